@@ -1,0 +1,16 @@
+#!/usr/bin/env bash
+# The README's test command: installs the dependencies if missing, builds with warnings as errors
+# and runs every test with ctest. Tests that need ../shared/data (or $RECOG_SHARED_DATA) skip
+# cleanly without it.
+#
+# Environment (used by .ci/run for the sanitizer pass):
+#   RECOG_BUILD_DIR   build folder (default: build)
+#   RECOG_CMAKE_ARGS  extra CMake arguments (default: none)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+build_dir=${RECOG_BUILD_DIR:-build}
+bash scripts/install_deps.sh
+# shellcheck disable=SC2086
+cmake -S . -B "$build_dir" -G Ninja -DRECOG_WERROR=ON ${RECOG_CMAKE_ARGS:-}
+cmake --build "$build_dir" -j"$(nproc)"
+ctest --test-dir "$build_dir" --output-on-failure -j"$(nproc)" --timeout 600

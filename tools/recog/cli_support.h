@@ -1,0 +1,56 @@
+// Small pieces shared by the recog subcommands: finding image files, showing progress, reading
+// the process's peak memory, and locating the bundled vocabularies and demo images.
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "core/common/status.h"
+
+namespace recog::cli {
+
+// Natural ("human") order of file names: digit runs compare as numbers, so 2.jpg < 10.jpg.
+bool NaturalLess(std::string_view a, std::string_view b);
+
+// Image files (.jpg .jpeg .png .bmp .pgm .ppm .tif .tiff, any case) under `dir`, recursively,
+// in natural order of their paths. NOT_FOUND when `dir` is missing, INVALID_ARGUMENT when it is
+// not a folder or holds no image.
+StatusOr<std::vector<std::string>> ListImages(const std::string& dir);
+
+// Path of a bundled vocabulary (e.g. "place_orb_k10_l5.rvoc"): $RECOG_VOCABULARY_DIR when set,
+// otherwise the project's vocabularies/ folder.
+std::string BundledVocabularyPath(const std::string& file_name);
+std::string DefaultPlaceVocabularyPath();
+std::string DefaultObjectVocabularyPath();
+// Folder of the demo images shipped with the project (corridor frames 1, 20, 41, 60).
+std::string DemoImageDir();
+
+// Largest resident set size of this process so far, in MiB.
+double PeakRssMiB();
+
+// "0x1234abcd..." (16 hex digits).
+std::string HexChecksum(uint64_t checksum);
+
+// A progress line on stderr. On a terminal it redraws one line (at most 10 times a second);
+// otherwise it prints a line at every 10 % so that logs stay readable.
+class ProgressBar {
+ public:
+  explicit ProgressBar(bool enabled = true);
+  void Update(std::string_view stage, uint64_t done, uint64_t total);
+  // Ends the current line, if any.
+  void Finish();
+
+ private:
+  bool enabled_;
+  bool tty_;
+  std::string stage_;
+  int last_decile_ = -1;
+  std::chrono::steady_clock::time_point start_;
+  std::chrono::steady_clock::time_point last_draw_;
+  bool line_open_ = false;
+};
+
+}  // namespace recog::cli

@@ -1,0 +1,14 @@
+// Registration of the recog subcommands. Each Add*Command attaches a subcommand (with its options
+// and --help) to the app; when the subcommand runs it stores its exit status in *exit_code:
+// 0 on success, 1 on bad input or failure (after printing one line "recog <cmd>: <reason>").
+#pragma once
+
+#include <CLI/CLI.hpp>
+
+namespace recog::cli {
+
+void AddVocabCommands(CLI::App& app, int* exit_code);
+void AddBowCommand(CLI::App& app, int* exit_code);
+void AddDemoCommand(CLI::App& app, int* exit_code);
+
+}  // namespace recog::cli

@@ -1,0 +1,75 @@
+#!/usr/bin/env bash
+# End-to-end test of the recog binary: every subcommand on good input, and a one-line error with
+# a non-zero exit status on bad input. Usage: recog_cli_test.sh RECOG_BINARY PROJECT_DIR
+set -u
+recog=$1
+project=$2
+tmp=$(mktemp -d)
+trap 'rm -rf "$tmp"' EXIT
+failures=0
+checks=0
+
+pass() { checks=$((checks + 1)); }
+fail() { checks=$((checks + 1)); failures=$((failures + 1)); echo "FAIL: $*"; }
+
+# expect_ok DESCRIPTION CMD...: the command exits 0.
+expect_ok() {
+  local what=$1; shift
+  if "$@" >"$tmp/out" 2>"$tmp/err"; then pass; else fail "$what (exit $?): $(cat "$tmp/err")"; fi
+}
+# expect_error DESCRIPTION PATTERN CMD...: exits non-zero with exactly one stderr line matching.
+expect_error() {
+  local what=$1 pattern=$2; shift 2
+  if "$@" >"$tmp/out" 2>"$tmp/err"; then fail "$what: exited 0"; return; fi
+  local lines; lines=$(wc -l <"$tmp/err")
+  if [ "$lines" -ne 1 ]; then fail "$what: expected one error line, got $lines: $(cat "$tmp/err")"; return; fi
+  if grep -q -- "$pattern" "$tmp/err"; then pass; else fail "$what: '$(cat "$tmp/err")' lacks '$pattern'"; fi
+}
+
+images=$project/tests/data/corridor
+
+expect_ok "top-level help" "$recog" --help
+for sub in "vocab train" "vocab info" "vocab convert" "bow" "demo"; do
+  # shellcheck disable=SC2086
+  expect_ok "help of $sub" "$recog" $sub --help
+done
+expect_error "unknown subcommand" "recog" "$recog" frobnicate
+expect_error "train without images" "images" "$recog" vocab train -o "$tmp/v.rvoc"
+expect_error "train on a missing folder" "NOT_FOUND" "$recog" vocab train --images "$tmp/none" -o "$tmp/v.rvoc"
+expect_error "train with k=1" "INVALID_ARGUMENT" "$recog" vocab train --images "$images" --k 1 -o "$tmp/v.rvoc"
+
+expect_ok "train a small vocabulary" "$recog" vocab train --images "$images" --k 5 --levels 3 \
+  --features 300 --threads 2 --seed 7 -q -o "$tmp/v.rvoc"
+grep -q "words" "$tmp/out" && pass || fail "train prints a summary"
+expect_ok "train again with one thread" "$recog" vocab train --images "$images" --k 5 --levels 3 \
+  --features 300 --threads 1 --seed 7 -q -o "$tmp/v1.rvoc"
+cmp -s "$tmp/v.rvoc" "$tmp/v1.rvoc" && pass || fail "training is deterministic across thread counts"
+
+expect_ok "info --json" "$recog" vocab info --json "$tmp/v.rvoc"
+/usr/bin/python3 -c "import json,sys; d=json.load(open('$tmp/out')); assert d['k']==5 and d['levels']==3 and d['words']>0, d" \
+  && pass || fail "info --json is valid JSON with k, levels, words"
+
+expect_ok "convert to DBoW2 text" "$recog" vocab convert "$tmp/v.rvoc" "$tmp/v.txt"
+expect_ok "convert back" "$recog" vocab convert "$tmp/v.txt" "$tmp/back.rvoc"
+"$recog" bow "$images/41.jpg" --vocab "$tmp/v.rvoc" --json >"$tmp/a.json" 2>/dev/null
+"$recog" bow "$images/41.jpg" --vocab "$tmp/back.rvoc" --json >"$tmp/b.json" 2>/dev/null
+/usr/bin/python3 -c "
+import json; a=json.load(open('$tmp/a.json')); b=json.load(open('$tmp/b.json'))
+assert a['features']>0 and a['bow']==b['bow'], 'bow differs after DBoW2 round trip'" \
+  && pass || fail "bow is the same after a DBoW2 text round trip"
+
+printf 'not a vocabulary' >"$tmp/garbage.rvoc"
+expect_error "info on garbage" "DATA_LOSS" "$recog" vocab info "$tmp/garbage.rvoc"
+head -c 200 "$tmp/v.rvoc" >"$tmp/cut.rvoc"
+expect_error "info on a truncated file" "truncated" "$recog" vocab info "$tmp/cut.rvoc"
+expect_error "info on a missing file" "NOT_FOUND" "$recog" vocab info "$tmp/none.rvoc"
+expect_error "convert to an unknown format" "unknown output format" "$recog" vocab convert "$tmp/v.rvoc" "$tmp/x" --to jpeg
+printf 'garbage' >"$tmp/garbage.jpg"
+expect_error "bow of a corrupt image" "INVALID_ARGUMENT" "$recog" bow "$tmp/garbage.jpg" --vocab "$tmp/v.rvoc"
+expect_error "bow of a missing image" "NOT_FOUND" "$recog" bow "$tmp/none.jpg" --vocab "$tmp/v.rvoc"
+
+expect_ok "demo with the small vocabulary" "$recog" demo --vocab "$tmp/v.rvoc"
+grep -q "41.jpg" "$tmp/out" && pass || fail "demo lists the frames"
+
+echo "$((checks - failures)) passed, $failures failed"
+[ "$failures" -eq 0 ]
