@@ -12,7 +12,7 @@
 // Memory layout. All nodes of all trees live in one aligned buffer, in breadth-first order per
 // tree so that the children of a node are contiguous: the descriptors of the k children of a node
 // are k consecutive rows, read in one streak while descending. The buffer is also the body of the
-// project's vocabulary file (vocabulary_io.h), so loading is one read and a checksum. A 1M-word
+// project's vocabulary file (vocabulary_io.h), so loading is one mmap and a checksum. A 1M-word
 // k=10, L=6 binary vocabulary takes 32 + 4 + 1 bytes per node and 4 bytes per word: about 45 MB.
 //
 // Thread safety: a Vocabulary is immutable after construction; any number of threads may call
@@ -20,7 +20,6 @@
 #pragma once
 
 #include <cstdint>
-#include <functional>
 #include <memory>
 #include <span>
 #include <string>
@@ -33,6 +32,7 @@
 #include "core/bow/scoring.h"
 #include "core/common/status.h"
 #include "core/vocabulary/descriptor.h"
+#include "core/vocabulary/layout_buffer.h"
 
 namespace recog {
 
@@ -97,7 +97,7 @@ class Vocabulary {
   // to refuse entries computed with another vocabulary.
   uint64_t checksum() const { return checksum_; }
   // Bytes held by the loaded vocabulary.
-  size_t MemoryBytes() const { return buffer_size_; }
+  size_t MemoryBytes() const { return buffer_.size(); }
 
   float WordWeight(WordId word) const { return word_weight_[word]; }
 
@@ -128,22 +128,16 @@ class Vocabulary {
   const uint8_t* NodeDescriptor(NodeId node) const { return descriptors_ + size_t(node) * stride_; }
 
   // The raw layout buffer, for the file writer.
-  std::span<const uint8_t> buffer() const { return {buffer_.get(), buffer_size_}; }
-  // Rebuilds a vocabulary from a layout buffer stored by a file writer: allocates the buffer
-  // (BufferSize bytes), lets `fill` write it (straight from the file, no extra copy), then checks
-  // that it is consistent with `info` and the counts (child ranges, word ids), so that a corrupt
-  // file cannot make Transform read out of bounds. Errors of `fill` are returned as they are.
+  std::span<const uint8_t> buffer() const { return {buffer_.data(), buffer_.size()}; }
+  // Adopts a layout buffer read back from a file (BufferSize bytes, e.g. a file mapping) after
+  // checking that it is consistent with `info` and the counts (child ranges, word ids), so that
+  // a corrupt file cannot make Transform read out of bounds. DATA_LOSS when it is not.
   static StatusOr<Vocabulary> FromLayout(const VocabularyInfo& info, uint32_t num_nodes,
-                                         uint32_t num_words,
-                                         const std::function<Status(std::span<uint8_t>)>& fill);
+                                         uint32_t num_words, LayoutBuffer buffer);
   // Size in bytes of the layout buffer for these counts.
   static size_t BufferSize(const VocabularyInfo& info, uint32_t num_nodes, uint32_t num_words);
 
  private:
-  struct AlignedFree {
-    void operator()(uint8_t* p) const;
-  };
-  static std::unique_ptr<uint8_t[], AlignedFree> AllocateBuffer(size_t bytes, bool zero);
   void BindArrays();  // points the typed arrays into buffer_
   Status CheckLayout() const;
 
@@ -151,19 +145,25 @@ class Vocabulary {
   // direct-index node at depth di_depth (see DirectIndexDepth).
   friend StatusOr<Vocabulary> TrainVocabulary(TrainingSet set, const TrainingOptions& options);
   // Replaces the word weights (training computes them after the layout) and the checksum.
+  // Only for vocabularies built in memory (FromTrees), never for a mapped file.
   void SetWordWeights(std::span<const float> weights);
 
   template <class Distance>
   WordId Descend(const Distance& distance, const uint8_t* descriptor, int di_depth,
                  NodeId* di_node) const;
+  // Transform's fast path for one tree of binary descriptors: the same descent as Descend for
+  // `count` rows, run level by level over batches of rows with the next level prefetched.
+  // Writes entries[i] = {word, word weight} and, when not null, node_of_feature[i] = {node, i}.
+  template <class Distance>
+  void DescendBinaryBatch(const Distance& distance, const uint8_t* rows, size_t count, int di_depth,
+                          BowEntry* entries, std::pair<NodeId, uint32_t>* node_of_feature) const;
 
   VocabularyInfo info_;
   uint32_t num_nodes_ = 0;
   uint32_t num_words_ = 0;
   uint32_t stride_ = 0;  // bytes between two node descriptors
   uint64_t checksum_ = 0;
-  std::unique_ptr<uint8_t[], AlignedFree> buffer_;
-  size_t buffer_size_ = 0;
+  LayoutBuffer buffer_;
 
   // Views into buffer_.
   const uint32_t* roots_ = nullptr;                // [num_trees]

@@ -153,24 +153,10 @@ StatusOr<Vocabulary> LoadVocabulary(const std::string& path) {
                             " (truncated or padded file)");
   }
 
-  // One read of the whole body, straight into the vocabulary's buffer.
-  auto vocabulary =
-      Vocabulary::FromLayout(info, num_nodes, num_words, [&](std::span<uint8_t> body) -> Status {
-        const size_t got = std::fread(body.data(), 1, body.size(), file.get());
-        if (got != body.size()) {
-          return Status::DataLoss(where + " is truncated: body has " + std::to_string(got) +
-                                  " of " + std::to_string(body.size()) + " bytes");
-        }
-        if (std::fgetc(file.get()) != EOF) {
-          return Status::DataLoss(where + " has trailing bytes after its body");
-        }
-        return Status::Ok();
-      });
-  if (!vocabulary.ok()) {
-    const Status& s = vocabulary.status();
-    if (s.message().starts_with(where)) return s;
-    return Status::DataLoss(where + ": " + s.message());
-  }
+  // The body is mapped, not read: no copy, and the pages come straight from the page cache.
+  RECOG_ASSIGN_OR_RETURN(LayoutBuffer body, LayoutBuffer::MapFile(path, kHeaderSize, body_size));
+  auto vocabulary = Vocabulary::FromLayout(info, num_nodes, num_words, std::move(body));
+  if (!vocabulary.ok()) return Status::DataLoss(where + ": " + vocabulary.status().message());
   if (vocabulary->checksum() != checksum) {
     return Status::DataLoss(where + " is corrupt (body checksum mismatch)");
   }

@@ -2,7 +2,7 @@
 // formats (see dbow2_format.h).
 //
 // The project format ("rvoc") is the in-memory layout of Vocabulary behind a fixed header, so a
-// load is one read of the body plus a checksum, never a parse:
+// load is one private mmap of the body plus a checksum, never a parse:
 //
 //   offset  size  field
 //   0       8     magic "RECOGVOC"

@@ -45,6 +45,13 @@ expect_ok "train again with one thread" "$recog" vocab train --images "$images" 
   --features 300 --threads 1 --seed 7 -q -o "$tmp/v1.rvoc"
 cmp -s "$tmp/v.rvoc" "$tmp/v1.rvoc" && pass || fail "training is deterministic across thread counts"
 
+expect_ok "train a float (SIFT, L2 k-means) vocabulary" "$recog" vocab train --images "$images" \
+  --feature-type sift --k 4 --levels 2 --features 200 --threads 2 -q -o "$tmp/sift.rvoc"
+"$recog" vocab info --json "$tmp/sift.rvoc" >"$tmp/sift.json" 2>/dev/null
+grep -q '"descriptor": "float-128"' "$tmp/sift.json" && pass || fail "SIFT vocabulary has float-128 descriptors"
+expect_ok "bow with the SIFT vocabulary" "$recog" bow "$images/1.jpg" --vocab "$tmp/sift.rvoc"
+expect_error "DBoW2 export of a float vocabulary" "INVALID_ARGUMENT" "$recog" vocab convert "$tmp/sift.rvoc" "$tmp/sift.txt"
+
 expect_ok "info --json" "$recog" vocab info --json "$tmp/v.rvoc"
 /usr/bin/python3 -c "import json,sys; d=json.load(open('$tmp/out')); assert d['k']==5 and d['levels']==3 and d['words']>0, d" \
   && pass || fail "info --json is valid JSON with k, levels, words"
