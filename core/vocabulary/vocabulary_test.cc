@@ -19,12 +19,8 @@ using testing::ClusteredTrainingSet;
 using testing::RandomDescriptors;
 
 Vocabulary TrainSmall(uint32_t k, uint32_t depth, uint32_t trees, uint64_t seed = 1) {
-  TrainingOptions options;
-  options.branching = k;
-  options.depth = depth;
+  TrainingOptions options = testing::SmallTrainingOptions(k, depth, /*threads=*/1, seed);
   options.trees = trees;
-  options.seed = seed;
-  options.threads = 1;
   auto vocabulary = TrainVocabulary(ClusteredTrainingSet(40, 100, seed), options);
   EXPECT_TRUE(vocabulary.ok()) << vocabulary.status().ToString();
   return std::move(vocabulary).value();
@@ -154,14 +150,27 @@ TEST(VocabularyTest, DirectIndexNodeAtLevelZeroIsTheWordsLeaf) {
   }
 }
 
-TEST(VocabularyTest, WeightingTypesFollowTheirDefinitions) {
-  // A two-word hand-made tree: word 0 under centre 0x00.., word 1 under centre 0xff..
+// A hand-made one-level tree of two words: word 0 under centroid 0x00.., word 1 under 0xff..
+TreeNodeTable TwoWordTree(float weight0, float weight1) {
   TreeNodeTable t;
   t.parent = {0, 0, 0};
   t.descriptors.assign(3 * 32, 0);
   std::fill(t.descriptors.begin() + 64, t.descriptors.end(), 0xff);
   t.word = {kInvalidWordId, kInvalidWordId, kInvalidWordId};
-  t.weight = {0.f, 2.f, 0.5f};
+  t.weight = {0.f, weight0, weight1};
+  return t;
+}
+
+VocabularyInfo TwoWordInfo(WeightingType weighting) {
+  VocabularyInfo info;
+  info.branching = 2;
+  info.depth = 1;
+  info.weighting = weighting;
+  return info;
+}
+
+TEST(VocabularyTest, WeightingTypesFollowTheirDefinitions) {
+  const TreeNodeTable t = TwoWordTree(2.f, 0.5f);
   cv::Mat d(3, 32, CV_8U, cv::Scalar(0));
   d.row(2).setTo(0xff);  // two features of word 0, one of word 1
   const double n = 3;
@@ -173,11 +182,7 @@ TEST(VocabularyTest, WeightingTypesFollowTheirDefinitions) {
        {Case{WeightingType::kTfIdf, 2 * 2.0 / n, 0.5 / n},
         Case{WeightingType::kTf, 2 * 2.0 / n, 0.5 / n}, Case{WeightingType::kIdf, 2.0, 0.5},
         Case{WeightingType::kBinary, 2.0, 0.5}}) {
-    VocabularyInfo info;
-    info.branching = 2;
-    info.depth = 1;
-    info.weighting = c.weighting;
-    auto voc = Vocabulary::FromTrees(info, std::span(&t, 1));
+    auto voc = Vocabulary::FromTrees(TwoWordInfo(c.weighting), std::span(&t, 1));
     ASSERT_TRUE(voc.ok()) << voc.status().ToString();
     BowVector bow;
     ASSERT_TRUE(voc->Transform(d, &bow, nullptr, 0, BowNormalization::kNone).ok());
@@ -187,16 +192,8 @@ TEST(VocabularyTest, WeightingTypesFollowTheirDefinitions) {
 }
 
 TEST(VocabularyTest, WordsOfWeightZeroAreLeftOutOfTheBow) {
-  TreeNodeTable t;
-  t.parent = {0, 0, 0};
-  t.descriptors.assign(3 * 32, 0);
-  std::fill(t.descriptors.begin() + 64, t.descriptors.end(), 0xff);
-  t.word = {kInvalidWordId, kInvalidWordId, kInvalidWordId};
-  t.weight = {0.f, 0.f, 1.f};
-  VocabularyInfo info;
-  info.branching = 2;
-  info.depth = 1;
-  auto voc = Vocabulary::FromTrees(info, std::span(&t, 1));
+  const TreeNodeTable t = TwoWordTree(0.f, 1.f);
+  auto voc = Vocabulary::FromTrees(TwoWordInfo(WeightingType::kTfIdf), std::span(&t, 1));
   ASSERT_TRUE(voc.ok());
   cv::Mat d(2, 32, CV_8U, cv::Scalar(0));
   d.row(1).setTo(0xff);

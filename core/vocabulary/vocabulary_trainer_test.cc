@@ -18,12 +18,7 @@ using testing::ClusteredTrainingSet;
 using testing::RandomDescriptors;
 
 TrainingOptions Options(uint32_t k, uint32_t depth, uint32_t threads, uint64_t seed = 3) {
-  TrainingOptions o;
-  o.branching = k;
-  o.depth = depth;
-  o.threads = threads;
-  o.seed = seed;
-  return o;
+  return testing::SmallTrainingOptions(k, depth, threads, seed);
 }
 
 // Largest depth of any leaf and most children of any node, from the public accessors.

@@ -60,4 +60,15 @@ inline TrainingSet ClusteredTrainingSet(int images, int per_image, uint64_t seed
   return set;
 }
 
+// Training options for small test vocabularies.
+inline TrainingOptions SmallTrainingOptions(uint32_t k, uint32_t depth, uint32_t threads,
+                                            uint64_t seed) {
+  TrainingOptions o;
+  o.branching = k;
+  o.depth = depth;
+  o.threads = threads;
+  o.seed = seed;
+  return o;
+}
+
 }  // namespace recog::testing
