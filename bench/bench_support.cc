@@ -2,9 +2,11 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <numeric>
 #include <random>
 
 #include "core/features/feature_extractor.h"
@@ -84,6 +86,51 @@ Vocabulary LoadBundledPlaceVocabulary() {
     std::exit(2);
   }
   return std::move(vocabulary).value();
+}
+
+std::vector<BowVector> RealImageBows(const Vocabulary& vocabulary, size_t count, uint64_t seed) {
+  std::vector<std::string> files;
+  const std::string caltech = testing::SharedData("training/caltech101");
+  if (std::filesystem::exists(caltech)) {
+    for (const auto& e : std::filesystem::recursive_directory_iterator(caltech)) {
+      if (e.is_regular_file() && e.path().extension() == ".jpg") files.push_back(e.path().string());
+    }
+    std::sort(files.begin(), files.end());
+  } else {
+    for (const char* f : {"1.jpg", "20.jpg", "41.jpg", "60.jpg"}) {
+      files.push_back(testing::ProjectTestData(std::string("corridor/") + f));
+    }
+  }
+  std::mt19937_64 rng(seed);
+  std::shuffle(files.begin(), files.end(), rng);
+  auto extractor = CreateFeatureExtractor(FeatureOptions{});
+  std::vector<cv::Mat> descriptors;
+  FeatureSet features;
+  for (const std::string& f : files) {
+    auto image = ReadGrayImage(f);
+    if (!image.ok() || !(*extractor)->Extract(*image, &features).ok()) continue;
+    if (features.size() >= 50) descriptors.push_back(features.descriptors.clone());
+    if (descriptors.size() >= count) break;
+  }
+  std::vector<BowVector> bows;
+  bows.reserve(count);
+  std::uniform_real_distribution<double> keep(0.6, 1.0);
+  for (size_t i = 0; bows.size() < count; ++i) {
+    const cv::Mat& all = descriptors[i % descriptors.size()];
+    cv::Mat subset;
+    if (i < descriptors.size()) {
+      subset = all;
+    } else {
+      std::vector<int> rows(all.rows);
+      std::iota(rows.begin(), rows.end(), 0);
+      std::shuffle(rows.begin(), rows.end(), rng);
+      rows.resize(size_t(all.rows * keep(rng)));
+      for (int r : rows) subset.push_back(all.row(r));
+    }
+    BowVector bow;
+    if (vocabulary.Transform(subset, &bow).ok()) bows.push_back(std::move(bow));
+  }
+  return bows;
 }
 
 std::string TempPath(const std::string& name) {

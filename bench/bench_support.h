@@ -8,6 +8,7 @@
 
 #include <opencv2/core.hpp>
 
+#include "core/bow/bow_vector.h"
 #include "core/vocabulary/vocabulary.h"
 
 namespace recog::bench {
@@ -24,6 +25,12 @@ Vocabulary RandomFullTreeVocabulary(uint32_t k, uint32_t levels, uint64_t seed);
 // The bundled place vocabulary (vocabularies/place_orb_k10_l5.rvoc); aborts the benchmark
 // binary with a message when it is missing.
 Vocabulary LoadBundledPlaceVocabulary();
+
+// Bags of words of real images: ORB features of the shared Caltech photos (or, without the shared
+// data, of the bundled corridor frames) converted with `vocabulary`, L1-normalised. Each image
+// gives `variants` vectors, each from a random 60-100 % of its features (seeded), so that a
+// database of many entries keeps the word statistics of real images.
+std::vector<BowVector> RealImageBows(const Vocabulary& vocabulary, size_t count, uint64_t seed);
 
 // A fresh temporary file path in the system temp folder.
 std::string TempPath(const std::string& name);

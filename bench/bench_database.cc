@@ -1,0 +1,148 @@
+// Recognition database benchmarks (issue "recognition databases"):
+//   Query_L1_k10L6/<entries>  top-10 L1 query, 1K..1M entries of 300-1000 words each (word ids
+//                             drawn uniformly from a k=10 L=6 vocabulary's 1M words)
+//   Query_L1_Shipped_k10L5_26K  top-10 L1 query over 26,000 bags of words of real photos
+//                             (Caltech, ORB) made with the shipped k=10 L=5 vocabulary
+// The entries are indexed through a store that keeps nothing, so these figures are the in-memory
+// index alone; `index_MB_per_million_postings` reports its memory, `process_peak_rss_MB` the
+// benchmark process's peak.
+// Run: build/bin/bench_database [--benchmark_format=json] [--benchmark_filter=...]
+#include <benchmark/benchmark.h>
+#include <sys/resource.h>
+
+#include <random>
+
+#include "bench/bench_support.h"
+#include "core/index/database.h"
+
+namespace recog::bench {
+namespace {
+
+// Accepts every write and keeps nothing: the benchmarks measure the in-memory index.
+class DiscardingStore : public IndexStore {
+ public:
+  StatusOr<MapInfo> CreateMap(const MapConfig& config) override {
+    info_ = {1, config, 0};
+    return info_;
+  }
+  StatusOr<MapInfo> GetMap(const std::string&) override { return info_; }
+  StatusOr<std::vector<MapInfo>> ListMaps() override { return std::vector<MapInfo>{info_}; }
+  Status DeleteMap(const std::string&) override { return Status::Ok(); }
+  Status CommitEntry(MapId, const EntryRecord&) override { return Status::Ok(); }
+  Status RemoveEntry(MapId, EntryId) override { return Status::Ok(); }
+  Status ReadEntry(MapId, EntryId, uint32_t, EntryRecord*) override {
+    return Status::NotFound("discarded");
+  }
+  Status ScanEntries(MapId, uint32_t, const std::function<Status(EntryRecord&)>&) override {
+    return Status::Ok();
+  }
+  StatusOr<EntryId> NextEntryId(MapId) override { return EntryId(0); }
+  Status Flush() override { return Status::Ok(); }
+  Status Checkpoint(const std::string&) override { return Status::FailedPrecondition("none"); }
+
+ private:
+  MapInfo info_;
+};
+
+// Adds an entry with the given bag of words and `features` placeholder features.
+void AddEntry(Database& db, const BowVector& bow, int features) {
+  static const cv::Mat descriptors(1000, 32, CV_8U, cv::Scalar(0));
+  static const std::vector<uint32_t> all = [] {
+    std::vector<uint32_t> v(1000);
+    std::iota(v.begin(), v.end(), 0u);
+    return v;
+  }();
+  FeatureSet f;
+  f.descriptors = descriptors.rowRange(0, features);
+  f.keypoints.resize(size_t(features));
+  FeatureVector direct;
+  direct.AppendNode(0, std::span(all.data(), size_t(features)));
+  if (!db.AddConverted(bow, direct, f).ok()) std::abort();
+}
+
+BowVector RandomBow(std::mt19937_64& rng, uint32_t words, int count) {
+  std::vector<BowEntry> entries;
+  std::uniform_int_distribution<uint32_t> word(0, words - 1);
+  std::uniform_real_distribution<float> value(0.1f, 1.f);
+  for (int i = 0; i < count; ++i) entries.push_back({word(rng), value(rng)});
+  BowVector bow(std::move(entries));
+  bow.Normalize(BowNormalization::kL1);
+  return bow;
+}
+
+void ReportMemory(benchmark::State& state, const Database& db) {
+  const DatabaseStats stats = db.Stats();
+  state.counters["entries"] = double(stats.entries);
+  state.counters["postings"] = double(stats.postings);
+  // Bytes per posting of the index equal its megabytes per million postings.
+  state.counters["index_MB_per_million_postings"] =
+      double(stats.index_bytes) / double(stats.postings);
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  state.counters["process_peak_rss_MB"] = double(usage.ru_maxrss) / 1024.0;
+}
+
+void BM_Query_L1_k10L6(benchmark::State& state) {
+  static DiscardingStore store;
+  static const auto vocabulary =
+      std::make_shared<const Vocabulary>(RandomFullTreeVocabulary(10, 6, 3));
+  static std::unique_ptr<Database> db =
+      std::move(Database::Create(&store, "m", vocabulary)).value();
+  static std::mt19937_64 rng(11);
+  const size_t target = size_t(state.range(0));
+  std::uniform_int_distribution<int> size(300, 1000);
+  while (db->size() < target) {  // grows across the arguments 1K .. 1M
+    const int n = size(rng);
+    AddEntry(*db, RandomBow(rng, uint32_t(vocabulary->num_words()), n), n);
+  }
+  std::vector<BowVector> queries;
+  for (int i = 0; i < 50; ++i)
+    queries.push_back(RandomBow(rng, uint32_t(vocabulary->num_words()), size(rng)));
+  std::vector<QueryResult> results;
+  size_t i = 0;
+  for (auto _ : state) {
+    if (!db->Query(queries[i++ % queries.size()], {.max_results = 10}, &results).ok()) std::abort();
+    benchmark::DoNotOptimize(results.data());
+  }
+  ReportMemory(state, *db);
+}
+BENCHMARK(BM_Query_L1_k10L6)
+    ->Arg(1000)
+    ->Arg(10000)
+    ->Arg(26000)
+    ->Arg(100000)
+    ->Arg(1000000)
+    ->Unit(benchmark::kMillisecond)
+    ->Repetitions(3)
+    ->ReportAggregatesOnly(true);
+
+void BM_Query_L1_Shipped_k10L5_26K(benchmark::State& state) {
+  static DiscardingStore store;
+  static const auto vocabulary = std::make_shared<const Vocabulary>(LoadBundledPlaceVocabulary());
+  static const std::vector<BowVector> bows = RealImageBows(*vocabulary, 26000 + 200, 5);
+  static std::unique_ptr<Database> db = [] {
+    auto d = std::move(Database::Create(&store, "m", vocabulary)).value();
+    for (size_t i = 200; i < bows.size(); ++i) AddEntry(*d, bows[i], 1000);
+    return d;
+  }();
+  std::vector<QueryResult> results;
+  size_t i = 0;
+  double words = 0;
+  for (auto _ : state) {
+    const BowVector& q = bows[i++ % 200];  // queries: images not in the database
+    words += double(q.size());
+    if (!db->Query(q, {.max_results = 10}, &results).ok()) std::abort();
+    benchmark::DoNotOptimize(results.data());
+  }
+  state.counters["query_words"] = words / double(state.iterations());
+  ReportMemory(state, *db);
+}
+BENCHMARK(BM_Query_L1_Shipped_k10L5_26K)
+    ->Unit(benchmark::kMillisecond)
+    ->Repetitions(3)
+    ->ReportAggregatesOnly(true);
+
+}  // namespace
+}  // namespace recog::bench
+
+BENCHMARK_MAIN();

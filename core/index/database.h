@@ -1,0 +1,128 @@
+// Database: one map's recognition database — an inverted index in memory over entries persisted
+// through an IndexStore (thesis §3.1.4, §4.3.2, §5.4.3).
+//
+// The inverted index keeps, for every word, the list of <entry, value> pairs of the entries that
+// contain it (8 bytes a posting, sorted by entry id), so a query scores every stored entry that
+// shares a word with it while touching nothing else (thesis Algorithm 1). The direct index and the
+// features of each entry stay in the store and are read on demand (Get) when a candidate has to
+// be verified geometrically.
+//
+// Writes go to the store first, then to memory: Add() returns only after the entry is committed
+// (atomically, every part), and a query sees an entry only once it is fully indexed. Opening a
+// database rebuilds the in-memory index from the store and checks that every entry's bag of
+// words, direct index and metadata agree with each other and with the vocabulary.
+//
+// A database refuses a vocabulary other than the one its map was created with
+// (FAILED_PRECONDITION): word ids of two vocabularies mean different things.
+//
+// Thread safety: Query, Get, Contains, size and Stats may run from any number of threads while
+// one or more threads Add/Remove; writers are serialised among themselves, and a query never
+// waits for a store write, only for the short in-memory update that follows it.
+#pragma once
+
+#include <atomic>
+#include <memory>
+#include <mutex>
+#include <shared_mutex>
+#include <string>
+#include <vector>
+
+#include "core/common/status.h"
+#include "core/features/feature_extractor.h"
+#include "core/index/entry.h"
+#include "core/index/index_store.h"
+#include "core/vocabulary/vocabulary.h"
+
+namespace recog {
+
+struct QueryOptions {
+  size_t max_results = 10;
+  // Only entries with an id below this bound are scored (leave out the most recent frames).
+  EntryId max_entry_id = kInvalidEntryId;
+};
+
+struct QueryResult {
+  EntryId id = kInvalidEntryId;
+  double score = 0.0;
+  friend bool operator==(const QueryResult&, const QueryResult&) = default;
+};
+
+struct DatabaseStats {
+  size_t entries = 0;
+  size_t postings = 0;
+  size_t words_in_use = 0;  // words with at least one posting
+  size_t index_bytes = 0;   // memory held by the inverted index
+  EntryId next_entry_id = 0;
+};
+
+class Database {
+ public:
+  // Creates map `name` in `store` for `vocabulary`, then opens it.
+  static StatusOr<std::unique_ptr<Database>> Create(IndexStore* store, const std::string& name,
+                                                    std::shared_ptr<const Vocabulary> vocabulary,
+                                                    ScoringType scoring = ScoringType::kL1,
+                                                    uint32_t direct_index_levels_up = 2);
+  // Opens map `name` of `store` and rebuilds its index. NOT_FOUND for an unknown map,
+  // FAILED_PRECONDITION for another vocabulary, DATA_LOSS when the stored entries disagree.
+  static StatusOr<std::unique_ptr<Database>> Open(IndexStore* store, const std::string& name,
+                                                  std::shared_ptr<const Vocabulary> vocabulary);
+
+  const MapInfo& info() const { return info_; }
+  const Vocabulary& vocabulary() const { return *vocabulary_; }
+
+  // Converts the features with the vocabulary (direct index at the map's level) and adds them.
+  StatusOr<EntryId> Add(const FeatureSet& features, EntryMetadata metadata = {});
+  // Adds an entry the caller has already converted with this database's vocabulary, with the
+  // normalisation of the map's scoring and the direct index at the map's level. INVALID_ARGUMENT
+  // when the parts do not fit the vocabulary or each other.
+  StatusOr<EntryId> AddConverted(const BowVector& bow, const FeatureVector& direct,
+                                 const FeatureSet& features, EntryMetadata metadata = {});
+
+  // Scores the query against every entry sharing a word with it, with the map's scoring, and
+  // returns the best `max_results` (best first; equal scores by increasing id). The query must
+  // come from this database's vocabulary (INVALID_ARGUMENT for a word id out of range).
+  Status Query(const BowVector& query, const QueryOptions& options,
+               std::vector<QueryResult>* results) const;
+
+  // Reads parts of an entry from the store. NOT_FOUND for an unknown or removed entry.
+  StatusOr<EntryRecord> Get(EntryId id, uint32_t parts = kEntryAllParts) const;
+  bool Contains(EntryId id) const;
+  // Removes an entry from the store and the index. NOT_FOUND when absent.
+  Status Remove(EntryId id);
+  // Removes every entry (ids keep increasing afterwards).
+  Status Clear();
+
+  size_t size() const;
+  DatabaseStats Stats() const;
+
+ private:
+  struct Posting {
+    EntryId entry;
+    float value;
+  };
+  static_assert(sizeof(Posting) == 8);
+
+  Database(IndexStore* store, MapInfo info, std::shared_ptr<const Vocabulary> vocabulary);
+  // Checks that the parts of an entry fit the vocabulary and each other; returns a message, or
+  // an empty string when they do.
+  std::string CheckParts(const BowVector& bow, const FeatureVector& direct,
+                         uint32_t num_features) const;
+  void IndexEntry(EntryId id, const BowVector& bow);  // requires index_mutex_ exclusively
+
+  template <ScoringType kType>
+  void ScoreEntries(const BowVector& query, EntryId bound, std::vector<QueryResult>* touched) const;
+
+  IndexStore* store_;
+  MapInfo info_;
+  std::shared_ptr<const Vocabulary> vocabulary_;
+
+  std::mutex write_mutex_;                      // serialises Add/Remove/Clear
+  mutable std::shared_mutex index_mutex_;       // guards everything below
+  std::vector<std::vector<Posting>> postings_;  // by word
+  std::vector<uint8_t> present_;                // by entry id: 1 when indexed
+  size_t num_entries_ = 0;
+  size_t num_postings_ = 0;
+  EntryId next_id_ = 0;
+};
+
+}  // namespace recog

@@ -1,0 +1,326 @@
+#include "core/index/database.h"
+
+#include <algorithm>
+#include <random>
+#include <thread>
+
+#include <gtest/gtest.h>
+
+#include "core/index/memory_index_store.h"
+#include "tests/testing/synthetic.h"
+
+namespace recog {
+namespace {
+
+std::shared_ptr<const Vocabulary> SmallVocabulary(uint64_t seed = 1) {
+  TrainingOptions options = testing::SmallTrainingOptions(8, 3, /*threads=*/1, seed);
+  auto v = TrainVocabulary(testing::ClusteredTrainingSet(40, 150, seed), options);
+  EXPECT_TRUE(v.ok()) << v.status().ToString();
+  return std::make_shared<const Vocabulary>(std::move(v).value());
+}
+
+// `count` clustered descriptors with keypoints on a grid.
+FeatureSet SyntheticFeatures(int count, uint64_t seed) {
+  FeatureSet f;
+  f.descriptors = testing::ClusteredBinaryDescriptors(count, 40, 0.08, seed);
+  for (int i = 0; i < count; ++i) {
+    f.keypoints.emplace_back(float(i % 40) * 10.f, float(i / 40) * 10.f, 31.f, float(i), 1.f, 0);
+  }
+  return f;
+}
+
+class DatabaseTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    vocabulary_ = SmallVocabulary();
+    auto db = Database::Create(&store_, "map-1", vocabulary_);
+    ASSERT_TRUE(db.ok()) << db.status().ToString();
+    db_ = std::move(db).value();
+  }
+
+  BowVector BowOf(const FeatureSet& f, ScoringType scoring = ScoringType::kL1) const {
+    BowVector bow;
+    EXPECT_TRUE(
+        vocabulary_->Transform(f.descriptors, &bow, nullptr, 0, TraitsOf(scoring).normalization)
+            .ok());
+    return bow;
+  }
+
+  MemoryIndexStore store_;
+  std::shared_ptr<const Vocabulary> vocabulary_;
+  std::unique_ptr<Database> db_;
+};
+
+TEST_F(DatabaseTest, AnEntryIsItsOwnBestMatch) {
+  std::vector<FeatureSet> sets;
+  for (int i = 0; i < 20; ++i) {
+    sets.push_back(SyntheticFeatures(150, 100 + i));
+    auto id = db_->Add(sets.back());
+    ASSERT_TRUE(id.ok()) << id.status().ToString();
+    EXPECT_EQ(*id, EntryId(i));
+  }
+  EXPECT_EQ(db_->size(), 20u);
+  std::vector<QueryResult> results;
+  for (int i = 0; i < 20; ++i) {
+    ASSERT_TRUE(db_->Query(BowOf(sets[i]), {.max_results = 3}, &results).ok());
+    ASSERT_EQ(results.size(), 3u);
+    EXPECT_EQ(results[0].id, EntryId(i));
+    EXPECT_NEAR(results[0].score, 1.0, 1e-5);
+    EXPECT_GE(results[0].score, results[1].score);
+    EXPECT_GE(results[1].score, results[2].score);
+  }
+}
+
+class DatabaseScoringTest : public ::testing::TestWithParam<ScoringType> {};
+
+TEST_P(DatabaseScoringTest, QueryEqualsScoringEveryEntryByBruteForce) {
+  const ScoringType type = GetParam();
+  MemoryIndexStore store;
+  auto vocabulary = SmallVocabulary();
+  auto db = Database::Create(&store, "m", vocabulary, type);
+  ASSERT_TRUE(db.ok());
+  const BowNormalization norm = TraitsOf(type).normalization;
+  std::vector<BowVector> bows;
+  for (int i = 0; i < 60; ++i) {
+    const FeatureSet f = SyntheticFeatures(40 + i % 50, 500 + i);
+    ASSERT_TRUE((*db)->Add(f).ok());
+    BowVector bow;
+    ASSERT_TRUE(vocabulary->Transform(f.descriptors, &bow, nullptr, 0, norm).ok());
+    bows.push_back(bow);
+  }
+  for (int q = 0; q < 10; ++q) {
+    BowVector query;
+    ASSERT_TRUE(
+        vocabulary->Transform(SyntheticFeatures(80, 900 + q).descriptors, &query, nullptr, 0, norm)
+            .ok());
+    std::vector<QueryResult> expected;
+    for (EntryId id = 0; id < bows.size(); ++id) {
+      bool shares_a_word = false;
+      for (const BowEntry& e : query.entries()) shares_a_word |= bows[id].ValueOf(e.word) > 0;
+      if (shares_a_word) expected.push_back({id, Score(type, query, bows[id])});
+    }
+    const bool higher = TraitsOf(type).higher_is_better;
+    std::stable_sort(expected.begin(), expected.end(), [&](const auto& a, const auto& b) {
+      return higher ? a.score > b.score : a.score < b.score;
+    });
+    std::vector<QueryResult> results;
+    ASSERT_TRUE((*db)->Query(query, {.max_results = 15}, &results).ok());
+    ASSERT_EQ(results.size(), std::min<size_t>(15, expected.size()));
+    for (size_t i = 0; i < results.size(); ++i) {
+      EXPECT_NEAR(results[i].score, expected[i].score,
+                  1e-6 * std::max(1.0, std::fabs(expected[i].score)))
+          << ScoringName(type) << " rank " << i;
+    }
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(AllScores, DatabaseScoringTest,
+                         ::testing::Values(ScoringType::kL1, ScoringType::kL2,
+                                           ScoringType::kChiSquare, ScoringType::kKL,
+                                           ScoringType::kBhattacharyya, ScoringType::kDotProduct),
+                         [](const auto& info) { return std::string(ScoringName(info.param)); });
+
+TEST_F(DatabaseTest, EntriesAtOrAboveTheBoundAreNotScored) {
+  const FeatureSet f = SyntheticFeatures(100, 7);
+  for (int i = 0; i < 10; ++i) ASSERT_TRUE(db_->Add(f).ok());
+  std::vector<QueryResult> results;
+  ASSERT_TRUE(db_->Query(BowOf(f), {.max_results = 20, .max_entry_id = 4}, &results).ok());
+  ASSERT_EQ(results.size(), 4u);
+  for (size_t i = 0; i < results.size(); ++i) EXPECT_EQ(results[i].id, EntryId(i)) << "ties by id";
+}
+
+TEST_F(DatabaseTest, RemovedEntriesLeaveTheIndexAndTheirIdsAreNotReused) {
+  const FeatureSet a = SyntheticFeatures(100, 1), b = SyntheticFeatures(100, 2);
+  ASSERT_TRUE(db_->Add(a).ok());
+  ASSERT_TRUE(db_->Add(b).ok());
+  const size_t postings_before = db_->Stats().postings;
+  ASSERT_TRUE(db_->Remove(0).ok());
+  EXPECT_FALSE(db_->Contains(0));
+  EXPECT_EQ(db_->Get(0).status().code(), StatusCode::kNotFound);
+  EXPECT_EQ(db_->Remove(0).code(), StatusCode::kNotFound);
+  EXPECT_EQ(db_->Stats().postings, postings_before - BowOf(a).size());
+  std::vector<QueryResult> results;
+  ASSERT_TRUE(db_->Query(BowOf(a), {.max_results = 10}, &results).ok());
+  for (const QueryResult& r : results) EXPECT_NE(r.id, 0u);
+  auto id = db_->Add(a);
+  ASSERT_TRUE(id.ok());
+  EXPECT_EQ(*id, 2u);
+  ASSERT_TRUE(db_->Clear().ok());
+  EXPECT_EQ(db_->size(), 0u);
+  EXPECT_EQ(db_->Stats().postings, 0u);
+  ASSERT_TRUE(db_->Query(BowOf(a), {}, &results).ok());
+  EXPECT_TRUE(results.empty());
+}
+
+TEST_F(DatabaseTest, GetReturnsEveryPartAsAdded) {
+  const FeatureSet f = SyntheticFeatures(90, 3);
+  EntryMetadata meta;
+  meta.timestamp = 12.5;
+  meta.user_data = std::string("cam\0era-1", 9);
+  auto id = db_->Add(f, meta);
+  ASSERT_TRUE(id.ok());
+  auto record = db_->Get(*id);
+  ASSERT_TRUE(record.ok());
+  EXPECT_EQ(record->metadata.timestamp, 12.5);
+  EXPECT_EQ(record->metadata.user_data, meta.user_data);
+  EXPECT_EQ(record->metadata.num_features, 90u);
+  EXPECT_EQ(record->keypoints.size(), 90u);
+  EXPECT_EQ(cv::norm(record->descriptors, f.descriptors, cv::NORM_HAMMING), 0.0);
+  BowVector bow;
+  FeatureVector direct;
+  ASSERT_TRUE(vocabulary_->Transform(f.descriptors, &bow, &direct, 2).ok());
+  EXPECT_EQ(record->bow, bow);
+  EXPECT_EQ(record->direct, direct);
+}
+
+TEST_F(DatabaseTest, ReopeningRebuildsTheSameIndex) {
+  std::vector<FeatureSet> sets;
+  for (int i = 0; i < 15; ++i) {
+    sets.push_back(SyntheticFeatures(120, 40 + i));
+    ASSERT_TRUE(db_->Add(sets.back()).ok());
+  }
+  ASSERT_TRUE(db_->Remove(14).ok());  // the last id must not come back after the reopen
+  std::vector<std::vector<QueryResult>> before(sets.size());
+  for (size_t i = 0; i < sets.size(); ++i) {
+    ASSERT_TRUE(db_->Query(BowOf(sets[i]), {.max_results = 5}, &before[i]).ok());
+  }
+  const DatabaseStats stats = db_->Stats();
+  db_.reset();
+  auto reopened = Database::Open(&store_, "map-1", vocabulary_);
+  ASSERT_TRUE(reopened.ok()) << reopened.status().ToString();
+  EXPECT_EQ((*reopened)->Stats().postings, stats.postings);
+  EXPECT_EQ((*reopened)->size(), 14u);
+  for (size_t i = 0; i < sets.size(); ++i) {
+    std::vector<QueryResult> after;
+    ASSERT_TRUE((*reopened)->Query(BowOf(sets[i]), {.max_results = 5}, &after).ok());
+    EXPECT_EQ(after, before[i]);
+  }
+  auto id = (*reopened)->Add(sets[0]);
+  ASSERT_TRUE(id.ok());
+  EXPECT_EQ(*id, 15u);
+}
+
+TEST_F(DatabaseTest, AnotherVocabularyIsRefused) {
+  auto other = SmallVocabulary(/*seed=*/99);
+  ASSERT_NE(other->checksum(), vocabulary_->checksum());
+  auto opened = Database::Open(&store_, "map-1", other);
+  EXPECT_EQ(opened.status().code(), StatusCode::kFailedPrecondition);
+  EXPECT_NE(opened.status().message().find("map-1"), std::string::npos);
+  EXPECT_EQ(Database::Open(&store_, "no-such-map", vocabulary_).status().code(),
+            StatusCode::kNotFound);
+  EXPECT_EQ(Database::Create(&store_, "map-1", vocabulary_).status().code(),
+            StatusCode::kAlreadyExists);
+  EXPECT_EQ(Database::Create(&store_, "bad name!", vocabulary_).status().code(),
+            StatusCode::kInvalidArgument);
+}
+
+TEST_F(DatabaseTest, EntriesThatDoNotFitAreRefusedAndNothingIsStored) {
+  const FeatureSet f = SyntheticFeatures(50, 5);
+  BowVector bow;
+  FeatureVector direct;
+  ASSERT_TRUE(vocabulary_->Transform(f.descriptors, &bow, &direct, 2).ok());
+
+  BowVector foreign_word({{WordId(vocabulary_->num_words() + 3), 1.f}});
+  EXPECT_EQ(db_->AddConverted(foreign_word, direct, f).status().code(),
+            StatusCode::kInvalidArgument);
+  FeatureVector short_direct;
+  EXPECT_EQ(db_->AddConverted(bow, short_direct, f).status().code(), StatusCode::kInvalidArgument);
+  FeatureSet missing_keypoints = f;
+  missing_keypoints.keypoints.pop_back();
+  EXPECT_EQ(db_->AddConverted(bow, direct, missing_keypoints).status().code(),
+            StatusCode::kInvalidArgument);
+  FeatureSet wrong_length = f;
+  wrong_length.descriptors = cv::Mat(50, 64, CV_8U, cv::Scalar(1));
+  EXPECT_EQ(db_->Add(wrong_length).status().code(), StatusCode::kInvalidArgument);
+  EntryMetadata huge;
+  huge.user_data.assign(70000, 'x');
+  EXPECT_EQ(db_->Add(f, huge).status().code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(db_->size(), 0u);
+  EXPECT_EQ(store_.NextEntryId(db_->info().id).value(), 0u);
+
+  std::vector<QueryResult> results;
+  EXPECT_EQ(db_->Query(foreign_word, {}, &results).code(), StatusCode::kInvalidArgument);
+}
+
+TEST_F(DatabaseTest, AnEmptyImageIsAValidEntry) {
+  FeatureSet empty;
+  empty.descriptors = cv::Mat(0, 32, CV_8U);
+  auto id = db_->Add(empty);
+  ASSERT_TRUE(id.ok()) << id.status().ToString();
+  EXPECT_TRUE(db_->Contains(*id));
+}
+
+TEST_F(DatabaseTest, OpeningAStoreWithInconsistentEntriesIsDataLoss) {
+  ASSERT_TRUE(db_->Add(SyntheticFeatures(60, 1)).ok());
+  auto record = db_->Get(0);
+  ASSERT_TRUE(record.ok());
+  record->id = 1;
+  record->metadata.num_features = 10;  // the direct index refers to 60 features
+  ASSERT_TRUE(store_.CommitEntry(db_->info().id, *record).ok());
+  db_.reset();
+  auto opened = Database::Open(&store_, "map-1", vocabulary_);
+  EXPECT_EQ(opened.status().code(), StatusCode::kDataLoss);
+  EXPECT_NE(opened.status().message().find("entry 1"), std::string::npos)
+      << opened.status().message();
+}
+
+TEST_F(DatabaseTest, PostingsTakeAboutTenBytesEach) {
+  for (int i = 0; i < 200; ++i) ASSERT_TRUE(db_->Add(SyntheticFeatures(150, 3000 + i)).ok());
+  const DatabaseStats stats = db_->Stats();
+  ASSERT_GT(stats.postings, 10000u);
+  const double list_bytes = double(stats.index_bytes) -
+                            double(vocabulary_->num_words() * sizeof(std::vector<int>)) - 200.0;
+  EXPECT_LE(list_bytes / double(stats.postings), 10.5);
+}
+
+TEST_F(DatabaseTest, ConcurrentQueriesWhileAddingGiveTheSerialResults) {
+  // 40 entries first; then one thread adds 60 more while three threads query the first 40 (the
+  // bound keeps the answers independent of the adds) and must get the serial answers every time.
+  for (int i = 0; i < 40; ++i) ASSERT_TRUE(db_->Add(SyntheticFeatures(100, 700 + i)).ok());
+  std::vector<BowVector> queries;
+  std::vector<std::vector<QueryResult>> serial(10);
+  for (int q = 0; q < 10; ++q) {
+    queries.push_back(BowOf(SyntheticFeatures(100, 700 + q * 3)));
+    ASSERT_TRUE(db_->Query(queries[q], {.max_results = 5, .max_entry_id = 40}, &serial[q]).ok());
+  }
+  std::atomic<bool> adding{true};
+  std::atomic<int> mismatches{0}, queries_run{0};
+  std::thread writer([&] {
+    for (int i = 0; i < 60; ++i) EXPECT_TRUE(db_->Add(SyntheticFeatures(100, 800 + i)).ok());
+    adding = false;
+  });
+  std::vector<std::thread> readers;
+  for (int t = 0; t < 3; ++t) {
+    readers.emplace_back([&, t] {
+      std::vector<QueryResult> results;
+      for (int n = 0; adding || n < 20; ++n) {
+        const int q = (n + t) % 10;
+        if (!db_->Query(queries[q], {.max_results = 5, .max_entry_id = 40}, &results).ok() ||
+            results != serial[q]) {
+          ++mismatches;
+        }
+        ++queries_run;
+      }
+    });
+  }
+  writer.join();
+  for (std::thread& r : readers) r.join();
+  EXPECT_EQ(mismatches.load(), 0);
+  EXPECT_GE(queries_run.load(), 60);
+  EXPECT_EQ(db_->size(), 100u);
+  // And the final state equals a database built serially from the same entries.
+  MemoryIndexStore serial_store;
+  auto serial_db = Database::Create(&serial_store, "serial", vocabulary_);
+  ASSERT_TRUE(serial_db.ok());
+  for (int i = 0; i < 40; ++i) ASSERT_TRUE((*serial_db)->Add(SyntheticFeatures(100, 700 + i)).ok());
+  for (int i = 0; i < 60; ++i) ASSERT_TRUE((*serial_db)->Add(SyntheticFeatures(100, 800 + i)).ok());
+  for (const BowVector& q : queries) {
+    std::vector<QueryResult> a, b;
+    ASSERT_TRUE(db_->Query(q, {.max_results = 10}, &a).ok());
+    ASSERT_TRUE((*serial_db)->Query(q, {.max_results = 10}, &b).ok());
+    EXPECT_EQ(a, b);
+  }
+}
+
+}  // namespace
+}  // namespace recog

@@ -1,0 +1,75 @@
+// What a recognition database stores for one entry (a place frame or an object model view).
+//
+// An entry is its bag of words (what the inverted index is built from), its direct-index
+// feature vector (vocabulary node -> features, for fast correspondences), its keypoints and
+// descriptors (for geometric verification), and metadata. Entries of a map get increasing ids
+// 0, 1, 2, ... in the order they are added; a removed id is never reused.
+#pragma once
+
+#include <cstdint>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "core/bow/bow_vector.h"
+#include "core/bow/feature_vector.h"
+#include "core/bow/scoring.h"
+#include "core/vocabulary/descriptor.h"
+
+namespace recog {
+
+using EntryId = uint32_t;
+inline constexpr EntryId kInvalidEntryId = std::numeric_limits<EntryId>::max();
+using MapId = uint32_t;
+
+// Parts of an entry, to read only what is needed (bit flags).
+enum EntryPart : uint32_t {
+  kEntryMetadata = 1u << 0,
+  kEntryBow = 1u << 1,
+  kEntryDirect = 1u << 2,
+  kEntryFeatures = 1u << 3,  // keypoints and descriptors
+  kEntryAllParts = kEntryMetadata | kEntryBow | kEntryDirect | kEntryFeatures,
+};
+
+struct EntryMetadata {
+  double timestamp = 0.0;     // seconds, as given by the client (0 when unknown)
+  uint32_t num_features = 0;  // keypoints of the entry; the direct index refers to them
+  std::string user_data;      // opaque to the database (camera id, pose, ...), at most 64 KiB
+
+  friend bool operator==(const EntryMetadata&, const EntryMetadata&) = default;
+};
+
+struct EntryRecord {
+  EntryId id = kInvalidEntryId;
+  EntryMetadata metadata;
+  BowVector bow;
+  FeatureVector direct;
+  std::vector<cv::KeyPoint> keypoints;
+  cv::Mat descriptors;  // one row per keypoint, in the map's descriptor format
+};
+
+// Fixed when a map is created.
+struct MapConfig {
+  std::string name;  // 1..128 characters of [A-Za-z0-9._-]
+  uint64_t vocabulary_checksum = 0;
+  uint32_t vocabulary_words = 0;
+  uint32_t vocabulary_nodes = 0;
+  DescriptorFormat descriptor = DescriptorFormat::Orb();
+  ScoringType scoring = ScoringType::kL1;
+  uint32_t direct_index_levels_up = 2;  // thesis Table 4.4: direct index at level 2
+
+  // OK when the name is valid and the vocabulary fields are set.
+  Status Validate() const;
+  friend bool operator==(const MapConfig&, const MapConfig&) = default;
+};
+
+struct MapInfo {
+  MapId id = 0;
+  MapConfig config;
+  int64_t created_unix_ms = 0;
+  friend bool operator==(const MapInfo&, const MapInfo&) = default;
+};
+
+}  // namespace recog

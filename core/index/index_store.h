@@ -1,0 +1,65 @@
+// IndexStore: the storage port of the recognition databases.
+//
+// core/ keeps its indexes in memory and writes every change through this interface, in domain
+// types only; storage/ implements it with RocksDB (durable), and MemoryIndexStore implements it
+// in memory (tests, throw-away maps). One store holds many maps, each with its own entries.
+//
+// Contract (checked by the contract test suite that runs against every implementation):
+//  - CommitEntry and RemoveEntry are atomic: after a crash an entry is either entirely present
+//    (every part) or entirely absent. Once CommitEntry has returned OK, the entry survives a crash
+//    of the process (and, with the durable implementation's "sync every write" policy, of the
+//    machine).
+//  - ScanEntries visits the entries of a map in increasing id order; an entry missing one of the
+//    requested parts is DATA_LOSS.
+//  - DeleteMap removes every record of the map; its name can then be created again.
+//  - Errors: NOT_FOUND (unknown map or entry), ALREADY_EXISTS (map name taken), INVALID_ARGUMENT
+//    (bad name or record), DATA_LOSS (undecodable or inconsistent stored data), RESOURCE_EXHAUSTED
+//    (disk full), UNAVAILABLE/INTERNAL (I/O failures).
+//
+// Thread safety: every method may be called from several threads at once. Ordering between
+// concurrent writes to the same map is the caller's business (Database serialises its adds).
+#pragma once
+
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "core/common/status.h"
+#include "core/index/entry.h"
+
+namespace recog {
+
+class IndexStore {
+ public:
+  virtual ~IndexStore() = default;
+
+  // Creates a map; its id is unique in this store and never reused.
+  virtual StatusOr<MapInfo> CreateMap(const MapConfig& config) = 0;
+  virtual StatusOr<MapInfo> GetMap(const std::string& name) = 0;
+  // Every map, by name.
+  virtual StatusOr<std::vector<MapInfo>> ListMaps() = 0;
+  virtual Status DeleteMap(const std::string& name) = 0;
+
+  // Stores every part of `entry` (its id is chosen by the caller) in one atomic write.
+  // ALREADY_EXISTS when the id is taken.
+  virtual Status CommitEntry(MapId map, const EntryRecord& entry) = 0;
+  // Removes every part of an entry in one atomic write.
+  virtual Status RemoveEntry(MapId map, EntryId id) = 0;
+  // Reads the requested parts (EntryPart flags) of one entry into *out.
+  virtual Status ReadEntry(MapId map, EntryId id, uint32_t parts, EntryRecord* out) = 0;
+  // Calls `visit` for every entry of the map in increasing id order, with the requested parts;
+  // stops at the first error `visit` returns and returns it.
+  virtual Status ScanEntries(MapId map, uint32_t parts,
+                             const std::function<Status(EntryRecord&)>& visit) = 0;
+  // The largest id ever committed to the map plus one (0 for a new map), so that ids removed
+  // from the end are not reused after a reopen.
+  virtual StatusOr<EntryId> NextEntryId(MapId map) = 0;
+
+  // Makes every committed entry durable (a no-op where every write already is).
+  virtual Status Flush() = 0;
+  // Writes a consistent copy of the whole store to `dir` (which must not exist) while the store
+  // keeps serving. FAILED_PRECONDITION where the implementation has nothing on disk.
+  virtual Status Checkpoint(const std::string& dir) = 0;
+};
+
+}  // namespace recog

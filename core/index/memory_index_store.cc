@@ -1,0 +1,124 @@
+#include "core/index/memory_index_store.h"
+
+#include <chrono>
+
+namespace recog {
+
+void CopyEntryParts(const EntryRecord& from, uint32_t parts, EntryRecord* to) {
+  to->id = from.id;
+  if (parts & kEntryMetadata) to->metadata = from.metadata;
+  if (parts & kEntryBow) to->bow = from.bow;
+  if (parts & kEntryDirect) to->direct = from.direct;
+  if (parts & kEntryFeatures) {
+    to->keypoints = from.keypoints;
+    to->descriptors = from.descriptors.clone();
+  }
+}
+
+MemoryIndexStore::StoredMap* MemoryIndexStore::Find(MapId map) {
+  for (auto& [name, stored] : maps_) {
+    if (stored.info.id == map) return &stored;
+  }
+  return nullptr;
+}
+
+StatusOr<MapInfo> MemoryIndexStore::CreateMap(const MapConfig& config) {
+  RECOG_RETURN_IF_ERROR(config.Validate());
+  std::lock_guard lock(mutex_);
+  if (maps_.count(config.name) != 0) {
+    return Status::AlreadyExists("map '" + config.name + "' already exists");
+  }
+  StoredMap& stored = maps_[config.name];
+  stored.info.id = next_map_id_++;
+  stored.info.config = config;
+  stored.info.created_unix_ms = std::chrono::duration_cast<std::chrono::milliseconds>(
+                                    std::chrono::system_clock::now().time_since_epoch())
+                                    .count();
+  return stored.info;
+}
+
+StatusOr<MapInfo> MemoryIndexStore::GetMap(const std::string& name) {
+  std::lock_guard lock(mutex_);
+  auto it = maps_.find(name);
+  if (it == maps_.end()) return Status::NotFound("map '" + name + "' does not exist");
+  return it->second.info;
+}
+
+StatusOr<std::vector<MapInfo>> MemoryIndexStore::ListMaps() {
+  std::lock_guard lock(mutex_);
+  std::vector<MapInfo> out;
+  for (const auto& [name, stored] : maps_) out.push_back(stored.info);
+  return out;
+}
+
+Status MemoryIndexStore::DeleteMap(const std::string& name) {
+  std::lock_guard lock(mutex_);
+  if (maps_.erase(name) == 0) return Status::NotFound("map '" + name + "' does not exist");
+  return Status::Ok();
+}
+
+Status MemoryIndexStore::CommitEntry(MapId map, const EntryRecord& entry) {
+  std::lock_guard lock(mutex_);
+  StoredMap* stored = Find(map);
+  if (stored == nullptr) return Status::NotFound("map " + std::to_string(map) + " does not exist");
+  if (entry.id == kInvalidEntryId) return Status::InvalidArgument("entry has no id");
+  if (stored->entries.count(entry.id) != 0) {
+    return Status::AlreadyExists("entry " + std::to_string(entry.id) + " already exists");
+  }
+  CopyEntryParts(entry, kEntryAllParts, &stored->entries[entry.id]);
+  stored->next_id = std::max(stored->next_id, entry.id + 1);
+  return Status::Ok();
+}
+
+Status MemoryIndexStore::RemoveEntry(MapId map, EntryId id) {
+  std::lock_guard lock(mutex_);
+  StoredMap* stored = Find(map);
+  if (stored == nullptr) return Status::NotFound("map " + std::to_string(map) + " does not exist");
+  if (stored->entries.erase(id) == 0) {
+    return Status::NotFound("entry " + std::to_string(id) + " does not exist");
+  }
+  return Status::Ok();
+}
+
+Status MemoryIndexStore::ReadEntry(MapId map, EntryId id, uint32_t parts, EntryRecord* out) {
+  std::lock_guard lock(mutex_);
+  StoredMap* stored = Find(map);
+  if (stored == nullptr) return Status::NotFound("map " + std::to_string(map) + " does not exist");
+  auto it = stored->entries.find(id);
+  if (it == stored->entries.end()) {
+    return Status::NotFound("entry " + std::to_string(id) + " does not exist");
+  }
+  CopyEntryParts(it->second, parts, out);
+  return Status::Ok();
+}
+
+Status MemoryIndexStore::ScanEntries(MapId map, uint32_t parts,
+                                     const std::function<Status(EntryRecord&)>& visit) {
+  // Copy under the lock, visit outside it, so that `visit` may call the store.
+  std::vector<EntryRecord> copies;
+  {
+    std::lock_guard lock(mutex_);
+    StoredMap* stored = Find(map);
+    if (stored == nullptr) {
+      return Status::NotFound("map " + std::to_string(map) + " does not exist");
+    }
+    copies.resize(stored->entries.size());
+    size_t i = 0;
+    for (const auto& [id, record] : stored->entries) CopyEntryParts(record, parts, &copies[i++]);
+  }
+  for (EntryRecord& record : copies) RECOG_RETURN_IF_ERROR(visit(record));
+  return Status::Ok();
+}
+
+StatusOr<EntryId> MemoryIndexStore::NextEntryId(MapId map) {
+  std::lock_guard lock(mutex_);
+  StoredMap* stored = Find(map);
+  if (stored == nullptr) return Status::NotFound("map " + std::to_string(map) + " does not exist");
+  return stored->next_id;
+}
+
+Status MemoryIndexStore::Checkpoint(const std::string&) {
+  return Status::FailedPrecondition("an in-memory store has nothing to checkpoint");
+}
+
+}  // namespace recog
