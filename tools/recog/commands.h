@@ -10,5 +10,7 @@ namespace recog::cli {
 void AddVocabCommands(CLI::App& app, int* exit_code);
 void AddBowCommand(CLI::App& app, int* exit_code);
 void AddDemoCommand(CLI::App& app, int* exit_code);
+void AddSeqgenCommand(CLI::App& app, int* exit_code);
+void AddEvalCommand(CLI::App& app, int* exit_code);
 
 }  // namespace recog::cli

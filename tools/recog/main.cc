@@ -16,6 +16,8 @@ int main(int argc, char** argv) {
   recog::cli::AddVocabCommands(app, &exit_code);
   recog::cli::AddBowCommand(app, &exit_code);
   recog::cli::AddDemoCommand(app, &exit_code);
+  recog::cli::AddSeqgenCommand(app, &exit_code);
+  recog::cli::AddEvalCommand(app, &exit_code);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -1,0 +1,133 @@
+#include "core/geometry/correspondences.h"
+
+#include <random>
+
+#include <gtest/gtest.h>
+
+#include "tests/testing/synthetic.h"
+
+namespace recog {
+namespace {
+
+FeatureVector AllUnderOneNode(uint32_t n) {
+  std::vector<uint32_t> all(n);
+  for (uint32_t i = 0; i < n; ++i) all[i] = i;
+  FeatureVector fv;
+  fv.AppendNode(7, all);
+  return fv;
+}
+
+TEST(CorrespondencesTest, EveryFeatureMatchesItsOwnCopy) {
+  const cv::Mat d = testing::RandomDescriptors(200, 1);
+  std::vector<Match> exhaustive, direct;
+  ASSERT_TRUE(MatchExhaustive(d, d, {}, &exhaustive).ok());
+  ASSERT_TRUE(
+      MatchByDirectIndex(AllUnderOneNode(200), d, AllUnderOneNode(200), d, {}, &direct).ok());
+  ASSERT_EQ(exhaustive.size(), 200u);
+  EXPECT_EQ(direct, exhaustive);
+  for (const Match& m : exhaustive) {
+    EXPECT_EQ(m.a, m.b);
+    EXPECT_EQ(m.distance, 0u);
+  }
+}
+
+TEST(CorrespondencesTest, DirectIndexComparesOnlyFeaturesUnderTheSameNode) {
+  const cv::Mat d = testing::RandomDescriptors(4, 2);
+  FeatureVector a, b;
+  const uint32_t a0[] = {0, 1}, a1[] = {2, 3};
+  a.AppendNode(3, a0);
+  a.AppendNode(9, a1);
+  const uint32_t b0[] = {0, 1}, b1[] = {2, 3};
+  b.AppendNode(3, b0);
+  b.AppendNode(12, b1);  // features 2 and 3 of B sit under another node than those of A
+  std::vector<Match> matches;
+  ASSERT_TRUE(MatchByDirectIndex(a, d, b, d, {}, &matches).ok());
+  ASSERT_EQ(matches.size(), 2u);
+  EXPECT_EQ(matches[0], (Match{0, 0, 0}));
+  EXPECT_EQ(matches[1], (Match{1, 1, 0}));
+}
+
+TEST(CorrespondencesTest, AmbiguousAndDistantMatchesAreRejected) {
+  cv::Mat a = testing::RandomDescriptors(1, 3);
+  cv::Mat b(2, 32, CV_8U);
+  a.copyTo(b.row(0));
+  a.copyTo(b.row(1));
+  b.at<uint8_t>(0, 0) ^= 0x0f;  // 4 bits away
+  b.at<uint8_t>(1, 1) ^= 0x1f;  // 5 bits away: 4 is not clearly better than 5
+  std::vector<Match> matches;
+  ASSERT_TRUE(MatchExhaustive(a, b, {.ratio = 0.6, .max_distance = 50}, &matches).ok());
+  EXPECT_TRUE(matches.empty());
+  const cv::Mat far = testing::RandomDescriptors(1, 4);  // ~128 bits away
+  ASSERT_TRUE(MatchExhaustive(a, far, {.ratio = 1.0, .max_distance = 50}, &matches).ok());
+  EXPECT_TRUE(matches.empty());
+}
+
+TEST(CorrespondencesTest, MatchesAreOneToOneKeepingTheNearer) {
+  cv::Mat b = testing::RandomDescriptors(1, 5);
+  cv::Mat a(2, 32, CV_8U);
+  b.copyTo(a.row(0));
+  b.copyTo(a.row(1));
+  a.at<uint8_t>(0, 3) ^= 0x7;  // 3 bits away; row 1 is exact
+  std::vector<Match> matches;
+  ASSERT_TRUE(MatchExhaustive(a, b, {}, &matches).ok());
+  ASSERT_EQ(matches.size(), 1u);
+  EXPECT_EQ(matches[0], (Match{1, 0, 0}));
+}
+
+TEST(CorrespondencesTest, NonBinaryOrMismatchedDescriptorsAreRefused) {
+  std::vector<Match> matches;
+  EXPECT_EQ(MatchExhaustive(cv::Mat(3, 32, CV_32F), cv::Mat(3, 32, CV_32F), {}, &matches).code(),
+            StatusCode::kInvalidArgument);
+  EXPECT_EQ(MatchExhaustive(cv::Mat(3, 32, CV_8U), cv::Mat(3, 64, CV_8U), {}, &matches).code(),
+            StatusCode::kInvalidArgument);
+  EXPECT_EQ(
+      MatchByDirectIndex(AllUnderOneNode(9), cv::Mat(3, 32, CV_8U, cv::Scalar(0)),
+                         AllUnderOneNode(3), cv::Mat(3, 32, CV_8U, cv::Scalar(0)), {}, &matches)
+          .code(),
+      StatusCode::kInvalidArgument);
+}
+
+// Two views of random 3D points: camera A at the origin, camera B moved sideways and turned.
+void TwoViews(int n, uint64_t seed, std::vector<cv::KeyPoint>* ka, std::vector<cv::KeyPoint>* kb) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> xy(-2, 2), z(4, 8);
+  const cv::Matx33d rotation(std::cos(0.1), 0, std::sin(0.1), 0, 1, 0, -std::sin(0.1), 0,
+                             std::cos(0.1));
+  const cv::Vec3d translation(0.5, 0.05, 0.1);
+  for (int i = 0; i < n; ++i) {
+    const cv::Vec3d p(xy(rng), xy(rng), z(rng));
+    const cv::Vec3d q = rotation * p + translation;
+    ka->emplace_back(float(500 * p[0] / p[2] + 320), float(500 * p[1] / p[2] + 240), 31.f);
+    kb->emplace_back(float(500 * q[0] / q[2] + 320), float(500 * q[1] / q[2] + 240), 31.f);
+  }
+}
+
+TEST(EpipolarTest, MatchesOfARigidSceneAreVerifiedWithEveryInlier) {
+  std::vector<cv::KeyPoint> ka, kb;
+  TwoViews(60, 1, &ka, &kb);
+  std::vector<Match> matches;
+  for (uint32_t i = 0; i < 60; ++i) matches.push_back({i, i, 0});
+  const EpipolarResult r = VerifyEpipolar(ka, kb, matches, {});
+  EXPECT_TRUE(r.verified);
+  EXPECT_EQ(r.inliers.size(), 60u);
+  // x_b^T F x_a = 0 for a correspondence
+  const cv::Vec3d xa(ka[5].pt.x, ka[5].pt.y, 1), xb(kb[5].pt.x, kb[5].pt.y, 1);
+  EXPECT_NEAR((xb.t() * r.fundamental * xa)(0), 0.0, 1e-2);
+}
+
+TEST(EpipolarTest, RandomMatchesAndTooFewMatchesAreNotVerified) {
+  std::vector<cv::KeyPoint> ka, kb;
+  TwoViews(60, 2, &ka, &kb);
+  std::vector<Match> shuffled;
+  for (uint32_t i = 0; i < 60; ++i) shuffled.push_back({i, (i * 37 + 11) % 60, 0});
+  EXPECT_FALSE(VerifyEpipolar(ka, kb, shuffled, {.min_inliers = 30}).verified);
+  std::vector<Match> few = {{0, 0, 0}, {1, 1, 0}, {2, 2, 0}};
+  const EpipolarResult r = VerifyEpipolar(ka, kb, few, {});
+  EXPECT_FALSE(r.verified);
+  EXPECT_TRUE(r.inliers.empty());
+  std::vector<Match> out_of_range = {{0, 500, 0}};
+  EXPECT_FALSE(VerifyEpipolar(ka, kb, out_of_range, {}).verified);
+}
+
+}  // namespace
+}  // namespace recog

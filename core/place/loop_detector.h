@@ -1,0 +1,141 @@
+// LoopDetector: real-time loop-closure detection over an image sequence (thesis chapter 4).
+//
+// For every frame, in order:
+//  1. its bag of words and direct-index entry are computed with the map's vocabulary;
+//  2. the map's database is queried, leaving out the recent entries (tau_c, in frames or seconds);
+//  3. scores are normalised by the score with the previous usable frame, eta = s(v_t, w) /
+//     s(v_t, v_t-1) (eq. 3.11), and matches below alpha are dropped; a frame whose score with the
+//     previous one is too low is not queried (its eta would be meaningless);
+//  4. the remaining matches are grouped into islands of entries close in time, ranked by the sum
+//     of their eta (eq. 4.2);
+//  5. the best island must be temporally consistent with the best islands of the k previous
+//     queries (§4.3.1): consecutive queries whose islands (almost) overlap;
+//  6. the best entry of the island is verified geometrically: correspondences through the
+//     direct index (Algorithm 2) or exhaustively, then a fundamental matrix with RANSAC and a
+//     minimum of inliers (or no check at all);
+//  7. the frame is added to the database.
+// Every frame gets a LoopResult whose status says why there is, or is not, a loop.
+//
+// The previous usable frame is the most recent one with enough features: a blank frame (a wall,
+// a covered lens) neither gets queried nor breaks the normalisation of the frames after it.
+//
+// Defaults are thesis Table 4.4 where it gives one (k = 3, alpha = 0.3, direct index level 2,
+// 12 RANSAC inliers, minimum score 0.005 with the previous frame, tau_c = 20 s); the others are
+// documented on each field. One detector per map; independent detectors may run at once.
+// A detector is not thread-safe: feed it from one thread.
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <string_view>
+#include <vector>
+
+#include "core/features/feature_extractor.h"
+#include "core/geometry/correspondences.h"
+#include "core/index/database.h"
+
+namespace recog {
+
+enum class LoopStatus {
+  kLoopDetected,               // a verified loop closure
+  kTooFewFeatures,             // fewer than min_features: added, not queried
+  kLowScoreWithPrevious,       // s(v_t, v_t-1) below the minimum: added, not queried
+  kNoCandidates,               // the query returned nothing (no old enough entry shares a word)
+  kLowScore,                   // no candidate reached alpha
+  kNoConsistentIsland,         // the candidates formed no island of the minimum size
+  kFailedTemporalConsistency,  // the best island is not consistent with the previous queries
+  kFailedGeometry,             // too few correspondences or RANSAC inliers
+};
+std::string_view LoopStatusName(LoopStatus status);  // "loop_detected", "too_few_features", ...
+
+enum class GeometryCheck {
+  kDirectIndex,  // correspondences through the direct index, then RANSAC (default, thesis DI_l)
+  kExhaustive,   // correspondences by comparing every pair, then RANSAC
+  kNone,         // accept the temporally consistent candidate as it is
+};
+std::string_view GeometryCheckName(GeometryCheck check);  // "direct_index", "exhaustive", "none"
+StatusOr<GeometryCheck> ParseGeometryCheck(std::string_view name);
+
+struct LoopDetectorParams {
+  uint32_t min_features = 20;              // fewer features: the frame is not queried
+  double min_score_with_previous = 0.005;  // thesis Table 4.4
+  double alpha = 0.3;                      // minimum normalised score eta (Table 4.4)
+  // tau_c: entries added less than this before the frame are not candidates. Frames count when
+  // the frames carry no timestamp; with timestamps (> 0), seconds (Table 4.4: 20 s).
+  uint32_t recent_frames = 20;
+  double recent_seconds = 20.0;
+  uint32_t max_query_results = 50;          // database results considered per query
+  uint32_t island_max_gap = 3;              // entries at most this far apart (ids) join one island
+  uint32_t island_min_size = 1;             // smaller islands are dropped
+  uint32_t temporal_matches = 3;            // k: consistent previous queries required (Table 4.4)
+  uint32_t consistency_max_island_gap = 3;  // ids between consecutive queries' islands
+  uint32_t consistency_max_query_gap = 2;   // queries further apart restart the count
+  GeometryCheck geometry = GeometryCheck::kDirectIndex;
+  MatchOptions matching;     // ratio 0.6 (§4.4.6), max Hamming distance 50
+  EpipolarOptions epipolar;  // 2 px, 12 inliers (Table 4.4)
+
+  Status Validate() const;
+};
+
+struct LoopTimings {  // milliseconds spent in each stage for one frame
+  double conversion = 0, query = 0, islands = 0, insertion = 0, verification = 0;
+};
+
+struct LoopResult {
+  LoopStatus status = LoopStatus::kNoCandidates;
+  EntryId entry = kInvalidEntryId;  // id this frame got in the database
+  EntryId match = kInvalidEntryId;  // the candidate (or verified loop) entry, when there is one
+  double score = 0;                 // s(v_t, w_match)
+  double normalized_score = 0;      // eta of the match
+  double previous_score = 0;        // s(v_t, v_t-1)
+  EntryId island_first = kInvalidEntryId, island_last = kInvalidEntryId;
+  double island_score = 0;          // H, the sum of eta over the island
+  uint32_t consistent_queries = 0;  // previous queries the island is consistent with
+  uint32_t correspondences = 0;     // putative matches given to RANSAC
+  std::vector<Match> inliers;       // a = this frame's feature, b = the match's feature
+  cv::Matx33d fundamental = cv::Matx33d::zeros();
+  LoopTimings timings;
+};
+
+class LoopDetector {
+ public:
+  // `database` must outlive the detector. Its map fixes the vocabulary, scoring and the level of
+  // the direct index. INVALID_ARGUMENT for bad parameters.
+  static StatusOr<LoopDetector> Create(Database* database, const LoopDetectorParams& params);
+
+  // Processes the next frame of the sequence (timestamp in seconds, 0 when unknown) and adds it
+  // to the database. Errors are only for bad input (e.g. descriptors of another format) or a
+  // failing store; "no loop" is a result.
+  StatusOr<LoopResult> Process(const FeatureSet& features, double timestamp = 0.0);
+
+  const LoopDetectorParams& params() const { return params_; }
+
+ private:
+  struct Island {
+    EntryId first = 0, last = 0;
+    double score = 0;  // H
+    EntryId best = 0;
+    double best_eta = 0, best_score = 0;
+  };
+  struct PreviousMatch {
+    uint64_t frame = 0;  // index of the query frame in this detector's sequence
+    EntryId first = 0, last = 0;
+    uint32_t consistent = 0;
+  };
+
+  LoopDetector(Database* database, const LoopDetectorParams& params)
+      : database_(database), params_(params) {}
+  EntryId QueryBound(double timestamp) const;
+  Status Verify(const FeatureSet& features, const FeatureVector& direct, LoopResult* result);
+
+  Database* database_;
+  LoopDetectorParams params_;
+  uint64_t frames_seen_ = 0;
+  std::optional<BowVector> previous_bow_;  // of the last frame with enough features
+  std::optional<PreviousMatch> previous_match_;
+  std::vector<double> entry_timestamps_;  // of the entries this detector added, by id order
+  std::vector<EntryId> entry_ids_;
+  std::vector<QueryResult> query_results_;  // reused
+};
+
+}  // namespace recog

@@ -1,0 +1,274 @@
+#include "core/place/loop_detector.h"
+
+#include <set>
+
+#include <gtest/gtest.h>
+#include <opencv2/imgproc.hpp>
+
+#include "core/index/memory_index_store.h"
+#include "core/vocabulary/vocabulary_trainer.h"
+#include "tests/testing/data_paths.h"
+
+namespace recog {
+namespace {
+
+// Four places cut from the bundled corridor frames: the textured halves of frames 20 and 1, and
+// frame 20's right half upside down (ORB descriptors are not invariant to a mirror image).
+std::vector<cv::Mat> Places() {
+  auto frame1 = ReadGrayImage(testing::ProjectTestData("corridor/1.jpg"));
+  auto frame20 = ReadGrayImage(testing::ProjectTestData("corridor/20.jpg"));
+  EXPECT_TRUE(frame1.ok() && frame20.ok());
+  const cv::Rect left(0, 0, 256, 384), right(256, 0, 256, 384);
+  cv::Mat flipped;
+  cv::flip((*frame20)(right), flipped, 0);
+  return {(*frame20)(right).clone(), (*frame1)(right).clone(), (*frame20)(left).clone(), flipped};
+}
+
+// One visit of a place: `frames` views, each shifted 3 more pixels.
+std::vector<cv::Mat> Visit(const cv::Mat& place, int frames, int first_shift = 0) {
+  std::vector<cv::Mat> views;
+  for (int f = 0; f < frames; ++f) {
+    const double shift = first_shift + 3.0 * f;
+    cv::Mat warped;
+    const cv::Matx23d m(1, 0, shift, 0, 1, shift / 2);
+    cv::warpAffine(place, warped, m, place.size(), cv::INTER_LINEAR, cv::BORDER_REFLECT);
+    views.push_back(warped);
+  }
+  return views;
+}
+
+class LoopDetectorTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    // A small vocabulary trained on the places themselves: enough to tell them apart.
+    auto extractor = CreateFeatureExtractor(FeatureOptions{});
+    TrainingSet set;
+    for (const cv::Mat& place : Places()) {
+      for (const cv::Mat& view : Visit(place, 3)) {
+        FeatureSet f;
+        ASSERT_TRUE((*extractor)->Extract(view, &f).ok());
+        ASSERT_TRUE(set.AddImage(f.descriptors).ok());
+      }
+    }
+    TrainingOptions options;
+    options.branching = 8;
+    options.depth = 4;
+    options.threads = 1;
+    auto v = TrainVocabulary(std::move(set), options);
+    ASSERT_TRUE(v.ok());
+    vocabulary_ = new std::shared_ptr<const Vocabulary>(
+        std::make_shared<const Vocabulary>(std::move(v).value()));
+  }
+  static void TearDownTestSuite() { delete vocabulary_; }
+
+  void SetUp() override {
+    auto db = Database::Create(&store_, "seq", *vocabulary_);
+    ASSERT_TRUE(db.ok());
+    db_ = std::move(db).value();
+    params_.recent_frames = 4;
+    params_.temporal_matches = 2;
+  }
+
+  std::vector<LoopResult> Run(const std::vector<cv::Mat>& frames, LoopDetectorParams params,
+                              Database* db = nullptr) {
+    auto detector = LoopDetector::Create(db ? db : db_.get(), params);
+    EXPECT_TRUE(detector.ok()) << detector.status().ToString();
+    auto extractor = CreateFeatureExtractor(FeatureOptions{});
+    std::vector<LoopResult> results;
+    for (const cv::Mat& frame : frames) {
+      FeatureSet f;
+      EXPECT_TRUE((*extractor)->Extract(frame, &f).ok());
+      auto r = detector->Process(f);
+      EXPECT_TRUE(r.ok()) << r.status().ToString();
+      results.push_back(std::move(r).value());
+    }
+    return results;
+  }
+
+  // Places 0 1 2 3, then places 0 1 again: 4 frames a visit.
+  static std::vector<cv::Mat> TourWithRevisits() {
+    const std::vector<cv::Mat> places = Places();
+    std::vector<cv::Mat> frames;
+    for (int p : {0, 1, 2, 3, 0, 1}) {
+      for (const cv::Mat& v : Visit(places[size_t(p)], 4, p >= 0 && frames.size() >= 16 ? 2 : 0)) {
+        frames.push_back(v);
+      }
+    }
+    return frames;
+  }
+
+  static std::shared_ptr<const Vocabulary>* vocabulary_;
+  MemoryIndexStore store_;
+  std::unique_ptr<Database> db_;
+  LoopDetectorParams params_;
+};
+std::shared_ptr<const Vocabulary>* LoopDetectorTest::vocabulary_ = nullptr;
+
+TEST_F(LoopDetectorTest, RevisitsAreDetectedOnceTheIslandIsTemporallyConsistent) {
+  const std::vector<LoopResult> results = Run(TourWithRevisits(), params_);
+  ASSERT_EQ(results.size(), 24u);
+  int detections = 0;
+  for (size_t i = 0; i < results.size(); ++i) {
+    const LoopResult& r = results[i];
+    EXPECT_EQ(r.entry, EntryId(i));
+    if (r.status != LoopStatus::kLoopDetected) continue;
+    ++detections;
+    ASSERT_GE(i, 16u) << "only revisit frames can close a loop";
+    const EntryId first_visit = i < 20 ? 0 : 4;  // place 0 at frames 0-3, place 1 at 4-7
+    EXPECT_GE(r.match, first_visit);
+    EXPECT_LT(r.match, first_visit + 4);
+    EXPECT_GE(r.inliers.size(), 12u);
+    EXPECT_GE(r.normalized_score, params_.alpha);
+    EXPECT_GE(r.consistent_queries, params_.temporal_matches);
+    EXPECT_LE(r.island_first, r.match);
+    EXPECT_GE(r.island_last, r.match);
+  }
+  EXPECT_GE(detections, 4);
+  // The first revisit frame has no consistent predecessor yet.
+  EXPECT_EQ(results[16].status, LoopStatus::kFailedTemporalConsistency);
+  EXPECT_EQ(results[16].consistent_queries, 0u);
+  // The very first frame has nothing to normalise with.
+  EXPECT_EQ(results[0].status, LoopStatus::kLowScoreWithPrevious);
+}
+
+TEST_F(LoopDetectorTest, ATourWithoutRevisitsHasNoLoop) {
+  const std::vector<cv::Mat> places = Places();
+  std::vector<cv::Mat> frames;
+  for (const cv::Mat& place : places) {
+    for (const cv::Mat& v : Visit(place, 5)) frames.push_back(v);
+  }
+  LoopDetectorParams params = params_;
+  params.temporal_matches = 0;  // the most permissive setting: only geometry stands in the way
+  for (const LoopResult& r : Run(frames, params)) {
+    EXPECT_NE(r.status, LoopStatus::kLoopDetected) << "frame " << r.entry << " -> " << r.match;
+  }
+}
+
+TEST_F(LoopDetectorTest, RecentFramesAreNeverCandidates) {
+  const std::vector<cv::Mat> frames = Visit(Places()[0], 10);
+  LoopDetectorParams params = params_;
+  params.recent_frames = 20;
+  for (const LoopResult& r : Run(frames, params)) {
+    EXPECT_TRUE(r.status == LoopStatus::kNoCandidates ||
+                r.status == LoopStatus::kLowScoreWithPrevious)
+        << LoopStatusName(r.status);
+  }
+}
+
+TEST_F(LoopDetectorTest, ABlankFrameIsSkippedWithoutBreakingTheFramesAfterIt) {
+  std::vector<cv::Mat> frames = TourWithRevisits();
+  frames.insert(frames.begin() + 18, cv::Mat(384, 256, CV_8U, cv::Scalar(128)));
+  LoopDetectorParams params = params_;
+  params.recent_frames = 5;
+  const std::vector<LoopResult> results = Run(frames, params);
+  EXPECT_EQ(results[18].status, LoopStatus::kTooFewFeatures);
+  // The frame after the blank one is normalised with the frame before it, and queried.
+  EXPECT_NE(results[19].status, LoopStatus::kLowScoreWithPrevious);
+  EXPECT_GT(results[19].previous_score, params.min_score_with_previous);
+  int detections_after_blank = 0;
+  for (size_t i = 19; i < results.size(); ++i) {
+    detections_after_blank += results[i].status == LoopStatus::kLoopDetected;
+  }
+  EXPECT_GE(detections_after_blank, 2);
+}
+
+TEST_F(LoopDetectorTest, EveryGeometryCheckFindsTheLoops) {
+  for (GeometryCheck check :
+       {GeometryCheck::kDirectIndex, GeometryCheck::kExhaustive, GeometryCheck::kNone}) {
+    MemoryIndexStore store;
+    auto db = Database::Create(&store, "g", *vocabulary_);
+    ASSERT_TRUE(db.ok());
+    LoopDetectorParams params = params_;
+    params.geometry = check;
+    int detections = 0;
+    for (const LoopResult& r : Run(TourWithRevisits(), params, db->get())) {
+      if (r.status == LoopStatus::kLoopDetected) {
+        ++detections;
+        if (check == GeometryCheck::kNone) {
+          EXPECT_TRUE(r.inliers.empty());
+        } else {
+          EXPECT_GE(r.correspondences, r.inliers.size());
+        }
+      }
+    }
+    EXPECT_GE(detections, 4) << GeometryCheckName(check);
+  }
+}
+
+TEST_F(LoopDetectorTest, TimestampsMakeTheRecentWindowASpanOfSeconds) {
+  const std::vector<cv::Mat> frames = Visit(Places()[0], 8);
+  LoopDetectorParams params = params_;
+  params.recent_frames = 1000;  // ignored when timestamps are given
+  params.recent_seconds = 2.5;
+  params.temporal_matches = 0;
+  params.geometry = GeometryCheck::kNone;
+  auto detector = LoopDetector::Create(db_.get(), params);
+  ASSERT_TRUE(detector.ok());
+  auto extractor = CreateFeatureExtractor(FeatureOptions{});
+  for (size_t i = 0; i < frames.size(); ++i) {
+    FeatureSet f;
+    ASSERT_TRUE((*extractor)->Extract(frames[i], &f).ok());
+    auto r = detector->Process(f, 100.0 + double(i));
+    ASSERT_TRUE(r.ok());
+    if (r->match != kInvalidEntryId) {
+      EXPECT_LE(double(r->match) + 3.0, double(i)) << "frame " << i << " matched a recent frame";
+    }
+    if (i >= 4) {
+      EXPECT_NE(r->status, LoopStatus::kNoCandidates) << "frame " << i;
+    }
+  }
+}
+
+TEST_F(LoopDetectorTest, RunsAreDeterministic) {
+  MemoryIndexStore store;
+  auto db = Database::Create(&store, "again", *vocabulary_);
+  ASSERT_TRUE(db.ok());
+  const auto a = Run(TourWithRevisits(), params_);
+  const auto b = Run(TourWithRevisits(), params_, db->get());
+  ASSERT_EQ(a.size(), b.size());
+  for (size_t i = 0; i < a.size(); ++i) {
+    EXPECT_EQ(a[i].status, b[i].status);
+    EXPECT_EQ(a[i].match, b[i].match);
+    EXPECT_EQ(a[i].inliers, b[i].inliers);
+  }
+}
+
+TEST_F(LoopDetectorTest, BadParametersAndBadInputAreErrors) {
+  LoopDetectorParams bad = params_;
+  bad.alpha = -1;
+  EXPECT_EQ(LoopDetector::Create(db_.get(), bad).status().code(), StatusCode::kInvalidArgument);
+  bad = params_;
+  bad.epipolar.min_inliers = 5;
+  EXPECT_EQ(LoopDetector::Create(db_.get(), bad).status().code(), StatusCode::kInvalidArgument);
+  bad = params_;
+  bad.matching.ratio = 0;
+  EXPECT_EQ(LoopDetector::Create(db_.get(), bad).status().code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(LoopDetector::Create(nullptr, params_).status().code(), StatusCode::kInvalidArgument);
+
+  auto detector = LoopDetector::Create(db_.get(), params_);
+  ASSERT_TRUE(detector.ok());
+  FeatureSet wrong;
+  wrong.descriptors = cv::Mat(10, 64, CV_8U, cv::Scalar(0));
+  wrong.keypoints.resize(10);
+  EXPECT_EQ(detector->Process(wrong).status().code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(db_->size(), 0u) << "a refused frame is not added";
+}
+
+TEST(LoopStatusTest, NamesAreDistinctAndGeometryNamesParse) {
+  std::set<std::string_view> names;
+  for (LoopStatus s :
+       {LoopStatus::kLoopDetected, LoopStatus::kTooFewFeatures, LoopStatus::kLowScoreWithPrevious,
+        LoopStatus::kNoCandidates, LoopStatus::kLowScore, LoopStatus::kNoConsistentIsland,
+        LoopStatus::kFailedTemporalConsistency, LoopStatus::kFailedGeometry}) {
+    names.insert(LoopStatusName(s));
+  }
+  EXPECT_EQ(names.size(), 8u);
+  for (GeometryCheck c :
+       {GeometryCheck::kDirectIndex, GeometryCheck::kExhaustive, GeometryCheck::kNone}) {
+    EXPECT_EQ(ParseGeometryCheck(GeometryCheckName(c)).value(), c);
+  }
+  EXPECT_FALSE(ParseGeometryCheck("homography").ok());
+}
+
+}  // namespace
+}  // namespace recog

@@ -1,0 +1,290 @@
+// recog eval place: runs the loop detector over a sequence with ground truth and reports
+// precision, recall, detections and per-stage timings; --sweep alpha draws the PR curve.
+#include <cstdio>
+#include <filesystem>
+#include <memory>
+#include <set>
+#include <string>
+
+#include <yaml-cpp/yaml.h>
+#include <nlohmann/json.hpp>
+#include <opencv2/features2d.hpp>
+#include <opencv2/imgcodecs.hpp>
+
+#include "core/vocabulary/vocabulary_io.h"
+#include "tools/recog/cli_support.h"
+#include "tools/recog/commands.h"
+#include "tools/recog/place_evaluation.h"
+#include "tools/recog/plot.h"
+
+namespace recog::cli {
+namespace {
+
+namespace fs = std::filesystem;
+
+struct EvalPlaceArgs {
+  std::string images, ground_truth, vocabulary, params_file, draw_dir, sweep;
+  std::string plot = "recog_eval_place_pr.png";
+  int features = 1000;
+  bool json = false;
+  bool quiet = false;
+};
+
+int Fail(const Status& s) {
+  std::fprintf(stderr, "recog eval place: %s\n", s.ToString().c_str());
+  return 1;
+}
+
+// Reads detector parameters from a YAML file; unknown keys are an error (typos must not pass
+// silently).
+Status ReadParams(const std::string& path, PlaceEvaluationOptions* options, int* features) {
+  YAML::Node root;
+  try {
+    root = YAML::LoadFile(path);
+  } catch (const YAML::BadFile&) {
+    return Status::NotFound("parameter file '" + path + "' cannot be read");
+  } catch (const YAML::Exception& e) {
+    return Status::InvalidArgument("parameter file '" + path + "': " + e.what());
+  }
+  if (!root.IsMap()) return Status::InvalidArgument("parameter file '" + path + "' is not a map");
+  LoopDetectorParams& p = options->detector;
+  try {
+    for (const auto& item : root) {
+      const std::string key = item.first.as<std::string>();
+      const YAML::Node& v = item.second;
+      if (key == "alpha")
+        p.alpha = v.as<double>();
+      else if (key == "temporal_matches")
+        p.temporal_matches = v.as<uint32_t>();
+      else if (key == "recent_frames")
+        p.recent_frames = v.as<uint32_t>();
+      else if (key == "recent_seconds")
+        p.recent_seconds = v.as<double>();
+      else if (key == "min_features")
+        p.min_features = v.as<uint32_t>();
+      else if (key == "min_score_with_previous")
+        p.min_score_with_previous = v.as<double>();
+      else if (key == "max_query_results")
+        p.max_query_results = v.as<uint32_t>();
+      else if (key == "island_max_gap")
+        p.island_max_gap = v.as<uint32_t>();
+      else if (key == "island_min_size")
+        p.island_min_size = v.as<uint32_t>();
+      else if (key == "consistency_max_island_gap")
+        p.consistency_max_island_gap = v.as<uint32_t>();
+      else if (key == "consistency_max_query_gap")
+        p.consistency_max_query_gap = v.as<uint32_t>();
+      else if (key == "ratio")
+        p.matching.ratio = v.as<double>();
+      else if (key == "max_distance")
+        p.matching.max_distance = v.as<uint32_t>();
+      else if (key == "ransac_threshold_px")
+        p.epipolar.threshold_px = v.as<double>();
+      else if (key == "ransac_confidence")
+        p.epipolar.confidence = v.as<double>();
+      else if (key == "ransac_max_iterations")
+        p.epipolar.max_iterations = v.as<int>();
+      else if (key == "min_inliers")
+        p.epipolar.min_inliers = v.as<size_t>();
+      else if (key == "direct_index_levels_up")
+        options->direct_index_levels_up = v.as<uint32_t>();
+      else if (key == "features")
+        *features = v.as<int>();
+      else if (key == "geometry") {
+        RECOG_ASSIGN_OR_RETURN(p.geometry, ParseGeometryCheck(v.as<std::string>()));
+      } else if (key == "scoring") {
+        RECOG_ASSIGN_OR_RETURN(options->scoring, ParseScoring(v.as<std::string>()));
+      } else {
+        return Status::InvalidArgument("parameter file '" + path + "': unknown key '" + key + "'");
+      }
+    }
+  } catch (const YAML::Exception& e) {
+    return Status::InvalidArgument("parameter file '" + path + "': " + e.what());
+  }
+  return p.Validate();
+}
+
+nlohmann::json ToJson(const PlaceEvaluation& e, const SequenceFeatures& seq) {
+  nlohmann::json timing;
+  for (const auto& [stage, s] : e.timing_ms) {
+    timing[stage] = {{"mean", s.mean}, {"median", s.median}, {"max", s.max}};
+  }
+  nlohmann::json loops = nlohmann::json::array();
+  for (const DetectedLoop& l : e.loops) {
+    loops.push_back({{"query", l.query + 1},
+                     {"match", l.match + 1},
+                     {"query_file", seq.names[size_t(l.query)]},
+                     {"match_file", seq.names[size_t(l.match)]},
+                     {"status", std::string(LoopStatusName(l.status))},
+                     {"correct", l.correct},
+                     {"normalized_score", l.normalized_score},
+                     {"inliers", l.inliers}});
+  }
+  return {{"frames", e.frames},
+          {"query_frames_with_truth", e.query_frames_with_truth},
+          {"detections", e.detections},
+          {"correct", e.correct},
+          {"precision", e.precision},
+          {"recall", e.recall},
+          {"statuses", e.statuses},
+          {"timing_ms", timing},
+          {"loops", loops}};
+}
+
+// Side-by-side images of each detection with its inlier correspondences.
+Status DrawDetections(const std::string& dir, const SequenceFeatures& seq,
+                      const std::vector<LoopResult>& results) {
+  std::error_code ec;
+  fs::create_directories(dir, ec);
+  if (ec) return Status::InvalidArgument("cannot create '" + dir + "': " + ec.message());
+  for (size_t q = 0; q < results.size(); ++q) {
+    const LoopResult& r = results[q];
+    if (r.status != LoopStatus::kLoopDetected) continue;
+    std::vector<cv::DMatch> matches;
+    for (const Match& m : r.inliers) matches.emplace_back(int(m.a), int(m.b), float(m.distance));
+    cv::Mat canvas;
+    cv::drawMatches(seq.images[q], seq.features[q].keypoints, seq.images[r.match],
+                    seq.features[r.match].keypoints, matches, canvas, cv::Scalar(0, 255, 0),
+                    cv::Scalar(0, 0, 255), {}, cv::DrawMatchesFlags::NOT_DRAW_SINGLE_POINTS);
+    const std::string path = (fs::path(dir) / ("loop_" + std::to_string(q + 1) + "_" +
+                                               std::to_string(r.match + 1) + ".jpg"))
+                                 .string();
+    if (!cv::imwrite(path, canvas)) return Status::Internal("cannot write '" + path + "'");
+  }
+  return Status::Ok();
+}
+
+int RunEvalPlace(const EvalPlaceArgs& args) {
+  PlaceEvaluationOptions options;
+  int features = args.features;
+  if (!args.params_file.empty()) {
+    if (Status s = ReadParams(args.params_file, &options, &features); !s.ok()) return Fail(s);
+  }
+  if (!args.sweep.empty() && args.sweep != "alpha") {
+    return Fail(Status::InvalidArgument("--sweep only supports 'alpha'"));
+  }
+  auto truth = ReadGroundTruth(args.ground_truth);
+  if (!truth.ok()) return Fail(truth.status());
+  const std::string vocabulary_path =
+      args.vocabulary.empty() ? DefaultPlaceVocabularyPath() : args.vocabulary;
+  auto vocabulary = LoadAnyVocabulary(vocabulary_path);
+  if (!vocabulary.ok()) return Fail(vocabulary.status());
+  auto shared = std::make_shared<const Vocabulary>(std::move(vocabulary).value());
+
+  auto source = FrameSource::Open(args.images);
+  if (!source.ok()) return Fail(source.status());
+  FeatureOptions feature_options;
+  feature_options.orb.max_features = features;
+  ProgressBar progress(!args.quiet);
+  auto sequence = ExtractSequence(*source, feature_options, !args.draw_dir.empty(), [&](size_t n) {
+    progress.Update("features", n, uint64_t(truth->frames));
+  });
+  progress.Finish();
+  if (!sequence.ok()) return Fail(sequence.status());
+
+  std::vector<LoopResult> results;
+  auto evaluation = EvaluatePlace(*sequence, *truth, shared, options, &results);
+  if (!evaluation.ok()) return Fail(evaluation.status());
+  nlohmann::json out = ToJson(*evaluation, *sequence);
+  out["parameters"] = {{"alpha", options.detector.alpha},
+                       {"temporal_matches", options.detector.temporal_matches},
+                       {"geometry", std::string(GeometryCheckName(options.detector.geometry))},
+                       {"direct_index_levels_up", options.direct_index_levels_up},
+                       {"features", features},
+                       {"vocabulary", vocabulary_path}};
+
+  if (!args.sweep.empty()) {
+    // Two curves: with the configured geometric check, and without any (thesis Fig. 4.7), which
+    // shows what the normalised score and the temporal consistency achieve on their own.
+    nlohmann::json sweep = nlohmann::json::array();
+    std::vector<PlotSeries> curves;
+    for (const GeometryCheck geometry : {options.detector.geometry, GeometryCheck::kNone}) {
+      if (!curves.empty() && geometry == options.detector.geometry) break;
+      PlotSeries series;
+      series.label = "geometry: " + std::string(GeometryCheckName(geometry));
+      series.color = curves.empty() ? cv::Scalar(200, 80, 20) : cv::Scalar(40, 40, 220);
+      for (int a = 0; a <= 20; ++a) {
+        PlaceEvaluationOptions o = options;
+        o.detector.alpha = a * 0.05;
+        o.detector.geometry = geometry;
+        auto e = EvaluatePlace(*sequence, *truth, shared, o);
+        if (!e.ok()) return Fail(e.status());
+        sweep.push_back({{"geometry", std::string(GeometryCheckName(geometry))},
+                         {"alpha", o.detector.alpha},
+                         {"precision", e->precision},
+                         {"recall", e->recall},
+                         {"detections", e->detections}});
+        series.points.push_back({e->recall, e->precision});
+        char label[16];
+        std::snprintf(label, sizeof(label), "%.1f", o.detector.alpha);
+        series.point_labels.push_back(a % 4 == 0 ? label : "");
+      }
+      curves.push_back(std::move(series));
+    }
+    out["sweep"] = sweep;
+    PlotOptions plot;
+    plot.title = "Loop detection on " + fs::path(args.images).filename().string() +
+                 ": precision vs recall, alpha from 0 to 1";
+    plot.x_label = "recall";
+    plot.y_label = "precision";
+    if (Status s = WritePlotPng(args.plot, plot, curves); !s.ok()) return Fail(s);
+    out["plot"] = args.plot;
+  }
+  if (!args.draw_dir.empty()) {
+    if (Status s = DrawDetections(args.draw_dir, *sequence, results); !s.ok()) return Fail(s);
+  }
+
+  if (args.json) {
+    std::printf("%s\n", out.dump(2).c_str());
+  } else {
+    const PlaceEvaluation& e = *evaluation;
+    std::printf("frames %d, query frames with a true match %d\n", e.frames,
+                e.query_frames_with_truth);
+    std::printf("detections %d, correct %d: precision %.1f %%, recall %.1f %%\n", e.detections,
+                e.correct, 100 * e.precision, 100 * e.recall);
+    std::printf("%-13s %8s %8s %8s  (ms per frame)\n", "stage", "mean", "median", "max");
+    for (const char* stage :
+         {"features", "conversion", "query", "islands", "insertion", "verification", "total"}) {
+      const StageStats& s = e.timing_ms.at(stage);
+      std::printf("%-13s %8.3f %8.3f %8.3f\n", stage, s.mean, s.median, s.max);
+    }
+    for (const DetectedLoop& l : e.loops) {
+      if (l.status == LoopStatus::kLoopDetected) {
+        std::printf("loop %s -> %s (%s, %u inliers)\n", sequence->names[size_t(l.query)].c_str(),
+                    sequence->names[size_t(l.match)].c_str(), l.correct ? "correct" : "WRONG",
+                    l.inliers);
+      }
+    }
+    if (!args.sweep.empty()) std::printf("precision-recall plot: %s\n", args.plot.c_str());
+  }
+  return 0;
+}
+
+}  // namespace
+
+void AddEvalCommand(CLI::App& app, int* exit_code) {
+  CLI::App* eval = app.add_subcommand("eval", "Evaluate recognition against ground truth");
+  eval->require_subcommand(1);
+  auto args = std::make_shared<EvalPlaceArgs>();
+  CLI::App* place = eval->add_subcommand(
+      "place", "Run the loop detector over a sequence and score it against ground truth");
+  place->add_option("--images", args->images, "Folder of frames, a list file, or a video")
+      ->required();
+  place
+      ->add_option("--ground-truth", args->ground_truth,
+                   "N x N 0/1 matrix (line i, column j = 1: frame i revisits frame j < i), or "
+                   "the sparse format of recog seqgen")
+      ->required();
+  place->add_option("--vocab", args->vocabulary, "Vocabulary (default: the bundled place one)");
+  place->add_option("--params", args->params_file, "YAML file of detector parameters");
+  place->add_option("--features", args->features, "ORB features per frame")->capture_default_str();
+  place->add_option("--sweep", args->sweep, "'alpha': precision-recall curve over alpha 0..1");
+  place->add_option("--plot", args->plot, "PNG of the precision-recall curve (with --sweep)")
+      ->capture_default_str();
+  place->add_option("--draw", args->draw_dir, "Folder for images of every detection");
+  place->add_flag("--json", args->json, "Print JSON");
+  place->add_flag("-q,--quiet", args->quiet, "No progress output");
+  place->callback([args, exit_code] { *exit_code = RunEvalPlace(*args); });
+}
+
+}  // namespace recog::cli

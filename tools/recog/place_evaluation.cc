@@ -1,0 +1,173 @@
+#include "tools/recog/place_evaluation.h"
+
+#include <algorithm>
+#include <chrono>
+#include <filesystem>
+#include <fstream>
+#include <numeric>
+
+#include <opencv2/imgproc.hpp>
+#include <opencv2/videoio.hpp>
+
+#include "core/index/memory_index_store.h"
+#include "tools/recog/cli_support.h"
+
+namespace recog::cli {
+
+namespace fs = std::filesystem;
+
+StatusOr<FrameSource> FrameSource::Open(const std::string& spec) {
+  FrameSource source;
+  std::error_code ec;
+  if (fs::is_directory(spec, ec)) {
+    RECOG_ASSIGN_OR_RETURN(source.files_, ListImages(spec));
+    return source;
+  }
+  if (!fs::exists(spec, ec)) return Status::NotFound("'" + spec + "' does not exist");
+  const std::string ext = fs::path(spec).extension().string();
+  if (ext == ".txt" || ext == ".lst" || ext == ".list") {
+    std::ifstream in(spec);
+    std::string line;
+    while (std::getline(in, line)) {
+      if (!line.empty() && line.back() == '\r') line.pop_back();
+      if (line.empty() || line[0] == '#') continue;
+      fs::path p(line);
+      if (p.is_relative()) p = fs::path(spec).parent_path() / p;
+      source.files_.push_back(p.string());
+    }
+    if (source.files_.empty()) return Status::InvalidArgument("image list '" + spec + "' is empty");
+    return source;
+  }
+  auto video = std::make_shared<cv::VideoCapture>(spec);
+  if (!video->isOpened()) {
+    return Status::InvalidArgument("'" + spec + "' is neither a folder, an image list nor a video");
+  }
+  source.video_ = std::move(video);
+  source.video_name_ = fs::path(spec).filename().string();
+  return source;
+}
+
+StatusOr<bool> FrameSource::Next(cv::Mat* gray, std::string* name) {
+  if (video_) {
+    cv::Mat frame;
+    if (!video_->read(frame) || frame.empty()) return false;
+    if (frame.channels() == 3) {
+      cv::cvtColor(frame, *gray, cv::COLOR_BGR2GRAY);
+    } else {
+      *gray = frame;
+    }
+    *name = video_name_ + "#" + std::to_string(next_++ + 1);
+    return true;
+  }
+  if (next_ >= files_.size()) return false;
+  *name = files_[next_++];
+  RECOG_ASSIGN_OR_RETURN(*gray, ReadGrayImage(*name));
+  return true;
+}
+
+StatusOr<SequenceFeatures> ExtractSequence(FrameSource& source, const FeatureOptions& options,
+                                           bool keep_images,
+                                           const std::function<void(size_t)>& progress) {
+  RECOG_ASSIGN_OR_RETURN(std::unique_ptr<FeatureExtractor> extractor,
+                         CreateFeatureExtractor(options));
+  SequenceFeatures sequence;
+  cv::Mat image;
+  std::string name;
+  for (;;) {
+    RECOG_ASSIGN_OR_RETURN(const bool more, source.Next(&image, &name));
+    if (!more) break;
+    FeatureSet features;
+    const auto start = std::chrono::steady_clock::now();
+    RECOG_RETURN_IF_ERROR(extractor->Extract(image, &features));
+    sequence.feature_ms.push_back(
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
+            .count());
+    sequence.features.push_back(std::move(features));
+    sequence.names.push_back(name);
+    if (keep_images) sequence.images.push_back(image.clone());
+    if (progress) progress(sequence.features.size());
+  }
+  if (sequence.features.empty()) return Status::InvalidArgument("the sequence has no frames");
+  return sequence;
+}
+
+double Median(std::vector<double> values) {
+  if (values.empty()) return 0.0;
+  const size_t mid = values.size() / 2;
+  std::nth_element(values.begin(), values.begin() + long(mid), values.end());
+  double m = values[mid];
+  if (values.size() % 2 == 0) {
+    m = (m + *std::max_element(values.begin(), values.begin() + long(mid))) / 2.0;
+  }
+  return m;
+}
+
+namespace {
+
+StageStats Stats(const std::vector<double>& values) {
+  StageStats s;
+  if (values.empty()) return s;
+  s.mean = std::accumulate(values.begin(), values.end(), 0.0) / double(values.size());
+  s.median = Median(values);
+  s.max = *std::max_element(values.begin(), values.end());
+  return s;
+}
+
+}  // namespace
+
+StatusOr<PlaceEvaluation> EvaluatePlace(const SequenceFeatures& sequence, const GroundTruth& truth,
+                                        std::shared_ptr<const Vocabulary> vocabulary,
+                                        const PlaceEvaluationOptions& options,
+                                        std::vector<LoopResult>* results) {
+  const int frames = int(sequence.features.size());
+  if (truth.frames != frames) {
+    return Status::InvalidArgument("the ground truth covers " + std::to_string(truth.frames) +
+                                   " frames but the sequence has " + std::to_string(frames));
+  }
+  MemoryIndexStore store;
+  RECOG_ASSIGN_OR_RETURN(std::unique_ptr<Database> db,
+                         Database::Create(&store, "evaluation", std::move(vocabulary),
+                                          options.scoring, options.direct_index_levels_up));
+  RECOG_ASSIGN_OR_RETURN(LoopDetector detector, LoopDetector::Create(db.get(), options.detector));
+
+  PlaceEvaluation eval;
+  eval.frames = frames;
+  eval.query_frames_with_truth = truth.QueriesWithMatches();
+  std::map<std::string, std::vector<double>> times;
+  if (results != nullptr) results->clear();
+  for (int i = 0; i < frames; ++i) {
+    RECOG_ASSIGN_OR_RETURN(LoopResult r, detector.Process(sequence.features[size_t(i)]));
+    const LoopTimings& t = r.timings;
+    times["features"].push_back(sequence.feature_ms[size_t(i)]);
+    times["conversion"].push_back(t.conversion);
+    times["query"].push_back(t.query);
+    times["islands"].push_back(t.islands);
+    times["insertion"].push_back(t.insertion);
+    times["verification"].push_back(t.verification);
+    times["total"].push_back(sequence.feature_ms[size_t(i)] + t.conversion + t.query + t.islands +
+                             t.insertion + t.verification);
+    ++eval.statuses[std::string(LoopStatusName(r.status))];
+    if (r.match != kInvalidEntryId) {
+      DetectedLoop loop;
+      loop.query = i;
+      loop.match = int(r.match);
+      loop.status = r.status;
+      loop.correct = truth.Matches(i, int(r.match));
+      loop.normalized_score = r.normalized_score;
+      loop.inliers = uint32_t(r.inliers.size());
+      if (r.status == LoopStatus::kLoopDetected) {
+        ++eval.detections;
+        eval.correct += loop.correct;
+      }
+      eval.loops.push_back(loop);
+    }
+    if (results != nullptr) results->push_back(std::move(r));
+  }
+  for (const auto& [stage, values] : times) eval.timing_ms[stage] = Stats(values);
+  eval.precision = eval.detections > 0 ? double(eval.correct) / eval.detections : 1.0;
+  eval.recall =
+      eval.query_frames_with_truth > 0 ? double(eval.correct) / eval.query_frames_with_truth : 0.0;
+  return eval;
+}
+
+}  // namespace recog::cli

@@ -1,0 +1,86 @@
+// Evaluation of the loop detector on a recorded sequence with ground truth: what
+// `recog eval place` reports (precision, recall, per-stage timings, the detections) and the
+// pieces it is made of, usable from benchmarks too.
+#pragma once
+
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <opencv2/videoio.hpp>
+
+#include "core/place/loop_detector.h"
+#include "tools/recog/ground_truth.h"
+
+namespace recog::cli {
+
+// The frames of a sequence: a folder of images (natural order of names), a text file listing one
+// image path per line (relative paths are relative to the list), or a video file.
+class FrameSource {
+ public:
+  static StatusOr<FrameSource> Open(const std::string& spec);
+  // The next frame as 8-bit grey; false at the end. Undecodable images are INVALID_ARGUMENT.
+  StatusOr<bool> Next(cv::Mat* gray, std::string* name);
+
+ private:
+  std::vector<std::string> files_;
+  size_t next_ = 0;
+  std::shared_ptr<cv::VideoCapture> video_;
+  std::string video_name_;
+};
+
+struct SequenceFeatures {
+  std::vector<FeatureSet> features;
+  std::vector<std::string> names;
+  std::vector<double> feature_ms;  // extraction time per frame
+  std::vector<cv::Mat> images;     // kept only when asked (for drawing)
+};
+
+// Reads every frame and extracts its features (single thread, timed per frame).
+StatusOr<SequenceFeatures> ExtractSequence(FrameSource& source, const FeatureOptions& options,
+                                           bool keep_images,
+                                           const std::function<void(size_t)>& progress = nullptr);
+
+struct StageStats {
+  double mean = 0, median = 0, max = 0;
+};
+
+struct DetectedLoop {
+  int query = 0;  // 0-based frame index
+  int match = 0;  // 0-based frame index of the matched frame
+  LoopStatus status = LoopStatus::kLoopDetected;
+  bool correct = false;  // the ground truth marks the pair
+  double normalized_score = 0;
+  uint32_t inliers = 0;
+};
+
+struct PlaceEvaluation {
+  int frames = 0;
+  int query_frames_with_truth = 0;
+  int detections = 0;
+  int correct = 0;
+  double precision = 1.0;  // 1 when there is no detection
+  double recall = 0.0;
+  std::map<std::string, StageStats> timing_ms;  // features, conversion, query, islands, ...
+  std::map<std::string, int> statuses;          // frames per LoopStatus name
+  std::vector<DetectedLoop> loops;              // every frame that had a candidate match
+};
+
+struct PlaceEvaluationOptions {
+  LoopDetectorParams detector;
+  ScoringType scoring = ScoringType::kL1;
+  uint32_t direct_index_levels_up = 2;
+};
+
+// Runs a fresh detector (in-memory database) over the sequence in order and scores it against
+// the ground truth. `results`, when not null, receives every frame's LoopResult.
+StatusOr<PlaceEvaluation> EvaluatePlace(const SequenceFeatures& sequence, const GroundTruth& truth,
+                                        std::shared_ptr<const Vocabulary> vocabulary,
+                                        const PlaceEvaluationOptions& options,
+                                        std::vector<LoopResult>* results = nullptr);
+
+// Median of a copy of the values (0 for none).
+double Median(std::vector<double> values);
+
+}  // namespace recog::cli

@@ -1,0 +1,434 @@
+#include "tools/recog/sequence_generator.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <list>
+#include <mutex>
+#include <numbers>
+#include <random>
+#include <utility>
+
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+namespace recog::cli {
+namespace {
+
+namespace fs = std::filesystem;
+
+// Independent random streams derived from the one seed.
+enum Stream : uint64_t { kTourStream = 1, kVisitStream = 2, kFrameStream = 3 };
+
+constexpr int kMaxFrames = 50'000'000;
+constexpr double kRevisitStrength = 1.5;  // revisits: 1.5x blur, noise and illumination limits
+constexpr double kMaxZoom = 1.5;          // beyond this, BORDER_REFLECT fills the view's edges
+
+uint64_t SplitMix64(uint64_t x) {
+  x += 0x9e3779b97f4a7c15ULL;
+  x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ULL;
+  x = (x ^ (x >> 27)) * 0x94d049bb133111ebULL;
+  return x ^ (x >> 31);
+}
+
+// Seed of item `index` of `stream`: a bijective mix, so nearby (seed, index) pairs give unrelated
+// generators.
+uint64_t StreamSeed(uint64_t seed, Stream stream, uint64_t index) {
+  return SplitMix64(SplitMix64(seed ^ SplitMix64(stream)) + index);
+}
+
+// Uniform in [lo, hi). Written out (not std::uniform_real_distribution) so that sequences do not
+// depend on the standard library's implementation.
+double Uniform(std::mt19937_64& rng, double lo, double hi) {
+  return lo + (hi - lo) * (double(rng() >> 11) * 0x1.0p-53);
+}
+double Symmetric(std::mt19937_64& rng, double limit) { return Uniform(rng, -limit, limit); }
+
+int NumRevisits(const SequenceOptions& o) {
+  return int(std::min<double>(o.places, std::llround(o.revisit_fraction * o.places)));
+}
+
+Status CheckRange(const char* name, double value, double lo, double hi) {
+  if (!std::isfinite(value) || value < lo || value > hi) {
+    char buf[200];
+    std::snprintf(buf, sizeof(buf), "%s = %g is outside [%g, %g]", name, value, lo, hi);
+    return Status::InvalidArgument(buf);
+  }
+  return Status::Ok();
+}
+
+// Everything about one visit that stays fixed across its frames.
+struct VisitParams {
+  double strength = 1;            // 1 on first visits, kRevisitStrength on revisits
+  double pan_dx = 0, pan_dy = 0;  // total pan over the visit, in output pixels
+  double offset_x = 0, offset_y = 0, rotation = 0, scale = 0;  // revisit viewpoint
+  double tilt_x = 0, tilt_y = 0;                               // perspective (revisits)
+  double gain = 1;
+  double gradient_x = 0, gradient_y = 0;  // illumination gradient, centre to edge (revisits)
+};
+
+VisitParams MakeVisitParams(const SequenceOptions& o, uint64_t visit, bool revisit) {
+  std::mt19937_64 rng(StreamSeed(o.seed, kVisitStream, visit));
+  // Always draw every value in the same order, so the stream does not depend on the visit kind.
+  const double pan_angle = Uniform(rng, 0, 2 * std::numbers::pi);
+  const double offset_x = Symmetric(rng, 2 * o.max_shift_px);
+  const double offset_y = Symmetric(rng, 2 * o.max_shift_px);
+  const double rotation = Symmetric(rng, o.max_rotation_deg * std::numbers::pi / 180);
+  const double scale = Symmetric(rng, o.max_scale);
+  const double tilt_x = Symmetric(rng, o.max_scale);
+  const double tilt_y = Symmetric(rng, o.max_scale);
+  const double strength = revisit ? kRevisitStrength : 1.0;
+  const double gain = 1 + Symmetric(rng, 0.75 * strength * o.illumination_max);
+  const double gradient_x = Symmetric(rng, 0.5 * o.illumination_max);
+  const double gradient_y = Symmetric(rng, 0.5 * o.illumination_max);
+
+  VisitParams v;
+  v.strength = strength;
+  const double pan = std::min((o.frames_per_place - 1) * o.max_shift_px, 0.15 * double(o.width));
+  v.pan_dx = pan * std::cos(pan_angle);
+  v.pan_dy = pan * std::sin(pan_angle);
+  v.gain = gain;
+  if (revisit) {
+    v.offset_x = offset_x;
+    v.offset_y = offset_y;
+    v.rotation = rotation;
+    v.scale = scale;
+    v.tilt_x = tilt_x;
+    v.tilt_y = tilt_y;
+    v.gradient_x = gradient_x;
+    v.gradient_y = gradient_y;
+  }
+  return v;
+}
+
+// Largest translation of the view centre (output pixels) any frame can have.
+double MaxTranslation(const SequenceOptions& o) {
+  const double pan = std::min((o.frames_per_place - 1) * o.max_shift_px, 0.15 * double(o.width));
+  return pan / 2 + o.max_shift_px + 2 * o.max_shift_px;
+}
+
+cv::Mat ResizeToCover(const cv::Mat& photo, const SequenceOptions& o) {
+  // Scale at which the photo just covers width x height, then a zoom that leaves room for the
+  // largest view (rotated, zoomed out, moved) inside the photo, so that BORDER_REFLECT is rarely
+  // needed.
+  const double base = std::max(double(o.width) / photo.cols, double(o.height) / photo.rows);
+  const double half_w = photo.cols * base / 2, half_h = photo.rows * base / 2;
+  const double angle = 2 * o.max_rotation_deg * std::numbers::pi / 180;
+  const double grow = 1 / (1 - 2 * o.max_scale);
+  const double view_x = grow * (o.width / 2.0 * std::cos(angle) + o.height / 2.0 * std::sin(angle));
+  const double view_y = grow * (o.width / 2.0 * std::sin(angle) + o.height / 2.0 * std::cos(angle));
+  const double t = MaxTranslation(o);
+  double zoom = std::max({1.0, (view_x + t) / half_w, (view_y + t) / half_h});
+  zoom = std::min(zoom, kMaxZoom);
+  const int cols = std::max(1, int(std::lround(photo.cols * base * zoom)));
+  const int rows = std::max(1, int(std::lround(photo.rows * base * zoom)));
+  cv::Mat cover;
+  const bool shrink = cols < photo.cols;
+  cv::resize(photo, cover, cv::Size(cols, rows), 0, 0, shrink ? cv::INTER_AREA : cv::INTER_LINEAR);
+  return cover;
+}
+
+// Multiplies by the illumination gain (global times a linear gradient, at least 0.05) and adds the
+// noise, rounding to 8 bits with saturation.
+void ApplyIllumination(const cv::Mat& src, const cv::Mat& noise, double gain, double gradient_x,
+                       double gradient_y, cv::Mat* dst) {
+  dst->create(src.size(), src.type());
+  const int channels = src.channels();
+  const double cx = (src.cols - 1) / 2.0, cy = (src.rows - 1) / 2.0;
+  const double sx = gradient_x / std::max(1.0, src.cols / 2.0);
+  const double sy = gradient_y / std::max(1.0, src.rows / 2.0);
+  for (int y = 0; y < src.rows; ++y) {
+    const uint8_t* in = src.ptr<uint8_t>(y);
+    const float* n = noise.empty() ? nullptr : noise.ptr<float>(y);
+    uint8_t* out = dst->ptr<uint8_t>(y);
+    const double row_gain = 1 + sy * (y - cy);
+    for (int x = 0; x < src.cols; ++x) {
+      const float g = float(std::max(0.05, gain * (row_gain + sx * (x - cx))));
+      for (int c = 0; c < channels; ++c) {
+        const int k = x * channels + c;
+        float v = float(in[k]) * g;
+        if (n != nullptr) v += n[k];
+        out[k] = cv::saturate_cast<uint8_t>(v);
+      }
+    }
+  }
+}
+
+}  // namespace
+
+Status SequenceOptions::Validate() const {
+  if (places < 1 || places > kMaxFrames) {
+    return Status::InvalidArgument("places = " + std::to_string(places) + " is outside [1, " +
+                                   std::to_string(kMaxFrames) + "]");
+  }
+  if (frames_per_place < 1 || frames_per_place > 100000) {
+    return Status::InvalidArgument("frames per place = " + std::to_string(frames_per_place) +
+                                   " is outside [1, 100000]");
+  }
+  RECOG_RETURN_IF_ERROR(CheckRange("revisit fraction", revisit_fraction, 0, 1));
+  if (width < 16 || width > 16384 || height < 16 || height > 16384) {
+    return Status::InvalidArgument("frame size " + std::to_string(width) + "x" +
+                                   std::to_string(height) + " is outside 16..16384 pixels");
+  }
+  RECOG_RETURN_IF_ERROR(CheckRange("max shift (px)", max_shift_px, 0, std::min(width, height) / 4));
+  RECOG_RETURN_IF_ERROR(CheckRange("max rotation (degrees)", max_rotation_deg, 0, 45));
+  RECOG_RETURN_IF_ERROR(CheckRange("max scale", max_scale, 0, 0.3));
+  RECOG_RETURN_IF_ERROR(CheckRange("blur sigma", blur_sigma_max, 0, 20));
+  RECOG_RETURN_IF_ERROR(CheckRange("noise sigma", noise_sigma, 0, 100));
+  RECOG_RETURN_IF_ERROR(CheckRange("illumination change", illumination_max, 0, 0.5));
+  const long long frames = (static_cast<long long>(places) + NumRevisits(*this)) * frames_per_place;
+  if (frames > kMaxFrames) {
+    return Status::InvalidArgument("the sequence would have " + std::to_string(frames) +
+                                   " frames, more than " + std::to_string(kMaxFrames));
+  }
+  return Status::Ok();
+}
+
+// The last few cover images (most recent first). Frames of a visit are consecutive, so a handful
+// of entries serves sequential generation; random access only costs decoding time.
+struct SequenceGenerator::PhotoCache {
+  static constexpr size_t kCapacity = 8;
+  std::mutex mutex;
+  std::list<std::pair<int, cv::Mat>> entries;
+};
+
+SequenceGenerator::SequenceGenerator(std::vector<std::string> photos,
+                                     const SequenceOptions& options)
+    : photos_(std::move(photos)), options_(options), cache_(std::make_shared<PhotoCache>()) {
+  const int places = options_.places;
+  // Revisited places: the first NumRevisits of a seeded Fisher-Yates shuffle, in shuffled order.
+  std::vector<int> order(static_cast<size_t>(places));
+  for (int p = 0; p < places; ++p) order[size_t(p)] = p;
+  std::mt19937_64 rng(StreamSeed(options_.seed, kTourStream, 0));
+  for (int i = places - 1; i > 0; --i) {
+    const int j = int(rng() % uint64_t(i + 1));
+    std::swap(order[size_t(i)], order[size_t(j)]);
+  }
+  const int revisits = NumRevisits(options_);
+  visit_place_.reserve(size_t(places + revisits));
+  for (int p = 0; p < places; ++p) visit_place_.push_back(p);
+  for (int r = 0; r < revisits; ++r) visit_place_.push_back(order[size_t(r)]);
+}
+
+StatusOr<SequenceGenerator> SequenceGenerator::Create(std::vector<std::string> photos,
+                                                      const SequenceOptions& options) {
+  if (photos.empty()) return Status::InvalidArgument("no photos to build the sequence from");
+  RECOG_RETURN_IF_ERROR(options.Validate());
+  // Only the first `places` photos are used.
+  if (photos.size() > size_t(options.places)) photos.resize(size_t(options.places));
+  for (const std::string& photo : photos) {
+    std::error_code ec;
+    if (!fs::exists(photo, ec)) return Status::NotFound("photo '" + photo + "' does not exist");
+  }
+  return SequenceGenerator(std::move(photos), options);
+}
+
+int SequenceGenerator::VisitPlace(int v) const {
+  return v < 0 || v >= num_visits() ? -1 : visit_place_[size_t(v)];
+}
+
+int SequenceGenerator::FramePlace(int i) const {
+  return i < 0 || i >= num_frames() ? -1 : visit_place_[size_t(i / options_.frames_per_place)];
+}
+
+const std::string& SequenceGenerator::PlacePhoto(int place) const {
+  return photos_[size_t(place) % photos_.size()];
+}
+
+bool SequenceGenerator::PlaceMirrored(int place) const {
+  return (size_t(place) / photos_.size()) % 2 == 1;
+}
+
+StatusOr<cv::Mat> SequenceGenerator::CoverImage(int place) const {
+  {
+    std::lock_guard<std::mutex> lock(cache_->mutex);
+    auto& entries = cache_->entries;
+    for (auto it = entries.begin(); it != entries.end(); ++it) {
+      if (it->first == place) {
+        entries.splice(entries.begin(), entries, it);
+        return entries.front().second;
+      }
+    }
+  }
+  const std::string& path = PlacePhoto(place);
+  std::error_code ec;
+  if (!fs::exists(path, ec)) return Status::NotFound("photo '" + path + "' does not exist");
+  cv::Mat photo;
+  try {
+    photo = cv::imread(path, cv::IMREAD_ANYCOLOR);  // 8-bit grey or BGR
+  } catch (const cv::Exception& e) {
+    return Status::InvalidArgument("photo '" + path + "' could not be decoded: " + e.what());
+  }
+  if (photo.empty())
+    return Status::InvalidArgument("photo '" + path + "' is not a decodable image");
+  if (photo.depth() != CV_8U) photo.convertTo(photo, CV_8U);
+  if (photo.channels() == 4) cv::cvtColor(photo, photo, cv::COLOR_BGRA2BGR);
+  if (photo.channels() != 1 && photo.channels() != 3) {
+    return Status::InvalidArgument("photo '" + path + "' has " + std::to_string(photo.channels()) +
+                                   " channels (expected grey or colour)");
+  }
+  if (PlaceMirrored(place)) cv::flip(photo, photo, 1);
+  cv::Mat cover = ResizeToCover(photo, options_);
+
+  std::lock_guard<std::mutex> lock(cache_->mutex);
+  auto& entries = cache_->entries;
+  if (std::none_of(entries.begin(), entries.end(),
+                   [&](const auto& e) { return e.first == place; })) {
+    entries.emplace_front(place, cover);
+    if (entries.size() > PhotoCache::kCapacity) entries.pop_back();
+  }
+  return cover;
+}
+
+StatusOr<SequenceFrame> SequenceGenerator::Frame(int i) const {
+  if (i < 0 || i >= num_frames()) {
+    return Status::InvalidArgument("frame " + std::to_string(i) + " is outside 0.." +
+                                   std::to_string(num_frames() - 1));
+  }
+  const SequenceOptions& o = options_;
+  const int visit = i / o.frames_per_place;
+  SequenceFrame frame;
+  frame.index = i;
+  frame.place = visit_place_[size_t(visit)];
+  frame.visit = visit < o.places ? 0 : 1;
+  frame.frame_in_visit = i % o.frames_per_place;
+  RECOG_ASSIGN_OR_RETURN(const cv::Mat cover, CoverImage(frame.place));
+
+  const VisitParams v = MakeVisitParams(o, uint64_t(visit), frame.visit > 0);
+  std::mt19937_64 rng(StreamSeed(o.seed, kFrameStream, uint64_t(i)));
+  const double jitter_x = Symmetric(rng, o.max_shift_px);
+  const double jitter_y = Symmetric(rng, o.max_shift_px);
+  const double rotation = v.rotation + Symmetric(rng, o.max_rotation_deg * std::numbers::pi / 180);
+  const double scale = v.scale + Symmetric(rng, o.max_scale);
+  const double tilt_x = v.tilt_x + Symmetric(rng, 0.25 * o.max_scale);
+  const double tilt_y = v.tilt_y + Symmetric(rng, 0.25 * o.max_scale);
+  const double blur_sigma = Uniform(rng, 0, v.strength * o.blur_sigma_max);
+  const double flicker = 1 + Symmetric(rng, 0.25 * v.strength * o.illumination_max);
+  const uint64_t noise_seed = rng();
+
+  // Homography from output pixels to cover pixels: centre the output, tilt (perspective), rotate
+  // and scale, then move to the cover's centre plus pan, viewpoint offset and jitter.
+  const double ox = (o.width - 1) / 2.0, oy = (o.height - 1) / 2.0;
+  const double progress =
+      o.frames_per_place > 1 ? double(frame.frame_in_visit) / (o.frames_per_place - 1) - 0.5 : 0;
+  const double tx = (cover.cols - 1) / 2.0 + progress * v.pan_dx + v.offset_x + jitter_x;
+  const double ty = (cover.rows - 1) / 2.0 + progress * v.pan_dy + v.offset_y + jitter_y;
+  const cv::Matx33d centre(1, 0, -ox, 0, 1, -oy, 0, 0, 1);
+  const cv::Matx33d tilt(1, 0, 0, 0, 1, 0, tilt_x / std::max(1.0, o.width / 2.0),
+                         tilt_y / std::max(1.0, o.height / 2.0), 1);
+  const double c = std::cos(rotation) / (1 + scale), s = std::sin(rotation) / (1 + scale);
+  const cv::Matx33d rotate(c, -s, 0, s, c, 0, 0, 0, 1);
+  const cv::Matx33d move(1, 0, tx, 0, 1, ty, 0, 0, 1);
+  const cv::Matx33d homography = move * rotate * tilt * centre;
+
+  cv::Mat warped;
+  cv::warpPerspective(cover, warped, cv::Mat(homography), cv::Size(o.width, o.height),
+                      cv::INTER_LINEAR | cv::WARP_INVERSE_MAP, cv::BORDER_REFLECT);
+  if (blur_sigma >= 0.2) {
+    cv::GaussianBlur(warped, warped, cv::Size(), blur_sigma, blur_sigma, cv::BORDER_REFLECT);
+  }
+  const double gain = v.gain * flicker;
+  const double noise_sigma = v.strength * o.noise_sigma;
+  if (gain == 1 && v.gradient_x == 0 && v.gradient_y == 0 && noise_sigma == 0) {
+    frame.image = std::move(warped);
+    return frame;
+  }
+  cv::Mat noise;
+  if (noise_sigma > 0) {
+    noise.create(warped.size(), CV_32FC(warped.channels()));
+    cv::RNG noise_rng(noise_seed);
+    noise_rng.fill(noise, cv::RNG::NORMAL, 0.0, noise_sigma);
+  }
+  ApplyIllumination(warped, noise, gain, v.gradient_x, v.gradient_y, &frame.image);
+  return frame;
+}
+
+bool SequenceGenerator::SamePlace(int a, int b) const {
+  const int n = num_frames();
+  if (a < 0 || a >= n || b < 0 || b >= a) return false;
+  const int va = a / options_.frames_per_place, vb = b / options_.frames_per_place;
+  return va != vb && visit_place_[size_t(va)] == visit_place_[size_t(vb)];
+}
+
+std::vector<int> SequenceGenerator::Matches(int a) const {
+  std::vector<int> matches;
+  if (a < 0 || a >= num_frames()) return matches;
+  const int f = options_.frames_per_place;
+  const int visit = a / f;
+  if (visit < options_.places) return matches;        // a first visit has nothing earlier
+  const int first = visit_place_[size_t(visit)] * f;  // first visit of place p is visit p
+  for (int b = first; b < first + f; ++b) matches.push_back(b);
+  return matches;
+}
+
+GroundTruth SequenceGenerator::BuildGroundTruth() const {
+  GroundTruth truth;
+  truth.frames = num_frames();
+  truth.matches.resize(size_t(truth.frames));
+  for (int a = options_.places * options_.frames_per_place; a < truth.frames; ++a) {
+    truth.matches[size_t(a)] = Matches(a);
+  }
+  return truth;
+}
+
+StatusOr<SequenceImageFormat> ParseSequenceImageFormat(std::string_view name) {
+  if (name == "png") return SequenceImageFormat::kPng;
+  if (name == "jpg" || name == "jpeg") return SequenceImageFormat::kJpeg;
+  return Status::InvalidArgument("unknown image format '" + std::string(name) + "' (png or jpg)");
+}
+
+StatusOr<SequenceWriteResult> WriteSequence(const SequenceGenerator& generator,
+                                            const std::string& out_dir, bool sparse_truth,
+                                            SequenceImageFormat format,
+                                            const SequenceProgress& progress) {
+  std::error_code ec;
+  if (fs::exists(out_dir, ec)) {
+    if (!fs::is_directory(out_dir, ec)) {
+      return Status::InvalidArgument("output '" + out_dir + "' exists and is not a folder");
+    }
+    if (!fs::is_empty(out_dir, ec) || ec) {
+      return Status::InvalidArgument("output folder '" + out_dir +
+                                     "' is not empty; refusing to overwrite it");
+    }
+  }
+  SequenceWriteResult result;
+  result.images_dir = (fs::path(out_dir) / "images").string();
+  result.frames = generator.num_frames();
+  result.sparse_truth = sparse_truth || result.frames > kMaxDenseGroundTruthFrames;
+  result.ground_truth_path =
+      (fs::path(out_dir) / (result.sparse_truth ? "ground_truth.sparse.txt" : "ground_truth.txt"))
+          .string();
+  fs::create_directories(result.images_dir, ec);
+  if (ec) {
+    return Status::Internal("cannot create folder '" + result.images_dir + "': " + ec.message());
+  }
+
+  const char* extension = format == SequenceImageFormat::kJpeg ? "jpg" : "png";
+  const std::vector<int> params = format == SequenceImageFormat::kJpeg
+                                      ? std::vector<int>{cv::IMWRITE_JPEG_QUALITY, 95}
+                                      : std::vector<int>{};
+  for (int i = 0; i < result.frames; ++i) {
+    RECOG_ASSIGN_OR_RETURN(const SequenceFrame frame, generator.Frame(i));
+    char name[32];
+    std::snprintf(name, sizeof(name), "%06d.%s", i + 1, extension);
+    const std::string path = (fs::path(result.images_dir) / name).string();
+    bool written = false;
+    try {
+      written = cv::imwrite(path, frame.image, params);
+    } catch (const cv::Exception& e) {
+      return Status::Internal("cannot write '" + path + "': " + e.what());
+    }
+    if (!written) return Status::Internal("cannot write '" + path + "'");
+    if (progress) progress(uint64_t(i + 1), uint64_t(result.frames));
+  }
+
+  const GroundTruth truth = generator.BuildGroundTruth();
+  result.queries_with_matches = truth.QueriesWithMatches();
+  RECOG_RETURN_IF_ERROR(result.sparse_truth
+                            ? WriteSparseGroundTruth(truth, result.ground_truth_path)
+                            : WriteDenseGroundTruth(truth, result.ground_truth_path));
+  return result;
+}
+
+}  // namespace recog::cli
