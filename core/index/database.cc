@@ -1,7 +1,9 @@
 #include "core/index/database.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
+#include <thread>
 
 namespace recog {
 namespace {
@@ -84,8 +86,15 @@ StatusOr<std::unique_ptr<Database>> Database::Open(IndexStore* store, const std:
   RECOG_ASSIGN_OR_RETURN(db->next_id_, store->NextEntryId(db->info_.id));
   db->present_.assign(db->next_id_, 0);
 
-  // Rebuild the index, checking every entry on the way. Entries arrive in id order, so each
-  // posting list is built sorted.
+  // Rebuild the index, checking every entry on the way. Appending posting by posting to a
+  // million lists would miss the cache twice per posting, so the scan first routes the postings
+  // into buckets by word-id range (sequential appends); each bucket is then spread over its lists,
+  // which fit in the cache, each list being allocated once at its final size. Entries arrive in
+  // id order, so every list ends up sorted by entry id.
+  const size_t words = db->postings_.size();
+  const int shift = std::max(0, int(std::bit_width(words)) - 6);  // about 64 buckets
+  std::vector<std::vector<PendingPosting>> buckets(((words - 1) >> shift) + 1);
+  std::vector<uint32_t> count(words, 0);
   const Status scanned = store->ScanEntries(
       db->info_.id, kEntryMetadata | kEntryBow | kEntryDirect, [&](EntryRecord& record) -> Status {
         std::string problem;
@@ -98,10 +107,28 @@ StatusOr<std::unique_ptr<Database>> Database::Open(IndexStore* store, const std:
           return Status::DataLoss("map '" + name + "' entry " + std::to_string(record.id) + ": " +
                                   problem);
         }
-        db->IndexEntry(record.id, record.bow);
+        for (const BowEntry& e : record.bow.entries()) {
+          ++count[e.word];
+          buckets[e.word >> shift].push_back({e.word, {record.id, e.value}});
+        }
+        db->present_[record.id] = 1;
+        ++db->num_entries_;
+        db->num_postings_ += record.bow.size();
         return Status::Ok();
       });
   RECOG_RETURN_IF_ERROR(scanned);
+  // Buckets cover disjoint words: two threads fill them without sharing a list.
+  auto fill = [&](size_t first_bucket) {
+    for (size_t b = first_bucket; b < buckets.size(); b += 2) {
+      const size_t end_word = std::min(words, (b + 1) << shift);
+      for (size_t w = b << shift; w < end_word; ++w) db->postings_[w].reserve(count[w]);
+      for (const PendingPosting& p : buckets[b]) db->postings_[p.word].push_back(p.posting);
+      std::vector<PendingPosting>().swap(buckets[b]);  // release as we go
+    }
+  };
+  std::thread helper(fill, 1);
+  fill(0);
+  helper.join();
   return db;
 }
 

@@ -101,6 +101,10 @@ class Database {
     float value;
   };
   static_assert(sizeof(Posting) == 8);
+  struct PendingPosting {  // a posting on its way to its list, while the index is rebuilt
+    WordId word;
+    Posting posting;
+  };
 
   Database(IndexStore* store, MapInfo info, std::shared_ptr<const Vocabulary> vocabulary);
   // Checks that the parts of an entry fit the vocabulary and each other; returns a message, or

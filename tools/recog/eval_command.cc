@@ -147,7 +147,7 @@ Status DrawDetections(const std::string& dir, const SequenceFeatures& seq,
                     seq.features[r.match].keypoints, matches, canvas, cv::Scalar(0, 255, 0),
                     cv::Scalar(0, 0, 255), {}, cv::DrawMatchesFlags::NOT_DRAW_SINGLE_POINTS);
     const std::string path = (fs::path(dir) / ("loop_" + std::to_string(q + 1) + "_" +
-                                               std::to_string(r.match + 1) + ".jpg"))
+                                               std::to_string(r.match + 1) + ".png"))
                                  .string();
     if (!cv::imwrite(path, canvas)) return Status::Internal("cannot write '" + path + "'");
   }

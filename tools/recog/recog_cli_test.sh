@@ -81,21 +81,22 @@ grep -q "41.jpg" "$tmp/out" && pass || fail "demo lists the frames"
 # seqgen: a tiny sequence (4 places x 2 frames + 2 revisits x 2 frames = 12 frames).
 expect_ok "help of seqgen" "$recog" seqgen --help
 expect_ok "seqgen a tiny sequence" "$recog" seqgen --images "$images" -o "$tmp/seq" --places 4 \
-  --frames-per-place 2 --revisit-fraction 0.5 --width 160 --height 120 --seed 3 -q
+  --allow-duplicate-places --frames-per-place 2 --revisit-fraction 0.5 --width 160 --height 120 --seed 3 -q
 [ -f "$tmp/seq/images/000001.png" ] && [ -f "$tmp/seq/images/000012.png" ] && [ ! -e "$tmp/seq/images/000013.png" ] \
   && pass || fail "seqgen writes frames 000001.png .. 000012.png"
 [ "$(wc -l <"$tmp/seq/ground_truth.txt")" -eq 12 ] && [ "$(awk '{print NF}' "$tmp/seq/ground_truth.txt" | sort -u)" = "12" ] \
   && pass || fail "seqgen writes a 12 x 12 dense ground truth"
 [ "$(grep -c 1 "$tmp/seq/ground_truth.txt")" -eq 4 ] && pass || fail "seqgen ground truth has 4 query frames with matches"
-expect_error "seqgen into a non-empty folder" "INVALID_ARGUMENT" "$recog" seqgen --images "$images" -o "$tmp/seq" \
-  --places 4 --frames-per-place 2 -q
+expect_error "seqgen into a non-empty folder" "not empty" "$recog" seqgen --images "$images" -o "$tmp/seq" \
+  --places 4 --allow-duplicate-places --frames-per-place 2 -q
 [ -f "$tmp/seq/ground_truth.txt" ] && [ ! -e "$tmp/seq/images/000013.png" ] && pass || fail "seqgen rerun leaves the folder alone"
 expect_ok "seqgen jpg, sparse truth, json" "$recog" seqgen --images "$images" -o "$tmp/seq2" --places 4 \
-  --frames-per-place 2 --revisit-fraction 0.5 --width 160 --height 120 --format jpg --sparse-truth --json
+  --allow-duplicate-places --frames-per-place 2 --revisit-fraction 0.5 --width 160 --height 120 --format jpg --sparse-truth --json
 /usr/bin/python3 -c "import json; d=json.load(open('$tmp/out')); assert d['frames']==12 and d['queries_with_matches']==4, d" \
   && pass || fail "seqgen --json reports 12 frames and 4 query frames with matches"
 head -1 "$tmp/seq2/ground_truth.sparse.txt" | grep -qx "# recog sparse ground truth v1 12" && [ -f "$tmp/seq2/images/000012.jpg" ] \
   && pass || fail "seqgen writes JPEG frames and a sparse ground truth"
+expect_error "seqgen with too few distinct scenes" "distinct" "$recog" seqgen --images "$images" -o "$tmp/seq3" --places 4 -q
 expect_error "seqgen from a missing folder" "NOT_FOUND" "$recog" seqgen --images "$tmp/none" -o "$tmp/seq3"
 expect_error "seqgen with a bad revisit fraction" "INVALID_ARGUMENT" "$recog" seqgen --images "$images" -o "$tmp/seq3" --revisit-fraction 1.5
 expect_error "seqgen with an unknown format" "unknown image format" "$recog" seqgen --images "$images" -o "$tmp/seq3" --format gif

@@ -23,6 +23,7 @@ struct SeqgenArgs {
   std::string output;
   SequenceOptions options;
   std::string format = "png";
+  bool allow_duplicate_places = false;
   bool sparse_truth = false;
   bool json = false;
   bool quiet = false;
@@ -32,12 +33,18 @@ int RunSeqgen(const SeqgenArgs& args) {
   const auto start = std::chrono::steady_clock::now();
   auto format = ParseSequenceImageFormat(args.format);
   if (!format.ok()) return Fail(format.status());
-  if (Status s = args.options.Validate(); !s.ok()) return Fail(s);
+  SequenceOptions options = args.options;
+  options.distinct_places = !args.allow_duplicate_places;
+  if (Status s = options.Validate(); !s.ok()) return Fail(s);
   auto photos = ListImages(args.images);
   if (!photos.ok()) return Fail(photos.status());
   const size_t num_photos = photos->size();
-  auto generator = SequenceGenerator::Create(std::move(photos).value(), args.options);
+  const auto choose_start = std::chrono::steady_clock::now();
+  auto generator = SequenceGenerator::Create(std::move(photos).value(), options);
   if (!generator.ok()) return Fail(generator.status());
+  // Time spent choosing the place photos (the distinct-places check).
+  const double choose_seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - choose_start).count();
 
   ProgressBar progress(!args.quiet && !args.json);
   auto written =
@@ -51,6 +58,13 @@ int RunSeqgen(const SeqgenArgs& args) {
   const SequenceOptions& o = generator->options();
 
   if (args.json) {
+    nlohmann::json skipped = nlohmann::json::array();
+    for (const SkippedPhoto& p : generator->skipped()) {
+      skipped.push_back({{"photo", p.photo},
+                         {"same_as_place", p.same_as_place},
+                         {"same_as_photo", generator->PlacePhoto(p.same_as_place)},
+                         {"inliers", p.inliers}});
+    }
     nlohmann::json j = {
         {"frames", written->frames},
         {"places", generator->num_places()},
@@ -58,6 +72,10 @@ int RunSeqgen(const SeqgenArgs& args) {
         {"frames_per_place", o.frames_per_place},
         {"photos_found", num_photos},
         {"photos_used", used_photos},
+        {"distinct_places", o.distinct_places},
+        {"skipped_duplicates", generator->skipped_duplicates()},
+        {"skipped_photos", skipped},
+        {"choose_seconds", choose_seconds},
         {"queries_with_matches", written->queries_with_matches},
         {"width", o.width},
         {"height", o.height},
@@ -82,6 +100,20 @@ int RunSeqgen(const SeqgenArgs& args) {
       written->queries_with_matches, written->images_dir.c_str(),
       written->ground_truth_path.c_str(), written->sparse_truth ? "sparse" : "dense", seconds,
       seconds > 0 ? written->frames / seconds : 0.0);
+  if (o.distinct_places) {
+    std::printf(
+        "distinct places: skipped %d photos showing the scene of an earlier place (%.1f s)\n",
+        generator->skipped_duplicates(), choose_seconds);
+    constexpr int kListed = 10;
+    const std::vector<SkippedPhoto>& skipped = generator->skipped();
+    for (size_t k = 0; k < skipped.size() && k < size_t(kListed); ++k) {
+      std::printf("  %s ~ %s (%d inliers)\n", skipped[k].photo.c_str(),
+                  generator->PlacePhoto(skipped[k].same_as_place).c_str(), skipped[k].inliers);
+    }
+    if (skipped.size() > size_t(kListed)) {
+      std::printf("  ... and %zu more (--json lists them all)\n", skipped.size() - kListed);
+    }
+  }
   if (used_photos < generator->num_places()) {
     std::printf(
         "note: %d photos for %d places; photos are reused (mirrored on odd cycles), and the ground "
@@ -103,7 +135,8 @@ void AddSeqgenCommand(CLI::App& app, int* exit_code) {
       ->required();
   cmd->add_option("-o,--output", args->output, "Output folder (must not exist or be empty)")
       ->required();
-  cmd->add_option("--places", o.places, "Distinct places (photos are cycled if fewer)")
+  cmd->add_option("--places", o.places,
+                  "Places, one photo each (photos of the same scene as an earlier one are skipped)")
       ->capture_default_str();
   cmd->add_option("--frames-per-place", o.frames_per_place, "Consecutive frames per visit")
       ->capture_default_str();
@@ -124,6 +157,9 @@ void AddSeqgenCommand(CLI::App& app, int* exit_code) {
   cmd->add_option("--illumination", o.illumination_max, "Relative illumination change")
       ->capture_default_str();
   cmd->add_option("--seed", o.seed, "Random seed")->capture_default_str();
+  cmd->add_flag("--allow-duplicate-places", args->allow_duplicate_places,
+                "Use the first photos as they are, even if two show the same scene (cycled and "
+                "mirrored if fewer than --places)");
   cmd->add_option("--format", args->format, "Image format: png or jpg (quality 95)")
       ->capture_default_str();
   cmd->add_flag("--sparse-truth", args->sparse_truth,

@@ -1,6 +1,7 @@
 #include "tools/recog/sequence_generator.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -8,10 +9,18 @@
 #include <mutex>
 #include <numbers>
 #include <random>
+#include <thread>
 #include <utility>
 
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+
+#include "core/features/feature_extractor.h"
+#include "core/geometry/correspondences.h"
+#include "core/index/database.h"
+#include "core/index/memory_index_store.h"
+#include "core/vocabulary/vocabulary_io.h"
+#include "tools/recog/cli_support.h"
 
 namespace recog::cli {
 namespace {
@@ -155,6 +164,179 @@ void ApplyIllumination(const cv::Mat& src, const cv::Mat& noise, double gain, do
   }
 }
 
+// --- Distinct places: the same-scene test (see the header). ---
+
+constexpr int kSceneFeatures = 500;
+constexpr int kSceneWidth = 640, kSceneHeight = 480;  // larger photos are shrunk to cover this
+constexpr size_t kSceneCandidates = 5;  // chosen photos of highest BoW score that get matched
+constexpr double kSceneRatio = 0.8;
+constexpr uint32_t kSceneMaxDistance = 64;
+constexpr double kSceneThresholdPx = 3;
+constexpr size_t kSceneMinInliers = 12;  // the loop detector's own minimum (Table 4.4)
+constexpr size_t kSceneBatch = 32;       // photos described ahead of the (sequential) selection
+
+// Features and bag of words of one photo.
+struct SceneView {
+  Status status;  // of reading and describing the photo
+  FeatureSet features;
+  BowVector bow;
+};
+
+// A chosen photo that shows the same scene as the one tested, with its epipolar inliers.
+struct SceneMatch {
+  int place = -1;  // -1: none
+  int inliers = 0;
+};
+
+// The photos chosen so far: an inverted index over their bags of words (entry id = place) to find
+// candidates, and their features to verify them.
+class SceneIndex {
+ public:
+  static StatusOr<std::unique_ptr<SceneIndex>> Create() {
+    const std::string path = DefaultPlaceVocabularyPath();
+    auto vocabulary = LoadAnyVocabulary(path);
+    if (!vocabulary.ok()) {
+      return Status(vocabulary.status().code(),
+                    "distinct places need the place vocabulary: " + vocabulary.status().message());
+    }
+    auto index = std::unique_ptr<SceneIndex>(new SceneIndex());
+    index->vocabulary_ = std::make_shared<const Vocabulary>(std::move(vocabulary).value());
+    RECOG_ASSIGN_OR_RETURN(index->database_,
+                           Database::Create(&index->store_, "places", index->vocabulary_,
+                                            ScoringType::kL1, /*direct_index_levels_up=*/0));
+    return index;
+  }
+
+  // Reads and describes photos [begin, end) into views[0 .. end - begin), on a few threads. Each
+  // view depends on its photo alone, so the thread count does not change any result.
+  void Describe(const std::vector<std::string>& photos, size_t begin, size_t end,
+                std::vector<SceneView>* views) const {
+    views->clear();
+    views->resize(end - begin);
+    std::atomic<size_t> next{begin};
+    const auto work = [&] {
+      FeatureOptions options;
+      options.orb.max_features = kSceneFeatures;
+      auto extractor = CreateFeatureExtractor(options);
+      for (size_t i = next++; i < end; i = next++) {
+        SceneView& view = (*views)[i - begin];
+        if (!extractor.ok()) {
+          view.status = extractor.status();
+          continue;
+        }
+        view.status = DescribeOne(**extractor, photos[i], &view);
+      }
+    };
+    const size_t threads =
+        std::min<size_t>({end - begin, std::max(1u, std::thread::hardware_concurrency()), 4});
+    std::vector<std::thread> helpers;
+    for (size_t t = 1; t < threads; ++t) helpers.emplace_back(work);
+    work();
+    for (std::thread& helper : helpers) helper.join();
+  }
+
+  // The first of the best-scoring chosen photos whose geometry agrees with `view`.
+  StatusOr<SceneMatch> FindSameScene(const SceneView& view) const {
+    SceneMatch found;
+    if (view.bow.empty()) return found;
+    QueryOptions query;
+    query.max_results = kSceneCandidates;
+    std::vector<QueryResult> candidates;
+    RECOG_RETURN_IF_ERROR(database_->Query(view.bow, query, &candidates));
+    const MatchOptions match{.ratio = kSceneRatio, .max_distance = kSceneMaxDistance};
+    EpipolarOptions epipolar;
+    epipolar.threshold_px = kSceneThresholdPx;
+    epipolar.min_inliers = kSceneMinInliers;
+    std::vector<Match> matches;
+    for (const QueryResult& candidate : candidates) {
+      const FeatureSet& place = places_[candidate.id];
+      RECOG_RETURN_IF_ERROR(
+          MatchExhaustive(view.features.descriptors, place.descriptors, match, &matches));
+      if (matches.size() < kSceneMinInliers) continue;
+      const EpipolarResult result =
+          VerifyEpipolar(view.features.keypoints, place.keypoints, matches, epipolar);
+      if (result.verified) return SceneMatch{int(candidate.id), int(result.inliers.size())};
+    }
+    return found;
+  }
+
+  // Makes `view` the next chosen photo (place number size()).
+  Status Add(SceneView view) {
+    // Only the bag of words goes to the database; the features stay here.
+    RECOG_RETURN_IF_ERROR(
+        database_->AddConverted(view.bow, FeatureVector(), FeatureSet()).status());
+    places_.push_back(std::move(view.features));
+    return Status::Ok();
+  }
+
+ private:
+  SceneIndex() = default;
+
+  Status DescribeOne(FeatureExtractor& extractor, const std::string& path, SceneView* view) const {
+    RECOG_ASSIGN_OR_RETURN(cv::Mat grey, ReadGrayImage(path));
+    // Large photos are looked at at about frame size (a fixed one, so that the chosen photos do
+    // not depend on the options), which also bounds the time spent on them.
+    const double scale =
+        std::max(double(kSceneWidth) / grey.cols, double(kSceneHeight) / grey.rows);
+    if (scale < 1) {
+      cv::resize(grey, grey,
+                 cv::Size(std::max(1, int(std::lround(grey.cols * scale))),
+                          std::max(1, int(std::lround(grey.rows * scale)))),
+                 0, 0, cv::INTER_AREA);
+    }
+    RECOG_RETURN_IF_ERROR(extractor.Extract(grey, &view->features));
+    return vocabulary_->Transform(view->features.descriptors, &view->bow);
+  }
+
+  std::shared_ptr<const Vocabulary> vocabulary_;
+  MemoryIndexStore store_;
+  std::unique_ptr<Database> database_;
+  std::vector<FeatureSet> places_;  // by place
+};
+
+// The first `places` photos that show distinct scenes, and the photos skipped on the way.
+Status ChooseDistinctPhotos(const std::vector<std::string>& photos, const SequenceOptions& options,
+                            std::vector<std::string>* chosen, std::vector<SkippedPhoto>* skipped) {
+  const int places = options.places;
+  const size_t wanted = size_t(places);
+  if (photos.size() < wanted) {
+    return Status::InvalidArgument(
+        std::to_string(photos.size()) + " photos for " + std::to_string(places) +
+        " places: distinct places need a different photo per place (turn distinct places off, "
+        "--allow-duplicate-places, to reuse photos)");
+  }
+  RECOG_ASSIGN_OR_RETURN(std::unique_ptr<SceneIndex> index, SceneIndex::Create());
+  std::vector<SceneView> views;
+  size_t next = 0;
+  while (chosen->size() < wanted && next < photos.size()) {
+    // Describe about as many photos as are still needed; most of them will be taken.
+    const size_t batch =
+        std::min({kSceneBatch, photos.size() - next, std::max<size_t>(wanted - chosen->size(), 2)});
+    index->Describe(photos, next, next + batch, &views);
+    for (size_t k = 0; k < batch && chosen->size() < wanted; ++k) {
+      SceneView& view = views[k];
+      const std::string& photo = photos[next + k];
+      RECOG_RETURN_IF_ERROR(view.status);
+      RECOG_ASSIGN_OR_RETURN(const SceneMatch same, index->FindSameScene(view));
+      if (same.place >= 0) {
+        skipped->push_back(SkippedPhoto{photo, same.place, same.inliers});
+        continue;
+      }
+      RECOG_RETURN_IF_ERROR(index->Add(std::move(view)));
+      chosen->push_back(photo);
+    }
+    next += batch;
+  }
+  if (chosen->size() < wanted) {
+    return Status::InvalidArgument(
+        "only " + std::to_string(chosen->size()) + " of the " + std::to_string(photos.size()) +
+        " photos show distinct scenes (" + std::to_string(skipped->size()) +
+        " show the scene of an earlier photo), fewer than the " + std::to_string(places) +
+        " places: distinct places need more photos (or turn them off, --allow-duplicate-places)");
+  }
+  return Status::Ok();
+}
+
 }  // namespace
 
 Status SequenceOptions::Validate() const {
@@ -215,6 +397,14 @@ StatusOr<SequenceGenerator> SequenceGenerator::Create(std::vector<std::string> p
                                                       const SequenceOptions& options) {
   if (photos.empty()) return Status::InvalidArgument("no photos to build the sequence from");
   RECOG_RETURN_IF_ERROR(options.Validate());
+  if (options.distinct_places) {
+    std::vector<std::string> chosen;
+    std::vector<SkippedPhoto> skipped;
+    RECOG_RETURN_IF_ERROR(ChooseDistinctPhotos(photos, options, &chosen, &skipped));
+    SequenceGenerator generator(std::move(chosen), options);
+    generator.skipped_ = std::move(skipped);
+    return generator;
+  }
   // Only the first `places` photos are used.
   if (photos.size() > size_t(options.places)) photos.resize(size_t(options.places));
   for (const std::string& photo : photos) {

@@ -1,10 +1,13 @@
 // SequenceGenerator: long synthetic "recorded sequences" with exact ground truth, built from real
 // photos, for scale and load tests of a loop-closure detector (`recog seqgen`, benchmarks).
 //
-// The tour visits P places, one photo each (photo p % #photos for place p, mirrored left-right on
-// odd cycles so that reused photos are less alike). Visit order: places 0..P-1, then a seeded
-// random subset of round(revisit_fraction * P) places a second time, in a seeded order. Every visit
-// lasts `frames_per_place` consecutive frames. Frame i belongs to visit i / frames_per_place.
+// The tour visits P places, one photo each. With distinct_places (the default) the place photos
+// are the first P photos, in the given order, that do not show the scene of an earlier place's
+// photo (see "Distinct places" below); otherwise place p shows photo p % #photos, mirrored
+// left-right on odd cycles so that reused photos are less alike. Visit order: places 0..P-1, then
+// a seeded random subset of round(revisit_fraction * P) places a second time, in a seeded order.
+// Every visit lasts `frames_per_place` consecutive frames: frame i belongs to visit
+// i / frames_per_place.
 //
 // Each frame is the place's photo, resized to cover width x height (times a small zoom that leaves
 // room for motion), warped by a homography: a slow pan across the visit (direction seeded per
@@ -25,6 +28,19 @@
 // Ground truth (matches the loop detector's evaluation): frame a matches frame b when b < a, both
 // show the same place and they belong to different visits. Frames of one visit are not loops, so
 // with revisit_fraction = 0 no frame has a match.
+//
+// Distinct places. The ground truth says that different places never match, which is only true
+// when no two place photos show the same scene (photo collections hold near-duplicates: two shots
+// of one beach, the same animals a second later). So Create() walks the photos in order and skips
+// every photo that shows the scene of an already chosen one, until P places are chosen. The test
+// is deterministic and independent of any loop detector's settings and of the options: 500 ORB
+// features of the grey photo (shrunk to just cover 640x480 when larger); its bag of words (bundled
+// place vocabulary, DefaultPlaceVocabularyPath()) finds the 5 chosen photos of highest L1 score;
+// each of those is matched exhaustively (ratio 0.8, Hamming distance <= 64) and the photo is a
+// duplicate as soon as a fundamental matrix (RANSAC, 3 px) has at least 12 inliers. This is
+// deliberately looser than a loop detector, so that whatever a detector could take for the same
+// place is left out. The chosen list is fixed by Create(), so Frame(i) stays independent of call
+// order.
 #pragma once
 
 #include <cstdint>
@@ -42,7 +58,7 @@
 namespace recog::cli {
 
 struct SequenceOptions {
-  int places = 50;                // P distinct places; photos in the given order, cycled if fewer
+  int places = 50;                // P places; photos in the given order (see distinct_places)
   int frames_per_place = 5;       // consecutive frames per visit
   double revisit_fraction = 0.5;  // fraction of places visited a second time (0 = no loops)
   int width = 640, height = 480;  // output frame size
@@ -51,6 +67,9 @@ struct SequenceOptions {
   // Appearance changes (revisits get stronger ones).
   double blur_sigma_max = 1.0, noise_sigma = 3.0, illumination_max = 0.15;
   uint64_t seed = 1;
+  // Skip photos that show the scene of an earlier place and require P distinct photos. When false,
+  // the first P photos are used as they are, cycled (and mirrored) when there are fewer.
+  bool distinct_places = true;
 
   // INVALID_ARGUMENT naming the first value out of range.
   Status Validate() const;
@@ -64,10 +83,21 @@ struct SequenceFrame {
   cv::Mat image;           // 8-bit grey or BGR, as the source photo
 };
 
+// A photo that Create() left out because it shows the scene of an earlier place.
+struct SkippedPhoto {
+  std::string photo;
+  int same_as_place = 0;  // the chosen place whose photo it matched
+  int inliers = 0;        // epipolar inliers of that match
+};
+
 class SequenceGenerator {
  public:
   // INVALID_ARGUMENT when `photos` is empty or the options are bad; NOT_FOUND when a photo that a
-  // place uses does not exist. Photos are decoded lazily, by Frame().
+  // place uses does not exist. Without distinct_places, photos are decoded lazily, by Frame().
+  // With distinct_places, Create() decodes photos in order until P distinct ones are found:
+  // INVALID_ARGUMENT when there are fewer than P photos, when they run out before P distinct ones
+  // are found, or when a photo it reaches cannot be decoded; errors loading the bundled place
+  // vocabulary as they are. Then Frame() decodes the chosen photos again, on demand.
   static StatusOr<SequenceGenerator> Create(std::vector<std::string> photos,
                                             const SequenceOptions& options);
 
@@ -76,7 +106,11 @@ class SequenceGenerator {
   int num_visits() const { return int(visit_place_.size()); }
   int num_revisits() const { return num_visits() - options_.places; }
   const SequenceOptions& options() const { return options_; }
+  // The photos the places show (with distinct_places, exactly one per place).
   const std::vector<std::string>& photos() const { return photos_; }
+  // Photos that distinct_places left out, in the order they were met (empty without it).
+  const std::vector<SkippedPhoto>& skipped() const { return skipped_; }
+  int skipped_duplicates() const { return int(skipped_.size()); }
   // Place of visit v of the tour (0-based) and of frame i; -1 when out of range.
   int VisitPlace(int v) const;
   int FramePlace(int i) const;
@@ -101,6 +135,7 @@ class SequenceGenerator {
   StatusOr<cv::Mat> CoverImage(int place) const;
 
   std::vector<std::string> photos_;
+  std::vector<SkippedPhoto> skipped_;
   SequenceOptions options_;
   // Place of each visit of the tour: visit v < P is the first visit of place v, the others are
   // revisits (each place is revisited at most once).

@@ -12,6 +12,7 @@
 
 #include <gtest/gtest.h>
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "tests/testing/data_paths.h"
 
@@ -28,9 +29,11 @@ std::vector<std::string> CorridorPhotos() {
   return photos;
 }
 
-// Small frames keep the tests fast.
+// Small frames keep the tests fast. The corridor frames show one corridor (distinct places would
+// keep only two of them), so these tests use them as they are, cycled when there are more places.
 SequenceOptions SmallOptions() {
   SequenceOptions o;
+  o.distinct_places = false;
   o.places = 4;
   o.frames_per_place = 3;
   o.revisit_fraction = 0.5;
@@ -82,7 +85,10 @@ class TempDir {
   fs::path path_;
 };
 
-TEST(SequenceOptionsTest, DefaultsAreValid) { EXPECT_TRUE(SequenceOptions().Validate().ok()); }
+TEST(SequenceOptionsTest, DefaultsAreValid) {
+  EXPECT_TRUE(SequenceOptions().Validate().ok());
+  EXPECT_TRUE(SequenceOptions().distinct_places);
+}
 
 TEST(SequenceOptionsTest, OutOfRangeValuesAreInvalidArguments) {
   const auto invalid = [](auto change) {
@@ -118,6 +124,11 @@ TEST(SequenceGeneratorTest, CreateRejectsNoPhotosBadOptionsAndMissingPhotos) {
             StatusCode::kInvalidArgument);
   EXPECT_EQ(SequenceGenerator::Create({"/nonexistent/photo.jpg"}, SmallOptions()).status().code(),
             StatusCode::kNotFound);
+  SequenceOptions distinct = SmallOptions();
+  distinct.distinct_places = true;
+  distinct.places = 1;
+  EXPECT_EQ(SequenceGenerator::Create({"/nonexistent/photo.jpg"}, distinct).status().code(),
+            StatusCode::kNotFound);
 }
 
 TEST(SequenceGeneratorTest, UndecodablePhotoFailsWhenItsFrameIsGenerated) {
@@ -131,6 +142,13 @@ TEST(SequenceGeneratorTest, UndecodablePhotoFailsWhenItsFrameIsGenerated) {
   EXPECT_TRUE(generator->Frame(0).ok());
   const int frame_of_place_1 = SmallOptions().frames_per_place;
   EXPECT_EQ(generator->Frame(frame_of_place_1).status().code(), StatusCode::kInvalidArgument);
+  // Distinct places decode the photos in Create().
+  SequenceOptions distinct = SmallOptions();
+  distinct.distinct_places = true;
+  distinct.places = 2;
+  const Status status = SequenceGenerator::Create(photos, distinct).status();
+  EXPECT_EQ(status.code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(status.message().find("bad.jpg"), std::string::npos) << status.ToString();
 }
 
 TEST(SequenceGeneratorTest, FramesOutsideTheSequenceAreInvalidArguments) {
@@ -331,6 +349,103 @@ TEST(SequenceGeneratorTest, PhotosAreCycledAndMirroredWhenThereAreFewerThanPlace
   // Place 4 is photo 0 flipped; the crop is centred, so up to a pixel of interpolation.
   EXPECT_LT(MeanAbsDifference(MustFrame(generator, 4 * f), mirrored), 3.0);
   EXPECT_GT(MeanAbsDifference(MustFrame(generator, 4 * f), MustFrame(generator, 0)), 5.0);
+}
+
+// A picture of random grey triangles: a scene unlike any other (seeded).
+cv::Mat RandomScene(uint64_t seed) {
+  cv::Mat scene(360, 480, CV_8UC1, cv::Scalar(128));
+  cv::RNG rng(seed);
+  for (int k = 0; k < 120; ++k) {
+    std::vector<cv::Point> triangle;
+    for (int v = 0; v < 3; ++v) triangle.emplace_back(rng.uniform(0, 480), rng.uniform(0, 360));
+    cv::fillConvexPoly(scene, triangle, cv::Scalar(rng.uniform(0, 256)), cv::LINE_AA);
+  }
+  return scene;
+}
+
+// 1.png corridor frame 20, 2.png random triangles, 3.png frame 20 moved by (7, 5) px and blurred,
+// 4.png corridor frame 1.
+class DistinctPlacesTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    fs::create_directories(dir_.path());
+    const cv::Mat photo = cv::imread(testing::ProjectTestData("corridor/20.jpg"));
+    ASSERT_FALSE(photo.empty());
+    cv::Mat copy;
+    const cv::Matx23d shift(1, 0, 7, 0, 1, 5);
+    cv::warpAffine(photo, copy, shift, photo.size(), cv::INTER_LINEAR, cv::BORDER_REFLECT);
+    cv::GaussianBlur(copy, copy, cv::Size(), 1.2);
+    ASSERT_TRUE(cv::imwrite(dir_ / "1.png", photo));
+    ASSERT_TRUE(cv::imwrite(dir_ / "2.png", RandomScene(5)));
+    ASSERT_TRUE(cv::imwrite(dir_ / "3.png", copy));
+    ASSERT_TRUE(
+        cv::imwrite(dir_ / "4.png", cv::imread(testing::ProjectTestData("corridor/1.jpg"))));
+    for (const char* name : {"1.png", "2.png", "3.png", "4.png"}) photos_.push_back(dir_ / name);
+  }
+
+  static SequenceOptions Options(int places) {
+    SequenceOptions o = SmallOptions();
+    o.places = places;
+    o.distinct_places = true;
+    return o;
+  }
+
+  TempDir dir_{"distinct"};
+  std::vector<std::string> photos_;
+};
+
+TEST_F(DistinctPlacesTest, AShiftedBlurredCopyIsSkipped) {
+  auto generator = SequenceGenerator::Create(photos_, Options(3));
+  ASSERT_TRUE(generator.ok()) << generator.status().ToString();
+  EXPECT_EQ(generator->photos(), (std::vector<std::string>{photos_[0], photos_[1], photos_[3]}));
+  EXPECT_EQ(generator->PlacePhoto(2), photos_[3]);
+  ASSERT_EQ(generator->skipped_duplicates(), 1);
+  EXPECT_EQ(generator->skipped()[0].photo, photos_[2]);
+  EXPECT_EQ(generator->skipped()[0].same_as_place, 0);
+  EXPECT_GE(generator->skipped()[0].inliers, 20);
+  for (int p = 0; p < 3; ++p) EXPECT_FALSE(generator->PlaceMirrored(p));
+}
+
+TEST_F(DistinctPlacesTest, WithoutDistinctPlacesTheCopyIsKept) {
+  SequenceOptions o = Options(3);
+  o.distinct_places = false;
+  auto generator = SequenceGenerator::Create(photos_, o);
+  ASSERT_TRUE(generator.ok()) << generator.status().ToString();
+  EXPECT_EQ(generator->PlacePhoto(2), photos_[2]);
+  EXPECT_EQ(generator->skipped_duplicates(), 0);
+}
+
+TEST_F(DistinctPlacesTest, TheChosenPhotosAreFixedAndGiveTheSameFramesAsTheirList) {
+  auto chosen = SequenceGenerator::Create(photos_, Options(3));
+  ASSERT_TRUE(chosen.ok()) << chosen.status().ToString();
+  auto again = SequenceGenerator::Create(photos_, Options(3));
+  ASSERT_TRUE(again.ok()) << again.status().ToString();
+  EXPECT_EQ(again->photos(), chosen->photos());
+  SequenceOptions o = Options(3);
+  o.distinct_places = false;
+  auto listed = SequenceGenerator::Create(chosen->photos(), o);
+  ASSERT_TRUE(listed.ok()) << listed.status().ToString();
+  ASSERT_EQ(listed->num_frames(), chosen->num_frames());
+  for (int i = chosen->num_frames() - 1; i >= 0; --i) {
+    EXPECT_TRUE(Identical(MustFrame(*chosen, i), MustFrame(*listed, i))) << i;
+  }
+}
+
+TEST_F(DistinctPlacesTest, RunningOutOfDistinctPhotosIsAnInvalidArgument) {
+  // Four photos, three scenes.
+  auto four = SequenceGenerator::Create(photos_, Options(4));
+  EXPECT_EQ(four.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(four.status().message().find("distinct"), std::string::npos)
+      << four.status().ToString();
+  // Fewer photos than places: no cycling with distinct places ...
+  auto five = SequenceGenerator::Create(photos_, Options(5));
+  EXPECT_EQ(five.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(five.status().message().find("distinct"), std::string::npos)
+      << five.status().ToString();
+  // ... but without them.
+  SequenceOptions o = Options(5);
+  o.distinct_places = false;
+  EXPECT_TRUE(SequenceGenerator::Create(photos_, o).ok());
 }
 
 TEST(SequenceGeneratorTest, FramesCanBeGeneratedFromSeveralThreads) {

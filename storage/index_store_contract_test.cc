@@ -1,0 +1,418 @@
+// The IndexStore contract (core/index/index_store.h), checked against every implementation:
+// MemoryIndexStore, and RocksDbIndexStore with each sync policy. A new implementation gets the
+// whole suite by adding one factory to kFactories.
+#include <algorithm>
+#include <atomic>
+#include <functional>
+#include <memory>
+#include <ostream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "core/index/index_store.h"
+#include "core/index/memory_index_store.h"
+#include "storage/rocksdb_index_store.h"
+#include "storage/store_test_util.h"
+
+namespace recog {
+namespace {
+
+using testing::EntryDifference;
+using testing::MakeTestEntry;
+using testing::TempDir;
+using testing::TestMapConfig;
+
+struct StoreFactory {
+  std::string name;
+  // Opens a store kept under `dir` (an empty directory owned by the test).
+  std::function<std::unique_ptr<IndexStore>(const std::string& dir)> make;
+};
+
+void PrintTo(const StoreFactory& factory, std::ostream* os) { *os << factory.name; }
+
+std::unique_ptr<IndexStore> OpenRocksDb(const std::string& dir, SyncPolicy sync) {
+  RocksDbStoreOptions options;
+  options.sync = sync;
+  options.group_sync_interval_ms = 5;
+  auto store = OpenRocksDbIndexStore(dir + "/store", options);
+  if (!store.ok()) {
+    ADD_FAILURE() << store.status().ToString();
+    return nullptr;
+  }
+  return std::move(store).value();
+}
+
+const StoreFactory kFactories[] = {
+    {"Memory", [](const std::string&) { return std::make_unique<MemoryIndexStore>(); }},
+    {"RocksDbEveryWrite",
+     [](const std::string& dir) { return OpenRocksDb(dir, SyncPolicy::kEveryWrite); }},
+    {"RocksDbGrouped",
+     [](const std::string& dir) { return OpenRocksDb(dir, SyncPolicy::kGrouped); }},
+};
+
+class IndexStoreContractTest : public ::testing::TestWithParam<StoreFactory> {
+ protected:
+  void SetUp() override {
+    store_ = GetParam().make(dir_.path().string());
+    ASSERT_NE(store_, nullptr);
+  }
+
+  MapInfo NewMap(const std::string& name, DescriptorFormat format = DescriptorFormat::Orb()) {
+    auto map = store_->CreateMap(TestMapConfig(name, format));
+    EXPECT_TRUE(map.ok()) << map.status().ToString();
+    return map.ok() ? *map : MapInfo{};
+  }
+
+  // Every entry of `map` with the requested parts, in visiting order.
+  std::vector<EntryRecord> ScanAll(MapId map, uint32_t parts = kEntryAllParts) {
+    std::vector<EntryRecord> out;
+    const Status s = store_->ScanEntries(map, parts, [&](EntryRecord& e) {
+      out.push_back(std::move(e));
+      return Status::Ok();
+    });
+    EXPECT_TRUE(s.ok()) << s.ToString();
+    return out;
+  }
+
+  TempDir dir_{"contract"};  // declared first: outlives the store
+  std::unique_ptr<IndexStore> store_;
+};
+
+// --- Maps ---
+
+TEST_P(IndexStoreContractTest, CreatedMapsHaveDistinctIdsAndCanBeReadBack) {
+  const MapInfo a = NewMap("office");
+  const MapInfo b = NewMap("lab-2.west_wing", DescriptorFormat::Sift());
+  EXPECT_NE(a.id, b.id);
+  EXPECT_EQ(a.config, TestMapConfig("office"));
+  EXPECT_EQ(b.config, TestMapConfig("lab-2.west_wing", DescriptorFormat::Sift()));
+  EXPECT_GT(a.created_unix_ms, 0);
+
+  auto got = store_->GetMap("lab-2.west_wing");
+  ASSERT_TRUE(got.ok()) << got.status().ToString();
+  EXPECT_EQ(*got, b);
+}
+
+TEST_P(IndexStoreContractTest, ListMapsReturnsEveryMapByName) {
+  NewMap("zeta");
+  NewMap("alpha");
+  NewMap("mid");
+  auto maps = store_->ListMaps();
+  ASSERT_TRUE(maps.ok());
+  ASSERT_EQ(maps->size(), 3u);
+  EXPECT_EQ((*maps)[0].config.name, "alpha");
+  EXPECT_EQ((*maps)[1].config.name, "mid");
+  EXPECT_EQ((*maps)[2].config.name, "zeta");
+}
+
+TEST_P(IndexStoreContractTest, CreatingAnExistingMapIsAlreadyExists) {
+  const MapInfo first = NewMap("office");
+  auto again = store_->CreateMap(TestMapConfig("office", DescriptorFormat::Sift()));
+  EXPECT_EQ(again.status().code(), StatusCode::kAlreadyExists);
+  // The original is untouched.
+  EXPECT_EQ(*store_->GetMap("office"), first);
+}
+
+TEST_P(IndexStoreContractTest, InvalidMapConfigsAreInvalidArgument) {
+  const std::vector<std::string> bad = {"", "has space", "slash/name", "dollar$",
+                                        std::string(129, 'a')};
+  for (const std::string& name : bad) {
+    EXPECT_EQ(store_->CreateMap(TestMapConfig(name)).status().code(), StatusCode::kInvalidArgument)
+        << "'" << name << "'";
+  }
+  MapConfig no_vocabulary = TestMapConfig("ok");
+  no_vocabulary.vocabulary_checksum = 0;
+  EXPECT_EQ(store_->CreateMap(no_vocabulary).status().code(), StatusCode::kInvalidArgument);
+  EXPECT_TRUE(store_->ListMaps()->empty());
+  // 128 characters is the longest valid name.
+  EXPECT_TRUE(store_->CreateMap(TestMapConfig(std::string(128, 'a'))).ok());
+}
+
+TEST_P(IndexStoreContractTest, UnknownMapNamesAreNotFound) {
+  EXPECT_EQ(store_->GetMap("nowhere").status().code(), StatusCode::kNotFound);
+  EXPECT_EQ(store_->DeleteMap("nowhere").code(), StatusCode::kNotFound);
+}
+
+TEST_P(IndexStoreContractTest, DeletedMapIsGoneAndItsIdIsNeverReused) {
+  const MapInfo a = NewMap("a");
+  const MapInfo b = NewMap("b");
+  ASSERT_TRUE(store_->DeleteMap("b").ok());
+  EXPECT_EQ(store_->GetMap("b").status().code(), StatusCode::kNotFound);
+  EXPECT_EQ(store_->DeleteMap("b").code(), StatusCode::kNotFound);
+  EXPECT_EQ(store_->ListMaps()->size(), 1u);
+
+  const MapInfo b2 = NewMap("b");
+  const MapInfo c = NewMap("c");
+  for (MapId old : {a.id, b.id}) {
+    EXPECT_NE(b2.id, old);
+    EXPECT_NE(c.id, old);
+  }
+  EXPECT_NE(b2.id, c.id);
+}
+
+// --- Entries ---
+
+TEST_P(IndexStoreContractTest, AllPartsRoundTripExactlyForBinaryAndFloatDescriptors) {
+  for (const DescriptorFormat format : {DescriptorFormat::Orb(), DescriptorFormat::Sift()}) {
+    SCOPED_TRACE(format.ToString());
+    const MapInfo map = NewMap("map-" + format.ToString(), format);
+    for (EntryId id = 0; id < 5; ++id) {
+      const EntryRecord entry = MakeTestEntry(id, 7, format, 300);
+      ASSERT_TRUE(store_->CommitEntry(map.id, entry).ok());
+    }
+    for (EntryId id = 0; id < 5; ++id) {
+      const EntryRecord expected = MakeTestEntry(id, 7, format, 300);
+      EntryRecord got;
+      const Status s = store_->ReadEntry(map.id, id, kEntryAllParts, &got);
+      ASSERT_TRUE(s.ok()) << s.ToString();
+      EXPECT_EQ(EntryDifference(got, expected), "");
+      EXPECT_EQ(got.descriptors.type(), format.cv_type());
+      EXPECT_EQ(got.descriptors.cols, format.cols());
+    }
+  }
+}
+
+TEST_P(IndexStoreContractTest, EachPartCanBeReadAlone) {
+  const MapInfo map = NewMap("office");
+  const EntryRecord entry = MakeTestEntry(3, 1);
+  ASSERT_TRUE(store_->CommitEntry(map.id, entry).ok());
+  for (uint32_t part : {kEntryMetadata, kEntryBow, kEntryDirect, kEntryFeatures}) {
+    SCOPED_TRACE(part);
+    EntryRecord got;
+    ASSERT_TRUE(store_->ReadEntry(map.id, 3, part, &got).ok());
+    EXPECT_EQ(EntryDifference(got, entry, part), "");
+    // The parts not asked for are left empty.
+    EntryRecord empty;
+    empty.id = 3;
+    EXPECT_EQ(EntryDifference(got, empty, kEntryAllParts & ~part), "");
+  }
+}
+
+TEST_P(IndexStoreContractTest, MetadataKeepsBinaryUserDataAndSpecialValues) {
+  const MapInfo map = NewMap("office");
+  EntryRecord entry = MakeTestEntry(0);
+  entry.metadata.user_data = std::string("\0\x01\xff\x80zero\0end", 11);
+  entry.metadata.user_data += std::string(64 * 1024 - 11, '\xfe');
+  entry.metadata.timestamp = -1.0 / 3.0;
+  entry.metadata.num_features = UINT32_MAX;
+  ASSERT_TRUE(store_->CommitEntry(map.id, entry).ok());
+  EntryRecord got;
+  ASSERT_TRUE(store_->ReadEntry(map.id, 0, kEntryMetadata, &got).ok());
+  EXPECT_EQ(got.metadata, entry.metadata);
+  EXPECT_EQ(got.metadata.user_data.size(), 64u * 1024u);
+}
+
+TEST_P(IndexStoreContractTest, AnEntryWithoutFeaturesRoundTrips) {
+  const MapInfo map = NewMap("office");
+  EntryRecord entry;
+  entry.id = 0;
+  ASSERT_TRUE(store_->CommitEntry(map.id, entry).ok());
+  EntryRecord got;
+  ASSERT_TRUE(store_->ReadEntry(map.id, 0, kEntryAllParts, &got).ok());
+  EXPECT_EQ(EntryDifference(got, entry), "");
+  EXPECT_TRUE(got.descriptors.empty());
+  EXPECT_TRUE(got.keypoints.empty());
+}
+
+TEST_P(IndexStoreContractTest, CommittingATakenIdIsAlreadyExistsAndKeepsTheOriginal) {
+  const MapInfo map = NewMap("office");
+  ASSERT_TRUE(store_->CommitEntry(map.id, MakeTestEntry(4, 1)).ok());
+  EXPECT_EQ(store_->CommitEntry(map.id, MakeTestEntry(4, 2)).code(), StatusCode::kAlreadyExists);
+  EntryRecord got;
+  ASSERT_TRUE(store_->ReadEntry(map.id, 4, kEntryAllParts, &got).ok());
+  EXPECT_EQ(EntryDifference(got, MakeTestEntry(4, 1)), "");
+}
+
+TEST_P(IndexStoreContractTest, AnEntryWithoutIdIsInvalidArgument) {
+  const MapInfo map = NewMap("office");
+  EntryRecord entry = MakeTestEntry(0);
+  entry.id = kInvalidEntryId;
+  EXPECT_EQ(store_->CommitEntry(map.id, entry).code(), StatusCode::kInvalidArgument);
+  EXPECT_TRUE(ScanAll(map.id).empty());
+}
+
+TEST_P(IndexStoreContractTest, RemovedEntryIsNotFound) {
+  const MapInfo map = NewMap("office");
+  for (EntryId id = 0; id < 3; ++id)
+    ASSERT_TRUE(store_->CommitEntry(map.id, MakeTestEntry(id)).ok());
+  ASSERT_TRUE(store_->RemoveEntry(map.id, 1).ok());
+  EntryRecord got;
+  EXPECT_EQ(store_->ReadEntry(map.id, 1, kEntryAllParts, &got).code(), StatusCode::kNotFound);
+  EXPECT_EQ(store_->ReadEntry(map.id, 1, kEntryBow, &got).code(), StatusCode::kNotFound);
+  EXPECT_EQ(store_->RemoveEntry(map.id, 1).code(), StatusCode::kNotFound);
+  EXPECT_EQ(store_->RemoveEntry(map.id, 99).code(), StatusCode::kNotFound);
+  EXPECT_EQ(store_->ReadEntry(map.id, 99, kEntryMetadata, &got).code(), StatusCode::kNotFound);
+  const std::vector<EntryRecord> left = ScanAll(map.id);
+  ASSERT_EQ(left.size(), 2u);
+  EXPECT_EQ(left[0].id, 0u);
+  EXPECT_EQ(left[1].id, 2u);
+}
+
+TEST_P(IndexStoreContractTest, ScanVisitsEntriesInIdOrderWithOnlyTheRequestedParts) {
+  const MapInfo map = NewMap("office");
+  // Ids whose little-endian bytes sort differently from their values.
+  const std::vector<EntryId> ids = {300, 2, 0x01000000, 256, 1, 65536, 0xfffffffe};
+  for (EntryId id : ids) ASSERT_TRUE(store_->CommitEntry(map.id, MakeTestEntry(id)).ok());
+  std::vector<EntryId> sorted = ids;
+  std::sort(sorted.begin(), sorted.end());
+
+  for (uint32_t parts : {uint32_t(kEntryAllParts), uint32_t(kEntryMetadata), uint32_t(kEntryBow),
+                         uint32_t(kEntryDirect | kEntryFeatures), uint32_t(0)}) {
+    SCOPED_TRACE(parts);
+    const std::vector<EntryRecord> seen = ScanAll(map.id, parts);
+    ASSERT_EQ(seen.size(), sorted.size());
+    for (size_t i = 0; i < seen.size(); ++i) {
+      EXPECT_EQ(seen[i].id, sorted[i]);
+      EXPECT_EQ(EntryDifference(seen[i], MakeTestEntry(sorted[i]), parts), "");
+      EntryRecord empty;
+      empty.id = sorted[i];
+      EXPECT_EQ(EntryDifference(seen[i], empty, kEntryAllParts & ~parts), "");
+    }
+  }
+}
+
+TEST_P(IndexStoreContractTest, ScanStopsAtTheFirstVisitorError) {
+  const MapInfo map = NewMap("office");
+  for (EntryId id = 0; id < 5; ++id)
+    ASSERT_TRUE(store_->CommitEntry(map.id, MakeTestEntry(id)).ok());
+  int visits = 0;
+  const Status s = store_->ScanEntries(map.id, kEntryMetadata, [&](EntryRecord& e) {
+    ++visits;
+    return e.id == 2 ? Status::Internal("stop here") : Status::Ok();
+  });
+  EXPECT_EQ(s.code(), StatusCode::kInternal);
+  EXPECT_EQ(s.message(), "stop here");
+  EXPECT_EQ(visits, 3);
+}
+
+TEST_P(IndexStoreContractTest, ScanVisitorMayCallTheStore) {
+  const MapInfo map = NewMap("office");
+  for (EntryId id = 0; id < 3; ++id)
+    ASSERT_TRUE(store_->CommitEntry(map.id, MakeTestEntry(id)).ok());
+  const Status s = store_->ScanEntries(map.id, kEntryMetadata, [&](EntryRecord& e) {
+    EntryRecord again;
+    RECOG_RETURN_IF_ERROR(store_->ReadEntry(map.id, e.id, kEntryBow, &again));
+    return store_->NextEntryId(map.id).status();
+  });
+  EXPECT_TRUE(s.ok()) << s.ToString();
+}
+
+TEST_P(IndexStoreContractTest, ScanOfAnEmptyMapVisitsNothingAndMapsDoNotMix) {
+  const MapInfo a = NewMap("a");
+  const MapInfo b = NewMap("b");
+  EXPECT_TRUE(ScanAll(a.id).empty());
+  for (EntryId id = 0; id < 3; ++id) ASSERT_TRUE(store_->CommitEntry(b.id, MakeTestEntry(id)).ok());
+  EXPECT_TRUE(ScanAll(a.id).empty());
+  EXPECT_EQ(ScanAll(b.id).size(), 3u);
+  EntryRecord got;
+  EXPECT_EQ(store_->ReadEntry(a.id, 0, kEntryAllParts, &got).code(), StatusCode::kNotFound);
+}
+
+TEST_P(IndexStoreContractTest, NextEntryIdFollowsTheLargestCommittedId) {
+  const MapInfo map = NewMap("office");
+  EXPECT_EQ(*store_->NextEntryId(map.id), 0u);
+  ASSERT_TRUE(store_->CommitEntry(map.id, MakeTestEntry(0)).ok());
+  EXPECT_EQ(*store_->NextEntryId(map.id), 1u);
+  ASSERT_TRUE(store_->CommitEntry(map.id, MakeTestEntry(7)).ok());
+  EXPECT_EQ(*store_->NextEntryId(map.id), 8u);
+  ASSERT_TRUE(store_->CommitEntry(map.id, MakeTestEntry(3)).ok());  // a gap filled later
+  EXPECT_EQ(*store_->NextEntryId(map.id), 8u);
+  EXPECT_EQ(store_->CommitEntry(map.id, MakeTestEntry(7)).code(), StatusCode::kAlreadyExists);
+  EXPECT_EQ(*store_->NextEntryId(map.id), 8u);
+}
+
+TEST_P(IndexStoreContractTest, NextEntryIdSurvivesRemovalOfTheLastEntry) {
+  const MapInfo map = NewMap("office");
+  for (EntryId id = 0; id < 4; ++id)
+    ASSERT_TRUE(store_->CommitEntry(map.id, MakeTestEntry(id)).ok());
+  ASSERT_TRUE(store_->RemoveEntry(map.id, 3).ok());
+  ASSERT_TRUE(store_->RemoveEntry(map.id, 2).ok());
+  EXPECT_EQ(*store_->NextEntryId(map.id), 4u);
+  for (EntryId id = 0; id < 2; ++id) ASSERT_TRUE(store_->RemoveEntry(map.id, id).ok());
+  EXPECT_EQ(*store_->NextEntryId(map.id), 4u);
+}
+
+TEST_P(IndexStoreContractTest, DeleteMapRemovesAllItsEntriesAndOnlyThem) {
+  const MapInfo doomed = NewMap("doomed");
+  const MapInfo kept = NewMap("kept");
+  for (EntryId id = 0; id < 10; ++id) {
+    ASSERT_TRUE(store_->CommitEntry(doomed.id, MakeTestEntry(id, 1)).ok());
+    ASSERT_TRUE(store_->CommitEntry(kept.id, MakeTestEntry(id, 2)).ok());
+  }
+  ASSERT_TRUE(store_->DeleteMap("doomed").ok());
+
+  const MapInfo again = NewMap("doomed");
+  EXPECT_NE(again.id, doomed.id);
+  EXPECT_TRUE(ScanAll(again.id).empty());
+  EXPECT_EQ(*store_->NextEntryId(again.id), 0u);
+  EntryRecord got;
+  EXPECT_EQ(store_->ReadEntry(again.id, 0, kEntryAllParts, &got).code(), StatusCode::kNotFound);
+
+  const std::vector<EntryRecord> left = ScanAll(kept.id);
+  ASSERT_EQ(left.size(), 10u);
+  for (const EntryRecord& e : left) EXPECT_EQ(EntryDifference(e, MakeTestEntry(e.id, 2)), "");
+}
+
+TEST_P(IndexStoreContractTest, UnknownOrDeletedMapIsNotFoundEverywhere) {
+  const MapInfo deleted = NewMap("deleted");
+  ASSERT_TRUE(store_->CommitEntry(deleted.id, MakeTestEntry(0)).ok());
+  ASSERT_TRUE(store_->DeleteMap("deleted").ok());
+  for (MapId map : {deleted.id, MapId(987654)}) {
+    SCOPED_TRACE(map);
+    EntryRecord got;
+    EXPECT_EQ(store_->CommitEntry(map, MakeTestEntry(1)).code(), StatusCode::kNotFound);
+    EXPECT_EQ(store_->RemoveEntry(map, 0).code(), StatusCode::kNotFound);
+    EXPECT_EQ(store_->ReadEntry(map, 0, kEntryAllParts, &got).code(), StatusCode::kNotFound);
+    EXPECT_EQ(
+        store_->ScanEntries(map, kEntryAllParts, [](EntryRecord&) { return Status::Ok(); }).code(),
+        StatusCode::kNotFound);
+    EXPECT_EQ(store_->NextEntryId(map).status().code(), StatusCode::kNotFound);
+  }
+}
+
+TEST_P(IndexStoreContractTest, ConcurrentCommitsFromFourThreadsToTwoMapsAllLand) {
+  const MapInfo maps[2] = {NewMap("left"), NewMap("right")};
+  constexpr EntryId kPerThread = 25;
+  std::atomic<int> failures{0};
+  std::vector<std::thread> threads;
+  for (int t = 0; t < 4; ++t) {
+    threads.emplace_back([&, t] {
+      // Threads t and t + 2 share a map: one commits the even ids, the other the odd ones.
+      const MapId map = maps[t % 2].id;
+      for (EntryId k = 0; k < kPerThread; ++k) {
+        const EntryId id = 2 * k + EntryId(t / 2);
+        if (!store_->CommitEntry(map, MakeTestEntry(id, map)).ok()) ++failures;
+        EntryRecord got;
+        if (!store_->ReadEntry(map, id, kEntryMetadata, &got).ok()) ++failures;
+      }
+    });
+  }
+  for (std::thread& t : threads) t.join();
+  EXPECT_EQ(failures.load(), 0);
+  for (const MapInfo& map : maps) {
+    const std::vector<EntryRecord> all = ScanAll(map.id);
+    ASSERT_EQ(all.size(), 2 * kPerThread);
+    for (size_t i = 0; i < all.size(); ++i) {
+      EXPECT_EQ(all[i].id, EntryId(i));
+      EXPECT_EQ(EntryDifference(all[i], MakeTestEntry(EntryId(i), map.id)), "");
+    }
+    EXPECT_EQ(*store_->NextEntryId(map.id), 2 * kPerThread);
+  }
+}
+
+TEST_P(IndexStoreContractTest, FlushSucceeds) {
+  const MapInfo map = NewMap("office");
+  ASSERT_TRUE(store_->CommitEntry(map.id, MakeTestEntry(0)).ok());
+  EXPECT_TRUE(store_->Flush().ok());
+}
+
+INSTANTIATE_TEST_SUITE_P(AllStores, IndexStoreContractTest, ::testing::ValuesIn(kFactories),
+                         [](const ::testing::TestParamInfo<StoreFactory>& info) {
+                           return info.param.name;
+                         });
+
+}  // namespace
+}  // namespace recog

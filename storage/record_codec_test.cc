@@ -1,0 +1,255 @@
+// The record codec on its own: exact round trips, key order, and decoders that turn every kind
+// of damaged value into DATA_LOSS without reading out of bounds (run it under ASan to see that).
+#include "storage/record_codec.h"
+
+#include <random>
+#include <string>
+
+#include <gtest/gtest.h>
+
+#include "storage/store_test_util.h"
+
+namespace recog::storage {
+namespace {
+
+using recog::testing::EntryDifference;
+using recog::testing::MakeTestEntry;
+
+const RecordContext kContext{3, 17};
+
+// Every encoded part of an entry, with a decoder that fills the matching part of a record.
+struct Part {
+  const char* name;
+  uint32_t flag;
+  std::string bytes;
+  Status (*decode)(std::string_view, EntryRecord*);
+};
+
+std::vector<Part> EncodeParts(const EntryRecord& e) {
+  return {
+      {"metadata", kEntryMetadata, EncodeMetadata(e.metadata),
+       [](std::string_view b, EntryRecord* r) {
+         return DecodeMetadata(b, kContext, &r->metadata);
+       }},
+      {"bow", kEntryBow, EncodeBow(e.bow),
+       [](std::string_view b, EntryRecord* r) { return DecodeBow(b, kContext, &r->bow); }},
+      {"direct", kEntryDirect, EncodeDirect(e.direct),
+       [](std::string_view b, EntryRecord* r) { return DecodeDirect(b, kContext, &r->direct); }},
+      {"features", kEntryFeatures, *EncodeFeatures(e.keypoints, e.descriptors),
+       [](std::string_view b, EntryRecord* r) {
+         return DecodeFeatures(b, kContext, &r->keypoints, &r->descriptors);
+       }},
+  };
+}
+
+TEST(RecordCodecTest, EntryKeysSortInNumericOrder) {
+  const std::vector<std::pair<MapId, EntryId>> ordered = {{1, 0},
+                                                          {1, 1},
+                                                          {1, 2},
+                                                          {1, 255},
+                                                          {1, 256},
+                                                          {1, 65536},
+                                                          {1, 0xfffffffe},
+                                                          {1, 0xffffffff},
+                                                          {2, 0},
+                                                          {256, 1},
+                                                          {0xffffffff, 0xffffffff}};
+  for (size_t i = 1; i < ordered.size(); ++i) {
+    EXPECT_LT(EntryKey(ordered[i - 1].first, ordered[i - 1].second),
+              EntryKey(ordered[i].first, ordered[i].second));
+  }
+  for (const auto& [map, id] : ordered) {
+    const std::string key = EntryKey(map, id);
+    EXPECT_EQ(key.size(), kEntryKeySize);
+    MapId m = 0;
+    EntryId e = 0;
+    ASSERT_TRUE(DecodeEntryKey(key, &m, &e));
+    EXPECT_EQ(m, map);
+    EXPECT_EQ(e, id);
+    EXPECT_LE(MapEntriesBegin(map), key);
+    EXPECT_LT(key, MapEntriesEnd(map));
+    if (map != 0xffffffff) {
+      EXPECT_LT(MapEntriesEnd(map), MapEntriesBegin(map + 1));
+    }
+  }
+  MapId m = 0;
+  EntryId e = 0;
+  EXPECT_FALSE(DecodeEntryKey("short", &m, &e));
+  ASSERT_TRUE(DecodeNextEntryIdKey(NextEntryIdKey(0x01020304), &m));
+  EXPECT_EQ(m, 0x01020304u);
+  EXPECT_FALSE(DecodeNextEntryIdKey(MapInfoKey("abcd"), &m));
+}
+
+TEST(RecordCodecTest, EntryPartsRoundTripBitExactly) {
+  for (const DescriptorFormat format : {DescriptorFormat::Orb(), DescriptorFormat::Sift()}) {
+    for (EntryId id = 0; id < 20; ++id) {
+      const EntryRecord entry = MakeTestEntry(id, 5, format, 400);
+      EntryRecord decoded;
+      decoded.id = id;
+      for (const Part& part : EncodeParts(entry)) {
+        const Status s = part.decode(part.bytes, &decoded);
+        ASSERT_TRUE(s.ok()) << part.name << ": " << s.ToString();
+      }
+      EXPECT_EQ(EntryDifference(decoded, entry), "");
+    }
+  }
+}
+
+TEST(RecordCodecTest, NonContinuousDescriptorsAreStoredRowByRow) {
+  cv::Mat big(10, 64, CV_8U);
+  cv::randu(big, 0, 256);
+  const cv::Mat view = big.colRange(16, 48);  // 32 columns, not continuous
+  ASSERT_FALSE(view.isContinuous());
+  auto bytes = EncodeFeatures({}, view);
+  ASSERT_TRUE(bytes.ok());
+  std::vector<cv::KeyPoint> keypoints;
+  cv::Mat decoded;
+  ASSERT_TRUE(DecodeFeatures(*bytes, kContext, &keypoints, &decoded).ok());
+  EXPECT_TRUE(recog::testing::SameMatrix(decoded, view));
+}
+
+TEST(RecordCodecTest, CatalogRecordsRoundTrip) {
+  MapInfo info;
+  info.id = 42;
+  info.created_unix_ms = 1700000000123;
+  info.config = recog::testing::TestMapConfig("office-3", DescriptorFormat::Sift());
+  info.config.scoring = ScoringType::kBhattacharyya;
+  MapInfo decoded;
+  ASSERT_TRUE(DecodeMapInfo("office-3", EncodeMapInfo(info), &decoded).ok());
+  EXPECT_EQ(decoded, info);
+
+  StoreRecord store{77};
+  StoreRecord store_decoded;
+  ASSERT_TRUE(DecodeStoreRecord(EncodeStoreRecord(store), &store_decoded).ok());
+  EXPECT_EQ(store_decoded.next_map_id, 77u);
+
+  EntryId next = 0;
+  ASSERT_TRUE(DecodeNextEntryId(EncodeNextEntryId(123456), kContext, &next).ok());
+  EXPECT_EQ(next, 123456u);
+}
+
+TEST(RecordCodecTest, EveryTruncationIsDataLossNamingTheRecord) {
+  const EntryRecord entry = MakeTestEntry(1, 2, DescriptorFormat::Orb(), 20);
+  for (const Part& part : EncodeParts(entry)) {
+    for (size_t n = 0; n < part.bytes.size(); ++n) {
+      EntryRecord decoded;
+      const Status s = part.decode(std::string_view(part.bytes).substr(0, n), &decoded);
+      ASSERT_EQ(s.code(), StatusCode::kDataLoss) << part.name << " cut at " << n;
+      EXPECT_NE(s.message().find("map 3 entry 17"), std::string::npos) << s.message();
+    }
+    // One byte too many is damage as well.
+    EntryRecord decoded;
+    EXPECT_EQ(part.decode(part.bytes + "x", &decoded).code(), StatusCode::kDataLoss) << part.name;
+  }
+  MapInfo info;
+  info.id = 1;
+  info.config = recog::testing::TestMapConfig("m");
+  const std::string map_bytes = EncodeMapInfo(info);
+  for (size_t n = 0; n < map_bytes.size(); ++n) {
+    MapInfo decoded;
+    EXPECT_EQ(DecodeMapInfo("m", map_bytes.substr(0, n), &decoded).code(), StatusCode::kDataLoss);
+  }
+}
+
+TEST(RecordCodecTest, UnknownFormatByteIsDataLoss) {
+  const EntryRecord entry = MakeTestEntry(1);
+  for (Part& part : EncodeParts(entry)) {
+    part.bytes[0] = char(kRecordFormat + 1);
+    EntryRecord decoded;
+    EXPECT_EQ(part.decode(part.bytes, &decoded).code(), StatusCode::kDataLoss) << part.name;
+  }
+  std::string store = EncodeStoreRecord({5});
+  store[0] = char(kRecordFormat + 1);
+  StoreRecord decoded;
+  EXPECT_EQ(DecodeStoreRecord(store, &decoded).code(), StatusCode::kFailedPrecondition);
+}
+
+TEST(RecordCodecTest, HugeCountsAreRejectedBeforeAllocating) {
+  std::string bow(1, char(kRecordFormat));
+  bow += std::string("\xff\xff\xff\xff", 4);  // 4 billion words in 5 bytes
+  BowVector v;
+  EXPECT_EQ(DecodeBow(bow, kContext, &v).code(), StatusCode::kDataLoss);
+
+  std::string direct(1, char(kRecordFormat));
+  direct += std::string("\xff\xff\xff\xff\xff\xff\xff\xff", 8);
+  FeatureVector f;
+  EXPECT_EQ(DecodeDirect(direct, kContext, &f).code(), StatusCode::kDataLoss);
+
+  // 0x7fffffff x 0x7fffffff CV_64FC4 descriptors: the byte count would overflow 64 bits.
+  std::string features(1, char(kRecordFormat));
+  features += std::string(4, '\0');  // no keypoints
+  features += std::string("\xff\xff\xff\x7f\xff\xff\xff\x7f", 8);
+  const int32_t type = CV_64FC4;
+  features.append(reinterpret_cast<const char*>(&type), 4);
+  std::vector<cv::KeyPoint> k;
+  cv::Mat d;
+  EXPECT_EQ(DecodeFeatures(features, kContext, &k, &d).code(), StatusCode::kDataLoss);
+}
+
+TEST(RecordCodecTest, BrokenInvariantsAreDataLoss) {
+  // Bow words out of order.
+  BowVector unsorted;
+  unsorted.AppendSorted(5, 0.5f);
+  unsorted.AppendSorted(3, 0.5f);
+  BowVector v;
+  EXPECT_EQ(DecodeBow(EncodeBow(unsorted), kContext, &v).code(), StatusCode::kDataLoss);
+
+  // Direct-index nodes out of order, features out of order under a node.
+  const uint32_t a[] = {1, 2};
+  const uint32_t b[] = {2, 1};
+  FeatureVector nodes_unsorted;
+  nodes_unsorted.AppendNode(9, a);
+  nodes_unsorted.AppendNode(4, a);
+  FeatureVector f;
+  EXPECT_EQ(DecodeDirect(EncodeDirect(nodes_unsorted), kContext, &f).code(), StatusCode::kDataLoss);
+  FeatureVector features_unsorted;
+  features_unsorted.AppendNode(4, b);
+  EXPECT_EQ(DecodeDirect(EncodeDirect(features_unsorted), kContext, &f).code(),
+            StatusCode::kDataLoss);
+
+  // CheckStorable refuses to write what the decoders would refuse to read.
+  EntryRecord entry;
+  entry.id = 1;
+  entry.bow = unsorted;
+  EXPECT_EQ(CheckStorable(entry).code(), StatusCode::kInvalidArgument);
+  entry.bow = BowVector();
+  entry.direct = nodes_unsorted;
+  EXPECT_EQ(CheckStorable(entry).code(), StatusCode::kInvalidArgument);
+  entry.direct = features_unsorted;
+  EXPECT_EQ(CheckStorable(entry).code(), StatusCode::kInvalidArgument);
+  entry.direct = FeatureVector();
+  EXPECT_TRUE(CheckStorable(MakeTestEntry(3)).ok());
+}
+
+TEST(RecordCodecTest, RandomDamageNeverCrashes) {
+  const EntryRecord entry = MakeTestEntry(9, 1, DescriptorFormat::Orb(), 30);
+  std::mt19937 rng(12345);
+  int rejected = 0;
+  for (const Part& original : EncodeParts(entry)) {
+    for (int trial = 0; trial < 2000; ++trial) {
+      std::string bytes = original.bytes;
+      const int flips = 1 + int(rng() % 4);
+      for (int i = 0; i < flips; ++i) bytes[rng() % bytes.size()] = char(rng());
+      if (rng() % 4 == 0) bytes.resize(rng() % (bytes.size() + 1));
+      EntryRecord decoded;
+      const Status s = original.decode(bytes, &decoded);
+      ASSERT_TRUE(s.ok() || s.code() == StatusCode::kDataLoss) << s.ToString();
+      rejected += !s.ok();
+    }
+  }
+  EXPECT_GT(rejected, 0);
+  // Pure noise.
+  for (int trial = 0; trial < 2000; ++trial) {
+    std::string bytes(rng() % 64, '\0');
+    for (char& c : bytes) c = char(rng());
+    if (!bytes.empty()) bytes[0] = char(kRecordFormat);
+    EntryRecord decoded;
+    for (const Part& part : EncodeParts(entry)) {
+      const Status s = part.decode(bytes, &decoded);
+      ASSERT_TRUE(s.ok() || s.code() == StatusCode::kDataLoss) << s.ToString();
+    }
+  }
+}
+
+}  // namespace
+}  // namespace recog::storage

@@ -1,0 +1,80 @@
+// The durable IndexStore: every map and entry of a recognition server in one RocksDB database.
+//
+// Callers get an IndexStore (core/index/index_store.h) from OpenRocksDbIndexStore and never see
+// a RocksDB type. Inside, each kind of record has its own column family: `maps` (the map catalog:
+// name -> MapInfo, each map's next entry id, the store-wide next map id), `entry_meta`
+// (EntryMetadata), `bow` (BowVector), `direct` (FeatureVector) and `features` (keypoints and
+// descriptors). Entry records are keyed by big-endian `map id | entry id`, so a map's entries are
+// contiguous and in id order; the value encodings are in storage/record_codec.h.
+//
+// Durability. Every CommitEntry / RemoveEntry / CreateMap / DeleteMap is one RocksDB WriteBatch
+// written through the write-ahead log, so a crash never leaves half an entry or half a map.
+// When a write has returned OK:
+//  - SyncPolicy::kEveryWrite: the WAL was fsync'ed before returning; the write survives a crash of
+//    the process and of the machine (power loss, kernel panic).
+//  - SyncPolicy::kGrouped: the WAL record was handed to the operating system before returning, and
+//    a background thread fsyncs the WAL every `group_sync_interval_ms`. The write survives a crash
+//    of the process (kill -9, abort), but a crash of the machine may lose the writes of the last
+//    interval. Flush() forces the sync. Much higher write throughput: many writes share one fsync.
+//
+// Checkpoints. IndexStore::Checkpoint(dir) writes a consistent, openable copy of the whole store
+// (SST files hard-linked when on the same filesystem) while the store keeps serving; it holds
+// every write that returned before the call. RestoreRocksDbCheckpoint copies one back into place,
+// offline.
+//
+// Thread safety: the store may be used from any number of threads at once (see IndexStore).
+// Writes to different maps proceed in parallel; writes to one map are serialised by a per-map
+// lock; reads never wait for writes. Only one store (in this or another process) can have a
+// directory open at a time.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include "core/common/status.h"
+#include "core/index/index_store.h"
+
+namespace recog {
+
+enum class SyncPolicy {
+  kEveryWrite,  // fsync the WAL in every write: durable against machine crashes
+  kGrouped,     // fsync the WAL from a background thread every group_sync_interval_ms
+};
+
+struct RocksDbStoreOptions {
+  // When an acknowledged write is fsync'ed; see the header comment.
+  SyncPolicy sync = SyncPolicy::kGrouped;
+  // kGrouped: the background thread syncs the WAL this often, 1 to 60000 ms. The window in which
+  // a machine crash may lose acknowledged writes. Ignored by kEveryWrite.
+  uint32_t group_sync_interval_ms = 50;
+  // Create the directory and an empty store when there is none; otherwise NOT_FOUND.
+  bool create_if_missing = true;
+  // Memory for cached uncompressed blocks, shared by all column families, at most 1 TiB. 0 turns
+  // the cache off (every read goes to the files / the OS page cache).
+  size_t block_cache_mb = 64;
+
+  // INVALID_ARGUMENT naming the bad field.
+  Status Validate() const;
+};
+
+// Opens (or creates) the store in `dir`. Fails with
+//  - INVALID_ARGUMENT for bad options or when `dir` exists but is not a directory;
+//  - NOT_FOUND when there is no store in `dir` and !create_if_missing;
+//  - FAILED_PRECONDITION when `dir` is not writable (read-only directory or filesystem), or the
+//    store was written by a newer, incompatible version;
+//  - UNAVAILABLE when another store (in this or another process) has `dir` open, or on other I/O
+//    errors; DATA_LOSS when the store is corrupt.
+// The message names the directory and includes RocksDB's own description.
+StatusOr<std::unique_ptr<IndexStore>> OpenRocksDbIndexStore(const std::string& dir,
+                                                            const RocksDbStoreOptions& options);
+
+// Offline restore: copies a checkpoint directory (written by IndexStore::Checkpoint) to
+// `data_dir`, which must not exist (ALREADY_EXISTS otherwise) and is then opened with
+// OpenRocksDbIndexStore. The copy is made under a temporary name, fsync'ed and renamed, so an
+// interrupted restore never leaves a half-copied store at `data_dir`. NOT_FOUND when
+// `checkpoint_dir` does not exist, DATA_LOSS when it is not a readable store.
+Status RestoreRocksDbCheckpoint(const std::string& checkpoint_dir, const std::string& data_dir);
+
+}  // namespace recog

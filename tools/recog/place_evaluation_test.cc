@@ -1,0 +1,133 @@
+#include "tools/recog/place_evaluation.h"
+
+#include <filesystem>
+#include <fstream>
+
+#include <gtest/gtest.h>
+
+#include "core/vocabulary/vocabulary_io.h"
+#include "tests/testing/test_data.h"
+#include "tools/recog/cli_support.h"
+#include "tools/recog/sequence_generator.h"
+
+namespace recog::cli {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::shared_ptr<const Vocabulary> PlaceVocabulary() {
+  auto v = LoadVocabulary(DefaultPlaceVocabularyPath());
+  EXPECT_TRUE(v.ok()) << v.status().ToString();
+  return std::make_shared<const Vocabulary>(std::move(v).value());
+}
+
+SequenceFeatures Extract(const std::string& spec) {
+  auto source = FrameSource::Open(spec);
+  EXPECT_TRUE(source.ok()) << source.status().ToString();
+  auto sequence = ExtractSequence(*source, FeatureOptions{}, false);
+  EXPECT_TRUE(sequence.ok()) << sequence.status().ToString();
+  return std::move(sequence).value();
+}
+
+TEST(PlaceEvaluationTest, CorridorIsDetectedWithFullPrecisionAndTheTargetRecall) {
+  RECOG_SKIP_WITHOUT_SHARED_DATA("places/corridor/ground_truth.txt");
+  const SequenceFeatures sequence = Extract(testing::SharedData("places/corridor/images"));
+  auto truth = ReadGroundTruth(testing::SharedData("places/corridor/ground_truth.txt"));
+  ASSERT_TRUE(truth.ok());
+  auto e = EvaluatePlace(sequence, *truth, PlaceVocabulary(), PlaceEvaluationOptions{});
+  ASSERT_TRUE(e.ok()) << e.status().ToString();
+  EXPECT_EQ(e->frames, 84);
+  EXPECT_EQ(e->query_frames_with_truth, 44);
+  EXPECT_EQ(e->precision, 1.0);
+  EXPECT_GE(e->recall, 0.65);
+  EXPECT_EQ(e->timing_ms.count("verification"), 1u);
+}
+
+TEST(PlaceEvaluationTest, TheFirstFortyCorridorFramesHaveNoLoop) {
+  RECOG_SKIP_WITHOUT_SHARED_DATA("places/corridor/images/40.jpg");
+  const fs::path list =
+      fs::temp_directory_path() / ("recog_first40_" + std::to_string(::getpid()) + ".txt");
+  {
+    std::ofstream out(list);
+    for (int i = 1; i <= 40; ++i) {
+      out << testing::SharedData("places/corridor/images/" + std::to_string(i) + ".jpg") << "\n";
+    }
+  }
+  const SequenceFeatures sequence = Extract(list.string());
+  fs::remove(list);
+  GroundTruth none;
+  none.frames = 40;
+  none.matches.resize(40);
+  auto e = EvaluatePlace(sequence, none, PlaceVocabulary(), PlaceEvaluationOptions{});
+  ASSERT_TRUE(e.ok());
+  EXPECT_EQ(e->detections, 0);
+}
+
+TEST(PlaceEvaluationTest, ATourOfDistinctPlacesWithoutRevisitsHasNoLoop) {
+  RECOG_SKIP_WITHOUT_SHARED_DATA("training/caltech101");
+  auto photos = ListImages(testing::SharedData("training/caltech101"));
+  ASSERT_TRUE(photos.ok());
+  SequenceOptions options;
+  options.places = 60;
+  options.frames_per_place = 5;
+  options.revisit_fraction = 0.0;
+  auto generator = SequenceGenerator::Create(*photos, options);
+  ASSERT_TRUE(generator.ok()) << generator.status().ToString();
+  SequenceFeatures sequence;
+  auto extractor = CreateFeatureExtractor(FeatureOptions{});
+  for (int i = 0; i < generator->num_frames(); ++i) {
+    auto frame = generator->Frame(i);
+    ASSERT_TRUE(frame.ok());
+    FeatureSet f;
+    ASSERT_TRUE((*extractor)->Extract(frame->image, &f).ok());
+    sequence.features.push_back(std::move(f));
+    sequence.feature_ms.push_back(0.0);
+    sequence.names.push_back(std::to_string(i + 1));
+  }
+  const GroundTruth truth = generator->BuildGroundTruth();
+  ASSERT_EQ(truth.QueriesWithMatches(), 0);
+  auto e = EvaluatePlace(sequence, truth, PlaceVocabulary(), PlaceEvaluationOptions{});
+  ASSERT_TRUE(e.ok());
+  EXPECT_EQ(e->detections, 0);
+}
+
+TEST(PlaceEvaluationTest, AGroundTruthOfAnotherLengthIsRefused) {
+  const SequenceFeatures sequence = Extract(testing::ProjectTestData("corridor"));
+  GroundTruth truth;
+  truth.frames = 5;
+  truth.matches.resize(5);
+  EXPECT_EQ(EvaluatePlace(sequence, truth, PlaceVocabulary(), {}).status().code(),
+            StatusCode::kInvalidArgument);
+}
+
+TEST(PlaceEvaluationTest, FrameSourcesReadListsAndRefuseWhatTheyCannotRead) {
+  const fs::path dir = fs::temp_directory_path() / ("recog_sources_" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  {
+    std::ofstream(dir / "list.txt") << "# two frames\n"
+                                    << testing::ProjectTestData("corridor/1.jpg") << "\n\n"
+                                    << testing::ProjectTestData("corridor/20.jpg") << "\n";
+    std::ofstream(dir / "empty.txt") << "# nothing\n";
+    std::ofstream(dir / "garbage.avi") << "not a video";
+    std::ofstream(dir / "bad.txt") << (dir / "missing.jpg").string() << "\n";
+  }
+  EXPECT_EQ(Extract((dir / "list.txt").string()).features.size(), 2u);
+  EXPECT_EQ(FrameSource::Open((dir / "empty.txt").string()).status().code(),
+            StatusCode::kInvalidArgument);
+  EXPECT_EQ(FrameSource::Open((dir / "garbage.avi").string()).status().code(),
+            StatusCode::kInvalidArgument);
+  EXPECT_EQ(FrameSource::Open((dir / "nope").string()).status().code(), StatusCode::kNotFound);
+  auto bad = FrameSource::Open((dir / "bad.txt").string());
+  ASSERT_TRUE(bad.ok());
+  EXPECT_EQ(ExtractSequence(*bad, FeatureOptions{}, false).status().code(), StatusCode::kNotFound);
+  fs::remove_all(dir);
+}
+
+TEST(PlaceEvaluationTest, MedianOfEvenAndOddCounts) {
+  EXPECT_EQ(Median({}), 0.0);
+  EXPECT_EQ(Median({3, 1, 2}), 2.0);
+  EXPECT_EQ(Median({4, 1, 3, 2}), 2.5);
+}
+
+}  // namespace
+}  // namespace recog::cli
