@@ -223,7 +223,10 @@ int RunEvalPlace(const EvalPlaceArgs& args) {
     }
     out["sweep"] = sweep;
     PlotOptions plot;
-    plot.title = "Loop detection on " + fs::path(args.images).filename().string() +
+    fs::path shown = fs::path(args.images).lexically_normal();
+    if (shown.filename().empty()) shown = shown.parent_path();      // a trailing slash
+    if (shown.filename() == "images") shown = shown.parent_path();  // name the data set
+    plot.title = "Loop detection on " + shown.filename().string() +
                  ": precision vs recall, alpha from 0 to 1";
     plot.x_label = "recall";
     plot.y_label = "precision";

@@ -38,7 +38,9 @@ StatusOr<FrameSource> FrameSource::Open(const std::string& spec) {
     if (source.files_.empty()) return Status::InvalidArgument("image list '" + spec + "' is empty");
     return source;
   }
-  auto video = std::make_shared<cv::VideoCapture>(spec);
+  // FFmpeg reads video files; letting OpenCV probe every capture backend would also start camera
+  // libraries (FireWire, USB) that have no business with a file.
+  auto video = std::make_shared<cv::VideoCapture>(spec, cv::CAP_FFMPEG);
   if (!video->isOpened()) {
     return Status::InvalidArgument("'" + spec + "' is neither a folder, an image list nor a video");
   }

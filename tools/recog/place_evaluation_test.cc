@@ -4,6 +4,8 @@
 #include <fstream>
 
 #include <gtest/gtest.h>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/videoio.hpp>
 
 #include "core/vocabulary/vocabulary_io.h"
 #include "tests/testing/test_data.h"
@@ -121,6 +123,24 @@ TEST(PlaceEvaluationTest, FrameSourcesReadListsAndRefuseWhatTheyCannotRead) {
   ASSERT_TRUE(bad.ok());
   EXPECT_EQ(ExtractSequence(*bad, FeatureOptions{}, false).status().code(), StatusCode::kNotFound);
   fs::remove_all(dir);
+}
+
+TEST(PlaceEvaluationTest, AVideoFileIsReadFrameByFrame) {
+  const fs::path path =
+      fs::temp_directory_path() / ("recog_video_" + std::to_string(::getpid()) + ".avi");
+  {
+    cv::VideoWriter writer(path.string(), cv::CAP_OPENCV_MJPEG,
+                           cv::VideoWriter::fourcc('M', 'J', 'P', 'G'), 5.0, cv::Size(512, 384));
+    ASSERT_TRUE(writer.isOpened());
+    for (const char* name : {"1.jpg", "20.jpg", "41.jpg"}) {
+      writer.write(cv::imread(testing::ProjectTestData(std::string("corridor/") + name)));
+    }
+  }
+  const SequenceFeatures sequence = Extract(path.string());
+  fs::remove(path);
+  ASSERT_EQ(sequence.features.size(), 3u);
+  EXPECT_GT(sequence.features[0].size(), 100u);
+  EXPECT_NE(sequence.names[2].find("#3"), std::string::npos);
 }
 
 TEST(PlaceEvaluationTest, MedianOfEvenAndOddCounts) {
