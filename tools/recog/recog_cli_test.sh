@@ -102,5 +102,35 @@ expect_error "seqgen with a bad revisit fraction" "INVALID_ARGUMENT" "$recog" se
 expect_error "seqgen with an unknown format" "unknown image format" "$recog" seqgen --images "$images" -o "$tmp/seq3" --format gif
 [ ! -e "$tmp/seq3" ] && pass || fail "seqgen creates nothing on bad input"
 
+# recog eval place on the 4 bundled frames (41 revisits 1, 60 revisits 20).
+printf '0 0 0 0\n0 0 0 0\n1 0 0 0\n0 1 0 0\n' >"$tmp/gt4.txt"
+expect_ok "eval place on the bundled frames" "$recog" eval place --images "$images" \
+  --ground-truth "$tmp/gt4.txt" --vocab "$tmp/v.rvoc" --json -q --sweep alpha --plot "$tmp/pr.png" \
+  --draw "$tmp/draw"
+/usr/bin/python3 -c "
+import json; d=json.load(open('$tmp/out'))
+for k in ['frames','query_frames_with_truth','detections','correct','precision','recall','loops','sweep']: assert k in d, k
+for s in ['features','conversion','query','islands','insertion','verification','total']:
+    assert set(d['timing_ms'][s]) == {'mean','median','max'}, s
+assert d['frames'] == 4 and d['query_frames_with_truth'] == 2, d" \
+  && pass || fail "eval place --json has the documented keys"
+[ -s "$tmp/pr.png" ] && [ -d "$tmp/draw" ] && pass || fail "eval place writes the PR plot and the draw folder"
+expect_error "eval place without ground truth file" "NOT_FOUND" "$recog" eval place --images "$images" \
+  --ground-truth "$tmp/none.txt" -q
+printf '0 0\n1 0\n' >"$tmp/gt2.txt"
+expect_error "eval place with a ground truth of another length" "INVALID_ARGUMENT" "$recog" eval place \
+  --images "$images" --ground-truth "$tmp/gt2.txt" --vocab "$tmp/v.rvoc" -q
+printf '0 0 0\n1 0\n' >"$tmp/gtbad.txt"
+expect_error "eval place with a malformed ground truth" "DATA_LOSS" "$recog" eval place \
+  --images "$images" --ground-truth "$tmp/gtbad.txt" -q
+printf 'alpha: 0.3\nalpah: 0.2\n' >"$tmp/params.yaml"
+expect_error "eval place with an unknown parameter" "unknown key 'alpah'" "$recog" eval place \
+  --images "$images" --ground-truth "$tmp/gt4.txt" --params "$tmp/params.yaml" -q
+printf 'geometry: homography\n' >"$tmp/params2.yaml"
+expect_error "eval place with an unknown geometry check" "INVALID_ARGUMENT" "$recog" eval place \
+  --images "$images" --ground-truth "$tmp/gt4.txt" --params "$tmp/params2.yaml" -q
+expect_error "eval place with an unsupported sweep" "only supports" "$recog" eval place \
+  --images "$images" --ground-truth "$tmp/gt4.txt" --sweep k -q
+
 echo "$((checks - failures)) passed, $failures failed"
 [ "$failures" -eq 0 ]
