@@ -1,6 +1,7 @@
 #include "core/place/loop_detector.h"
 
 #include <set>
+#include <thread>
 
 #include <gtest/gtest.h>
 #include <opencv2/imgproc.hpp>
@@ -230,6 +231,34 @@ TEST_F(LoopDetectorTest, RunsAreDeterministic) {
     EXPECT_EQ(a[i].status, b[i].status);
     EXPECT_EQ(a[i].match, b[i].match);
     EXPECT_EQ(a[i].inliers, b[i].inliers);
+  }
+}
+
+TEST_F(LoopDetectorTest, DetectorsOfTwoMapsRunAtOnceAndGiveTheirSerialResults) {
+  const std::vector<cv::Mat> tour = TourWithRevisits();
+  std::vector<cv::Mat> reversed(tour.rbegin(), tour.rend());
+  const auto serial_a = Run(tour, params_);
+  MemoryIndexStore serial_store;
+  auto serial_db = Database::Create(&serial_store, "b", *vocabulary_);
+  ASSERT_TRUE(serial_db.ok());
+  const auto serial_b = Run(reversed, params_, serial_db->get());
+
+  MemoryIndexStore store;  // one store, two maps, two threads
+  auto db_a = Database::Create(&store, "a", *vocabulary_);
+  auto db_b = Database::Create(&store, "b", *vocabulary_);
+  ASSERT_TRUE(db_a.ok() && db_b.ok());
+  std::vector<LoopResult> a, b;
+  std::thread ta([&] { a = Run(tour, params_, db_a->get()); });
+  std::thread tb([&] { b = Run(reversed, params_, db_b->get()); });
+  ta.join();
+  tb.join();
+  ASSERT_EQ(a.size(), serial_a.size());
+  ASSERT_EQ(b.size(), serial_b.size());
+  for (size_t i = 0; i < a.size(); ++i) {
+    EXPECT_EQ(a[i].status, serial_a[i].status) << i;
+    EXPECT_EQ(a[i].match, serial_a[i].match) << i;
+    EXPECT_EQ(b[i].status, serial_b[i].status) << i;
+    EXPECT_EQ(b[i].match, serial_b[i].match) << i;
   }
 }
 
