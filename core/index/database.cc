@@ -354,6 +354,11 @@ size_t Database::size() const {
   return num_entries_;
 }
 
+EntryId Database::next_entry_id() const {
+  std::shared_lock lock(index_mutex_);
+  return next_id_;
+}
+
 DatabaseStats Database::Stats() const {
   std::shared_lock lock(index_mutex_);
   DatabaseStats stats;

@@ -93,6 +93,8 @@ class Database {
   Status Clear();
 
   size_t size() const;
+  // The id the next added entry will get (constant time, unlike Stats()).
+  EntryId next_entry_id() const;
   DatabaseStats Stats() const;
 
  private:

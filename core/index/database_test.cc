@@ -142,9 +142,11 @@ TEST_F(DatabaseTest, RemovedEntriesLeaveTheIndexAndTheirIdsAreNotReused) {
   std::vector<QueryResult> results;
   ASSERT_TRUE(db_->Query(BowOf(a), {.max_results = 10}, &results).ok());
   for (const QueryResult& r : results) EXPECT_NE(r.id, 0u);
+  EXPECT_EQ(db_->next_entry_id(), 2u);
   auto id = db_->Add(a);
   ASSERT_TRUE(id.ok());
   EXPECT_EQ(*id, 2u);
+  EXPECT_EQ(db_->next_entry_id(), 3u);
   ASSERT_TRUE(db_->Clear().ok());
   EXPECT_EQ(db_->size(), 0u);
   EXPECT_EQ(db_->Stats().postings, 0u);

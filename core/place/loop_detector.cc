@@ -83,7 +83,7 @@ StatusOr<LoopDetector> LoopDetector::Create(Database* database, const LoopDetect
 }
 
 EntryId LoopDetector::QueryBound(double timestamp) const {
-  const EntryId next = database_->Stats().next_entry_id;
+  const EntryId next = database_->next_entry_id();
   if (timestamp <= 0.0) {
     return next > params_.recent_frames ? next - params_.recent_frames : 0;
   }
