@@ -12,6 +12,7 @@
 #include "core/features/feature_extractor.h"
 #include "core/vocabulary/vocabulary_io.h"
 #include "tests/testing/data_paths.h"
+#include "tools/recog/cli_support.h"
 
 namespace recog::bench {
 
@@ -89,18 +90,14 @@ Vocabulary LoadBundledPlaceVocabulary() {
 }
 
 std::vector<BowVector> RealImageBows(const Vocabulary& vocabulary, size_t count, uint64_t seed) {
-  std::vector<std::string> files;
   const std::string caltech = testing::SharedData("training/caltech101");
-  if (std::filesystem::exists(caltech)) {
-    for (const auto& e : std::filesystem::recursive_directory_iterator(caltech)) {
-      if (e.is_regular_file() && e.path().extension() == ".jpg") files.push_back(e.path().string());
-    }
-    std::sort(files.begin(), files.end());
-  } else {
-    for (const char* f : {"1.jpg", "20.jpg", "41.jpg", "60.jpg"}) {
-      files.push_back(testing::ProjectTestData(std::string("corridor/") + f));
-    }
+  auto listed = cli::ListImages(
+      std::filesystem::exists(caltech) ? caltech : testing::ProjectTestData("corridor"));
+  if (!listed.ok()) {
+    std::fprintf(stderr, "bench: %s\n", listed.status().ToString().c_str());
+    std::exit(2);
   }
+  std::vector<std::string> files = std::move(listed).value();
   std::mt19937_64 rng(seed);
   std::shuffle(files.begin(), files.end(), rng);
   auto extractor = CreateFeatureExtractor(FeatureOptions{});

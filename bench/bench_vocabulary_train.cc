@@ -11,19 +11,15 @@
 #include "core/vocabulary/training_images.h"
 #include "core/vocabulary/vocabulary_trainer.h"
 #include "tests/testing/data_paths.h"
+#include "tools/recog/cli_support.h"
 
 namespace recog::bench {
 namespace {
 
+// The shared Caltech photos, or nothing when the shared data is absent.
 std::vector<std::string> CaltechImages() {
-  std::vector<std::string> files;
-  const std::string root = testing::SharedData("training/caltech101");
-  if (!std::filesystem::exists(root)) return files;
-  for (const auto& e : std::filesystem::recursive_directory_iterator(root)) {
-    if (e.is_regular_file() && e.path().extension() == ".jpg") files.push_back(e.path().string());
-  }
-  std::sort(files.begin(), files.end());
-  return files;
+  auto files = cli::ListImages(testing::SharedData("training/caltech101"));
+  return files.ok() ? std::move(files).value() : std::vector<std::string>{};
 }
 
 void BM_TrainPlaceVocabulary_Caltech(benchmark::State& state) {
