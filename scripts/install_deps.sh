@@ -5,7 +5,7 @@ set -euo pipefail
 
 packages=(
   build-essential cmake ninja-build pkg-config git
-  libopencv-dev libeigen3-dev libspdlog-dev libxxhash-dev zlib1g-dev
+  libopencv-dev libeigen3-dev libspdlog-dev libxxhash-dev zlib1g-dev libtinyxml2-dev
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler
   librocksdb-dev prometheus-cpp-dev
   libgtest-dev libgmock-dev libbenchmark-dev

@@ -403,14 +403,22 @@ Status DecodeDirect(std::string_view bytes, const RecordContext& context, Featur
 }
 
 StatusOr<std::string> EncodeFeatures(const std::vector<cv::KeyPoint>& keypoints,
-                                     const cv::Mat& descriptors) {
+                                     const cv::Mat& descriptors,
+                                     const std::vector<cv::Point3f>& points) {
   if (descriptors.dims > 2 || descriptors.channels() > 4) {
     return Status::InvalidArgument(
         "descriptors must be a matrix of at most two dimensions and four channels");
   }
+  if (!points.empty() && points.size() != keypoints.size()) {
+    return Status::InvalidArgument("entry has " + std::to_string(points.size()) +
+                                   " 3D points for " + std::to_string(keypoints.size()) +
+                                   " keypoints");
+  }
   const size_t row_bytes = size_t(descriptors.cols) * descriptors.elemSize();
-  std::string out = StartValue();
-  out.reserve(1 + 4 + keypoints.size() * kKeyPointBytes + 12 + descriptors.rows * row_bytes);
+  // Place frames keep the first layout; object entries, with 3D points, use the second.
+  std::string out(1, char(points.empty() ? kRecordFormat : kFeaturesWithPointsFormat));
+  out.reserve(1 + 4 + keypoints.size() * kKeyPointBytes + 12 + descriptors.rows * row_bytes + 4 +
+              points.size() * 12);
   Put<uint32_t>(&out, uint32_t(keypoints.size()));
   for (const cv::KeyPoint& k : keypoints) {
     Put<float>(&out, k.pt.x);
@@ -426,22 +434,35 @@ StatusOr<std::string> EncodeFeatures(const std::vector<cv::KeyPoint>& keypoints,
   for (int r = 0; r < descriptors.rows; ++r) {
     out.append(reinterpret_cast<const char*>(descriptors.ptr(r)), row_bytes);
   }
+  if (!points.empty()) {
+    Put<uint32_t>(&out, uint32_t(points.size()));
+    for (const cv::Point3f& p : points) {
+      Put<float>(&out, p.x);
+      Put<float>(&out, p.y);
+      Put<float>(&out, p.z);
+    }
+  }
   return out;
 }
 
 Status DecodeFeatures(std::string_view bytes, const RecordContext& context,
-                      std::vector<cv::KeyPoint>* keypoints, cv::Mat* descriptors) {
+                      std::vector<cv::KeyPoint>* keypoints, cv::Mat* descriptors,
+                      std::vector<cv::Point3f>* points) {
   constexpr std::string_view kWhat = "features";
   Reader reader(bytes);
-  RECOG_RETURN_IF_ERROR(ReadFormat(&reader, kWhat, context));
+  uint8_t format = 0;
+  if (!reader.Read(&format)) return Malformed(kWhat, context, "empty record");
+  if (format != kRecordFormat && format != kFeaturesWithPointsFormat) {
+    return Malformed(kWhat, context, "unknown record format " + std::to_string(format));
+  }
   uint32_t num_keypoints = 0;
   if (!reader.Read(&num_keypoints)) return Truncated(kWhat, context, reader);
   if (!Fits(reader, num_keypoints, kKeyPointBytes)) {
     return Malformed(kWhat, context,
                      std::to_string(num_keypoints) + " keypoints do not fit in the record");
   }
-  std::vector<cv::KeyPoint> points(num_keypoints);
-  for (cv::KeyPoint& k : points) {
+  std::vector<cv::KeyPoint> keys(num_keypoints);
+  for (cv::KeyPoint& k : keys) {
     reader.Read(&k.pt.x);
     reader.Read(&k.pt.y);
     reader.Read(&k.size);
@@ -462,7 +483,7 @@ Status DecodeFeatures(std::string_view bytes, const RecordContext& context,
     return Malformed(kWhat, context, "unknown descriptor element type " + std::to_string(type));
   }
   const uint64_t row_bytes = uint64_t(cols) * CV_ELEM_SIZE(type);
-  if (!Fits(reader, rows, row_bytes) || uint64_t(rows) * row_bytes != reader.left()) {
+  if (!Fits(reader, rows, row_bytes)) {
     return Malformed(kWhat, context,
                      "a " + std::to_string(rows) + "x" + std::to_string(cols) +
                          " descriptor matrix does not match the " + std::to_string(reader.left()) +
@@ -473,8 +494,29 @@ Status DecodeFeatures(std::string_view bytes, const RecordContext& context,
   const char* data = nullptr;
   reader.Skip(size_t(rows * row_bytes), &data);
   if (rows * row_bytes != 0) std::memcpy(matrix.data, data, size_t(rows * row_bytes));
-  *keypoints = std::move(points);
+  std::vector<cv::Point3f> positions;
+  if (format == kFeaturesWithPointsFormat) {
+    uint32_t num_points = 0;
+    if (!reader.Read(&num_points)) return Truncated(kWhat, context, reader);
+    if (num_points != num_keypoints || uint64_t(num_points) * 12 != reader.left()) {
+      return Malformed(kWhat, context,
+                       std::to_string(num_points) + " 3D points for " +
+                           std::to_string(num_keypoints) + " keypoints in " +
+                           std::to_string(reader.left()) + " bytes");
+    }
+    positions.resize(num_points);
+    for (cv::Point3f& p : positions) {
+      reader.Read(&p.x);
+      reader.Read(&p.y);
+      reader.Read(&p.z);
+    }
+  }
+  if (reader.left() != 0) {
+    return Malformed(kWhat, context, std::to_string(reader.left()) + " bytes after the features");
+  }
+  *keypoints = std::move(keys);
   *descriptors = std::move(matrix);
+  *points = std::move(positions);
   return Status::Ok();
 }
 

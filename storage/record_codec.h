@@ -25,7 +25,9 @@
 //                (n + 1) x offset u32 (0 ... m, non-decreasing) | m x feature index u32
 //                (increasing under each node)
 //   features   : format | keypoints k u32 | k x (x, y, size, angle, response f32, octave i32) |
-//                descriptor rows u32 | cols u32 | OpenCV type i32 | rows x cols x element bytes
+//                descriptor rows u32 | cols u32 | OpenCV type i32 | rows x cols x element bytes |
+//                and, for object entries only (format byte kFeaturesWithPointsFormat),
+//                | points k u32 | k x (x, y, z f32)
 //
 // Every decoder checks every length against what is left before reading or allocating, and
 // returns DATA_LOSS naming the record ("bow of map 3 entry 17: ...") on anything malformed: a
@@ -45,6 +47,8 @@
 namespace recog::storage {
 
 inline constexpr uint8_t kRecordFormat = 1;
+// Features records of object entries (with 3D points) start with this byte instead.
+inline constexpr uint8_t kFeaturesWithPointsFormat = 2;
 
 // Which record a value belongs to, for error messages.
 struct RecordContext {
@@ -101,10 +105,13 @@ Status DecodeBow(std::string_view bytes, const RecordContext& context, BowVector
 std::string EncodeDirect(const FeatureVector& direct);
 Status DecodeDirect(std::string_view bytes, const RecordContext& context, FeatureVector* out);
 
-// INVALID_ARGUMENT when the descriptor matrix has more than two dimensions or four channels.
+// INVALID_ARGUMENT when the descriptor matrix has more than two dimensions or four channels, or
+// when `points` is neither empty nor one per keypoint.
 StatusOr<std::string> EncodeFeatures(const std::vector<cv::KeyPoint>& keypoints,
-                                     const cv::Mat& descriptors);
+                                     const cv::Mat& descriptors,
+                                     const std::vector<cv::Point3f>& points);
 Status DecodeFeatures(std::string_view bytes, const RecordContext& context,
-                      std::vector<cv::KeyPoint>* keypoints, cv::Mat* descriptors);
+                      std::vector<cv::KeyPoint>* keypoints, cv::Mat* descriptors,
+                      std::vector<cv::Point3f>* points);
 
 }  // namespace recog::storage

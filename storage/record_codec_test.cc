@@ -35,9 +35,9 @@ std::vector<Part> EncodeParts(const EntryRecord& e) {
        [](std::string_view b, EntryRecord* r) { return DecodeBow(b, kContext, &r->bow); }},
       {"direct", kEntryDirect, EncodeDirect(e.direct),
        [](std::string_view b, EntryRecord* r) { return DecodeDirect(b, kContext, &r->direct); }},
-      {"features", kEntryFeatures, *EncodeFeatures(e.keypoints, e.descriptors),
+      {"features", kEntryFeatures, *EncodeFeatures(e.keypoints, e.descriptors, e.points),
        [](std::string_view b, EntryRecord* r) {
-         return DecodeFeatures(b, kContext, &r->keypoints, &r->descriptors);
+         return DecodeFeatures(b, kContext, &r->keypoints, &r->descriptors, &r->points);
        }},
   };
 }
@@ -100,11 +100,12 @@ TEST(RecordCodecTest, NonContinuousDescriptorsAreStoredRowByRow) {
   cv::randu(big, 0, 256);
   const cv::Mat view = big.colRange(16, 48);  // 32 columns, not continuous
   ASSERT_FALSE(view.isContinuous());
-  auto bytes = EncodeFeatures({}, view);
+  auto bytes = EncodeFeatures({}, view, {});
   ASSERT_TRUE(bytes.ok());
   std::vector<cv::KeyPoint> keypoints;
   cv::Mat decoded;
-  ASSERT_TRUE(DecodeFeatures(*bytes, kContext, &keypoints, &decoded).ok());
+  std::vector<cv::Point3f> points;
+  ASSERT_TRUE(DecodeFeatures(*bytes, kContext, &keypoints, &decoded, &points).ok());
   EXPECT_TRUE(recog::testing::SameMatrix(decoded, view));
 }
 
@@ -154,7 +155,7 @@ TEST(RecordCodecTest, EveryTruncationIsDataLossNamingTheRecord) {
 TEST(RecordCodecTest, UnknownFormatByteIsDataLoss) {
   const EntryRecord entry = MakeTestEntry(1);
   for (Part& part : EncodeParts(entry)) {
-    part.bytes[0] = char(kRecordFormat + 1);
+    part.bytes[0] = char(0x7f);
     EntryRecord decoded;
     EXPECT_EQ(part.decode(part.bytes, &decoded).code(), StatusCode::kDataLoss) << part.name;
   }
@@ -183,7 +184,8 @@ TEST(RecordCodecTest, HugeCountsAreRejectedBeforeAllocating) {
   features.append(reinterpret_cast<const char*>(&type), 4);
   std::vector<cv::KeyPoint> k;
   cv::Mat d;
-  EXPECT_EQ(DecodeFeatures(features, kContext, &k, &d).code(), StatusCode::kDataLoss);
+  std::vector<cv::Point3f> p;
+  EXPECT_EQ(DecodeFeatures(features, kContext, &k, &d, &p).code(), StatusCode::kDataLoss);
 }
 
 TEST(RecordCodecTest, BrokenInvariantsAreDataLoss) {

@@ -549,7 +549,7 @@ Status RocksDbIndexStore::CommitEntry(MapId map, const EntryRecord& entry) {
   // Encode before taking the map's lock.
   const std::string key = EntryKey(map, entry.id);
   RECOG_ASSIGN_OR_RETURN(const std::string features,
-                         EncodeFeatures(entry.keypoints, entry.descriptors));
+                         EncodeFeatures(entry.keypoints, entry.descriptors, entry.points));
   rocksdb::WriteBatch batch;
   batch.Put(Cf(kMetaCf), key, EncodeMetadata(entry.metadata));
   batch.Put(Cf(kBowCf), key, EncodeBow(entry.bow));
@@ -607,7 +607,8 @@ Status RocksDbIndexStore::DecodePart(ColumnFamily cf, std::string_view value,
     case kDirectCf:
       return DecodeDirect(value, context, &record->direct);
     case kFeaturesCf:
-      return DecodeFeatures(value, context, &record->keypoints, &record->descriptors);
+      return DecodeFeatures(value, context, &record->keypoints, &record->descriptors,
+                            &record->points);
     default:
       return Status::Internal("column family " + std::to_string(cf) + " holds no entry part");
   }
@@ -622,6 +623,7 @@ void MoveParts(EntryRecord&& from, uint32_t parts, EntryRecord* to) {
   if (parts & kEntryFeatures) {
     to->keypoints = std::move(from.keypoints);
     to->descriptors = std::move(from.descriptors);
+    to->points = std::move(from.points);
   }
 }
 

@@ -312,7 +312,7 @@ TEST_F(RocksDbStoreTest, MemoryStoreHasNothingToCheckpoint) {
 TEST_F(RocksDbStoreTest, GarbageFeatureValuesAreDataLossNotACrash) {
   const MapId map = MakeStore(6);
   const std::string valid =
-      *storage::EncodeFeatures(MakeTestEntry(1).keypoints, MakeTestEntry(1).descriptors);
+      *storage::EncodeFeatures(MakeTestEntry(1).keypoints, MakeTestEntry(1).descriptors, {});
   const std::vector<std::string> garbage = {
       "",                                                                        // empty
       std::string(1, char(storage::kRecordFormat)),                              // format byte only

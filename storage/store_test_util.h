@@ -130,6 +130,11 @@ inline EntryRecord MakeTestEntry(EntryId id, uint32_t seed = 0,
   for (int i = 0; i < n; ++i) pairs.emplace_back(NodeId(rng() % 50), uint32_t(i));
   std::sort(pairs.begin(), pairs.end());
   e.direct.AssignSorted(pairs);
+  // Odd ids are object entries: every feature has a 3D point.
+  if (id % 2 == 1) {
+    for (int i = 0; i < n; ++i)
+      e.points.emplace_back(uniform(-1, 1), uniform(-1, 1), uniform(0, 2));
+  }
   return e;
 }
 
@@ -161,6 +166,7 @@ inline std::string EntryDifference(const EntryRecord& a, const EntryRecord& b,
     }
     if (!same) out += "keypoints differ; ";
     if (!SameMatrix(a.descriptors, b.descriptors)) out += "descriptors differ; ";
+    if (a.points != b.points) out += "3D points differ; ";
   }
   return out;
 }

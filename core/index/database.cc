@@ -23,12 +23,14 @@ void AppendCompact(std::vector<T>& v, const T& item) {
 // queries.
 struct QueryScratch {
   std::vector<double> score;
+  std::vector<double> second_score;  // BC matching's chi-square sums
   std::vector<uint32_t> stamp;
   uint32_t generation = 0;
 
   void Prepare(size_t entries) {
     if (score.size() < entries) {
       score.resize(entries);
+      second_score.resize(entries);
       stamp.resize(entries, 0);
     }
     if (++generation == 0) {  // wrapped: forget every old stamp
@@ -189,12 +191,17 @@ StatusOr<EntryId> Database::Add(const FeatureSet& features, EntryMetadata metada
 }
 
 StatusOr<EntryId> Database::AddConverted(const BowVector& bow, const FeatureVector& direct,
-                                         const FeatureSet& features, EntryMetadata metadata) {
+                                         const FeatureSet& features, EntryMetadata metadata,
+                                         std::vector<cv::Point3f> points) {
   RECOG_RETURN_IF_ERROR(CheckDescriptorMatrix(features.descriptors, info_.config.descriptor));
   const size_t rows = features.descriptors.empty() ? 0 : size_t(features.descriptors.rows);
   if (features.keypoints.size() != rows) {
     return Status::InvalidArgument("entry has " + std::to_string(features.keypoints.size()) +
                                    " keypoints but " + std::to_string(rows) + " descriptors");
+  }
+  if (!points.empty() && points.size() != rows) {
+    return Status::InvalidArgument("entry has " + std::to_string(points.size()) +
+                                   " 3D points but " + std::to_string(rows) + " descriptors");
   }
   if (metadata.user_data.size() > kMaxUserDataBytes) {
     return Status::InvalidArgument("entry user data exceeds 64 KiB");
@@ -217,6 +224,7 @@ StatusOr<EntryId> Database::AddConverted(const BowVector& bow, const FeatureVect
   record.direct = direct;
   record.keypoints = features.keypoints;
   record.descriptors = features.descriptors;
+  record.points = std::move(points);
   // The store write happens outside the index lock: queries go on meanwhile.
   RECOG_RETURN_IF_ERROR(store_->CommitEntry(info_.id, record));
   std::unique_lock index_lock(index_mutex_);
@@ -252,9 +260,7 @@ void Database::ScoreEntries(const BowVector& query, EntryId bound,
   for (QueryResult& r : *touched) r.score = FinishScore(kType, score[r.id], constant);
 }
 
-Status Database::Query(const BowVector& query, const QueryOptions& options,
-                       std::vector<QueryResult>* results) const {
-  results->clear();
+Status Database::CheckQueryWords(const BowVector& query) const {
   const size_t words = vocabulary_->num_words();
   for (const BowEntry& e : query.entries()) {
     if (e.word >= words) {
@@ -263,6 +269,65 @@ Status Database::Query(const BowVector& query, const QueryOptions& options,
                                      " words)");
     }
   }
+  return Status::Ok();
+}
+
+Status Database::QueryBcMatching(const BowVector& query, double beta, size_t max_results,
+                                 std::vector<BcMatch>* results) const {
+  results->clear();
+  if (TraitsOf(info_.config.scoring).normalization != BowNormalization::kL1) {
+    return Status::FailedPrecondition("BC matching needs a map of L1-normalised vectors; map '" +
+                                      info_.config.name + "' is scored with " +
+                                      std::string(ScoringName(info_.config.scoring)));
+  }
+  RECOG_RETURN_IF_ERROR(CheckQueryWords(query));
+  if (max_results == 0) return Status::Ok();
+  thread_local QueryScratch scratch;
+  {
+    std::shared_lock lock(index_mutex_);
+    scratch.Prepare(next_id_);
+    const uint32_t generation = scratch.generation;
+    double* bhattacharyya = scratch.score.data();
+    double* chi_square = scratch.second_score.data();
+    uint32_t* stamp = scratch.stamp.data();
+    for (const BowEntry& q : query.entries()) {
+      if (q.value <= 0.f) continue;
+      const double v = q.value;
+      for (const Posting& p : postings_[q.word]) {
+        const double w = p.value;
+        if (stamp[p.entry] != generation) {
+          stamp[p.entry] = generation;
+          bhattacharyya[p.entry] = 0.0;
+          chi_square[p.entry] = 0.0;
+          results->push_back({p.entry, 0.0, 0.0});
+        }
+        bhattacharyya[p.entry] += std::sqrt(v * w);
+        chi_square[p.entry] += 2.0 * v * w / (v + w);
+      }
+    }
+    for (BcMatch& r : *results) {
+      r.bhattacharyya = bhattacharyya[r.id];
+      r.chi_square = chi_square[r.id];
+    }
+  }
+  double best = 0.0;
+  for (const BcMatch& r : *results) best = std::max(best, r.bhattacharyya);
+  const double bound = beta * best;
+  std::erase_if(*results, [bound](const BcMatch& r) { return r.bhattacharyya < bound; });
+  const auto better = [](const BcMatch& a, const BcMatch& b) {
+    if (a.chi_square != b.chi_square) return a.chi_square > b.chi_square;
+    return a.id < b.id;
+  };
+  const size_t keep = std::min(max_results, results->size());
+  std::partial_sort(results->begin(), results->begin() + long(keep), results->end(), better);
+  results->resize(keep);
+  return Status::Ok();
+}
+
+Status Database::Query(const BowVector& query, const QueryOptions& options,
+                       std::vector<QueryResult>* results) const {
+  results->clear();
+  RECOG_RETURN_IF_ERROR(CheckQueryWords(query));
   if (options.max_results == 0) return Status::Ok();
   const ScoringType type = info_.config.scoring;
   {

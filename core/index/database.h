@@ -47,6 +47,13 @@ struct QueryResult {
   friend bool operator==(const QueryResult&, const QueryResult&) = default;
 };
 
+struct BcMatch {
+  EntryId id = kInvalidEntryId;
+  double bhattacharyya = 0.0;  // s_B in [0, 1]
+  double chi_square = 0.0;     // s_chi2 in [0, 1], what the ranking uses
+  friend bool operator==(const BcMatch&, const BcMatch&) = default;
+};
+
 struct DatabaseStats {
   size_t entries = 0;
   size_t postings = 0;
@@ -73,16 +80,26 @@ class Database {
   // Converts the features with the vocabulary (direct index at the map's level) and adds them.
   StatusOr<EntryId> Add(const FeatureSet& features, EntryMetadata metadata = {});
   // Adds an entry the caller has already converted with this database's vocabulary, with the
-  // normalisation of the map's scoring and the direct index at the map's level. INVALID_ARGUMENT
-  // when the parts do not fit the vocabulary or each other.
+  // normalisation of the map's scoring and the direct index at the map's level. `points` is the
+  // 3D point of every feature (object entries) or empty. INVALID_ARGUMENT when the parts do not
+  // fit the vocabulary or each other.
   StatusOr<EntryId> AddConverted(const BowVector& bow, const FeatureVector& direct,
-                                 const FeatureSet& features, EntryMetadata metadata = {});
+                                 const FeatureSet& features, EntryMetadata metadata = {},
+                                 std::vector<cv::Point3f> points = {});
 
   // Scores the query against every entry sharing a word with it, with the map's scoring, and
   // returns the best `max_results` (best first; equal scores by increasing id). The query must
   // come from this database's vocabulary (INVALID_ARGUMENT for a word id out of range).
   Status Query(const BowVector& query, const QueryOptions& options,
                std::vector<QueryResult>* results) const;
+
+  // BC matching (thesis Algorithm 5), for maps scored with L1-normalised vectors (Bhattacharyya
+  // or chi-square; FAILED_PRECONDITION otherwise): one pass over the inverted index computes both
+  // the Bhattacharyya coefficient s_B and the chi-square score s_chi2 = 2 sum v w / (v + w) of
+  // every entry sharing a word with the query; the entries with s_B >= beta * max s_B are
+  // returned ranked by s_chi2 (best first, at most max_results; equal scores by increasing id).
+  Status QueryBcMatching(const BowVector& query, double beta, size_t max_results,
+                         std::vector<BcMatch>* results) const;
 
   // Reads parts of an entry from the store. NOT_FOUND for an unknown or removed entry.
   StatusOr<EntryRecord> Get(EntryId id, uint32_t parts = kEntryAllParts) const;
@@ -115,6 +132,8 @@ class Database {
                          uint32_t num_features) const;
   void IndexEntry(EntryId id, const BowVector& bow);  // requires index_mutex_ exclusively
 
+  // Checks that every word of `query` is in the vocabulary.
+  Status CheckQueryWords(const BowVector& query) const;
   template <ScoringType kType>
   void ScoreEntries(const BowVector& query, EntryId bound, std::vector<QueryResult>* touched) const;
 

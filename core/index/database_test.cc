@@ -326,3 +326,83 @@ TEST_F(DatabaseTest, ConcurrentQueriesWhileAddingGiveTheSerialResults) {
 
 }  // namespace
 }  // namespace recog
+
+namespace recog {
+namespace {
+
+TEST(DatabaseBcMatchingTest, KeepsBhattacharyyaCandidatesWithinBetaRankedByChiSquare) {
+  MemoryIndexStore store;
+  auto vocabulary = SmallVocabulary();
+  auto db = Database::Create(&store, "objects", vocabulary, ScoringType::kBhattacharyya);
+  ASSERT_TRUE(db.ok());
+  std::vector<BowVector> bows;
+  for (int i = 0; i < 40; ++i) {
+    const FeatureSet f = SyntheticFeatures(60 + i % 30, 700 + i);
+    ASSERT_TRUE((*db)->Add(f).ok());
+    BowVector bow;
+    ASSERT_TRUE(vocabulary->Transform(f.descriptors, &bow, nullptr, 0, BowNormalization::kL1).ok());
+    bows.push_back(bow);
+  }
+  for (int q = 0; q < 8; ++q) {
+    BowVector query;
+    ASSERT_TRUE(vocabulary
+                    ->Transform(SyntheticFeatures(50, 950 + q).descriptors, &query, nullptr, 0,
+                                BowNormalization::kL1)
+                    .ok());
+    for (const double beta : {0.0, 0.5, 0.9}) {
+      // Brute force: both scores of every entry, then Algorithm 5's selection.
+      std::vector<BcMatch> expected;
+      double best = 0;
+      for (EntryId id = 0; id < bows.size(); ++id) {
+        const double b = Score(ScoringType::kBhattacharyya, query, bows[id]);
+        // The chi-square score is s_chi2 = 1 - chi2 / 2 (eq. 5.12).
+        const double c = Score(ScoringType::kChiSquare, query, bows[id]);
+        if (b > 0) expected.push_back({id, b, c});
+        best = std::max(best, b);
+      }
+      std::erase_if(expected, [&](const BcMatch& m) { return m.bhattacharyya < beta * best; });
+      std::stable_sort(expected.begin(), expected.end(), [](const BcMatch& a, const BcMatch& b) {
+        return a.chi_square > b.chi_square;
+      });
+      std::vector<BcMatch> results;
+      ASSERT_TRUE((*db)->QueryBcMatching(query, beta, 100, &results).ok());
+      ASSERT_EQ(results.size(), expected.size()) << "beta " << beta;
+      for (size_t i = 0; i < results.size(); ++i) {
+        EXPECT_NEAR(results[i].bhattacharyya, expected[i].bhattacharyya, 1e-5);
+        EXPECT_NEAR(results[i].chi_square, expected[i].chi_square, 1e-5);
+      }
+      if (beta > 0.8) {
+        EXPECT_LT(results.size(), bows.size());
+      }
+    }
+  }
+}
+
+TEST(DatabaseBcMatchingTest, RefusesMapsThatAreNotL1Normalised) {
+  MemoryIndexStore store;
+  auto db = Database::Create(&store, "places", SmallVocabulary(), ScoringType::kL2);
+  ASSERT_TRUE(db.ok());
+  std::vector<BcMatch> results;
+  EXPECT_EQ((*db)->QueryBcMatching(BowVector(), 0.5, 10, &results).code(),
+            StatusCode::kFailedPrecondition);
+}
+
+TEST_F(DatabaseTest, ObjectEntriesKeepTheirThreeDPoints) {
+  const FeatureSet f = SyntheticFeatures(30, 5);
+  BowVector bow;
+  FeatureVector direct;
+  ASSERT_TRUE(vocabulary_->Transform(f.descriptors, &bow, &direct, 2).ok());
+  std::vector<cv::Point3f> points;
+  for (int i = 0; i < 30; ++i) points.emplace_back(float(i), float(-i), 0.5f);
+  auto id = db_->AddConverted(bow, direct, f, {}, points);
+  ASSERT_TRUE(id.ok()) << id.status().ToString();
+  auto record = db_->Get(*id);
+  ASSERT_TRUE(record.ok());
+  EXPECT_EQ(record->points, points);
+  points.pop_back();
+  EXPECT_EQ(db_->AddConverted(bow, direct, f, {}, points).status().code(),
+            StatusCode::kInvalidArgument);
+}
+
+}  // namespace
+}  // namespace recog

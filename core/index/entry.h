@@ -2,7 +2,8 @@
 //
 // An entry is its bag of words (what the inverted index is built from), its direct-index
 // feature vector (vocabulary node -> features, for fast correspondences), its keypoints and
-// descriptors (for geometric verification), and metadata. Entries of a map get increasing ids
+// descriptors (for geometric verification), and metadata. Object entries also carry the 3D point
+// (object frame) of every feature, for pose estimation. Entries of a map get increasing ids
 // 0, 1, 2, ... in the order they are added; a removed id is never reused.
 #pragma once
 
@@ -29,7 +30,7 @@ enum EntryPart : uint32_t {
   kEntryMetadata = 1u << 0,
   kEntryBow = 1u << 1,
   kEntryDirect = 1u << 2,
-  kEntryFeatures = 1u << 3,  // keypoints and descriptors
+  kEntryFeatures = 1u << 3,  // keypoints, descriptors and 3D points
   kEntryAllParts = kEntryMetadata | kEntryBow | kEntryDirect | kEntryFeatures,
 };
 
@@ -47,7 +48,8 @@ struct EntryRecord {
   BowVector bow;
   FeatureVector direct;
   std::vector<cv::KeyPoint> keypoints;
-  cv::Mat descriptors;  // one row per keypoint, in the map's descriptor format
+  cv::Mat descriptors;              // one row per keypoint, in the map's descriptor format
+  std::vector<cv::Point3f> points;  // one per keypoint (object entries) or empty (place frames)
 };
 
 // Fixed when a map is created.

@@ -12,6 +12,7 @@ void CopyEntryParts(const EntryRecord& from, uint32_t parts, EntryRecord* to) {
   if (parts & kEntryFeatures) {
     to->keypoints = from.keypoints;
     to->descriptors = from.descriptors.clone();
+    to->points = from.points;
   }
 }
 

@@ -12,5 +12,7 @@ void AddBowCommand(CLI::App& app, int* exit_code);
 void AddDemoCommand(CLI::App& app, int* exit_code);
 void AddSeqgenCommand(CLI::App& app, int* exit_code);
 void AddEvalCommand(CLI::App& app, int* exit_code);
+void AddObjectCommands(CLI::App& app, int* exit_code);  // model build|info, recognize
+void AddEvalObjectsCommand(CLI::App& eval, int* exit_code);
 
 }  // namespace recog::cli

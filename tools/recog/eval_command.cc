@@ -288,6 +288,7 @@ void AddEvalCommand(CLI::App& app, int* exit_code) {
   place->add_flag("--json", args->json, "Print JSON");
   place->add_flag("-q,--quiet", args->quiet, "No progress output");
   place->callback([args, exit_code] { *exit_code = RunEvalPlace(*args); });
+  AddEvalObjectsCommand(*eval, exit_code);
 }
 
 }  // namespace recog::cli

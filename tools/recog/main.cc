@@ -18,6 +18,7 @@ int main(int argc, char** argv) {
   recog::cli::AddDemoCommand(app, &exit_code);
   recog::cli::AddSeqgenCommand(app, &exit_code);
   recog::cli::AddEvalCommand(app, &exit_code);
+  recog::cli::AddObjectCommands(app, &exit_code);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

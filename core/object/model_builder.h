@@ -1,0 +1,112 @@
+// Building object models from images (thesis §5.2.2, §5.4.2).
+//
+// Every builder extracts ORB features from each training image over about two octaves (the
+// default pyramid: 8 levels at 1.2), gives each keypoint the 3D point it sees, drops keypoints
+// without one, and then merges descriptors: per 3D point and visual word only one descriptor is
+// kept, the bitwise median (majority) of those that fell into that word (eq. 5.3).
+//
+// Where the 3D points come from:
+//  - RoboEarth `re_vision` folders (roboearth.h). 3D models: the dense PMVS cloud
+//    (drawing_model.ply, else the union of the per-view clouds) is projected into each view; a
+//    point is visible when its normal faces the camera and it is the nearest in its pixel
+//    neighbourhood (a coarse z-buffer); a keypoint takes the visible point projecting nearest to
+//    it within `association_px` (3 px). Planar models: every view is a fronto-parallel photo of a
+//    face at the depth of that view's points; keypoints inside the face rectangle (the bounding
+//    box of the view's points) are back-projected onto it, one face per view.
+//  - Planar faces from images and physical sizes (a poster: one image, W x H; a cuboid: up to six
+//    face images of a W x H x D box, eq. 5.1; the object frame is centred on the box).
+//  - Views with known poses and polygonal faces (e.g. a CAD model and one registered frame):
+//    keypoints are intersected with the nearest face polygon facing the camera.
+//  - RGB-D views with intrinsics and poses (and optional masks): keypoints with a valid depth are
+//    back-projected.
+//
+// All builders are deterministic.
+#pragma once
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "core/common/status.h"
+#include "core/features/feature_extractor.h"
+#include "core/object/object_model.h"
+#include "core/vocabulary/vocabulary.h"
+
+namespace recog {
+
+struct ModelBuildOptions {
+  OrbOptions orb = DefaultModelOrb();
+  double association_px = 3.0;  // thesis §5.2.2
+  bool keep_images = true;      // store the training images (PNG) in the model
+  // RoboEarth: view indices (k of face_k) to leave out, e.g. for leave-one-view-out tests.
+  std::vector<int> exclude_views;
+
+  static OrbOptions DefaultModelOrb() {
+    OrbOptions orb;
+    orb.max_features = 2000;
+    orb.levels = 8;  // 1.2^7 = 3.6: about two octaves
+    return orb;
+  }
+};
+
+// Which side of a W x H x D box a face image shows (viewed from outside, upright).
+enum class BoxSide { kFront, kBack, kLeft, kRight, kTop, kBottom };
+StatusOr<BoxSide> ParseBoxSide(std::string_view name);  // "front", "back", ...
+
+struct FaceImage {
+  BoxSide side = BoxSide::kFront;
+  cv::Mat image;  // 8-bit grey or BGR, showing the whole face and nothing else
+};
+
+// A polygonal face of a 3D model in the object frame (corners in order around the face).
+struct FacePolygon {
+  std::vector<cv::Point3d> corners;  // at least 3, coplanar
+};
+
+// A registered training image: the object frame as seen by this camera.
+struct PosedImage {
+  std::string name;
+  cv::Mat image;
+  CameraIntrinsics camera;
+  RigidTransform camera_from_object;
+};
+
+struct RgbdView {
+  PosedImage view;
+  cv::Mat depth;  // CV_16U (units of 1 / depth_scale metres) or CV_32F (metres); 0 = none
+  double depth_scale = 1000.0;
+  cv::Mat mask;  // optional CV_8U, non-zero on the object
+};
+
+class ModelBuilder {
+ public:
+  // The vocabulary is the object vocabulary the model's descriptors are merged with.
+  ModelBuilder(std::shared_ptr<const Vocabulary> vocabulary, ModelBuildOptions options = {});
+
+  StatusOr<ObjectModel> FromRoboEarth(const std::string& dir);
+  // One face image: a planar poster of width x height; several (up to 6, distinct sides): a box
+  // of width x height x depth. Sizes in metres.
+  StatusOr<ObjectModel> FromFaceImages(const std::string& name, const std::vector<FaceImage>& faces,
+                                       double width, double height, double depth = 0);
+  StatusOr<ObjectModel> FromPosedPolygons(const std::string& name,
+                                          const std::vector<FacePolygon>& polygons,
+                                          const std::vector<PosedImage>& views);
+  StatusOr<ObjectModel> FromRgbd(const std::string& name, const std::vector<RgbdView>& views);
+
+ private:
+  class Accumulator;
+  Status Extract(const cv::Mat& image, FeatureSet* features);
+
+  std::shared_ptr<const Vocabulary> vocabulary_;
+  ModelBuildOptions options_;
+  std::unique_ptr<FeatureExtractor> extractor_;
+};
+
+// Reads an RGB-D view list: a text file whose lines (besides # comments) are
+//   rgb depth fx fy cx cy depth_scale r11 r12 r13 r21 r22 r23 r31 r32 r33 t1 t2 t3 [mask]
+// with paths relative to the file and the pose T_camera<-object.
+StatusOr<std::vector<RgbdView>> ReadRgbdViews(const std::string& list_path);
+
+}  // namespace recog

@@ -1,0 +1,329 @@
+// Object models, the object database and recognition, end to end: synthetic views of a planar
+// poster with known poses, and (when the shared data is there) a held-out RoboEarth view.
+#include <cmath>
+#include <memory>
+
+#include <gtest/gtest.h>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "core/index/memory_index_store.h"
+#include "core/object/model_builder.h"
+#include "core/object/object_database.h"
+#include "core/object/object_recognizer.h"
+#include "core/object/roboearth.h"
+#include "core/vocabulary/vocabulary_io.h"
+#include "tests/testing/test_data.h"
+
+namespace recog {
+namespace {
+
+constexpr double kPosterWidth = 0.64, kPosterHeight = 0.48;  // metres
+
+std::shared_ptr<const Vocabulary> ObjectVocabulary() {
+  static const std::shared_ptr<const Vocabulary> vocabulary = [] {
+    auto loaded =
+        LoadVocabulary(std::string(RECOG_SOURCE_DIR) + "/vocabularies/object_orb_t12_k10_l4.rvoc");
+    EXPECT_TRUE(loaded.ok()) << loaded.status().ToString();
+    return std::make_shared<const Vocabulary>(std::move(*loaded));
+  }();
+  return vocabulary;
+}
+
+cv::Mat Poster(const std::string& name = "corridor/1.jpg") {
+  return cv::imread(testing::ProjectTestData(name), cv::IMREAD_GRAYSCALE);
+}
+
+double RotationErrorDeg(const cv::Matx33d& a, const cv::Matx33d& b) {
+  const cv::Matx33d d = a * b.t();
+  return std::acos(std::clamp((cv::trace(d) - 1.0) / 2.0, -1.0, 1.0)) * 180.0 / CV_PI;
+}
+
+RigidTransform PoseAt(double yaw_deg, double pitch_deg, const cv::Vec3d& t) {
+  RigidTransform pose;
+  cv::Rodrigues(cv::Vec3d(pitch_deg * CV_PI / 180, yaw_deg * CV_PI / 180, 0), pose.R);
+  pose.t = t;
+  return pose;
+}
+
+// Renders the poster model's front face as `camera` sees it under `camera_from_object`.
+cv::Mat RenderPoster(const cv::Mat& poster, const ObjectModel& model,
+                     const CameraIntrinsics& camera, const RigidTransform& camera_from_object) {
+  const RigidTransform camera_from_face = camera_from_object * model.faces[0].object_from_face;
+  const cv::Matx33d& R = camera_from_face.R;
+  const cv::Matx33d plane(R(0, 0), R(0, 1), camera_from_face.t[0], R(1, 0), R(1, 1),
+                          camera_from_face.t[1], R(2, 0), R(2, 1), camera_from_face.t[2]);
+  const cv::Matx33d pixels_to_face(kPosterWidth / poster.cols, 0, 0, 0, kPosterHeight / poster.rows,
+                                   0, 0, 0, 1);
+  cv::Mat view;
+  cv::warpPerspective(poster, view, cv::Mat(camera.K() * plane * pixels_to_face),
+                      cv::Size(640, 480), cv::INTER_LINEAR, cv::BORDER_CONSTANT, 90);
+  return view;
+}
+
+class ObjectRecognitionTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    ModelBuilder builder(ObjectVocabulary());
+    auto poster = builder.FromFaceImages("poster", {{BoxSide::kFront, Poster()}}, kPosterWidth,
+                                         kPosterHeight);
+    ASSERT_TRUE(poster.ok()) << poster.status().ToString();
+    poster_ = std::move(*poster);
+    auto database = ObjectDatabase::Open(&store_, ObjectVocabulary());
+    ASSERT_TRUE(database.ok()) << database.status().ToString();
+    database_ = std::move(*database);
+    camera_ = {500, 500, 320, 240, {}};
+  }
+
+  MemoryIndexStore store_;
+  ObjectModel poster_;
+  std::shared_ptr<ObjectDatabase> database_;
+  CameraIntrinsics camera_;
+};
+
+TEST_F(ObjectRecognitionTest, APlanarModelPutsEveryPointOnItsFace) {
+  EXPECT_EQ(poster_.metadata.type, ObjectType::kPlanar);
+  ASSERT_EQ(poster_.faces.size(), 1u);
+  EXPECT_GT(poster_.num_features(), 300u);
+  EXPECT_EQ(poster_.views.size(), 1u);
+  EXPECT_FALSE(poster_.views[0].image_png.empty());
+  for (const cv::Point3f& p : poster_.points) {
+    EXPECT_NEAR(p.z, 0.0, 1e-6);  // a flat poster: depth 0, centred on the object origin
+    EXPECT_LE(std::abs(p.x), kPosterWidth / 2 + 1e-6);
+    EXPECT_LE(std::abs(p.y), kPosterHeight / 2 + 1e-6);
+  }
+}
+
+TEST_F(ObjectRecognitionTest, RecognisesThePosterAndRecoversItsPose) {
+  ASSERT_TRUE(database_->Put(poster_).ok());
+  ObjectRecognizer recognizer(database_);
+  for (const RigidTransform& truth : {PoseAt(0, 0, {0, 0, 0.9}), PoseAt(25, 0, {0.05, 0, 1.0}),
+                                      PoseAt(-15, 20, {0, 0.05, 1.1})}) {
+    const cv::Mat view = RenderPoster(Poster(), poster_, camera_, truth);
+    std::vector<Detection> detections;
+    RecognitionTiming timing;
+    ASSERT_TRUE(recognizer.Recognize(view, camera_, &detections, &timing).ok());
+    ASSERT_EQ(detections.size(), 1u);
+    const Detection& d = detections[0];
+    EXPECT_EQ(d.name, "poster");
+    EXPECT_EQ(d.version, 1u);
+    EXPECT_GE(d.inliers, 30u);
+    EXPECT_LT(RotationErrorDeg(d.camera_from_object.R, truth.R), 1.5);
+    EXPECT_LT(cv::norm(d.camera_from_object.t - truth.t) / cv::norm(truth.t), 0.02);
+    EXPECT_LT(d.reprojection_error_px, 2.0);
+    EXPECT_GE(d.outline.size(), 4u);
+    EXPECT_GT(timing.total, 0.0);
+    EXPECT_GE(timing.regions, 1u);
+  }
+}
+
+TEST_F(ObjectRecognitionTest, SameInputGivesTheSameOutput) {
+  ASSERT_TRUE(database_->Put(poster_).ok());
+  const cv::Mat view = RenderPoster(Poster(), poster_, camera_, PoseAt(20, 10, {0, 0, 1.0}));
+  std::vector<Detection> first, second;
+  ObjectRecognizer a(database_), b(database_);
+  ASSERT_TRUE(a.Recognize(view, camera_, &first).ok());
+  ASSERT_TRUE(b.Recognize(view, camera_, &second).ok());
+  ASSERT_EQ(first.size(), 1u);
+  ASSERT_EQ(second.size(), 1u);
+  EXPECT_EQ(first[0].inliers, second[0].inliers);
+  EXPECT_EQ(first[0].camera_from_object.t, second[0].camera_from_object.t);
+}
+
+TEST_F(ObjectRecognitionTest, AnUnrelatedImageRecognisesNothing) {
+  ASSERT_TRUE(database_->Put(poster_).ok());
+  ObjectRecognizer recognizer(database_);
+  std::vector<Detection> detections;
+  // Another corridor frame looks alike but is not the poster.
+  ASSERT_TRUE(recognizer.Recognize(Poster("corridor/60.jpg"), camera_, &detections).ok());
+  EXPECT_TRUE(detections.empty());
+  cv::Mat flat(480, 640, CV_8U, cv::Scalar(128));
+  ASSERT_TRUE(recognizer.Recognize(flat, camera_, &detections).ok());
+  EXPECT_TRUE(detections.empty());
+}
+
+TEST_F(ObjectRecognitionTest, BadInputIsRejected) {
+  ObjectRecognizer recognizer(database_);
+  std::vector<Detection> detections;
+  EXPECT_EQ(recognizer.Recognize(cv::Mat(), camera_, &detections).code(),
+            StatusCode::kInvalidArgument);
+  EXPECT_EQ(recognizer.Recognize(Poster(), {0, 500, 320, 240, {}}, &detections).code(),
+            StatusCode::kInvalidArgument);
+  FeatureSet wrong_width;
+  wrong_width.keypoints.resize(2);
+  wrong_width.descriptors = cv::Mat(2, 16, CV_8U, cv::Scalar(0));
+  EXPECT_EQ(recognizer.RecognizeFeatures(wrong_width, camera_, &detections).code(),
+            StatusCode::kInvalidArgument);
+}
+
+TEST_F(ObjectRecognitionTest, DatabaseAddsReplacesListsAndRemovesModels) {
+  auto first = database_->Put(poster_);
+  ASSERT_TRUE(first.ok());
+  EXPECT_EQ(first->version, 1u);
+  auto replaced = database_->Put(poster_);
+  ASSERT_TRUE(replaced.ok());
+  EXPECT_EQ(replaced->version, 2u);
+  EXPECT_EQ(database_->size(), 1u);
+  EXPECT_EQ(database_->index().size(), 1u);  // the old entry left the index
+
+  ModelBuilder builder(ObjectVocabulary());
+  auto other =
+      builder.FromFaceImages("other", {{BoxSide::kFront, Poster("corridor/41.jpg")}}, 0.3, 0.2);
+  ASSERT_TRUE(other.ok());
+  ASSERT_TRUE(database_->Put(*other).ok());
+  const std::vector<ObjectMetadata> list = database_->List();
+  ASSERT_EQ(list.size(), 2u);
+  EXPECT_EQ(list[0].name, "other");
+  EXPECT_EQ(list[1].name, "poster");
+
+  auto stored = database_->Get("poster");
+  ASSERT_TRUE(stored.ok());
+  EXPECT_EQ(stored->num_features(), poster_.num_features());
+  EXPECT_EQ(stored->faces.size(), 1u);
+  EXPECT_TRUE(stored->Validate().ok());
+
+  EXPECT_TRUE(database_->Remove("poster").ok());
+  EXPECT_EQ(database_->Remove("poster").code(), StatusCode::kNotFound);
+  EXPECT_EQ(database_->Get("poster").status().code(), StatusCode::kNotFound);
+  EXPECT_EQ(database_->size(), 1u);
+}
+
+TEST_F(ObjectRecognitionTest, DatabaseReloadsItsObjectsFromTheStore) {
+  ASSERT_TRUE(database_->Put(poster_).ok());
+  ASSERT_TRUE(database_->Put(poster_).ok());  // version 2
+  database_.reset();
+  auto reopened = ObjectDatabase::Open(&store_, ObjectVocabulary());
+  ASSERT_TRUE(reopened.ok()) << reopened.status().ToString();
+  std::shared_ptr<ObjectDatabase> database = std::move(*reopened);
+  ASSERT_EQ(database->size(), 1u);
+  EXPECT_EQ(database->List()[0].version, 2u);
+  ObjectRecognizer recognizer(database);
+  std::vector<Detection> detections;
+  const RigidTransform truth = PoseAt(10, 0, {0, 0, 1.0});
+  ASSERT_TRUE(
+      recognizer.Recognize(RenderPoster(Poster(), poster_, camera_, truth), camera_, &detections)
+          .ok());
+  ASSERT_EQ(detections.size(), 1u);
+  EXPECT_LT(RotationErrorDeg(detections[0].camera_from_object.R, truth.R), 1.5);
+}
+
+TEST_F(ObjectRecognitionTest, DatabaseRejectsBadModels) {
+  ObjectModel nameless = poster_;
+  nameless.metadata.name = "no spaces allowed";
+  EXPECT_EQ(database_->Put(nameless).status().code(), StatusCode::kInvalidArgument);
+  ObjectModel empty = poster_;
+  empty.descriptors = cv::Mat();
+  empty.point_of_feature.clear();
+  EXPECT_EQ(database_->Put(empty).status().code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(database_->size(), 0u);
+}
+
+TEST(ModelBuilderTest, BoxFacesLandOnTheirSidesOfTheBox) {
+  ModelBuilder builder(ObjectVocabulary());
+  const double w = 0.3, h = 0.2, d = 0.1;
+  auto box = builder.FromFaceImages("box",
+                                    {{BoxSide::kFront, Poster()},
+                                     {BoxSide::kTop, Poster("corridor/41.jpg")},
+                                     {BoxSide::kRight, Poster("corridor/60.jpg")}},
+                                    w, h, d);
+  ASSERT_TRUE(box.ok()) << box.status().ToString();
+  ASSERT_EQ(box->faces.size(), 3u);
+  for (size_t i = 0; i < box->points.size(); ++i) {
+    const cv::Point3f& p = box->points[i];
+    switch (box->face_of_point[i]) {
+      case 0:
+        EXPECT_NEAR(p.z, -d / 2, 1e-6);
+        break;  // front: towards the viewer
+      case 1:
+        EXPECT_NEAR(p.y, -h / 2, 1e-6);
+        break;  // top
+      case 2:
+        EXPECT_NEAR(p.x, w / 2, 1e-6);
+        break;  // right
+      default:
+        ADD_FAILURE() << "unexpected face";
+    }
+  }
+  EXPECT_EQ(builder
+                .FromFaceImages("box", {{BoxSide::kFront, Poster()}, {BoxSide::kFront, Poster()}},
+                                w, h, d)
+                .status()
+                .code(),
+            StatusCode::kInvalidArgument);
+  EXPECT_EQ(builder.FromFaceImages("box", {{BoxSide::kFront, Poster()}}, -1, h).status().code(),
+            StatusCode::kInvalidArgument);
+}
+
+TEST(ModelBuilderTest, RgbdViewsBackProjectFeaturesWithDepth) {
+  // A fronto-parallel wall 1.5 m away, seen by a camera at the object origin; the left half has
+  // no depth.
+  RgbdView view;
+  view.view.name = "wall";
+  view.view.image = Poster();
+  view.view.camera = {500, 500, 320, 240, {}};
+  const cv::Size size = view.view.image.size();
+  view.view.camera = {500, 500, size.width / 2.0, size.height / 2.0, {}};
+  view.depth = cv::Mat(size, CV_16U, cv::Scalar(1500));
+  view.depth.colRange(0, size.width / 2).setTo(0);
+  ModelBuilder builder(ObjectVocabulary());
+  auto model = builder.FromRgbd("wall", {view});
+  ASSERT_TRUE(model.ok()) << model.status().ToString();
+  ASSERT_GT(model->points.size(), 50u);
+  for (const cv::Point3f& p : model->points) {
+    EXPECT_NEAR(p.z, 1.5, 1e-6);
+    EXPECT_GE(p.x, -0.01);  // only the right half had depth
+  }
+  view.depth = cv::Mat(10, 10, CV_16U);
+  EXPECT_EQ(builder.FromRgbd("wall", {view}).status().code(), StatusCode::kInvalidArgument);
+}
+
+TEST(ModelBuilderTest, PosedPolygonsIntersectKeypointsWithTheVisibleFace) {
+  // One 1 x 0.75 m face at z = 2 m in front of the camera; keypoints outside it are dropped.
+  PosedImage view{"frame", Poster(), {500, 500, 320, 240, {}}, {}};
+  FacePolygon face{{{-0.5, -0.375, 2}, {0.5, -0.375, 2}, {0.5, 0.375, 2}, {-0.5, 0.375, 2}}};
+  ModelBuilder builder(ObjectVocabulary());
+  auto model = builder.FromPosedPolygons("face", {face}, {view});
+  ASSERT_TRUE(model.ok()) << model.status().ToString();
+  ASSERT_GT(model->points.size(), 50u);
+  for (const cv::Point3f& p : model->points) {
+    EXPECT_NEAR(p.z, 2.0, 1e-5);
+    EXPECT_LE(std::abs(p.x), 0.5 + 1e-6);
+    EXPECT_LE(std::abs(p.y), 0.375 + 1e-6);
+  }
+}
+
+TEST(ModelBuilderTest, RoboEarthLionHeldOutViewIsRecognisedWithItsPose) {
+  RECOG_SKIP_WITHOUT_SHARED_DATA("objects/roboearth/models/lion");
+  const std::string dir = testing::SharedData("objects/roboearth/models/lion");
+  ModelBuildOptions options;
+  options.keep_images = false;
+  options.exclude_views = {13};
+  ModelBuilder builder(ObjectVocabulary(), options);
+  auto model = builder.FromRoboEarth(dir);
+  ASSERT_TRUE(model.ok()) << model.status().ToString();
+  EXPECT_EQ(model->metadata.name, "lion");
+  EXPECT_EQ(model->views.size(), 19u);
+  EXPECT_GT(model->points.size(), 1000u);
+
+  MemoryIndexStore store;
+  auto database = ObjectDatabase::Open(&store, ObjectVocabulary());
+  ASSERT_TRUE(database.ok());
+  ASSERT_TRUE((*database)->Put(*model).ok());
+  auto camera_file = ReadBundleCamera(dir + "/face_013.txt");
+  ASSERT_TRUE(camera_file.ok());
+  const CameraIntrinsics camera{camera_file->focal, camera_file->focal, 320, 240, {}};
+  ObjectRecognizer recognizer(std::shared_ptr<const ObjectDatabase>(std::move(*database)));
+  std::vector<Detection> detections;
+  ASSERT_TRUE(
+      recognizer
+          .Recognize(cv::imread(dir + "/face_013.png", cv::IMREAD_GRAYSCALE), camera, &detections)
+          .ok());
+  ASSERT_EQ(detections.size(), 1u);
+  const RigidTransform& truth = camera_file->camera_from_object;
+  EXPECT_LT(RotationErrorDeg(detections[0].camera_from_object.R, truth.R), 3.0);
+  EXPECT_LT(cv::norm(detections[0].camera_from_object.t - truth.t) / cv::norm(truth.t), 0.03);
+}
+
+}  // namespace
+}  // namespace recog

@@ -1,0 +1,113 @@
+// ObjectRecognizer: finds known objects in an image and their 6-DoF pose (thesis Algorithm 4).
+//
+//  1. ORB features of the image (one scale by default, as the thesis does: the models carry
+//     descriptors of about two octaves instead);
+//  2. regions of interest by two-stage clustering of the keypoints (roi_clustering.h), plus the
+//     whole image;
+//  3. per region: every feature's word and level-1 node are computed once per image, and the
+//     region's bag of words is assembled from them; the object database is queried with BC
+//     matching (Bhattacharyya candidates within beta of the best, ranked by chi-square);
+//  4. correspondences between the region's features and the best object's descriptors through
+//     the direct index (same level-1 node, nearest-neighbour ratio test);
+//  5. geometric verification: 3D objects by RANSAC over EPnP on minimal samples (seeded, so the
+//     same input gives the same output) then Levenberg-Marquardt on the inliers; planar objects by
+//     a RANSAC homography on the face with most correspondences, the pose following from it
+//     (IPPE on the inliers). A detection needs at least `min_inliers` inliers.
+// Each object is reported once (its best detection) unless `report_duplicates` is set.
+//
+// Not thread-safe (it reuses scratch memory): use one recogniser per thread; they can share one
+// ObjectDatabase.
+#pragma once
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "core/common/status.h"
+#include "core/features/feature_extractor.h"
+#include "core/geometry/correspondences.h"
+#include "core/object/object_database.h"
+#include "core/object/roi_clustering.h"
+
+namespace recog {
+
+struct RecognitionOptions {
+  OrbOptions orb = DefaultQueryOrb();
+  RoiOptions roi;
+  double beta = 0.5;               // BC matching (thesis §5.4.4.2)
+  size_t candidates_per_roi = 1;   // objects verified per region (thesis: the best one)
+  MatchOptions match = {0.8, 64};  // ratio test and Hamming bound for correspondences
+  int ransac_iterations = 100;     // thesis Table 5.4
+  double reprojection_px = 4.0;    // inlier threshold
+  size_t min_inliers = 6;          // thesis §5.7.2.1
+  uint64_t seed = 1;               // RANSAC sampling
+  bool report_duplicates = false;  // report an object once per region instead of once per image
+
+  static OrbOptions DefaultQueryOrb() {
+    OrbOptions orb;
+    orb.max_features = 1000;
+    orb.levels = 1;
+    return orb;
+  }
+};
+
+struct Detection {
+  EntryId id = kInvalidEntryId;
+  std::string name;
+  uint32_t version = 0;
+  ObjectType type = ObjectType::k3D;
+  RigidTransform camera_from_object;  // X_camera = R X_object + t, in the model's units
+  size_t inliers = 0;
+  size_t correspondences = 0;
+  double reprojection_error_px = 0;        // mean over the inliers
+  double score = 0;                        // chi-square score of the region against the object
+  std::vector<cv::Point2f> outline;        // convex hull of the projected model, image pixels
+  std::vector<cv::Point2f> inlier_pixels;  // the image points of the inliers
+  int region = -1;                         // index of the region it was found in
+};
+
+// Milliseconds per stage for one image (thesis Table 5.6).
+struct RecognitionTiming {
+  double orb = 0, clustering = 0, conversion = 0, query = 0, correspondences = 0, ransac = 0,
+         total = 0;
+  size_t regions = 0;
+};
+
+class ObjectRecognizer {
+ public:
+  ObjectRecognizer(std::shared_ptr<const ObjectDatabase> database, RecognitionOptions options = {});
+
+  // INVALID_ARGUMENT for an empty or non-8-bit image, or invalid intrinsics.
+  Status Recognize(const cv::Mat& image, const CameraIntrinsics& camera,
+                   std::vector<Detection>* detections, RecognitionTiming* timing = nullptr);
+  // The same from features already extracted (with the database's descriptor format).
+  Status RecognizeFeatures(const FeatureSet& features, const CameraIntrinsics& camera,
+                           std::vector<Detection>* detections, RecognitionTiming* timing = nullptr);
+
+  const RecognitionOptions& options() const { return options_; }
+
+ private:
+  // The pipeline after feature extraction; fills every field of *timing but orb and total.
+  Status Run(const FeatureSet& features, const CameraIntrinsics& camera,
+             std::vector<Detection>* detections, RecognitionTiming* timing);
+  // Verifies one candidate object against a region; true and *detection filled when it passes.
+  bool Verify(const IndexedObject& object, const FeatureSet& features,
+              const std::vector<uint32_t>& region, const CameraIntrinsics& camera,
+              RecognitionTiming* timing, Detection* detection);
+
+  std::shared_ptr<const ObjectDatabase> database_;
+  RecognitionOptions options_;
+  std::unique_ptr<FeatureExtractor> extractor_;
+  RoiClusterer clusterer_;
+  // Scratch reused across images.
+  FeatureSet features_;
+  std::vector<WordId> word_of_feature_;
+  std::vector<NodeId> node_of_feature_;
+  std::vector<RegionOfInterest> regions_;
+  std::vector<cv::Point2f> positions_;  // keypoint pixels
+  std::vector<cv::Point2f> pinhole_;    // the same without lens distortion
+};
+
+}  // namespace recog

@@ -1,0 +1,887 @@
+#include "core/object/roboearth.h"
+
+#include <tinyxml2.h>
+
+#include <algorithm>
+#include <array>
+#include <bit>
+#include <charconv>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <memory>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <system_error>
+#include <utility>
+#include <vector>
+
+namespace recog {
+namespace {
+
+namespace fs = std::filesystem;
+
+// --- Files. ---
+
+struct FileCloser {
+  void operator()(std::FILE* f) const { std::fclose(f); }
+};
+using File = std::unique_ptr<std::FILE, FileCloser>;
+
+// NOT_FOUND unless `path` names a regular file; `what` describes it ("PLY file 'x.ply'").
+Status CheckFileExists(const std::string& path, const std::string& what) {
+  std::error_code ec;
+  const fs::file_status st = fs::status(path, ec);
+  if (ec || !fs::exists(st)) return Status::NotFound(what + " does not exist");
+  if (!fs::is_regular_file(st)) return Status::NotFound(what + " is not a regular file");
+  return Status::Ok();
+}
+
+// Reads a whole file in one call.
+StatusOr<std::string> ReadWholeFile(const std::string& path, const std::string& what) {
+  RECOG_RETURN_IF_ERROR(CheckFileExists(path, what));
+  std::error_code ec;
+  const uintmax_t size = fs::file_size(path, ec);
+  File file(std::fopen(path.c_str(), "rb"));
+  if (ec || !file) return Status::NotFound("cannot open " + what);
+  std::string content(size_t(size), '\0');
+  if (std::fread(content.data(), 1, content.size(), file.get()) != content.size()) {
+    return Status::DataLoss("cannot read " + what);
+  }
+  return content;
+}
+
+// Writes `content` to path + ".tmp", then renames it over `path`, so that readers never see a
+// partly written file.
+Status WriteFileAtomically(const std::string& path, std::string_view content) {
+  const std::string tmp = path + ".tmp";
+  {
+    File file(std::fopen(tmp.c_str(), "wb"));
+    if (!file) return Status::NotFound("cannot create '" + tmp + "'");
+    if (std::fwrite(content.data(), 1, content.size(), file.get()) != content.size() ||
+        std::fflush(file.get()) != 0) {
+      std::remove(tmp.c_str());
+      return Status::ResourceExhausted("cannot write '" + tmp + "' (disk full?)");
+    }
+  }
+  std::error_code ec;
+  fs::rename(tmp, path, ec);
+  if (ec) {
+    std::remove(tmp.c_str());
+    return Status::Internal("cannot rename '" + tmp + "' to '" + path + "': " + ec.message());
+  }
+  return Status::Ok();
+}
+
+// --- Text. ---
+
+// Splits a text into lines ("\n" or "\r\n" ends), numbering them from 1 for error messages.
+class LineReader {
+ public:
+  explicit LineReader(std::string_view text) : rest_(text) {}
+
+  // The next line without its end; false at the end of the text.
+  bool Next(std::string_view* line) {
+    if (rest_.empty()) return false;
+    const size_t end = rest_.find('\n');
+    *line = rest_.substr(0, end);
+    rest_ = end == std::string_view::npos ? std::string_view() : rest_.substr(end + 1);
+    if (!line->empty() && line->back() == '\r') line->remove_suffix(1);
+    ++line_number_;
+    return true;
+  }
+  int line_number() const { return line_number_; }
+  // What follows the last line read (the body of a binary PLY file).
+  std::string_view rest() const { return rest_; }
+
+ private:
+  std::string_view rest_;
+  int line_number_ = 0;
+};
+
+// Separators between numbers ('\r' and '\n' only occur inside XML text: lines are split first).
+inline bool IsBlank(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\n'; }
+
+// The next blank-separated token of *line, removed from it; empty at the end of the line.
+inline std::string_view NextToken(std::string_view* line) {
+  size_t start = 0;
+  while (start < line->size() && IsBlank((*line)[start])) ++start;
+  size_t end = start;
+  while (end < line->size() && !IsBlank((*line)[end])) ++end;
+  const std::string_view token = line->substr(start, end - start);
+  line->remove_prefix(end);
+  return token;
+}
+
+std::vector<std::string_view> Tokens(std::string_view line) {
+  std::vector<std::string_view> tokens;
+  for (std::string_view t = NextToken(&line); !t.empty(); t = NextToken(&line)) {
+    tokens.push_back(t);
+  }
+  return tokens;
+}
+
+// A whole token as a number (std::from_chars syntax: no leading '+').
+template <class T>
+inline bool ParseNumber(std::string_view token, T* out) {
+  const auto [end, ec] = std::from_chars(token.data(), token.data() + token.size(), *out);
+  return ec == std::errc() && end == token.data() + token.size();
+}
+
+// A token for an error message, shortened when long.
+std::string Quote(std::string_view token) {
+  return "'" + std::string(token.substr(0, 24)) + (token.size() > 24 ? "...'" : "'");
+}
+
+// The shortest text that reads back as exactly `value`.
+template <class T>
+void AppendNumber(std::string* out, T value) {
+  std::array<char, 32> buffer;
+  const auto [end, ec] = std::to_chars(buffer.data(), buffer.data() + buffer.size(), value);
+  out->append(buffer.data(), end);
+}
+
+template <class T>
+std::string FormatNumber(T value) {
+  std::string s;
+  AppendNumber(&s, value);
+  return s;
+}
+
+// --- Geometry checks. ---
+
+// OK when R is finite and a rotation: |R^T R - I| < 1e-3 and det(R) > 0.
+Status CheckRotation(const cv::Matx33d& R) {
+  for (int i = 0; i < 9; ++i) {
+    if (!std::isfinite(R.val[i])) return Status::InvalidArgument("R is not finite");
+  }
+  const double error = cv::norm(R.t() * R - cv::Matx33d::eye(), cv::NORM_INF);
+  const double det = cv::determinant(R);
+  if (error >= 1e-3 || det <= 0) {
+    return Status::InvalidArgument("R is not a rotation (|R^T R - I| = " + FormatNumber(error) +
+                                   ", det = " + FormatNumber(det) + ")");
+  }
+  return Status::Ok();
+}
+
+Status CheckTransform(const RigidTransform& transform) {
+  RECOG_RETURN_IF_ERROR(CheckRotation(transform.R));
+  for (double v : transform.t.val) {
+    if (!std::isfinite(v)) return Status::InvalidArgument("t is not finite");
+  }
+  return Status::Ok();
+}
+
+// Prefixes a failed status's message with `where`, keeping its code.
+Status Locate(const Status& status, const std::string& where) {
+  if (status.ok()) return status;
+  return {status.code(), where + ": " + status.message()};
+}
+
+// --- PLY. ---
+
+enum class PlyType : uint8_t {
+  kInt8,
+  kUint8,
+  kInt16,
+  kUint16,
+  kInt32,
+  kUint32,
+  kFloat32,
+  kFloat64
+};
+
+std::optional<PlyType> ParsePlyType(std::string_view name) {
+  static constexpr std::pair<std::string_view, PlyType> kNames[] = {
+      {"char", PlyType::kInt8},      {"int8", PlyType::kInt8},       {"uchar", PlyType::kUint8},
+      {"uint8", PlyType::kUint8},    {"short", PlyType::kInt16},     {"int16", PlyType::kInt16},
+      {"ushort", PlyType::kUint16},  {"uint16", PlyType::kUint16},   {"int", PlyType::kInt32},
+      {"int32", PlyType::kInt32},    {"uint", PlyType::kUint32},     {"uint32", PlyType::kUint32},
+      {"float", PlyType::kFloat32},  {"float32", PlyType::kFloat32}, {"double", PlyType::kFloat64},
+      {"float64", PlyType::kFloat64}};
+  for (const auto& [text, type] : kNames) {
+    if (text == name) return type;
+  }
+  return std::nullopt;
+}
+
+size_t PlyTypeSize(PlyType type) {
+  static constexpr size_t kSizes[] = {1, 1, 2, 2, 4, 4, 4, 8};
+  return kSizes[size_t(type)];
+}
+
+// Decodes one little-endian value of `type` at p (PlyTypeSize(type) bytes), on any host.
+double DecodeLittleEndian(const char* p, PlyType type) {
+  uint64_t bits = 0;
+  for (size_t i = PlyTypeSize(type); i-- > 0;) bits = (bits << 8) | uint8_t(p[i]);
+  switch (type) {
+    case PlyType::kInt8:
+      return int8_t(bits);
+    case PlyType::kUint8:
+      return uint8_t(bits);
+    case PlyType::kInt16:
+      return int16_t(bits);
+    case PlyType::kUint16:
+      return uint16_t(bits);
+    case PlyType::kInt32:
+      return int32_t(bits);
+    case PlyType::kUint32:
+      return uint32_t(bits);
+    case PlyType::kFloat32:
+      return std::bit_cast<float>(uint32_t(bits));
+    case PlyType::kFloat64:
+      return std::bit_cast<double>(bits);
+  }
+  return 0;
+}
+
+struct PlyProperty {
+  std::string name;
+  PlyType type = PlyType::kFloat32;  // of the value, or of the items of a list
+  bool is_list = false;
+  PlyType count_type = PlyType::kUint8;  // lists only
+};
+
+struct PlyElement {
+  std::string name;
+  size_t count = 0;
+  std::vector<PlyProperty> properties;
+};
+
+struct PlyHeader {
+  bool binary = false;
+  std::vector<PlyElement> elements;
+};
+
+// Where the vertex element keeps the fields this reader returns (-1 when absent).
+struct VertexLayout {
+  size_t element = 0;  // index of the vertex element
+  int x = -1, y = -1, z = -1, nx = -1, ny = -1, nz = -1;
+  bool has_normals() const { return nx >= 0 && ny >= 0 && nz >= 0; }
+};
+
+// Reads and checks the header of a PLY file. On return `lines` is positioned at the body.
+StatusOr<PlyHeader> ParsePlyHeader(LineReader* lines, const std::string& where) {
+  const auto error = [&](const std::string& message) {
+    return Status::DataLoss(where + " line " + std::to_string(lines->line_number()) + ": " +
+                            message);
+  };
+  std::string_view line;
+  if (!lines->Next(&line) || line != "ply") {
+    return Status::DataLoss(where + " is not a PLY file (no 'ply' line)");
+  }
+  PlyHeader header;
+  bool has_format = false;
+  while (lines->Next(&line)) {
+    const std::vector<std::string_view> t = Tokens(line);
+    if (t.empty() || t[0] == "comment" || t[0] == "obj_info") continue;
+    if (t[0] == "end_header") {
+      if (!has_format) return error("the header has no 'format' line");
+      return header;
+    }
+    if (t[0] == "format") {
+      if (t.size() != 3 || t[2] != "1.0") return error("malformed format line");
+      if (t[1] == "binary_big_endian") {
+        return Status::InvalidArgument(where + ": binary_big_endian PLY is not supported");
+      }
+      if (t[1] != "ascii" && t[1] != "binary_little_endian") {
+        return error("unknown format " + Quote(t[1]));
+      }
+      header.binary = t[1] != "ascii";
+      has_format = true;
+    } else if (t[0] == "element") {
+      PlyElement element;
+      if (t.size() != 3 || !ParseNumber(t[2], &element.count)) {
+        return error("malformed element line");
+      }
+      element.name = t[1];
+      header.elements.push_back(std::move(element));
+    } else if (t[0] == "property") {
+      if (header.elements.empty()) return error("property before any element");
+      PlyProperty property;
+      property.is_list = t.size() == 5 && t[1] == "list";
+      if (t.size() != 3 && !property.is_list) return error("malformed property line");
+      const std::optional<PlyType> type = ParsePlyType(t[property.is_list ? 3 : 1]);
+      const std::optional<PlyType> count_type = ParsePlyType(t[property.is_list ? 2 : 1]);
+      if (!type || !count_type || (property.is_list && *count_type >= PlyType::kFloat32)) {
+        return error("unknown or unusable property type in " + Quote(line));
+      }
+      property.type = *type;
+      property.count_type = *count_type;
+      property.name = t.back();
+      header.elements.back().properties.push_back(std::move(property));
+    } else {
+      return error("unknown header line " + Quote(line));
+    }
+  }
+  return Status::DataLoss(where + " is truncated: the header has no 'end_header' line");
+}
+
+StatusOr<VertexLayout> FindVertexLayout(const PlyHeader& header, const std::string& where) {
+  const auto it = std::find_if(header.elements.begin(), header.elements.end(),
+                               [](const PlyElement& e) { return e.name == "vertex"; });
+  if (it == header.elements.end()) {
+    return Status::InvalidArgument(where + " has no vertex element");
+  }
+  VertexLayout layout;
+  layout.element = size_t(it - header.elements.begin());
+  const std::pair<const char*, int*> fields[] = {{"x", &layout.x},   {"y", &layout.y},
+                                                 {"z", &layout.z},   {"nx", &layout.nx},
+                                                 {"ny", &layout.ny}, {"nz", &layout.nz}};
+  for (size_t i = 0; i < it->properties.size(); ++i) {
+    for (const auto& [name, index] : fields) {
+      if (it->properties[i].name == name && !it->properties[i].is_list) *index = int(i);
+    }
+  }
+  if (layout.x < 0 || layout.y < 0 || layout.z < 0) {
+    return Status::InvalidArgument(where + ": the vertex element has no x, y and z properties");
+  }
+  return layout;
+}
+
+// Appends the vertex held in `row` (one value per property) to the cloud; false if not finite.
+bool StoreVertex(const std::vector<double>& row, const VertexLayout& layout, PointCloud* cloud) {
+  const cv::Point3f p(float(row[layout.x]), float(row[layout.y]), float(row[layout.z]));
+  cloud->points.push_back(p);
+  bool finite = std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z);
+  if (layout.has_normals()) {
+    const cv::Vec3f n(float(row[layout.nx]), float(row[layout.ny]), float(row[layout.nz]));
+    cloud->normals.push_back(n);
+    finite = finite && std::isfinite(n[0]) && std::isfinite(n[1]) && std::isfinite(n[2]);
+  }
+  return finite;
+}
+
+// Space for `count` instances, bounded by what `bytes` bytes can hold, so that a corrupt count
+// cannot make the reader allocate more than the file justifies.
+void Reserve(size_t count, size_t bytes, size_t min_instance_bytes, PointCloud* cloud,
+             const VertexLayout& layout) {
+  const size_t n = std::min(count, bytes / std::max<size_t>(min_instance_bytes, 1) + 1);
+  cloud->points.reserve(n);
+  if (layout.has_normals()) cloud->normals.reserve(n);
+}
+
+// Parses one element instance written on an ASCII line: one value per scalar property into
+// `row`; a list is a count followed by that many values, checked and skipped.
+Status ParseAsciiInstance(std::string_view line, const PlyElement& element,
+                          std::vector<double>* row) {
+  for (size_t i = 0; i < element.properties.size(); ++i) {
+    const std::string_view token = NextToken(&line);
+    if (token.empty()) {
+      return Status::DataLoss("expected " + std::to_string(element.properties.size()) +
+                              " properties of '" + element.name + "', got " + std::to_string(i));
+    }
+    double value = 0;
+    if (!ParseNumber(token, &value)) return Status::DataLoss("not a number: " + Quote(token));
+    (*row)[i] = value;
+    size_t list_size = 0;
+    if (element.properties[i].is_list && !ParseNumber(token, &list_size)) {
+      return Status::DataLoss("bad list size " + Quote(token));
+    }
+    for (size_t j = 0; j < list_size; ++j) {
+      const std::string_view item = NextToken(&line);
+      if (!ParseNumber(item, &value)) return Status::DataLoss("bad list item " + Quote(item));
+    }
+  }
+  if (const std::string_view extra = NextToken(&line); !extra.empty()) {
+    return Status::DataLoss("unexpected value " + Quote(extra) + " after the properties of '" +
+                            element.name + "'");
+  }
+  return Status::Ok();
+}
+
+StatusOr<PointCloud> ReadAsciiPlyBody(LineReader* lines, const PlyHeader& header,
+                                      const VertexLayout& layout, const std::string& where) {
+  PointCloud cloud;
+  for (size_t e = 0; e <= layout.element; ++e) {
+    const PlyElement& element = header.elements[e];
+    std::vector<double> row(element.properties.size());
+    if (e == layout.element) {
+      Reserve(element.count, lines->rest().size(), 2 * element.properties.size(), &cloud, layout);
+    }
+    for (size_t i = 0; i < element.count; ++i) {
+      std::string_view line;
+      if (!lines->Next(&line)) {
+        return Status::DataLoss(where + " is truncated after line " +
+                                std::to_string(lines->line_number()) + ": expected " +
+                                std::to_string(element.count) + " '" + element.name +
+                                "' lines, got " + std::to_string(i));
+      }
+      Status status = ParseAsciiInstance(line, element, &row);
+      if (status.ok() && e == layout.element && !StoreVertex(row, layout, &cloud)) {
+        status = Status::DataLoss("the vertex is not finite");
+      }
+      if (!status.ok()) {
+        return Locate(status, where + " line " + std::to_string(lines->line_number()));
+      }
+    }
+  }
+  return cloud;
+}
+
+// Reads one binary element instance at *p (advanced past it) into `row`; false when the data
+// ends first or a list size is negative.
+bool ReadBinaryInstance(const char*& p, const char* end, const PlyElement& element,
+                        std::vector<double>* row) {
+  for (size_t i = 0; i < element.properties.size(); ++i) {
+    const PlyProperty& property = element.properties[i];
+    const PlyType type = property.is_list ? property.count_type : property.type;
+    if (size_t(end - p) < PlyTypeSize(type)) return false;
+    (*row)[i] = DecodeLittleEndian(p, type);
+    p += PlyTypeSize(type);
+    if (property.is_list) {
+      const double size = (*row)[i];
+      if (size < 0 || size * double(PlyTypeSize(property.type)) > double(end - p)) return false;
+      p += size_t(size) * PlyTypeSize(property.type);
+    }
+  }
+  return true;
+}
+
+// The smallest size of an instance (lists count for their size field only).
+size_t MinBinaryInstanceBytes(const PlyElement& element) {
+  size_t bytes = 0;
+  for (const PlyProperty& p : element.properties) {
+    bytes += PlyTypeSize(p.is_list ? p.count_type : p.type);
+  }
+  return bytes;
+}
+
+StatusOr<PointCloud> ReadBinaryPlyBody(std::string_view body, const PlyHeader& header,
+                                       const VertexLayout& layout, const std::string& where) {
+  PointCloud cloud;
+  const char* p = body.data();
+  const char* const end = body.data() + body.size();
+  for (size_t e = 0; e <= layout.element; ++e) {
+    const PlyElement& element = header.elements[e];
+    std::vector<double> row(element.properties.size());
+    if (e == layout.element) {
+      Reserve(element.count, size_t(end - p), MinBinaryInstanceBytes(element), &cloud, layout);
+    }
+    for (size_t i = 0; i < element.count; ++i) {
+      if (!ReadBinaryInstance(p, end, element, &row)) {
+        return Status::DataLoss(where + " is truncated: its data ends after " + std::to_string(i) +
+                                " of " + std::to_string(element.count) + " '" + element.name +
+                                "' elements");
+      }
+      if (e == layout.element && !StoreVertex(row, layout, &cloud)) {
+        return Status::DataLoss(where + ": vertex " + std::to_string(i) + " is not finite");
+      }
+    }
+  }
+  return cloud;
+}
+
+// --- Bundle cameras. ---
+
+constexpr std::string_view kBundleComment =
+    "# A contraption file with the bundle.out format in opencv reference system";
+
+// Reads the next line of a bundle file as exactly `n` numbers.
+Status ReadNumberLine(LineReader* lines, size_t n, double* values, const std::string& where) {
+  std::string_view line;
+  if (!lines->Next(&line)) {
+    return Status::DataLoss(where + " is truncated: expected 7 lines, got " +
+                            std::to_string(lines->line_number()));
+  }
+  const std::string at = where + " line " + std::to_string(lines->line_number());
+  const std::vector<std::string_view> tokens = Tokens(line);
+  if (tokens.size() != n) {
+    return Status::DataLoss(at + ": expected " + std::to_string(n) + " numbers, got " +
+                            std::to_string(tokens.size()));
+  }
+  for (size_t i = 0; i < n; ++i) {
+    if (!ParseNumber(tokens[i], &values[i])) {
+      return Status::DataLoss(at + ": not a number: " + Quote(tokens[i]));
+    }
+    if (!std::isfinite(values[i])) {
+      return Status::InvalidArgument(at + ": " + Quote(tokens[i]) + " is not finite");
+    }
+  }
+  return Status::Ok();
+}
+
+Status ValidateBundleCamera(const BundleCamera& camera) {
+  if (!(camera.focal > 0) || !std::isfinite(camera.focal) || !std::isfinite(camera.k1) ||
+      !std::isfinite(camera.k2)) {
+    return Status::InvalidArgument("the camera needs a finite focal length > 0 and finite k1, k2");
+  }
+  return CheckTransform(camera.camera_from_object);
+}
+
+// --- meta.xml. ---
+
+using tinyxml2::XMLElement;
+
+std::string_view Trim(std::string_view s) {
+  const size_t start = s.find_first_not_of(" \t\r\n");
+  if (start == std::string_view::npos) return {};
+  return s.substr(start, s.find_last_not_of(" \t\r\n") + 1 - start);
+}
+
+// "meta file 'x' line 7: <oTf>", to start a message about `element`.
+std::string Describe(const XMLElement* element, const std::string& where) {
+  return where + " line " + std::to_string(element->GetLineNum()) + ": <" + element->Name() + ">";
+}
+
+std::string_view Text(const XMLElement* element) {
+  const char* text = element->GetText();
+  return Trim(text == nullptr ? "" : text);
+}
+
+// The child element `name` of `parent`; INVALID_ARGUMENT naming both when it is missing.
+StatusOr<const XMLElement*> Child(const XMLElement* parent, const char* name,
+                                  const std::string& where) {
+  const XMLElement* child = parent->FirstChildElement(name);
+  if (child == nullptr) {
+    return Status::InvalidArgument(Describe(parent, where) + " has no <" + name + ">");
+  }
+  return child;
+}
+
+StatusOr<std::string_view> ChildText(const XMLElement* parent, const char* name,
+                                     const std::string& where) {
+  RECOG_ASSIGN_OR_RETURN(const XMLElement* child, Child(parent, name, where));
+  return Text(child);
+}
+
+// The numbers of the child element `name` (blank-separated), exactly `n` of them.
+Status ChildNumbers(const XMLElement* parent, const char* name, size_t n, double* values,
+                    const std::string& where) {
+  RECOG_ASSIGN_OR_RETURN(const XMLElement* child, Child(parent, name, where));
+  const std::vector<std::string_view> tokens = Tokens(Text(child));
+  const std::string at = Describe(child, where);
+  if (tokens.size() != n) {
+    return Status::InvalidArgument(at + " needs " + std::to_string(n) + " numbers, got " +
+                                   std::to_string(tokens.size()));
+  }
+  for (size_t i = 0; i < n; ++i) {
+    if (!ParseNumber(tokens[i], &values[i]) || !std::isfinite(values[i])) {
+      return Status::InvalidArgument(at + " holds " + Quote(tokens[i]) + ", not a finite number");
+    }
+  }
+  return Status::Ok();
+}
+
+StatusOr<double> ChildNumber(const XMLElement* parent, const char* name, const std::string& where) {
+  double value = 0;
+  RECOG_RETURN_IF_ERROR(ChildNumbers(parent, name, 1, &value, where));
+  return value;
+}
+
+StatusOr<int> ChildInt(const XMLElement* parent, const char* name, const std::string& where) {
+  RECOG_ASSIGN_OR_RETURN(const XMLElement* child, Child(parent, name, where));
+  int value = 0;
+  if (!ParseNumber(Text(child), &value)) {
+    return Status::InvalidArgument(Describe(child, where) + " holds " + Quote(Text(child)) +
+                                   ", not an integer");
+  }
+  return value;
+}
+
+StatusOr<RigidTransform> ParseOtf(const XMLElement* face, const std::string& where) {
+  cv::Matx44d m;
+  RECOG_RETURN_IF_ERROR(ChildNumbers(face, "oTf", 16, m.val, where));
+  if (cv::norm(m.row(3) - cv::Matx14d(0, 0, 0, 1), cv::NORM_INF) > 1e-9) {
+    return Status::InvalidArgument(Describe(face->FirstChildElement("oTf"), where) +
+                                   ": the last row is not 0 0 0 1");
+  }
+  return RigidTransform::FromMatrix(m);
+}
+
+StatusOr<RoboEarthFace> ParseFace(const XMLElement* face, const std::string& where) {
+  RoboEarthFace out;
+  RECOG_ASSIGN_OR_RETURN(out.index, ChildInt(face, "index", where));
+  RECOG_ASSIGN_OR_RETURN(out.width, ChildNumber(face, "width", where));
+  RECOG_ASSIGN_OR_RETURN(out.height, ChildNumber(face, "height", where));
+  RECOG_ASSIGN_OR_RETURN(out.object_from_face, ParseOtf(face, where));
+  return out;
+}
+
+Status ParsePlanarDimensions(const XMLElement* dimensions, const std::string& where,
+                             RoboEarthMeta* meta) {
+  RECOG_ASSIGN_OR_RETURN(meta->width, ChildNumber(dimensions, "width", where));
+  RECOG_ASSIGN_OR_RETURN(meta->height, ChildNumber(dimensions, "height", where));
+  RECOG_ASSIGN_OR_RETURN(meta->depth, ChildNumber(dimensions, "depth", where));
+  for (const XMLElement* face = dimensions->FirstChildElement("face"); face != nullptr;
+       face = face->NextSiblingElement("face")) {
+    RECOG_ASSIGN_OR_RETURN(RoboEarthFace parsed, ParseFace(face, where));
+    meta->faces.push_back(std::move(parsed));
+  }
+  std::sort(meta->faces.begin(), meta->faces.end(),
+            [](const RoboEarthFace& a, const RoboEarthFace& b) { return a.index < b.index; });
+  return Status::Ok();
+}
+
+// Checks the values of a meta (whatever file they come from or go to).
+Status ValidateMeta(const RoboEarthMeta& meta) {
+  if (meta.name.empty()) return Status::InvalidArgument("the model has no name");
+  if (meta.num_faces < 0) return Status::InvalidArgument("the number of faces is negative");
+  if (meta.type == ObjectType::k3D) {
+    if (!(meta.scale > 0) || !std::isfinite(meta.scale)) {
+      return Status::InvalidArgument("the scale must be finite and > 0");
+    }
+    return Status::Ok();
+  }
+  if (!(meta.width > 0 && meta.height > 0 && meta.depth >= 0) || !std::isfinite(meta.width) ||
+      !std::isfinite(meta.height) || !std::isfinite(meta.depth)) {
+    return Status::InvalidArgument("a planar model needs finite width, height > 0 and depth >= 0");
+  }
+  if (meta.faces.size() != size_t(meta.num_faces)) {
+    return Status::InvalidArgument("<faces> says " + std::to_string(meta.num_faces) +
+                                   " faces, but " + std::to_string(meta.faces.size()) +
+                                   " are described");
+  }
+  for (size_t i = 0; i < meta.faces.size(); ++i) {
+    const RoboEarthFace& face = meta.faces[i];
+    const std::string which = "face " + std::to_string(face.index);
+    if (face.index < 0 || (i > 0 && face.index <= meta.faces[i - 1].index)) {
+      return Status::InvalidArgument(which + ": face indices must be >= 0, unique and sorted");
+    }
+    if (!(face.width > 0 && face.height > 0) || !std::isfinite(face.width) ||
+        !std::isfinite(face.height)) {
+      return Status::InvalidArgument(which + " needs a finite width and height > 0");
+    }
+    RECOG_RETURN_IF_ERROR(Locate(CheckTransform(face.object_from_face), which + " oTf"));
+  }
+  return Status::Ok();
+}
+
+StatusOr<RoboEarthMeta> ParseMeta(const XMLElement* model, const std::string& where) {
+  RoboEarthMeta meta;
+  RECOG_ASSIGN_OR_RETURN(const std::string_view name, ChildText(model, "name", where));
+  meta.name = name;
+  RECOG_ASSIGN_OR_RETURN(const std::string_view type, ChildText(model, "type", where));
+  const StatusOr<ObjectType> object_type = ParseObjectType(type);
+  if (!object_type.ok()) return Locate(object_type.status(), where + ": <type>");
+  meta.type = *object_type;
+  RECOG_ASSIGN_OR_RETURN(meta.num_faces, ChildInt(model, "faces", where));
+  RECOG_ASSIGN_OR_RETURN(const XMLElement* dimensions, Child(model, "dimensions", where));
+  if (meta.type == ObjectType::k3D) {
+    RECOG_ASSIGN_OR_RETURN(meta.scale, ChildNumber(dimensions, "scale", where));
+  } else {
+    RECOG_RETURN_IF_ERROR(ParsePlanarDimensions(dimensions, where, &meta));
+  }
+  return meta;
+}
+
+void AddTextElement(tinyxml2::XMLDocument* doc, XMLElement* parent, const char* name,
+                    const std::string& text) {
+  parent->InsertEndChild(doc->NewElement(name))->ToElement()->SetText(text.c_str());
+}
+
+std::string FormatMatrix(const cv::Matx44d& m) {
+  std::string s;
+  for (int i = 0; i < 16; ++i) {
+    if (i > 0) s += ' ';
+    AppendNumber(&s, m.val[i]);
+  }
+  return s;
+}
+
+void AddFace(tinyxml2::XMLDocument* doc, XMLElement* dimensions, const RoboEarthFace& face) {
+  XMLElement* element = dimensions->InsertEndChild(doc->NewElement("face"))->ToElement();
+  AddTextElement(doc, element, "index", std::to_string(face.index));
+  AddTextElement(doc, element, "width", FormatNumber(face.width));
+  AddTextElement(doc, element, "height", FormatNumber(face.height));
+  AddTextElement(doc, element, "oTf", FormatMatrix(face.object_from_face.Matrix()));
+}
+
+// --- Folders. ---
+
+// The index k of a "face_k.png" file name.
+std::optional<int> ViewIndex(const std::string& file_name) {
+  constexpr std::string_view kPrefix = "face_", kSuffix = ".png";
+  const std::string_view name = file_name;
+  if (!name.starts_with(kPrefix) || !name.ends_with(kSuffix)) return std::nullopt;
+  const std::string_view digits =
+      name.substr(kPrefix.size(), name.size() - kPrefix.size() - kSuffix.size());
+  int index = 0;
+  if (digits.empty() || digits[0] == '-' || !ParseNumber(digits, &index)) return std::nullopt;
+  return index;
+}
+
+bool IsRegularFile(const fs::path& path) {
+  std::error_code ec;
+  return fs::is_regular_file(path, ec);
+}
+
+// The view of image `png` (face_k.png), or nothing when its face_k.txt is missing.
+StatusOr<std::optional<RoboEarthView>> ReadView(const fs::path& png, int index) {
+  fs::path txt = png, ply = png;
+  txt.replace_extension(".txt");
+  ply.replace_extension(".ply");
+  if (!IsRegularFile(txt)) return std::optional<RoboEarthView>();
+  RoboEarthView view;
+  view.index = index;
+  view.image_path = png.string();
+  RECOG_ASSIGN_OR_RETURN(view.camera, ReadBundleCamera(txt.string()));
+  if (IsRegularFile(ply)) view.points_path = ply.string();
+  return std::optional<RoboEarthView>(std::move(view));
+}
+
+StatusOr<std::vector<RoboEarthView>> ReadViews(const std::string& dir) {
+  std::vector<RoboEarthView> views;
+  std::error_code ec;
+  for (const fs::directory_entry& entry : fs::directory_iterator(dir, ec)) {
+    const std::optional<int> index = ViewIndex(entry.path().filename().string());
+    if (!index || !IsRegularFile(entry.path())) continue;
+    RECOG_ASSIGN_OR_RETURN(std::optional<RoboEarthView> view, ReadView(entry.path(), *index));
+    if (view) views.push_back(std::move(*view));
+  }
+  if (ec) return Status::NotFound("cannot list RoboEarth folder '" + dir + "': " + ec.message());
+  std::sort(views.begin(), views.end(),
+            [](const RoboEarthView& a, const RoboEarthView& b) { return a.index < b.index; });
+  const auto same_index = [](const RoboEarthView& a, const RoboEarthView& b) {
+    return a.index == b.index;
+  };
+  if (const auto dup = std::adjacent_find(views.begin(), views.end(), same_index);
+      dup != views.end()) {
+    return Status::InvalidArgument("RoboEarth folder '" + dir + "' has two images of view " +
+                                   std::to_string(dup->index));
+  }
+  return views;
+}
+
+}  // namespace
+
+StatusOr<PointCloud> ReadPly(const std::string& path) {
+  const std::string where = "PLY file '" + path + "'";
+  RECOG_ASSIGN_OR_RETURN(const std::string content, ReadWholeFile(path, where));
+  LineReader lines(content);
+  RECOG_ASSIGN_OR_RETURN(const PlyHeader header, ParsePlyHeader(&lines, where));
+  RECOG_ASSIGN_OR_RETURN(const VertexLayout layout, FindVertexLayout(header, where));
+  if (header.binary) return ReadBinaryPlyBody(lines.rest(), header, layout, where);
+  return ReadAsciiPlyBody(&lines, header, layout, where);
+}
+
+Status WritePly(const std::string& path, const PointCloud& cloud) {
+  const bool normals = !cloud.normals.empty();
+  if (normals && cloud.normals.size() != cloud.points.size()) {
+    return Status::InvalidArgument("cannot write '" + path +
+                                   "': " + std::to_string(cloud.points.size()) + " points but " +
+                                   std::to_string(cloud.normals.size()) + " normals");
+  }
+  std::string text = "ply\nformat ascii 1.0\nelement vertex " +
+                     std::to_string(cloud.points.size()) +
+                     "\nproperty float x\nproperty float y\nproperty float z\n";
+  if (normals) text += "property float nx\nproperty float ny\nproperty float nz\n";
+  text += "end_header\n";
+  text.reserve(text.size() + cloud.points.size() * (normals ? 72 : 36));
+  for (size_t i = 0; i < cloud.points.size(); ++i) {
+    const float values[] = {cloud.points[i].x, cloud.points[i].y, cloud.points[i].z};
+    for (float v : values) {
+      AppendNumber(&text, v);
+      text += ' ';
+    }
+    for (int k = 0; normals && k < 3; ++k) {
+      AppendNumber(&text, cloud.normals[i][k]);
+      text += ' ';
+    }
+    text.back() = '\n';
+  }
+  return WriteFileAtomically(path, text);
+}
+
+StatusOr<BundleCamera> ReadBundleCamera(const std::string& path) {
+  const std::string where = "bundle camera file '" + path + "'";
+  RECOG_ASSIGN_OR_RETURN(const std::string content, ReadWholeFile(path, where));
+  LineReader lines(content);
+  std::string_view comment;
+  if (!lines.Next(&comment) || !comment.starts_with("#")) {
+    return Status::DataLoss(where + " line 1: expected a '#' comment line");
+  }
+  double counts[2], intrinsics[3], rows[12];
+  RECOG_RETURN_IF_ERROR(ReadNumberLine(&lines, 2, counts, where));
+  if (counts[0] != 1) {
+    return Status::InvalidArgument(where + " line 2: expected one camera, got " +
+                                   FormatNumber(counts[0]));
+  }
+  RECOG_RETURN_IF_ERROR(ReadNumberLine(&lines, 3, intrinsics, where));
+  for (int i = 0; i < 4; ++i) RECOG_RETURN_IF_ERROR(ReadNumberLine(&lines, 3, rows + 3 * i, where));
+  BundleCamera camera;
+  camera.focal = intrinsics[0];
+  camera.k1 = intrinsics[1];
+  camera.k2 = intrinsics[2];
+  std::copy(rows, rows + 9, camera.camera_from_object.R.val);
+  std::copy(rows + 9, rows + 12, camera.camera_from_object.t.val);
+  RECOG_RETURN_IF_ERROR(Locate(ValidateBundleCamera(camera), where));
+  return camera;
+}
+
+Status WriteBundleCamera(const std::string& path, const BundleCamera& camera) {
+  RECOG_RETURN_IF_ERROR(Locate(ValidateBundleCamera(camera), "cannot write '" + path + "'"));
+  std::string text(kBundleComment);
+  text += "\n1 0\n";
+  char line[160];
+  std::snprintf(line, sizeof(line), "%.6f %.6f %.6f\n", camera.focal, camera.k1, camera.k2);
+  text += line;
+  const cv::Matx33d& R = camera.camera_from_object.R;
+  for (int r = 0; r < 3; ++r) {
+    std::snprintf(line, sizeof(line), "%.12f %.12f %.12f \n", R(r, 0), R(r, 1), R(r, 2));
+    text += line;
+  }
+  const cv::Vec3d& t = camera.camera_from_object.t;
+  std::snprintf(line, sizeof(line), "%.12f %.12f %.12f \n", t[0], t[1], t[2]);
+  text += line;
+  return WriteFileAtomically(path, text);
+}
+
+StatusOr<RoboEarthMeta> ReadRoboEarthMeta(const std::string& path) {
+  const std::string where = "meta file '" + path + "'";
+  RECOG_RETURN_IF_ERROR(CheckFileExists(path, where));
+  tinyxml2::XMLDocument doc;
+  if (doc.LoadFile(path.c_str()) != tinyxml2::XML_SUCCESS) {
+    return Status::DataLoss(where + " line " + std::to_string(doc.ErrorLineNum()) +
+                            ": not well-formed XML (" + doc.ErrorName() + ")");
+  }
+  const XMLElement* model = doc.RootElement();
+  if (model == nullptr || std::string_view(model->Name()) != "model") {
+    return Status::InvalidArgument(where + " has no <model> root element");
+  }
+  RECOG_ASSIGN_OR_RETURN(RoboEarthMeta meta, ParseMeta(model, where));
+  RECOG_RETURN_IF_ERROR(Locate(ValidateMeta(meta), where));
+  return meta;
+}
+
+Status WriteRoboEarthMeta(const std::string& path, const RoboEarthMeta& meta) {
+  RECOG_RETURN_IF_ERROR(Locate(ValidateMeta(meta), "cannot write '" + path + "'"));
+  tinyxml2::XMLDocument doc;
+  XMLElement* model = doc.InsertEndChild(doc.NewElement("model"))->ToElement();
+  AddTextElement(&doc, model, "name", meta.name);
+  AddTextElement(&doc, model, "type", std::string(ObjectTypeName(meta.type)));
+  AddTextElement(&doc, model, "faces", std::to_string(meta.num_faces));
+  XMLElement* dimensions = model->InsertEndChild(doc.NewElement("dimensions"))->ToElement();
+  if (meta.type == ObjectType::k3D) {
+    AddTextElement(&doc, dimensions, "scale", FormatNumber(meta.scale));
+  } else {
+    AddTextElement(&doc, dimensions, "width", FormatNumber(meta.width));
+    AddTextElement(&doc, dimensions, "height", FormatNumber(meta.height));
+    AddTextElement(&doc, dimensions, "depth", FormatNumber(meta.depth));
+    for (const RoboEarthFace& face : meta.faces) AddFace(&doc, dimensions, face);
+  }
+  tinyxml2::XMLPrinter printer;
+  doc.Print(&printer);
+  return WriteFileAtomically(path, std::string_view(printer.CStr(), printer.CStrSize() - 1));
+}
+
+StatusOr<RoboEarthFolder> ReadRoboEarthFolder(const std::string& dir) {
+  std::error_code ec;
+  if (!fs::is_directory(dir, ec)) {
+    return Status::NotFound("RoboEarth folder '" + dir + "' does not exist");
+  }
+  RoboEarthFolder folder;
+  folder.path = dir;
+  RECOG_ASSIGN_OR_RETURN(folder.meta, ReadRoboEarthMeta((fs::path(dir) / "meta.xml").string()));
+  RECOG_ASSIGN_OR_RETURN(folder.views, ReadViews(dir));
+  if (folder.views.empty()) {
+    return Status::InvalidArgument("RoboEarth folder '" + dir +
+                                   "' has no view (face_k.png with its face_k.txt)");
+  }
+  const fs::path dense = fs::path(dir) / "drawing_model.ply";
+  if (IsRegularFile(dense)) folder.dense_cloud_path = dense.string();
+  return folder;
+}
+
+}  // namespace recog

@@ -1,0 +1,81 @@
+// Reading and writing RoboEarth `re_vision` object model folders.
+//
+// A folder holds, per training view k (three-digit index): face_k.png (the photo), face_k.txt (the
+// camera in Bundler "bundle.out" form, OpenCV axes: a comment line, "1 0", "f k1 k2", three rows
+// of R, then t; the principal point is the image centre), face_k.ply (the sparse points seen in
+// that view) and face_k.key.gz (old SURF keys, ignored); drawing_model.ply (the dense PMVS cloud
+// of the whole object, ASCII PLY with x y z [nx ny nz] [colour]); and meta.xml:
+//
+//   <model><name>lion</name><type>3D</type><faces>20</faces>
+//     <dimensions><scale>1</scale> ... or, for planar models, <width> <height> <depth> and per
+//     face <face><index>0</index><width>..</width><height>..</height>
+//     <oTf>16 numbers, row-major</oTf></face></dimensions></model>
+//
+// Readers validate everything they read and return INVALID_ARGUMENT / DATA_LOSS naming the file
+// and line for malformed input, NOT_FOUND for a missing folder or file.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "core/common/status.h"
+#include "core/object/object_model.h"
+
+namespace recog {
+
+// A PLY point cloud: positions, and normals when the file has them (else empty).
+struct PointCloud {
+  std::vector<cv::Point3f> points;
+  std::vector<cv::Vec3f> normals;  // empty, or one per point
+};
+
+// Reads an ASCII or binary_little_endian PLY file's vertex element (x y z, optional nx ny nz;
+// other properties are skipped).
+StatusOr<PointCloud> ReadPly(const std::string& path);
+// Writes an ASCII PLY (with normals when cloud.normals is not empty), atomically.
+Status WritePly(const std::string& path, const PointCloud& cloud);
+
+// A Bundler camera as RoboEarth stores it.
+struct BundleCamera {
+  double focal = 0, k1 = 0, k2 = 0;
+  RigidTransform camera_from_object;
+};
+StatusOr<BundleCamera> ReadBundleCamera(const std::string& path);
+Status WriteBundleCamera(const std::string& path, const BundleCamera& camera);
+
+struct RoboEarthFace {  // planar models only
+  int index = 0;
+  double width = 0, height = 0;
+  RigidTransform object_from_face;  // oTf
+};
+
+struct RoboEarthMeta {
+  std::string name;
+  ObjectType type = ObjectType::k3D;
+  int num_faces = 0;
+  double scale = 1;                         // 3D models
+  double width = 0, height = 0, depth = 0;  // planar models: overall size
+  std::vector<RoboEarthFace> faces;         // planar models, by index
+};
+StatusOr<RoboEarthMeta> ReadRoboEarthMeta(const std::string& path);
+Status WriteRoboEarthMeta(const std::string& path, const RoboEarthMeta& meta);
+
+struct RoboEarthView {
+  int index = 0;
+  std::string image_path;  // face_k.png
+  BundleCamera camera;
+  std::string points_path;  // face_k.ply ("" when absent)
+};
+
+struct RoboEarthFolder {
+  std::string path;
+  RoboEarthMeta meta;
+  std::vector<RoboEarthView> views;  // by increasing index
+  std::string dense_cloud_path;      // drawing_model.ply ("" when absent)
+};
+// Lists a model folder: meta.xml plus every face_k.png that has its face_k.txt.
+StatusOr<RoboEarthFolder> ReadRoboEarthFolder(const std::string& dir);
+
+}  // namespace recog

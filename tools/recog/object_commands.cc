@@ -1,0 +1,403 @@
+// recog model build|info, recog recognize and recog eval objects: object models and object
+// recognition from the command line.
+#include <cstdio>
+#include <filesystem>
+#include <memory>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "core/index/memory_index_store.h"
+#include "core/object/model_builder.h"
+#include "core/object/model_file.h"
+#include "core/object/object_recognizer.h"
+#include "core/vocabulary/vocabulary_io.h"
+#include "tools/recog/cli_support.h"
+#include "tools/recog/commands.h"
+#include "tools/recog/object_evaluation.h"
+
+namespace recog::cli {
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+int Fail(const char* command, const Status& s) {
+  std::fprintf(stderr, "recog %s: %s\n", command, s.ToString().c_str());
+  return 1;
+}
+
+StatusOr<std::shared_ptr<const Vocabulary>> LoadObjectVocabulary(const std::string& path) {
+  RECOG_ASSIGN_OR_RETURN(Vocabulary vocabulary,
+                         LoadAnyVocabulary(path.empty() ? DefaultObjectVocabularyPath() : path));
+  return std::make_shared<const Vocabulary>(std::move(vocabulary));
+}
+
+// "fx,fy,cx,cy[,k1,k2,p1,p2[,k3]]".
+StatusOr<CameraIntrinsics> ParseCamera(const std::string& text) {
+  std::vector<double> values;
+  std::stringstream in(text);
+  std::string field;
+  while (std::getline(in, field, ',')) {
+    try {
+      size_t used = 0;
+      values.push_back(std::stod(field, &used));
+      if (used != field.size()) throw std::invalid_argument(field);
+    } catch (const std::exception&) {
+      return Status::InvalidArgument("--camera: '" + field + "' is not a number");
+    }
+  }
+  if (values.size() != 4 && values.size() != 8 && values.size() != 9) {
+    return Status::InvalidArgument("--camera needs fx,fy,cx,cy[,k1,k2,p1,p2[,k3]]");
+  }
+  CameraIntrinsics camera{values[0], values[1], values[2], values[3],
+                          std::vector<double>(values.begin() + 4, values.end())};
+  RECOG_RETURN_IF_ERROR(camera.Validate());
+  return camera;
+}
+
+json MetadataJson(const ObjectMetadata& m) {
+  return {{"name", m.name},
+          {"class", m.object_class},
+          {"type", std::string(ObjectTypeName(m.type))},
+          {"dimensions", {m.dimensions[0], m.dimensions[1], m.dimensions[2]}},
+          {"units", m.units},
+          {"source", m.source},
+          {"version", m.version}};
+}
+
+json TimingJson(const RecognitionTiming& t) {
+  return {{"orb", t.orb},     {"clustering", t.clustering},           {"conversion", t.conversion},
+          {"query", t.query}, {"correspondences", t.correspondences}, {"ransac", t.ransac},
+          {"total", t.total}};
+}
+
+// ---- recog model build / info ----
+
+struct ModelBuildArgs {
+  std::string roboearth, planar, rgbd, output, name, vocabulary;
+  std::vector<std::string> faces;  // side=IMAGE
+  double width = 0, height = 0, depth = 0;
+  bool no_images = false;
+};
+
+int RunModelBuild(const ModelBuildArgs& args) {
+  const int sources = int(!args.roboearth.empty()) +
+                      int(!args.planar.empty() || !args.faces.empty()) + int(!args.rgbd.empty());
+  if (sources != 1) {
+    return Fail("model build", Status::InvalidArgument(
+                                   "give exactly one of --roboearth, --planar/--face or --rgbd"));
+  }
+  auto vocabulary = LoadObjectVocabulary(args.vocabulary);
+  if (!vocabulary.ok()) return Fail("model build", vocabulary.status());
+  ModelBuildOptions options;
+  options.keep_images = !args.no_images;
+  ModelBuilder builder(*vocabulary, options);
+  StatusOr<ObjectModel> model = Status::Internal("no source");
+  if (!args.roboearth.empty()) {
+    model = builder.FromRoboEarth(args.roboearth);
+  } else if (!args.rgbd.empty()) {
+    auto views = ReadRgbdViews(args.rgbd);
+    if (!views.ok()) return Fail("model build", views.status());
+    model = builder.FromRgbd(
+        args.name.empty() ? fs::path(args.rgbd).parent_path().filename().string() : args.name,
+        *views);
+  } else {
+    std::vector<FaceImage> faces;
+    std::vector<std::string> specs = args.faces;
+    if (!args.planar.empty()) specs.insert(specs.begin(), "front=" + args.planar);
+    for (const std::string& spec : specs) {
+      const size_t eq = spec.find('=');
+      if (eq == std::string::npos) {
+        return Fail("model build",
+                    Status::InvalidArgument("--face needs SIDE=IMAGE, got '" + spec + "'"));
+      }
+      auto side = ParseBoxSide(spec.substr(0, eq));
+      if (!side.ok()) return Fail("model build", side.status());
+      auto image = ReadGrayImage(spec.substr(eq + 1));
+      if (!image.ok()) return Fail("model build", image.status());
+      faces.push_back({*side, *image});
+    }
+    const std::string name =
+        args.name.empty()
+            ? fs::path(specs.front().substr(specs.front().find('=') + 1)).stem().string()
+            : args.name;
+    model = builder.FromFaceImages(name, faces, args.width, args.height, args.depth);
+  }
+  if (!model.ok()) return Fail("model build", model.status());
+  if (!args.name.empty()) model->metadata.name = args.name;
+  if (Status s = SaveObjectModel(*model, args.output); !s.ok()) return Fail("model build", s);
+  std::printf("%s: %s object, %zu points, %zu descriptors, %zu views -> %s\n",
+              model->metadata.name.c_str(),
+              std::string(ObjectTypeName(model->metadata.type)).c_str(), model->points.size(),
+              model->num_features(), model->views.size(), args.output.c_str());
+  return 0;
+}
+
+int RunModelInfo(const std::string& path, bool as_json) {
+  auto model = LoadObjectModel(path);
+  if (!model.ok()) return Fail("model info", model.status());
+  json out = MetadataJson(model->metadata);
+  out["points"] = model->points.size();
+  out["descriptors"] = model->num_features();
+  out["faces"] = model->faces.size();
+  out["views"] = model->views.size();
+  if (as_json) {
+    std::printf("%s\n", out.dump(2).c_str());
+  } else {
+    for (const auto& [key, value] : out.items()) {
+      std::printf("%-12s %s\n", key.c_str(), value.dump().c_str());
+    }
+  }
+  return 0;
+}
+
+// ---- recog recognize ----
+
+struct RecognizeArgs {
+  std::vector<std::string> models;
+  std::string image, camera, draw, vocabulary;
+  bool json = false;
+};
+
+// Model files (.robj) and RoboEarth folders named by `paths` (folders are searched one level).
+Status LoadModels(const std::vector<std::string>& paths, ModelBuilder* builder,
+                  ObjectDatabase* database) {
+  for (const std::string& path : paths) {
+    std::vector<fs::path> found;
+    if (fs::is_directory(path) && !fs::exists(fs::path(path) / "meta.xml")) {
+      for (const auto& entry : fs::directory_iterator(path)) found.push_back(entry.path());
+      std::sort(found.begin(), found.end());
+    } else {
+      found.push_back(path);
+    }
+    for (const fs::path& item : found) {
+      StatusOr<ObjectModel> model = Status::Internal("unset");
+      if (fs::is_directory(item) && fs::exists(item / "meta.xml")) {
+        model = builder->FromRoboEarth(item.string());
+      } else if (item.extension() == ".robj" || found.size() == 1) {
+        model = LoadObjectModel(item.string());
+      } else {
+        continue;
+      }
+      RECOG_RETURN_IF_ERROR(model.status());
+      RECOG_RETURN_IF_ERROR(database->Put(*model).status());
+    }
+  }
+  if (database->size() == 0) return Status::InvalidArgument("--models named no object model");
+  return Status::Ok();
+}
+
+int RunRecognize(const RecognizeArgs& args) {
+  auto camera = ParseCamera(args.camera);
+  if (!camera.ok()) return Fail("recognize", camera.status());
+  auto image = ReadGrayImage(args.image);
+  if (!image.ok()) return Fail("recognize", image.status());
+  auto vocabulary = LoadObjectVocabulary(args.vocabulary);
+  if (!vocabulary.ok()) return Fail("recognize", vocabulary.status());
+  MemoryIndexStore store;
+  auto database = ObjectDatabase::Open(&store, *vocabulary);
+  if (!database.ok()) return Fail("recognize", database.status());
+  ModelBuildOptions build;
+  build.keep_images = false;
+  ModelBuilder builder(*vocabulary, build);
+  if (Status s = LoadModels(args.models, &builder, database->get()); !s.ok()) {
+    return Fail("recognize", s);
+  }
+  ObjectRecognizer recognizer(std::shared_ptr<const ObjectDatabase>(std::move(*database)));
+  std::vector<Detection> detections;
+  RecognitionTiming timing;
+  if (Status s = recognizer.Recognize(*image, *camera, &detections, &timing); !s.ok()) {
+    return Fail("recognize", s);
+  }
+  json out = json::array();
+  for (const Detection& d : detections) {
+    const RigidTransform& p = d.camera_from_object;
+    json outline = json::array();
+    for (const cv::Point2f& q : d.outline) outline.push_back({q.x, q.y});
+    out.push_back({{"name", d.name},
+                   {"version", d.version},
+                   {"rotation",
+                    {{p.R(0, 0), p.R(0, 1), p.R(0, 2)},
+                     {p.R(1, 0), p.R(1, 1), p.R(1, 2)},
+                     {p.R(2, 0), p.R(2, 1), p.R(2, 2)}}},
+                   {"translation", {p.t[0], p.t[1], p.t[2]}},
+                   {"inliers", d.inliers},
+                   {"reprojection_error_px", d.reprojection_error_px},
+                   {"outline", outline}});
+  }
+  if (!args.draw.empty()) {
+    cv::Mat canvas;
+    cv::cvtColor(*image, canvas, cv::COLOR_GRAY2BGR);
+    for (const Detection& d : detections) DrawDetection(d, *camera, {0, 200, 0}, &canvas);
+    if (!cv::imwrite(args.draw, canvas)) {
+      return Fail("recognize", Status::InvalidArgument("cannot write '" + args.draw + "'"));
+    }
+  }
+  if (args.json) {
+    std::printf("%s\n",
+                json({{"detections", out}, {"timing_ms", TimingJson(timing)}}).dump(2).c_str());
+  } else {
+    for (const Detection& d : detections) {
+      const cv::Vec3d& t = d.camera_from_object.t;
+      std::printf("%s v%u: %zu inliers, t = (%.3f, %.3f, %.3f), %.2f px\n", d.name.c_str(),
+                  d.version, d.inliers, t[0], t[1], t[2], d.reprojection_error_px);
+    }
+    if (detections.empty()) std::printf("no object recognised\n");
+  }
+  return 0;
+}
+
+// ---- recog eval objects ----
+
+struct EvalObjectsArgs {
+  std::string roboearth, vocabulary, draw;
+  std::vector<std::string> transforms = {"none", "scale0.5", "rot90", "rot180"};
+  int min_views = 5;
+  bool json = false, quiet = false;
+};
+
+json SummaryJson(const ObjectEvaluationSummary& s) {
+  const RecognitionTiming& t = s.median_timing;
+  const json timing = {{"orb", {{"median", t.orb}}},
+                       {"clustering", {{"median", t.clustering}}},
+                       {"conversion", {{"median", t.conversion}}},
+                       {"query", {{"median", t.query}}},
+                       {"correspondences", {{"median", t.correspondences}}},
+                       {"ransac", {{"median", t.ransac}}},
+                       {"total", {{"median", t.total}}}};
+  return {{"queries", s.queries},
+          {"detections", s.detections},
+          {"detection_rate", s.detection_rate},
+          {"wrong_detections", s.wrong_detections},
+          {"median_rotation_error_deg", s.median_rotation_error_deg},
+          {"median_translation_error_ratio", s.median_translation_error_ratio},
+          {"timing_ms", timing}};
+}
+
+int RunEvalObjects(const EvalObjectsArgs& args) {
+  ObjectEvaluationOptions options;
+  options.roboearth_dir = args.roboearth;
+  options.vocabulary_path =
+      args.vocabulary.empty() ? DefaultObjectVocabularyPath() : args.vocabulary;
+  options.min_views = args.min_views;
+  options.draw_dir = args.draw;
+  options.transforms.clear();
+  for (const std::string& name : args.transforms) {
+    auto transform = ParseImageTransform(name);
+    if (!transform.ok()) return Fail("eval objects", transform.status());
+    options.transforms.push_back(*transform);
+  }
+  ProgressBar progress(!args.quiet);
+  options.progress = [&progress](size_t done, size_t total) {
+    progress.Update("queries", done, total);
+  };
+  auto evaluation = EvaluateObjects(options);
+  progress.Finish();
+  if (!evaluation.ok()) return Fail("eval objects", evaluation.status());
+  json out = SummaryJson(evaluation->summaries.front());
+  out["transform"] = std::string(ImageTransformName(evaluation->summaries.front().transform));
+  json by_transform;
+  for (const ObjectEvaluationSummary& s : evaluation->summaries) {
+    by_transform[std::string(ImageTransformName(s.transform))] = SummaryJson(s);
+  }
+  out["by_transform"] = by_transform;
+  out["database"] = evaluation->database;
+  json queries = json::array();
+  for (const ObjectQuery& q : evaluation->queries) {
+    queries.push_back({{"object", q.object},
+                       {"view", q.view},
+                       {"transform", std::string(ImageTransformName(q.transform))},
+                       {"detected", q.detected},
+                       {"wrong", q.wrong},
+                       {"inliers", q.inliers},
+                       {"rotation_error_deg", q.rotation_error_deg},
+                       {"translation_error_ratio", q.translation_error_ratio},
+                       {"total_ms", q.timing.total}});
+  }
+  out["per_query"] = queries;
+  if (args.json) {
+    std::printf("%s\n", out.dump(2).c_str());
+  } else {
+    std::printf("%-9s %7s %9s %6s %9s %9s %9s\n", "transform", "queries", "detected", "wrong",
+                "rot(deg)", "trans(%)", "total(ms)");
+    for (const ObjectEvaluationSummary& s : evaluation->summaries) {
+      std::printf("%-9s %7zu %8.1f%% %6zu %9.2f %9.2f %9.2f\n",
+                  std::string(ImageTransformName(s.transform)).c_str(), s.queries,
+                  100 * s.detection_rate, s.wrong_detections, s.median_rotation_error_deg,
+                  100 * s.median_translation_error_ratio, s.median_timing.total);
+    }
+  }
+  return 0;
+}
+
+}  // namespace
+
+void AddObjectCommands(CLI::App& app, int* exit_code) {
+  CLI::App* model = app.add_subcommand("model", "Build and inspect object models");
+  model->require_subcommand(1);
+  auto build_args = std::make_shared<ModelBuildArgs>();
+  CLI::App* build = model->add_subcommand("build", "Build an object model file (.robj)");
+  build->add_option("--roboearth", build_args->roboearth, "A RoboEarth re_vision model folder");
+  build->add_option("--planar", build_args->planar,
+                    "Image of a planar object (with --width, --height)");
+  build->add_option(
+      "--face", build_args->faces,
+      "SIDE=IMAGE face of a box (front, back, left, right, top, bottom), with --width "
+      "--height --depth");
+  build->add_option("--width", build_args->width, "Physical width, metres");
+  build->add_option("--height", build_args->height, "Physical height, metres");
+  build->add_option("--depth", build_args->depth, "Physical depth of a box, metres");
+  build->add_option("--rgbd", build_args->rgbd, "RGB-D view list (see ReadRgbdViews)");
+  build->add_option("--name", build_args->name, "Object name (default: from the source)");
+  build->add_option("--vocab", build_args->vocabulary,
+                    "Vocabulary (default: the bundled object one)");
+  build->add_flag("--no-images", build_args->no_images, "Do not keep the training images");
+  build->add_option("-o,--output", build_args->output, "Model file to write")->required();
+  build->callback([build_args, exit_code] { *exit_code = RunModelBuild(*build_args); });
+
+  auto info_path = std::make_shared<std::string>();
+  auto info_json = std::make_shared<bool>(false);
+  CLI::App* info = model->add_subcommand("info", "Describe an object model file");
+  info->add_option("file", *info_path, "Model file")->required();
+  info->add_flag("--json", *info_json, "Print JSON");
+  info->callback(
+      [info_path, info_json, exit_code] { *exit_code = RunModelInfo(*info_path, *info_json); });
+
+  auto recognize_args = std::make_shared<RecognizeArgs>();
+  CLI::App* recognize = app.add_subcommand("recognize", "Recognise objects in one image");
+  recognize
+      ->add_option("--models", recognize_args->models,
+                   "Model files, folders of them, or RoboEarth folders")
+      ->required();
+  recognize->add_option("--image", recognize_args->image, "Image")->required();
+  recognize->add_option("--camera", recognize_args->camera, "fx,fy,cx,cy[,k1,k2,p1,p2[,k3]]")
+      ->required();
+  recognize->add_option("--draw", recognize_args->draw, "PNG with outlines and axes");
+  recognize->add_option("--vocab", recognize_args->vocabulary, "Vocabulary");
+  recognize->add_flag("--json", recognize_args->json, "Print JSON");
+  recognize->callback([recognize_args, exit_code] { *exit_code = RunRecognize(*recognize_args); });
+}
+
+void AddEvalObjectsCommand(CLI::App& eval, int* exit_code) {
+  auto args = std::make_shared<EvalObjectsArgs>();
+  CLI::App* objects = eval.add_subcommand(
+      "objects", "Leave-one-view-out recognition on RoboEarth models, with pose errors");
+  objects->add_option("--roboearth", args->roboearth, "Folder of RoboEarth model folders")
+      ->required();
+  objects->add_option("--vocab", args->vocabulary, "Vocabulary (default: the bundled object one)");
+  objects->add_option("--transforms", args->transforms, "none, scale0.5, rot90, rot180")
+      ->capture_default_str();
+  objects->add_option("--min-views", args->min_views, "3D objects with at least this many views")
+      ->capture_default_str();
+  objects->add_option("--draw", args->draw, "Folder for a PNG per query");
+  objects->add_flag("--json", args->json, "Print JSON");
+  objects->add_flag("-q,--quiet", args->quiet, "No progress output");
+  objects->callback([args, exit_code] { *exit_code = RunEvalObjects(*args); });
+}
+
+}  // namespace recog::cli

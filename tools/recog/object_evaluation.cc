@@ -1,0 +1,249 @@
+#include "tools/recog/object_evaluation.h"
+
+#include <cmath>
+#include <filesystem>
+#include <memory>
+
+#include <opencv2/calib3d.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "core/features/feature_extractor.h"
+#include "core/index/memory_index_store.h"
+#include "core/object/roboearth.h"
+#include "core/vocabulary/vocabulary_io.h"
+#include "tools/recog/place_evaluation.h"
+
+namespace recog::cli {
+namespace {
+
+namespace fs = std::filesystem;
+
+constexpr std::pair<std::string_view, ImageTransform> kTransformNames[] = {
+    {"none", ImageTransform::kNone},
+    {"scale0.5", ImageTransform::kHalfScale},
+    {"rot90", ImageTransform::kRotate90},
+    {"rot180", ImageTransform::kRotate180}};
+
+ObjectEvaluationSummary Summarise(ImageTransform transform,
+                                  const std::vector<ObjectQuery>& queries) {
+  ObjectEvaluationSummary s;
+  s.transform = transform;
+  std::vector<double> rotation, translation, orb, clustering, conversion, query, correspondences,
+      ransac, total;
+  for (const ObjectQuery& q : queries) {
+    if (q.transform != transform) continue;
+    ++s.queries;
+    s.wrong_detections += q.wrong.size();
+    if (q.detected) {
+      ++s.detections;
+      rotation.push_back(q.rotation_error_deg);
+      translation.push_back(q.translation_error_ratio);
+    }
+    orb.push_back(q.timing.orb);
+    clustering.push_back(q.timing.clustering);
+    conversion.push_back(q.timing.conversion);
+    query.push_back(q.timing.query);
+    correspondences.push_back(q.timing.correspondences);
+    ransac.push_back(q.timing.ransac);
+    total.push_back(q.timing.total);
+  }
+  s.detection_rate = s.queries == 0 ? 0.0 : double(s.detections) / double(s.queries);
+  s.median_rotation_error_deg = Median(rotation);
+  s.median_translation_error_ratio = Median(translation);
+  s.median_timing.orb = Median(orb);
+  s.median_timing.clustering = Median(clustering);
+  s.median_timing.conversion = Median(conversion);
+  s.median_timing.query = Median(query);
+  s.median_timing.correspondences = Median(correspondences);
+  s.median_timing.ransac = Median(ransac);
+  s.median_timing.total = Median(total);
+  return s;
+}
+
+}  // namespace
+
+std::string_view ImageTransformName(ImageTransform transform) {
+  for (const auto& [name, value] : kTransformNames) {
+    if (value == transform) return name;
+  }
+  return "none";
+}
+
+StatusOr<ImageTransform> ParseImageTransform(std::string_view name) {
+  for (const auto& [text, value] : kTransformNames) {
+    if (name == text) return value;
+  }
+  return Status::InvalidArgument("unknown image transform '" + std::string(name) +
+                                 "' (none, scale0.5, rot90, rot180)");
+}
+
+void TransformView(ImageTransform transform, cv::Mat* image, CameraIntrinsics* camera,
+                   RigidTransform* camera_from_object) {
+  const double w = image->cols, h = image->rows;
+  cv::Matx33d turn = cv::Matx33d::eye();  // new camera axes from old ones
+  switch (transform) {
+    case ImageTransform::kNone:
+      return;
+    case ImageTransform::kHalfScale:
+      cv::resize(*image, *image, cv::Size(), 0.5, 0.5, cv::INTER_AREA);
+      // Pixel centres: u' + 0.5 = (u + 0.5) / 2.
+      camera->fx *= 0.5;
+      camera->fy *= 0.5;
+      camera->cx = (camera->cx + 0.5) * 0.5 - 0.5;
+      camera->cy = (camera->cy + 0.5) * 0.5 - 0.5;
+      return;
+    case ImageTransform::kRotate90: {  // clockwise: u' = h - 1 - v, v' = u
+      cv::rotate(*image, *image, cv::ROTATE_90_CLOCKWISE);
+      const CameraIntrinsics old = *camera;
+      camera->fx = old.fy;
+      camera->fy = old.fx;
+      camera->cx = h - 1 - old.cy;
+      camera->cy = old.cx;
+      turn = {0, -1, 0, 1, 0, 0, 0, 0, 1};
+      break;
+    }
+    case ImageTransform::kRotate180:
+      cv::rotate(*image, *image, cv::ROTATE_180);
+      camera->cx = w - 1 - camera->cx;
+      camera->cy = h - 1 - camera->cy;
+      turn = {-1, 0, 0, 0, -1, 0, 0, 0, 1};
+      break;
+  }
+  camera_from_object->R = turn * camera_from_object->R;
+  camera_from_object->t = turn * camera_from_object->t;
+}
+
+double RotationErrorDeg(const cv::Matx33d& a, const cv::Matx33d& b) {
+  const cv::Matx33d d = a * b.t();
+  const double c = std::clamp((cv::trace(d) - 1.0) / 2.0, -1.0, 1.0);
+  return std::acos(c) * 180.0 / CV_PI;
+}
+
+void DrawDetection(const Detection& detection, const CameraIntrinsics& camera,
+                   const cv::Scalar& colour, cv::Mat* canvas) {
+  std::vector<std::vector<cv::Point>> outline(1);
+  for (const cv::Point2f& p : detection.outline) outline[0].emplace_back(cv::Point(p));
+  if (outline[0].size() >= 3) cv::polylines(*canvas, outline, true, colour, 2, cv::LINE_AA);
+  for (const cv::Point2f& p : detection.inlier_pixels) {
+    cv::circle(*canvas, cv::Point(p), 3, colour, 1, cv::LINE_AA);
+  }
+  // Axes of the object frame, a tenth of the object's distance long.
+  const RigidTransform& pose = detection.camera_from_object;
+  const double length = 0.1 * cv::norm(pose.t);
+  std::vector<cv::Point3f> axes = {
+      {0, 0, 0}, {float(length), 0, 0}, {0, float(length), 0}, {0, 0, float(length)}};
+  std::vector<cv::Point2f> pixels;
+  cv::Vec3d rvec;
+  cv::Rodrigues(pose.R, rvec);
+  cv::projectPoints(axes, rvec, pose.t, camera.K(), camera.distortion, pixels);
+  const cv::Scalar axis_colour[] = {{0, 0, 255}, {0, 255, 0}, {255, 0, 0}};
+  for (int k = 0; k < 3; ++k) {
+    cv::arrowedLine(*canvas, pixels[0], pixels[size_t(k) + 1], axis_colour[k], 2, cv::LINE_AA);
+  }
+  cv::putText(*canvas, detection.name + " (" + std::to_string(detection.inliers) + ")",
+              outline[0].empty() ? cv::Point(10, 20) : outline[0][0], cv::FONT_HERSHEY_SIMPLEX, 0.6,
+              colour, 2, cv::LINE_AA);
+}
+
+StatusOr<ObjectEvaluation> EvaluateObjects(const ObjectEvaluationOptions& options) {
+  RECOG_ASSIGN_OR_RETURN(Vocabulary loaded, LoadAnyVocabulary(options.vocabulary_path));
+  auto vocabulary = std::make_shared<const Vocabulary>(std::move(loaded));
+  if (!fs::is_directory(options.roboearth_dir)) {
+    return Status::NotFound("RoboEarth folder '" + options.roboearth_dir + "' not found");
+  }
+  std::vector<fs::path> folders;
+  for (const auto& entry : fs::directory_iterator(options.roboearth_dir)) {
+    if (entry.is_directory() && fs::exists(entry.path() / "meta.xml")) {
+      folders.push_back(entry.path());
+    }
+  }
+  std::sort(folders.begin(), folders.end());
+  if (folders.empty()) {
+    return Status::InvalidArgument("'" + options.roboearth_dir + "' holds no RoboEarth model");
+  }
+  ModelBuildOptions build = options.build;
+  build.keep_images = false;
+  ModelBuilder builder(vocabulary, build);
+  MemoryIndexStore store;
+  RECOG_ASSIGN_OR_RETURN(std::shared_ptr<ObjectDatabase> database,
+                         ObjectDatabase::Open(&store, vocabulary));
+  ObjectEvaluation evaluation;
+  std::vector<RoboEarthFolder> evaluated;
+  std::vector<ObjectModel> full_models;
+  for (const fs::path& folder : folders) {
+    RECOG_ASSIGN_OR_RETURN(ObjectModel model, builder.FromRoboEarth(folder.string()));
+    RECOG_RETURN_IF_ERROR(database->Put(model).status());
+    evaluation.database.push_back(model.metadata.name);
+    RECOG_ASSIGN_OR_RETURN(RoboEarthFolder listing, ReadRoboEarthFolder(folder.string()));
+    if (listing.meta.type == ObjectType::k3D && int(listing.views.size()) >= options.min_views) {
+      evaluated.push_back(std::move(listing));
+      full_models.push_back(std::move(model));
+    }
+  }
+  size_t total = 0;
+  for (const RoboEarthFolder& folder : evaluated) total += folder.views.size();
+  total *= options.transforms.size();
+  if (!options.draw_dir.empty()) fs::create_directories(options.draw_dir);
+
+  ObjectRecognizer recognizer(database, options.recognition);
+  std::vector<Detection> detections;
+  for (size_t o = 0; o < evaluated.size(); ++o) {
+    const RoboEarthFolder& folder = evaluated[o];
+    for (const RoboEarthView& view : folder.views) {
+      ModelBuildOptions without = build;
+      without.exclude_views.push_back(view.index);
+      ModelBuilder partial_builder(vocabulary, without);
+      RECOG_ASSIGN_OR_RETURN(ObjectModel partial, partial_builder.FromRoboEarth(folder.path));
+      RECOG_RETURN_IF_ERROR(database->Put(partial).status());
+      RECOG_ASSIGN_OR_RETURN(cv::Mat original, ReadGrayImage(view.image_path));
+      for (ImageTransform transform : options.transforms) {
+        cv::Mat image = original.clone();
+        CameraIntrinsics camera;
+        camera.fx = camera.fy = view.camera.focal;
+        camera.cx = original.cols / 2.0;
+        camera.cy = original.rows / 2.0;
+        RigidTransform truth = view.camera.camera_from_object;
+        TransformView(transform, &image, &camera, &truth);
+        ObjectQuery query;
+        query.object = partial.metadata.name;
+        query.view = view.index;
+        query.transform = transform;
+        RECOG_RETURN_IF_ERROR(recognizer.Recognize(image, camera, &detections, &query.timing));
+        for (const Detection& d : detections) {
+          if (d.name != query.object) {
+            query.wrong.push_back(d.name);
+          } else if (!query.detected) {
+            query.detected = true;
+            query.inliers = d.inliers;
+            query.rotation_error_deg = RotationErrorDeg(d.camera_from_object.R, truth.R);
+            query.translation_error_ratio =
+                cv::norm(d.camera_from_object.t - truth.t) / cv::norm(truth.t);
+          }
+        }
+        if (!options.draw_dir.empty()) {
+          cv::Mat canvas;
+          cv::cvtColor(image, canvas, cv::COLOR_GRAY2BGR);
+          for (const Detection& d : detections) {
+            DrawDetection(d, camera,
+                          d.name == query.object ? cv::Scalar(0, 200, 0) : cv::Scalar(0, 0, 255),
+                          &canvas);
+          }
+          char name[160];
+          std::snprintf(name, sizeof(name), "%s_%03d_%s.png", query.object.c_str(), view.index,
+                        std::string(ImageTransformName(transform)).c_str());
+          cv::imwrite((fs::path(options.draw_dir) / name).string(), canvas);
+        }
+        evaluation.queries.push_back(std::move(query));
+        if (options.progress) options.progress(evaluation.queries.size(), total);
+      }
+    }
+    RECOG_RETURN_IF_ERROR(database->Put(full_models[o]).status());
+  }
+  for (ImageTransform transform : options.transforms) {
+    evaluation.summaries.push_back(Summarise(transform, evaluation.queries));
+  }
+  return evaluation;
+}
+
+}  // namespace recog::cli

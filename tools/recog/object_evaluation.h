@@ -1,0 +1,82 @@
+// Leave-one-view-out evaluation of object recognition on RoboEarth model folders (`recog eval
+// objects`).
+//
+// Every RoboEarth folder under the root becomes a model built from all its views; those are the
+// database. Then, for every 3D object with at least `min_views` views and every view v: the
+// object's model is rebuilt without v and replaces the full one, and face_v.png is recognised
+// with v's camera, as is and through each image transform (half size, rotated 90 and 180
+// degrees, with the camera and the ground-truth pose transformed alike). The held-out camera is
+// the ground-truth pose. A query counts as detected when the held-out object is among the
+// detections; any other object detected is a wrong detection.
+#pragma once
+
+#include <functional>
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "core/common/status.h"
+#include "core/object/model_builder.h"
+#include "core/object/object_recognizer.h"
+
+namespace recog::cli {
+
+enum class ImageTransform { kNone, kHalfScale, kRotate90, kRotate180 };
+std::string_view ImageTransformName(ImageTransform transform);  // "none", "scale0.5", ...
+StatusOr<ImageTransform> ParseImageTransform(std::string_view name);
+
+// Applies `transform` to an image, its camera and the pose of an object in that camera.
+void TransformView(ImageTransform transform, cv::Mat* image, CameraIntrinsics* camera,
+                   RigidTransform* camera_from_object);
+
+// Angle of R_a R_b^T in degrees.
+double RotationErrorDeg(const cv::Matx33d& a, const cv::Matx33d& b);
+
+struct ObjectEvaluationOptions {
+  std::string roboearth_dir;  // a folder of RoboEarth model folders
+  std::string vocabulary_path;
+  ModelBuildOptions build;
+  RecognitionOptions recognition;
+  std::vector<ImageTransform> transforms = {ImageTransform::kNone, ImageTransform::kHalfScale,
+                                            ImageTransform::kRotate90, ImageTransform::kRotate180};
+  int min_views = 5;
+  std::string draw_dir;  // a PNG per query when not empty
+  // Called after each query with (done, total).
+  std::function<void(size_t, size_t)> progress;
+};
+
+struct ObjectQuery {
+  std::string object;
+  int view = 0;
+  ImageTransform transform = ImageTransform::kNone;
+  bool detected = false;
+  std::vector<std::string> wrong;  // other objects reported
+  double rotation_error_deg = 0;   // when detected
+  double translation_error_ratio = 0;
+  size_t inliers = 0;
+  RecognitionTiming timing;
+};
+
+struct ObjectEvaluationSummary {
+  ImageTransform transform = ImageTransform::kNone;
+  size_t queries = 0, detections = 0, wrong_detections = 0;
+  double detection_rate = 0;
+  double median_rotation_error_deg = 0;
+  double median_translation_error_ratio = 0;
+  RecognitionTiming median_timing;  // per stage
+};
+
+struct ObjectEvaluation {
+  std::vector<std::string> database;  // object names
+  std::vector<ObjectQuery> queries;
+  std::vector<ObjectEvaluationSummary> summaries;  // one per transform
+};
+
+StatusOr<ObjectEvaluation> EvaluateObjects(const ObjectEvaluationOptions& options);
+
+// Draws a detection over an image: outline, model axes, inlier points; writes nothing.
+void DrawDetection(const Detection& detection, const CameraIntrinsics& camera,
+                   const cv::Scalar& colour, cv::Mat* canvas);
+
+}  // namespace recog::cli
