@@ -17,6 +17,8 @@
 #include <utility>
 #include <vector>
 
+#include <opencv2/imgcodecs.hpp>
+
 namespace recog {
 namespace {
 
@@ -744,6 +746,125 @@ StatusOr<std::vector<RoboEarthView>> ReadViews(const std::string& dir) {
   return views;
 }
 
+// --- Export. ---
+
+// "view 3 ('face_003')", to start a message about view `index`.
+std::string DescribeView(size_t index, const TrainingView& view) {
+  return "view " + std::to_string(index) + (view.name.empty() ? "" : " ('" + view.name + "')");
+}
+
+// The size of a view's image, checking that RoboEarth can express its camera: one focal length,
+// the principal point at the image centre (the reader puts it there) and no distortion. Half a
+// pixel anywhere in the image is tolerated, as keypoints are not located more precisely.
+StatusOr<cv::Size> ExportableViewSize(const TrainingView& view, const std::string& which) {
+  if (view.image_png.empty()) {
+    return Status::FailedPrecondition(which +
+                                      " has no image (the model was built without its images)");
+  }
+  const cv::Mat image = cv::imdecode(view.image_png, cv::IMREAD_UNCHANGED);
+  if (image.empty()) return Status::DataLoss(which + ": its image cannot be decoded");
+  const CameraIntrinsics& camera = view.camera;
+  RECOG_RETURN_IF_ERROR(Locate(camera.Validate(), which));
+  if (std::any_of(camera.distortion.begin(), camera.distortion.end(),
+                  [](double k) { return k != 0; })) {
+    return Status::InvalidArgument(which + " has lens distortion, which RoboEarth cannot express");
+  }
+  constexpr double kTolerancePx = 0.5;
+  // Projecting with fx alone moves a pixel at the top or bottom edge by this much.
+  if (std::abs(camera.fx - camera.fy) * image.rows / (2 * camera.fy) > kTolerancePx) {
+    return Status::InvalidArgument(which + ": fx = " + FormatNumber(camera.fx) +
+                                   " and fy = " + FormatNumber(camera.fy) +
+                                   " differ, but a RoboEarth camera has one focal length");
+  }
+  const double centre_x = image.cols / 2.0, centre_y = image.rows / 2.0;
+  if (std::abs(camera.cx - centre_x) > kTolerancePx ||
+      std::abs(camera.cy - centre_y) > kTolerancePx) {
+    return Status::InvalidArgument(which + ": the principal point (" + FormatNumber(camera.cx) +
+                                   ", " + FormatNumber(camera.cy) + ") is not the image centre (" +
+                                   FormatNumber(centre_x) + ", " + FormatNumber(centre_y) +
+                                   "), where a RoboEarth camera has it");
+  }
+  return image.size();
+}
+
+StatusOr<RoboEarthMeta> ExportMeta(const ObjectModel& model) {
+  RoboEarthMeta meta;
+  meta.name = model.metadata.name;
+  meta.type = model.metadata.type;
+  if (meta.type == ObjectType::k3D) {
+    meta.num_faces = int(model.views.size());
+    meta.scale = 1;
+  } else {
+    meta.width = model.metadata.dimensions[0];
+    meta.height = model.metadata.dimensions[1];
+    meta.depth = model.metadata.dimensions[2];
+    meta.num_faces = int(model.faces.size());
+    for (size_t f = 0; f < model.faces.size(); ++f) {
+      const PlanarFace& face = model.faces[f];
+      meta.faces.push_back({int(f), face.width, face.height, face.object_from_face});
+    }
+  }
+  RECOG_RETURN_IF_ERROR(ValidateMeta(meta));
+  return meta;
+}
+
+// The face a camera looks at most directly: the largest cosine between the face's normal (its -z
+// axis, towards its viewer) and the direction from the face's centre to the camera; -1 when every
+// face turns away.
+int MostFrontalFace(const std::vector<PlanarFace>& faces,
+                    const RigidTransform& camera_from_object) {
+  int best = -1;
+  double best_cosine = 0;
+  for (size_t f = 0; f < faces.size(); ++f) {
+    const RigidTransform camera_from_face = camera_from_object * faces[f].object_from_face;
+    const cv::Point3d centre = camera_from_face.Apply({faces[f].width / 2, faces[f].height / 2, 0});
+    const cv::Vec3d to_camera(-centre.x, -centre.y, -centre.z);
+    const cv::Vec3d normal = camera_from_face.R * cv::Vec3d(0, 0, -1);
+    const double cosine = normal.dot(to_camera) / cv::norm(to_camera);
+    if (cosine > best_cosine) {
+      best_cosine = cosine;
+      best = int(f);
+    }
+  }
+  return best;
+}
+
+// The model points that project into a view's image in front of its camera. For planar models
+// only those of the face the view looks at most directly: the reader takes the bounding box of a
+// planar view's points as the face it shows, which other faces' points would enlarge.
+PointCloud ViewPoints(const ObjectModel& model, const TrainingView& view, cv::Size size) {
+  const bool planar = model.metadata.type == ObjectType::kPlanar;
+  const int face = planar ? MostFrontalFace(model.faces, view.camera_from_object) : -1;
+  PointCloud cloud;
+  if (planar && face < 0) return cloud;
+  for (size_t i = 0; i < model.points.size(); ++i) {
+    if (planar && model.face_of_point[i] != uint32_t(face)) continue;
+    cv::Point2d uv;
+    if (ProjectPoint(view.camera, view.camera_from_object, cv::Point3d(model.points[i]), &uv) &&
+        uv.x >= 0 && uv.y >= 0 && uv.x < size.width && uv.y < size.height) {
+      cloud.points.push_back(model.points[i]);
+    }
+  }
+  return cloud;
+}
+
+// Creates `dir` when missing. ALREADY_EXISTS when it holds anything or is not a folder, so that
+// an export never mixes its views with those of another model.
+Status PrepareEmptyFolder(const std::string& dir) {
+  std::error_code ec;
+  const fs::file_status st = fs::status(dir, ec);
+  if (fs::exists(st)) {
+    if (!fs::is_directory(st)) return Status::AlreadyExists("'" + dir + "' is not a folder");
+    const bool empty = fs::is_empty(dir, ec);
+    if (ec) return Status::NotFound("cannot list folder '" + dir + "': " + ec.message());
+    if (!empty) return Status::AlreadyExists("folder '" + dir + "' is not empty");
+    return Status::Ok();
+  }
+  fs::create_directories(dir, ec);
+  if (ec) return Status::NotFound("cannot create folder '" + dir + "': " + ec.message());
+  return Status::Ok();
+}
+
 }  // namespace
 
 StatusOr<PointCloud> ReadPly(const std::string& path) {
@@ -882,6 +1003,46 @@ StatusOr<RoboEarthFolder> ReadRoboEarthFolder(const std::string& dir) {
   const fs::path dense = fs::path(dir) / "drawing_model.ply";
   if (IsRegularFile(dense)) folder.dense_cloud_path = dense.string();
   return folder;
+}
+
+Status ExportRoboEarthFolder(const ObjectModel& model, const std::string& dir) {
+  RECOG_RETURN_IF_ERROR(model.Validate());
+  const std::string what =
+      "cannot export model '" + model.metadata.name + "' as RoboEarth folder '" + dir + "'";
+  if (model.points.empty()) return Status::FailedPrecondition(what + ": it has no 3D point");
+  if (model.views.empty()) {
+    return Status::FailedPrecondition(what + ": it has no training view");
+  }
+  std::vector<cv::Size> sizes;
+  for (size_t k = 0; k < model.views.size(); ++k) {
+    const StatusOr<cv::Size> size =
+        ExportableViewSize(model.views[k], DescribeView(k, model.views[k]));
+    if (!size.ok()) return Locate(size.status(), what);
+    sizes.push_back(*size);
+  }
+  const StatusOr<RoboEarthMeta> meta = ExportMeta(model);
+  if (!meta.ok()) return Locate(meta.status(), what);
+  RECOG_RETURN_IF_ERROR(Locate(PrepareEmptyFolder(dir), what));
+
+  const fs::path root(dir);
+  RECOG_RETURN_IF_ERROR(WriteRoboEarthMeta((root / "meta.xml").string(), *meta));
+  RECOG_RETURN_IF_ERROR(WritePly((root / "drawing_model.ply").string(), {model.points, {}}));
+  for (size_t k = 0; k < model.views.size(); ++k) {
+    const TrainingView& view = model.views[k];
+    char stem[32];
+    std::snprintf(stem, sizeof(stem), "face_%03zu", k);
+    const std::string base = (root / stem).string();
+    // The bytes are already PNG: written as they are, the image is exactly the one trained on.
+    RECOG_RETURN_IF_ERROR(WriteFileAtomically(
+        base + ".png", std::string_view(reinterpret_cast<const char*>(view.image_png.data()),
+                                        view.image_png.size())));
+    BundleCamera camera;
+    camera.focal = view.camera.fx;
+    camera.camera_from_object = view.camera_from_object;
+    RECOG_RETURN_IF_ERROR(WriteBundleCamera(base + ".txt", camera));
+    RECOG_RETURN_IF_ERROR(WritePly(base + ".ply", ViewPoints(model, view, sizes[k])));
+  }
+  return Status::Ok();
 }
 
 }  // namespace recog

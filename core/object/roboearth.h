@@ -78,4 +78,21 @@ struct RoboEarthFolder {
 // Lists a model folder: meta.xml plus every face_k.png that has its face_k.txt.
 StatusOr<RoboEarthFolder> ReadRoboEarthFolder(const std::string& dir);
 
+// Writes `model` as a RoboEarth folder that ModelBuilder::FromRoboEarth reads back: meta.xml
+// (planar models: their size and one <face> per PlanarFace; 3D models: scale 1 and one face per
+// view, as the real folders count them), drawing_model.ply (the model points, without normals)
+// and, per training view k in order (face_000, face_001, ...), the image, its camera and the model
+// points that project into it in front of the camera; for planar models only those of the face the
+// view looks at most directly, since the reader takes a planar view's points as its face.
+// Everything is checked before anything is written:
+//  - FAILED_PRECONDITION when the model has no point, no view, or a view without its image;
+//  - INVALID_ARGUMENT naming the view when its camera is one the format cannot express (one focal
+//    length, the principal point at the image centre, no distortion): fx != fy or a principal
+//    point off the centre by more than half a pixel anywhere in the image, or any distortion;
+//    also for a model that fails Validate() or whose metadata meta.xml cannot hold;
+//  - DATA_LOSS when a view's image cannot be decoded;
+//  - ALREADY_EXISTS when `dir` exists and is not an empty folder.
+// `dir` is created when missing. An I/O error part way leaves the files written so far.
+Status ExportRoboEarthFolder(const ObjectModel& model, const std::string& dir);
+
 }  // namespace recog

@@ -6,12 +6,16 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <memory>
 #include <set>
 #include <string>
 
 #include <gtest/gtest.h>
 #include <opencv2/calib3d.hpp>
+#include <opencv2/imgcodecs.hpp>
 
+#include "core/object/model_builder.h"
+#include "core/vocabulary/vocabulary_io.h"
 #include "tests/testing/data_paths.h"
 #include "tests/testing/test_data.h"
 
@@ -671,6 +675,162 @@ TEST_F(RoboEarthTest, FolderWithABadCameraReportsTheCameraFile) {
   const Status status = ReadRoboEarthFolder(dir_.string()).status();
   EXPECT_EQ(status.code(), StatusCode::kDataLoss);
   EXPECT_NE(status.message().find("face_000.txt"), std::string::npos) << status.message();
+}
+
+// --- Export. ---
+
+std::shared_ptr<const Vocabulary> ObjectVocabulary() {
+  static const std::shared_ptr<const Vocabulary> vocabulary = [] {
+    auto loaded =
+        LoadVocabulary(std::string(RECOG_SOURCE_DIR) + "/vocabularies/object_orb_t12_k10_l4.rvoc");
+    EXPECT_TRUE(loaded.ok()) << loaded.status().ToString();
+    return std::make_shared<const Vocabulary>(std::move(*loaded));
+  }();
+  return vocabulary;
+}
+
+cv::Mat PosterImage() { return cv::imread(testing::ProjectTestData("corridor/1.jpg")); }
+
+// A 3D model RoboEarth can hold: a 1 x 0.75 m poster at z = 2 m, seen by one camera at the origin
+// whose principal point is the image centre.
+const ObjectModel& PosedPoster() {
+  static const ObjectModel model = [] {
+    const cv::Mat image = PosterImage();
+    const PosedImage view{
+        "frame", image, {500, 500, image.cols / 2.0, image.rows / 2.0, {}}, RigidTransform()};
+    const FacePolygon face{
+        {{-0.5, -0.375, 2}, {0.5, -0.375, 2}, {0.5, 0.375, 2}, {-0.5, 0.375, 2}}};
+    auto built = ModelBuilder(ObjectVocabulary()).FromPosedPolygons("poster", {face}, {view});
+    EXPECT_TRUE(built.ok()) << built.status().ToString();
+    return std::move(*built);
+  }();
+  return model;
+}
+
+TEST_F(RoboEarthTest, ExportedModelReadsBackAsTheSameObject) {
+  const ObjectModel& model = PosedPoster();
+  ASSERT_GT(model.points.size(), 50u);
+  const std::string dir = Path("poster");
+  ASSERT_TRUE(ExportRoboEarthFolder(model, dir).ok());
+
+  const auto folder = ReadRoboEarthFolder(dir);
+  ASSERT_TRUE(folder.ok()) << folder.status().ToString();
+  EXPECT_EQ(folder->meta.name, "poster");
+  EXPECT_EQ(folder->meta.type, ObjectType::k3D);
+  EXPECT_EQ(folder->meta.num_faces, 1);
+  EXPECT_EQ(folder->meta.scale, 1);
+  ASSERT_EQ(folder->views.size(), 1u);
+  EXPECT_EQ(folder->views[0].image_path, (fs::path(dir) / "face_000.png").string());
+  EXPECT_EQ(folder->views[0].camera.focal, 500);
+  EXPECT_EQ(folder->views[0].camera.camera_from_object.R, cv::Matx33d::eye());
+  EXPECT_EQ(folder->views[0].camera.camera_from_object.t, cv::Vec3d(0, 0, 0));
+  ASSERT_FALSE(folder->dense_cloud_path.empty());
+  const auto dense = ReadPly(folder->dense_cloud_path);
+  ASSERT_TRUE(dense.ok()) << dense.status().ToString();
+  EXPECT_EQ(dense->points, model.points);
+  // The whole poster is in view, so the view sees every point.
+  const auto seen = ReadPly(folder->views[0].points_path);
+  ASSERT_TRUE(seen.ok()) << seen.status().ToString();
+  EXPECT_EQ(seen->points.size(), model.points.size());
+
+  auto rebuilt = ModelBuilder(ObjectVocabulary()).FromRoboEarth(dir);
+  ASSERT_TRUE(rebuilt.ok()) << rebuilt.status().ToString();
+  EXPECT_EQ(rebuilt->metadata.name, "poster");
+  EXPECT_EQ(rebuilt->metadata.type, ObjectType::k3D);
+  ASSERT_EQ(rebuilt->views.size(), 1u);
+  EXPECT_EQ(rebuilt->views[0].camera, model.views[0].camera);
+  EXPECT_EQ(rebuilt->views[0].camera_from_object.t, cv::Vec3d(0, 0, 0));
+  // The same image gives the same keypoints, which find their points again.
+  EXPECT_GT(rebuilt->num_features(), model.num_features() / 2);
+}
+
+TEST_F(RoboEarthTest, ExportIntoAnEmptyFolderIsFine) {
+  fs::create_directories(Path("empty"));
+  EXPECT_TRUE(ExportRoboEarthFolder(PosedPoster(), Path("empty")).ok());
+  EXPECT_TRUE(fs::exists(Path("empty/face_000.txt")));
+}
+
+TEST_F(RoboEarthTest, ExportIntoANonEmptyFolderIsAlreadyExistsAndTouchesNothing) {
+  Fixture("notes.txt", "keep me");
+  EXPECT_EQ(ExportRoboEarthFolder(PosedPoster(), dir_.string()).code(), StatusCode::kAlreadyExists);
+  EXPECT_EQ(ExportRoboEarthFolder(PosedPoster(), Path("notes.txt")).code(),
+            StatusCode::kAlreadyExists);
+  EXPECT_FALSE(fs::exists(Path("meta.xml")));
+  EXPECT_EQ(ReadText(Path("notes.txt")), "keep me");
+}
+
+TEST_F(RoboEarthTest, ExportWithoutViewsOrImagesIsFailedPrecondition) {
+  ObjectModel model = PosedPoster();
+  model.views[0].image_png.clear();
+  const Status no_image = ExportRoboEarthFolder(model, Path("out"));
+  EXPECT_EQ(no_image.code(), StatusCode::kFailedPrecondition);
+  EXPECT_NE(no_image.message().find("view 0 ('frame')"), std::string::npos) << no_image.message();
+  model.views.clear();
+  EXPECT_EQ(ExportRoboEarthFolder(model, Path("out")).code(), StatusCode::kFailedPrecondition);
+  EXPECT_FALSE(fs::exists(Path("out")));
+}
+
+TEST_F(RoboEarthTest, ExportOfACameraRoboEarthCannotExpressIsInvalidArgumentNamingTheView) {
+  ObjectModel model = PosedPoster();
+  model.views[0].camera.cx += 0.4;  // within half a pixel: fine
+  EXPECT_TRUE(ExportRoboEarthFolder(model, Path("nearly")).ok());
+
+  model.views[0].camera.cx += 10;
+  Status status = ExportRoboEarthFolder(model, Path("out"));
+  EXPECT_EQ(status.code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(status.message().find("view 0 ('frame')"), std::string::npos) << status.message();
+  EXPECT_NE(status.message().find("principal point"), std::string::npos) << status.message();
+
+  model = PosedPoster();
+  model.views[0].camera.fy = 520;
+  status = ExportRoboEarthFolder(model, Path("out"));
+  EXPECT_EQ(status.code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(status.message().find("focal length"), std::string::npos) << status.message();
+
+  model = PosedPoster();
+  model.views[0].camera.distortion = {0.1, 0, 0, 0};
+  EXPECT_EQ(ExportRoboEarthFolder(model, Path("out")).code(), StatusCode::kInvalidArgument);
+  EXPECT_FALSE(fs::exists(Path("out")));
+}
+
+TEST_F(RoboEarthTest, ExportOfAFaceImagePosterIsInvalidArgument) {
+  // Its views are frontal cameras with the principal point at the image corner.
+  auto poster = ModelBuilder(ObjectVocabulary())
+                    .FromFaceImages("poster", {{BoxSide::kFront, PosterImage()}}, 0.64, 0.48);
+  ASSERT_TRUE(poster.ok()) << poster.status().ToString();
+  const Status status = ExportRoboEarthFolder(*poster, Path("out"));
+  EXPECT_EQ(status.code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(status.message().find("principal point"), std::string::npos) << status.message();
+}
+
+TEST_F(RoboEarthTest, ExportedPlanarModelKeepsItsFacesInTheMeta) {
+  // A planar model whose view is a centred camera looking at its single face.
+  ObjectModel model = PosedPoster();
+  model.metadata.type = ObjectType::kPlanar;
+  model.metadata.dimensions = {1, 0.75, 0};
+  PlanarFace face;
+  face.width = 1;
+  face.height = 0.75;
+  face.object_from_face.t = {-0.5, -0.375, 2};
+  model.faces = {face};
+  model.face_of_point.assign(model.points.size(), 0);
+  ASSERT_TRUE(ExportRoboEarthFolder(model, Path("planar")).ok());
+  const auto meta = ReadRoboEarthMeta(Path("planar/meta.xml"));
+  ASSERT_TRUE(meta.ok()) << meta.status().ToString();
+  EXPECT_EQ(meta->type, ObjectType::kPlanar);
+  EXPECT_EQ(meta->width, 1);
+  EXPECT_EQ(meta->height, 0.75);
+  ASSERT_EQ(meta->faces.size(), 1u);
+  EXPECT_EQ(meta->faces[0].object_from_face.t, cv::Vec3d(-0.5, -0.375, 2));
+
+  auto rebuilt = ModelBuilder(ObjectVocabulary()).FromRoboEarth(Path("planar"));
+  ASSERT_TRUE(rebuilt.ok()) << rebuilt.status().ToString();
+  EXPECT_EQ(rebuilt->metadata.type, ObjectType::kPlanar);
+  ASSERT_EQ(rebuilt->faces.size(), 1u);
+  // The face comes back as the bounding box of the model's points on it.
+  EXPECT_NEAR(rebuilt->faces[0].object_from_face.t[2], 2, 1e-3);
+  EXPECT_LE(rebuilt->faces[0].width, 1 + 1e-3);
+  EXPECT_GT(rebuilt->num_features(), 0u);
 }
 
 }  // namespace

@@ -13,6 +13,8 @@ void AddDemoCommand(CLI::App& app, int* exit_code);
 void AddSeqgenCommand(CLI::App& app, int* exit_code);
 void AddEvalCommand(CLI::App& app, int* exit_code);
 void AddObjectCommands(CLI::App& app, int* exit_code);  // model build|info, recognize
+// model export; call after AddObjectCommands, which adds "model".
+void AddModelExportCommand(CLI::App& app, int* exit_code);
 void AddEvalObjectsCommand(CLI::App& eval, int* exit_code);
 
 }  // namespace recog::cli

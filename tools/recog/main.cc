@@ -19,6 +19,7 @@ int main(int argc, char** argv) {
   recog::cli::AddSeqgenCommand(app, &exit_code);
   recog::cli::AddEvalCommand(app, &exit_code);
   recog::cli::AddObjectCommands(app, &exit_code);
+  recog::cli::AddModelExportCommand(app, &exit_code);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -19,6 +19,8 @@
 #include "tools/recog/cli_support.h"
 #include "tools/recog/commands.h"
 #include "tools/recog/object_evaluation.h"
+#include "tools/recog/place_evaluation.h"
+#include "tools/recog/visp_files.h"
 
 namespace recog::cli {
 namespace {
@@ -79,18 +81,36 @@ json TimingJson(const RecognitionTiming& t) {
 // ---- recog model build / info ----
 
 struct ModelBuildArgs {
-  std::string roboearth, planar, rgbd, output, name, vocabulary;
-  std::vector<std::string> faces;  // side=IMAGE
+  std::string roboearth, planar, rgbd, cad, output, name, vocabulary;
+  std::string pose, image, camera;  // with --cad
+  std::vector<std::string> faces;   // side=IMAGE
   double width = 0, height = 0, depth = 0;
   bool no_images = false;
 };
 
+// A model from a CAD file of planar faces and one registered image (--cad --pose --image
+// --camera), e.g. the visp-cube.
+StatusOr<ObjectModel> BuildFromCad(const ModelBuildArgs& args, ModelBuilder* builder) {
+  if (args.pose.empty() || args.image.empty() || args.camera.empty()) {
+    return Status::InvalidArgument("--cad needs --pose, --image and --camera");
+  }
+  RECOG_ASSIGN_OR_RETURN(std::vector<FacePolygon> faces, ReadCaoFaces(args.cad));
+  PosedImage view;
+  view.name = fs::path(args.image).stem().string();
+  RECOG_ASSIGN_OR_RETURN(view.image, ReadGrayImage(args.image));
+  RECOG_ASSIGN_OR_RETURN(view.camera, ParseCamera(args.camera));
+  RECOG_ASSIGN_OR_RETURN(view.camera_from_object, ReadVispPose(args.pose));
+  return builder->FromPosedPolygons(
+      args.name.empty() ? fs::path(args.cad).stem().string() : args.name, faces, {view});
+}
+
 int RunModelBuild(const ModelBuildArgs& args) {
   const int sources = int(!args.roboearth.empty()) +
-                      int(!args.planar.empty() || !args.faces.empty()) + int(!args.rgbd.empty());
+                      int(!args.planar.empty() || !args.faces.empty()) + int(!args.rgbd.empty()) +
+                      int(!args.cad.empty());
   if (sources != 1) {
-    return Fail("model build", Status::InvalidArgument(
-                                   "give exactly one of --roboearth, --planar/--face or --rgbd"));
+    return Fail("model build", Status::InvalidArgument("give exactly one of --roboearth, "
+                                                       "--planar/--face, --rgbd or --cad"));
   }
   auto vocabulary = LoadObjectVocabulary(args.vocabulary);
   if (!vocabulary.ok()) return Fail("model build", vocabulary.status());
@@ -100,6 +120,8 @@ int RunModelBuild(const ModelBuildArgs& args) {
   StatusOr<ObjectModel> model = Status::Internal("no source");
   if (!args.roboearth.empty()) {
     model = builder.FromRoboEarth(args.roboearth);
+  } else if (!args.cad.empty()) {
+    model = BuildFromCad(args, &builder);
   } else if (!args.rgbd.empty()) {
     auto views = ReadRgbdViews(args.rgbd);
     if (!views.ok()) return Fail("model build", views.status());
@@ -252,6 +274,102 @@ int RunRecognize(const RecognizeArgs& args) {
   return 0;
 }
 
+// ---- recog eval sequence ----
+
+struct EvalSequenceArgs {
+  std::vector<std::string> models;
+  std::string images, camera, expect, draw, vocabulary;
+  bool json = false, quiet = false;
+};
+
+// Recognises every frame of a sequence in which one known object (--expect) is visible: recall
+// is the fraction of frames where it is found; any other object reported is a false positive.
+int RunEvalSequence(const EvalSequenceArgs& args) {
+  auto camera = ParseCamera(args.camera);
+  if (!camera.ok()) return Fail("eval sequence", camera.status());
+  auto frames = ListImages(args.images);
+  if (!frames.ok()) return Fail("eval sequence", frames.status());
+  auto vocabulary = LoadObjectVocabulary(args.vocabulary);
+  if (!vocabulary.ok()) return Fail("eval sequence", vocabulary.status());
+  MemoryIndexStore store;
+  auto opened = ObjectDatabase::Open(&store, *vocabulary);
+  if (!opened.ok()) return Fail("eval sequence", opened.status());
+  std::shared_ptr<ObjectDatabase> database = std::move(*opened);
+  ModelBuildOptions build;
+  build.keep_images = false;
+  ModelBuilder builder(*vocabulary, build);
+  if (Status s = LoadModels(args.models, &builder, database.get()); !s.ok()) {
+    return Fail("eval sequence", s);
+  }
+  const std::vector<ObjectMetadata> objects = database->List();
+  if (std::none_of(objects.begin(), objects.end(),
+                   [&](const ObjectMetadata& m) { return m.name == args.expect; })) {
+    return Fail("eval sequence",
+                Status::InvalidArgument("--expect '" + args.expect + "' is not among the models"));
+  }
+  if (!args.draw.empty()) fs::create_directories(args.draw);
+  ObjectRecognizer recognizer(database);
+  ProgressBar progress(!args.quiet);
+  size_t found = 0, false_positives = 0;
+  std::vector<double> totals, inliers;
+  json per_frame = json::array();
+  std::vector<Detection> detections;
+  for (size_t i = 0; i < frames->size(); ++i) {
+    auto image = ReadGrayImage((*frames)[i]);
+    if (!image.ok()) return Fail("eval sequence", image.status());
+    RecognitionTiming timing;
+    if (Status s = recognizer.Recognize(*image, *camera, &detections, &timing); !s.ok()) {
+      return Fail("eval sequence", s);
+    }
+    totals.push_back(timing.total);
+    json names = json::array();
+    bool hit = false;
+    for (const Detection& d : detections) {
+      names.push_back(d.name);
+      if (d.name == args.expect) {
+        hit = true;
+        inliers.push_back(double(d.inliers));
+      } else {
+        ++false_positives;
+      }
+    }
+    found += hit;
+    per_frame.push_back({{"frame", fs::path((*frames)[i]).filename().string()},
+                         {"objects", names},
+                         {"total_ms", timing.total}});
+    if (!args.draw.empty() && !detections.empty()) {
+      cv::Mat canvas;
+      cv::cvtColor(*image, canvas, cv::COLOR_GRAY2BGR);
+      for (const Detection& d : detections) {
+        DrawDetection(d, *camera,
+                      d.name == args.expect ? cv::Scalar(0, 200, 0) : cv::Scalar(0, 0, 255),
+                      &canvas);
+      }
+      cv::imwrite(
+          (fs::path(args.draw) / (fs::path((*frames)[i]).stem().string() + ".png")).string(),
+          canvas);
+    }
+    progress.Update("frames", i + 1, frames->size());
+  }
+  progress.Finish();
+  const double recall = double(found) / double(frames->size());
+  json out = {{"frames", frames->size()},
+              {"detections", found},
+              {"recall", recall},
+              {"false_positives", false_positives},
+              {"median_inliers", Median(inliers)},
+              {"timing_ms", {{"total", {{"median", Median(totals)}}}}},
+              {"per_frame", per_frame}};
+  if (args.json) {
+    std::printf("%s\n", out.dump(2).c_str());
+  } else {
+    std::printf(
+        "%zu frames: '%s' found in %zu (recall %.1f %%), %zu false positives, median %.2f ms\n",
+        frames->size(), args.expect.c_str(), found, 100 * recall, false_positives, Median(totals));
+  }
+  return 0;
+}
+
 // ---- recog eval objects ----
 
 struct EvalObjectsArgs {
@@ -353,6 +471,11 @@ void AddObjectCommands(CLI::App& app, int* exit_code) {
   build->add_option("--height", build_args->height, "Physical height, metres");
   build->add_option("--depth", build_args->depth, "Physical depth of a box, metres");
   build->add_option("--rgbd", build_args->rgbd, "RGB-D view list (see ReadRgbdViews)");
+  build->add_option("--cad", build_args->cad,
+                    "ViSP .cao model of planar faces (with --pose, --image, --camera)");
+  build->add_option("--pose", build_args->pose, "ViSP .pos pose of the object in --image");
+  build->add_option("--image", build_args->image, "Registered image for --cad");
+  build->add_option("--camera", build_args->camera, "fx,fy,cx,cy of --image");
   build->add_option("--name", build_args->name, "Object name (default: from the source)");
   build->add_option("--vocab", build_args->vocabulary,
                     "Vocabulary (default: the bundled object one)");
@@ -398,6 +521,24 @@ void AddEvalObjectsCommand(CLI::App& eval, int* exit_code) {
   objects->add_flag("--json", args->json, "Print JSON");
   objects->add_flag("-q,--quiet", args->quiet, "No progress output");
   objects->callback([args, exit_code] { *exit_code = RunEvalObjects(*args); });
+
+  auto sequence_args = std::make_shared<EvalSequenceArgs>();
+  CLI::App* sequence = eval.add_subcommand(
+      "sequence", "Frame-by-frame recognition of one object: recall and false positives");
+  sequence
+      ->add_option("--models", sequence_args->models,
+                   "Model files, folders of them, or RoboEarth folders")
+      ->required();
+  sequence->add_option("--images", sequence_args->images, "Folder of frames")->required();
+  sequence->add_option("--camera", sequence_args->camera, "fx,fy,cx,cy[,k1,k2,p1,p2[,k3]]")
+      ->required();
+  sequence->add_option("--expect", sequence_args->expect, "Name of the object in every frame")
+      ->required();
+  sequence->add_option("--draw", sequence_args->draw, "Folder for a PNG per frame with detections");
+  sequence->add_option("--vocab", sequence_args->vocabulary, "Vocabulary");
+  sequence->add_flag("--json", sequence_args->json, "Print JSON");
+  sequence->add_flag("-q,--quiet", sequence_args->quiet, "No progress output");
+  sequence->callback([sequence_args, exit_code] { *exit_code = RunEvalSequence(*sequence_args); });
 }
 
 }  // namespace recog::cli

@@ -132,5 +132,63 @@ expect_error "eval place with an unknown geometry check" "INVALID_ARGUMENT" "$re
 expect_error "eval place with an unsupported sweep" "only supports" "$recog" eval place \
   --images "$images" --ground-truth "$tmp/gt4.txt" --sweep k -q
 
+# Object models: a planar poster built from one bundled frame, recognised in that same frame.
+for sub in "model build" "model info" "model export" "recognize" "eval objects"; do
+  # shellcheck disable=SC2086
+  expect_ok "help of $sub" "$recog" $sub --help
+done
+expect_ok "model build of a planar poster" "$recog" model build --planar "$images/1.jpg" \
+  --width 0.64 --height 0.48 --name poster -o "$tmp/poster.robj"
+expect_ok "model info --json" "$recog" model info "$tmp/poster.robj" --json
+/usr/bin/python3 -c "import json; d=json.load(open('$tmp/out')); assert d['type']=='planar' and d['name']=='poster' and d['views']==1, d" \
+  && pass || fail "model info --json shows a planar model named poster"
+expect_ok "recognize the poster in its own image" "$recog" recognize --models "$tmp/poster.robj" \
+  --image "$images/1.jpg" --camera 500,500,256,192 --json --draw "$tmp/poster.png"
+/usr/bin/python3 -c "import json; d=json.load(open('$tmp/out')); assert [x['name'] for x in d['detections']]==['poster'], d" \
+  && pass || fail "recognize --json reports the poster"
+/usr/bin/python3 -c "assert open('$tmp/poster.png', 'rb').read(8) == b'\\x89PNG\\r\\n\\x1a\\n'" \
+  && pass || fail "recognize --draw writes a PNG"
+expect_error "model build without a source" "exactly one of" "$recog" model build -o "$tmp/m.robj"
+expect_error "model build with two sources" "exactly one of" "$recog" model build --planar "$images/1.jpg" \
+  --rgbd "$tmp/views.txt" --width 0.64 --height 0.48 -o "$tmp/m.robj"
+expect_error "model build of a missing image" "NOT_FOUND" "$recog" model build --planar "$tmp/none.jpg" \
+  --width 0.64 --height 0.48 -o "$tmp/m.robj"
+expect_error "model build with a negative width" "INVALID_ARGUMENT" "$recog" model build \
+  --planar "$images/1.jpg" --width -0.64 --height 0.48 -o "$tmp/m.robj"
+[ ! -e "$tmp/m.robj" ] && pass || fail "model build writes nothing on bad input"
+expect_error "model info of a missing file" "NOT_FOUND" "$recog" model info "$tmp/none.robj"
+head -c 100 "$tmp/poster.robj" >"$tmp/cut.robj"
+expect_error "model info of a truncated file" "DATA_LOSS" "$recog" model info "$tmp/cut.robj"
+expect_error "recognize with a malformed camera" "--camera" "$recog" recognize --models "$tmp/poster.robj" \
+  --image "$images/1.jpg" --camera 1,2,3
+expect_error "recognize with a missing model" "NOT_FOUND" "$recog" recognize --models "$tmp/none.robj" \
+  --image "$images/1.jpg" --camera 500,500,256,192
+expect_error "eval objects on a missing folder" "NOT_FOUND" "$recog" eval objects --roboearth /nonexistent -q
+# A poster's training view is a frontal camera with the principal point at the image corner.
+expect_error "model export of a camera RoboEarth cannot express" "principal point" "$recog" model export \
+  "$tmp/poster.robj" --roboearth "$tmp/poster-export"
+expect_error "model export of a missing file" "NOT_FOUND" "$recog" model export "$tmp/none.robj" \
+  --roboearth "$tmp/none-export"
+[ ! -e "$tmp/poster-export" ] && [ ! -e "$tmp/none-export" ] && pass || fail "model export creates nothing on bad input"
+
+# A real RoboEarth model through build, export and build again (needs the shared data).
+shared=${RECOG_SHARED_DATA:-$project/../shared/data}
+if [ -d "$shared/objects/roboearth/models/box" ]; then
+  expect_ok "model build of the RoboEarth box" "$recog" model build \
+    --roboearth "$shared/objects/roboearth/models/box" -o "$tmp/box.robj"
+  expect_ok "model export of the box" "$recog" model export "$tmp/box.robj" --roboearth "$tmp/box-export"
+  [ -f "$tmp/box-export/meta.xml" ] && [ -f "$tmp/box-export/face_014.png" ] && [ -f "$tmp/box-export/face_014.txt" ] \
+    && pass || fail "model export writes meta.xml and the 15 views"
+  expect_ok "model build of the exported box" "$recog" model build --roboearth "$tmp/box-export" \
+    -o "$tmp/box2.robj"
+  expect_ok "model info of the rebuilt box" "$recog" model info "$tmp/box2.robj" --json
+  /usr/bin/python3 -c "import json; d=json.load(open('$tmp/out')); assert d['name']=='box' and d['type']=='3D' and d['views']==15 and d['descriptors']>0, d" \
+    && pass || fail "the rebuilt box has its name, type, 15 views and descriptors"
+  expect_error "model export into a non-empty folder" "ALREADY_EXISTS" "$recog" model export \
+    "$tmp/box.robj" --roboearth "$tmp/box-export"
+else
+  echo "skipping the RoboEarth box checks: $shared/objects/roboearth/models/box not found (set RECOG_SHARED_DATA)"
+fi
+
 echo "$((checks - failures)) passed, $failures failed"
 [ "$failures" -eq 0 ]

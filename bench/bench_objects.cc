@@ -1,0 +1,290 @@
+// Object recognition speed benchmarks (issue "object recognition", thesis Table 5.6):
+//   BM_RecognizeRoboEarth            ObjectRecognizer::Recognize with default options, one thread,
+//                                    on every 640x480 query image once, with the 11 RoboEarth
+//                                    models (every folder of objects/roboearth/models, built with
+//                                    the default ModelBuilder options but without training images)
+//                                    in an in-memory ObjectDatabase.
+//   BM_RecognizeWith1000Distractors  the same with 1,000 synthetic distractor objects added to the
+//                                    database.
+// Query images: the 640x480 training views of the RoboEarth models (lion, van, box and bio, 54
+// photos that show an object, with the camera of their bundle file: f from face_k.txt, principal
+// point at the image centre) and the 218 frames of objects/visp-cube (a cube that is in no model:
+// the "no object" case, with fx = fy = 600 and the principal point at the centre). The RoboEarth
+// views are also in the models, so the detections are easy: this measures speed, not accuracy.
+// One benchmark iteration recognises one image (after one untimed warm-up call). The counters are
+// medians over the images of each stage's milliseconds as RecognitionTiming reports them (ORB,
+// clustering, conversion, query, DI correspondences, RANSAC, total; the stage medians need not add
+// up to the total's), the median total over the images with and without an object, and how many
+// images gave at least one detection.
+// Distractors: 1,000 planar posters built with ModelBuilder::FromFaceImages, each from one
+// Caltech-101 photo of training/caltech101 (of the N photos in natural path order, photo
+// floor(i * N / 1000) for distractor i, which spreads them over every category), as a single front
+// face of width uniform in [0.1, 0.5) m (a seeded mt19937_64) and height width * rows / cols of the
+// photo; named distractor-0000 .. distractor-0999.
+// The databases are built once, before the first timed iteration of the benchmark that needs them
+// (the distractors take about 20 s; progress goes to stderr). Needs the shared data
+// (RECOG_SHARED_DATA, default ../shared/data); the benchmarks are skipped without it.
+// Run: build/bin/bench_objects [--benchmark_filter=...]
+#include <benchmark/benchmark.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <filesystem>
+#include <memory>
+#include <random>
+#include <string>
+#include <vector>
+
+#include <opencv2/core/utility.hpp>
+
+#include "core/features/feature_extractor.h"
+#include "core/index/memory_index_store.h"
+#include "core/object/model_builder.h"
+#include "core/object/object_database.h"
+#include "core/object/object_recognizer.h"
+#include "core/object/roboearth.h"
+#include "core/vocabulary/vocabulary_io.h"
+#include "tests/testing/data_paths.h"
+#include "tools/recog/cli_support.h"
+#include "tools/recog/place_evaluation.h"
+
+namespace recog::bench {
+namespace {
+
+constexpr char kModelsDir[] = "objects/roboearth/models";
+constexpr char kVispDir[] = "objects/visp-cube/images";
+constexpr char kCaltechDir[] = "training/caltech101";
+constexpr size_t kDistractors = 1000;
+constexpr uint64_t kDistractorSeed = 20130101;
+
+struct QueryImage {
+  cv::Mat image;  // 8-bit grey, 640x480
+  CameraIntrinsics camera;
+  bool shows_object = false;  // a RoboEarth view (else a visp-cube frame)
+};
+
+// The model folders under kModelsDir, by name.
+std::vector<std::string> ModelFolders() {
+  std::vector<std::string> dirs;
+  for (const auto& entry : std::filesystem::directory_iterator(testing::SharedData(kModelsDir))) {
+    if (entry.is_directory()) dirs.push_back(entry.path().string());
+  }
+  std::sort(dirs.begin(), dirs.end());
+  return dirs;
+}
+
+StatusOr<std::vector<QueryImage>> LoadQueryImages() {
+  std::vector<QueryImage> queries;
+  for (const std::string& dir : ModelFolders()) {
+    RECOG_ASSIGN_OR_RETURN(RoboEarthFolder folder, ReadRoboEarthFolder(dir));
+    for (const RoboEarthView& view : folder.views) {
+      RECOG_ASSIGN_OR_RETURN(cv::Mat image, ReadGrayImage(view.image_path));
+      if (image.cols != 640 || image.rows != 480) continue;
+      const double f = view.camera.focal;
+      queries.push_back({image, {f, f, 320, 240, {}}, true});
+    }
+  }
+  RECOG_ASSIGN_OR_RETURN(std::vector<std::string> frames,
+                         cli::ListImages(testing::SharedData(kVispDir)));
+  for (const std::string& path : frames) {
+    RECOG_ASSIGN_OR_RETURN(cv::Mat image, ReadGrayImage(path));
+    queries.push_back({image, {600, 600, 320, 240, {}}, false});
+  }
+  return queries;
+}
+
+// The query images, loaded on first use (empty when the shared data is missing).
+const std::vector<QueryImage>& QueryImages() {
+  static const std::vector<QueryImage> queries = [] {
+    if (!testing::HasSharedData(kModelsDir) || !testing::HasSharedData(kVispDir)) {
+      return std::vector<QueryImage>();
+    }
+    auto loaded = LoadQueryImages();
+    if (!loaded.ok()) {
+      std::fprintf(stderr, "bench_objects: %s\n", loaded.status().ToString().c_str());
+      return std::vector<QueryImage>();
+    }
+    return std::move(loaded).value();
+  }();
+  return queries;
+}
+
+// An object database in memory; `status` says whether it could be built.
+struct ObjectFixture {
+  Status status;
+  MemoryIndexStore store;
+  std::shared_ptr<const ObjectDatabase> database;  // declared after the store it uses
+  size_t distractors = 0;
+};
+
+// Adds `count` Caltech posters (see the file comment) to `database`.
+Status AddDistractors(size_t count, ModelBuilder* builder, ObjectDatabase* database) {
+  RECOG_ASSIGN_OR_RETURN(std::vector<std::string> photos,
+                         cli::ListImages(testing::SharedData(kCaltechDir)));
+  if (photos.size() < count) {
+    return Status::FailedPrecondition("only " + std::to_string(photos.size()) +
+                                      " Caltech photos for " + std::to_string(count) +
+                                      " distractors");
+  }
+  std::mt19937_64 random(kDistractorSeed);
+  for (size_t i = 0; i < count; ++i) {
+    RECOG_ASSIGN_OR_RETURN(cv::Mat photo, ReadGrayImage(photos[i * photos.size() / count]));
+    // Uniform in [0, 1) from the top 53 bits: the same on every standard library.
+    const double unit = double(random() >> 11) * 0x1.0p-53;
+    const double width = 0.1 + 0.4 * unit;
+    const double height = width * photo.rows / photo.cols;
+    char name[32];
+    std::snprintf(name, sizeof(name), "distractor-%04zu", i);
+    RECOG_ASSIGN_OR_RETURN(ObjectModel model, builder->FromFaceImages(
+                                                  name, {{BoxSide::kFront, photo}}, width, height));
+    RECOG_RETURN_IF_ERROR(database->Put(model).status());
+    if ((i + 1) % 100 == 0) {
+      std::fprintf(stderr, "bench_objects: %zu / %zu distractors\n", i + 1, count);
+    }
+  }
+  return Status::Ok();
+}
+
+Status BuildDatabase(size_t distractors, ObjectFixture* fixture) {
+  if (!testing::HasSharedData(kModelsDir) ||
+      (distractors > 0 && !testing::HasSharedData(kCaltechDir))) {
+    return Status::NotFound("shared data not found under " + testing::SharedDataRoot().string() +
+                            " (set RECOG_SHARED_DATA)");
+  }
+  RECOG_ASSIGN_OR_RETURN(Vocabulary loaded, LoadVocabulary(cli::DefaultObjectVocabularyPath()));
+  auto vocabulary = std::make_shared<const Vocabulary>(std::move(loaded));
+  RECOG_ASSIGN_OR_RETURN(std::unique_ptr<ObjectDatabase> database,
+                         ObjectDatabase::Open(&fixture->store, vocabulary));
+  ModelBuildOptions options;
+  options.keep_images = false;
+  ModelBuilder builder(vocabulary, options);
+  for (const std::string& dir : ModelFolders()) {
+    RECOG_ASSIGN_OR_RETURN(ObjectModel model, builder.FromRoboEarth(dir));
+    // Named after the folder: the meta.xml names repeat (the three bottle1_* sizes are all
+    // "bottle1", cabinet_small is "cabinet1") and Put() would replace one with the next.
+    model.metadata.name = std::filesystem::path(dir).filename().string();
+    RECOG_RETURN_IF_ERROR(database->Put(model).status());
+    std::fprintf(stderr, "bench_objects: model %s, %zu features\n", model.metadata.name.c_str(),
+                 model.num_features());
+  }
+  RECOG_RETURN_IF_ERROR(AddDistractors(distractors, &builder, database.get()));
+  fixture->database = std::move(database);
+  fixture->distractors = distractors;
+  return Status::Ok();
+}
+
+// The database with the RoboEarth models and `distractors` distractors, built on first use.
+const ObjectFixture& Fixture(size_t distractors) {
+  auto build = [](size_t count) {
+    auto fixture = std::make_unique<ObjectFixture>();
+    fixture->status = BuildDatabase(count, fixture.get());
+    return fixture;
+  };
+  if (distractors == 0) {
+    static const std::unique_ptr<ObjectFixture> plain = build(0);
+    return *plain;
+  }
+  static const std::unique_ptr<ObjectFixture> with_distractors = build(kDistractors);
+  return *with_distractors;
+}
+
+// Recognises one query image per iteration, cycling through them, and reports the medians.
+void RunRecognition(benchmark::State& state, size_t distractors) {
+  const std::vector<QueryImage>& queries = QueryImages();
+  if (queries.empty()) {
+    state.SkipWithError("shared data not found (set RECOG_SHARED_DATA) or unreadable");
+    return;
+  }
+  const ObjectFixture& fixture = Fixture(distractors);
+  if (!fixture.status.ok()) {
+    state.SkipWithError(fixture.status.ToString().c_str());
+    return;
+  }
+  ObjectRecognizer recognizer(fixture.database);
+  std::vector<Detection> detections;
+  // Warm-up, untimed: creates the ORB extractor and sizes the scratch memory.
+  if (Status s = recognizer.Recognize(queries[0].image, queries[0].camera, &detections); !s.ok()) {
+    state.SkipWithError(s.ToString().c_str());
+    return;
+  }
+  std::vector<RecognitionTiming> timings;
+  std::vector<bool> shows_object;
+  size_t with_detections = 0;
+  size_t next = 0;
+  for (auto _ : state) {
+    const QueryImage& query = queries[next];
+    next = (next + 1) % queries.size();
+    RecognitionTiming timing;
+    if (Status s = recognizer.Recognize(query.image, query.camera, &detections, &timing); !s.ok()) {
+      state.SkipWithError(s.ToString().c_str());
+      return;
+    }
+    timings.push_back(timing);
+    shows_object.push_back(query.shows_object);
+    with_detections += detections.empty() ? 0 : 1;
+  }
+  auto median = [&](double RecognitionTiming::*stage) {
+    std::vector<double> values;
+    for (const RecognitionTiming& t : timings) values.push_back(t.*stage);
+    return cli::Median(values);
+  };
+  std::vector<double> total_object, total_no_object;
+  for (size_t i = 0; i < timings.size(); ++i) {
+    (shows_object[i] ? total_object : total_no_object).push_back(timings[i].total);
+  }
+  for (int want = 1; want >= 0; --want) {
+    double m[8] = {0};
+    size_t n = 0;
+    for (size_t i = 0; i < timings.size(); ++i) {
+      if (shows_object[i] != bool(want)) continue;
+      const auto& t = timings[i];
+      m[0] += t.orb; m[1] += t.clustering; m[2] += t.conversion; m[3] += t.query;
+      m[4] += t.correspondences; m[5] += t.ransac; m[6] += t.total; m[7] += double(t.regions);
+      ++n;
+    }
+    std::fprintf(stderr, "%s means: orb %.2f clu %.2f conv %.2f q %.2f di %.2f ransac %.2f total %.2f regions %.1f\n", want ? "OBJ" : "NOOBJ",
+      m[0]/n, m[1]/n, m[2]/n, m[3]/n, m[4]/n, m[5]/n, m[6]/n, m[7]/n);
+  }
+  state.counters["orb_ms"] = median(&RecognitionTiming::orb);
+  state.counters["clustering_ms"] = median(&RecognitionTiming::clustering);
+  state.counters["conversion_ms"] = median(&RecognitionTiming::conversion);
+  state.counters["query_ms"] = median(&RecognitionTiming::query);
+  state.counters["di_ms"] = median(&RecognitionTiming::correspondences);
+  state.counters["ransac_ms"] = median(&RecognitionTiming::ransac);
+  state.counters["total_ms"] = median(&RecognitionTiming::total);
+  state.counters["total_ms_object"] = cli::Median(total_object);
+  state.counters["total_ms_no_object"] = cli::Median(total_no_object);
+  state.counters["objects"] = double(fixture.database->size());
+  state.counters["images"] = double(timings.size());
+  state.counters["images_with_detections"] = double(with_detections);
+  if (distractors > 0) state.counters["distractors"] = double(fixture.distractors);
+}
+
+void BM_RecognizeRoboEarth(benchmark::State& state) { RunRecognition(state, 0); }
+
+void BM_RecognizeWith1000Distractors(benchmark::State& state) {
+  RunRecognition(state, kDistractors);
+}
+
+}  // namespace
+}  // namespace recog::bench
+
+// The iteration count is the number of query images (each is recognised once), known only once
+// they are listed, so the benchmarks are registered here rather than with BENCHMARK().
+int main(int argc, char** argv) {
+  cv::setNumThreads(0);  // no OpenCV worker threads: everything runs on this one
+  benchmark::Initialize(&argc, argv);
+  if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
+  const auto iterations =
+      benchmark::IterationCount(std::max<size_t>(1, recog::bench::QueryImages().size()));
+  benchmark::RegisterBenchmark("BM_RecognizeRoboEarth", recog::bench::BM_RecognizeRoboEarth)
+      ->Unit(benchmark::kMillisecond)
+      ->Iterations(iterations);
+  benchmark::RegisterBenchmark("BM_RecognizeWith1000Distractors",
+                               recog::bench::BM_RecognizeWith1000Distractors)
+      ->Unit(benchmark::kMillisecond)
+      ->Iterations(iterations);
+  benchmark::RunSpecifiedBenchmarks();
+  benchmark::Shutdown();
+  return 0;
+}
