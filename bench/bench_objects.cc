@@ -159,10 +159,7 @@ Status BuildDatabase(size_t distractors, ObjectFixture* fixture) {
   options.keep_images = false;
   ModelBuilder builder(vocabulary, options);
   for (const std::string& dir : ModelFolders()) {
-    RECOG_ASSIGN_OR_RETURN(ObjectModel model, builder.FromRoboEarth(dir));
-    // Named after the folder: the meta.xml names repeat (the three bottle1_* sizes are all
-    // "bottle1", cabinet_small is "cabinet1") and Put() would replace one with the next.
-    model.metadata.name = std::filesystem::path(dir).filename().string();
+    RECOG_ASSIGN_OR_RETURN(ObjectModel model, builder.FromRoboEarth(dir));  // named by folder
     RECOG_RETURN_IF_ERROR(database->Put(model).status());
     std::fprintf(stderr, "bench_objects: model %s, %zu features\n", model.metadata.name.c_str(),
                  model.num_features());
@@ -231,19 +228,6 @@ void RunRecognition(benchmark::State& state, size_t distractors) {
   std::vector<double> total_object, total_no_object;
   for (size_t i = 0; i < timings.size(); ++i) {
     (shows_object[i] ? total_object : total_no_object).push_back(timings[i].total);
-  }
-  for (int want = 1; want >= 0; --want) {
-    double m[8] = {0};
-    size_t n = 0;
-    for (size_t i = 0; i < timings.size(); ++i) {
-      if (shows_object[i] != bool(want)) continue;
-      const auto& t = timings[i];
-      m[0] += t.orb; m[1] += t.clustering; m[2] += t.conversion; m[3] += t.query;
-      m[4] += t.correspondences; m[5] += t.ransac; m[6] += t.total; m[7] += double(t.regions);
-      ++n;
-    }
-    std::fprintf(stderr, "%s means: orb %.2f clu %.2f conv %.2f q %.2f di %.2f ransac %.2f total %.2f regions %.1f\n", want ? "OBJ" : "NOOBJ",
-      m[0]/n, m[1]/n, m[2]/n, m[3]/n, m[4]/n, m[5]/n, m[6]/n, m[7]/n);
   }
   state.counters["orb_ms"] = median(&RecognitionTiming::orb);
   state.counters["clustering_ms"] = median(&RecognitionTiming::clustering);

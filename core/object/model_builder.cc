@@ -441,7 +441,14 @@ StatusOr<ObjectModel> ModelBuilder::FromRgbd(const std::string& name,
 StatusOr<ObjectModel> ModelBuilder::FromRoboEarth(const std::string& dir) {
   RECOG_ASSIGN_OR_RETURN(RoboEarthFolder folder, ReadRoboEarthFolder(dir));
   ObjectModel model;
-  model.metadata.name = folder.meta.name;
+  // Several RoboEarth folders share a meta name (bottle1_big, bottle1_medium and bottle1_small
+  // are all "bottle1"), and names are unique in a database: the folder names the model, and the
+  // meta name becomes its class.
+  model.metadata.name = std::filesystem::path(dir).filename().string();
+  if (model.metadata.name.empty()) {
+    model.metadata.name = std::filesystem::path(dir).parent_path().filename().string();
+  }
+  model.metadata.object_class = folder.meta.name;
   model.metadata.type = folder.meta.type;
   model.metadata.source = "roboearth:" + std::filesystem::path(dir).filename().string();
   model.metadata.units = folder.meta.type == ObjectType::kPlanar ? "m" : "sfm";

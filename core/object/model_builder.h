@@ -6,7 +6,8 @@
 // kept, the bitwise median (majority) of those that fell into that word (eq. 5.3).
 //
 // Where the 3D points come from:
-//  - RoboEarth `re_vision` folders (roboearth.h). 3D models: the dense PMVS cloud
+//  - RoboEarth `re_vision` folders (roboearth.h), named after the folder (the meta name, which
+//    several folders share, becomes the class). 3D models: the dense PMVS cloud
 //    (drawing_model.ply, else the union of the per-view clouds) is projected into each view; a
 //    point is visible when its normal faces the camera and it is the nearest in its pixel
 //    neighbourhood (a coarse z-buffer); a keypoint takes the visible point projecting nearest to

@@ -303,6 +303,7 @@ TEST(ModelBuilderTest, RoboEarthLionHeldOutViewIsRecognisedWithItsPose) {
   auto model = builder.FromRoboEarth(dir);
   ASSERT_TRUE(model.ok()) << model.status().ToString();
   EXPECT_EQ(model->metadata.name, "lion");
+  EXPECT_EQ(model->metadata.object_class, "lion");
   EXPECT_EQ(model->views.size(), 19u);
   EXPECT_GT(model->points.size(), 1000u);
 

@@ -345,7 +345,9 @@ bool ObjectRecognizer::Verify(const IndexedObject& object, const FeatureSet& fea
           : RansacPnp(K, object_points, image_points, options_.ransac_iterations,
                       options_.reprojection_px, options_.seed, &pose, &inliers);
   timing->ransac += MillisecondsSince(phase);
-  if (!solved || inliers.size() < options_.min_inliers) return false;
+  const size_t needed = object.metadata.type == ObjectType::kPlanar ? options_.min_planar_inliers
+                                                                    : options_.min_inliers;
+  if (!solved || inliers.size() < needed) return false;
 
   detection->id = object.id;
   detection->name = object.metadata.name;
