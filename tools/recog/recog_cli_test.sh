@@ -176,16 +176,16 @@ shared=${RECOG_SHARED_DATA:-$project/../shared/data}
 if [ -d "$shared/objects/roboearth/models/box" ]; then
   expect_ok "model build of the RoboEarth box" "$recog" model build \
     --roboearth "$shared/objects/roboearth/models/box" -o "$tmp/box.robj"
-  expect_ok "model export of the box" "$recog" model export "$tmp/box.robj" --roboearth "$tmp/box-export"
-  [ -f "$tmp/box-export/meta.xml" ] && [ -f "$tmp/box-export/face_014.png" ] && [ -f "$tmp/box-export/face_014.txt" ] \
+  expect_ok "model export of the box" "$recog" model export "$tmp/box.robj" --roboearth "$tmp/export/box"
+  [ -f "$tmp/export/box/meta.xml" ] && [ -f "$tmp/export/box/face_014.png" ] && [ -f "$tmp/export/box/face_014.txt" ] \
     && pass || fail "model export writes meta.xml and the 15 views"
-  expect_ok "model build of the exported box" "$recog" model build --roboearth "$tmp/box-export" \
+  expect_ok "model build of the exported box" "$recog" model build --roboearth "$tmp/export/box" \
     -o "$tmp/box2.robj"
   expect_ok "model info of the rebuilt box" "$recog" model info "$tmp/box2.robj" --json
   /usr/bin/python3 -c "import json; d=json.load(open('$tmp/out')); assert d['name']=='box' and d['type']=='3D' and d['views']==15 and d['descriptors']>0, d" \
     && pass || fail "the rebuilt box has its name, type, 15 views and descriptors"
   expect_error "model export into a non-empty folder" "ALREADY_EXISTS" "$recog" model export \
-    "$tmp/box.robj" --roboearth "$tmp/box-export"
+    "$tmp/box.robj" --roboearth "$tmp/export/box"
 else
   echo "skipping the RoboEarth box checks: $shared/objects/roboearth/models/box not found (set RECOG_SHARED_DATA)"
 fi
