@@ -7,19 +7,16 @@
 
 #include "core/object/model_builder.h"
 #include "core/object/object_database.h"
-#include "core/vocabulary/vocabulary_io.h"
 #include "storage/rocksdb_index_store.h"
 #include "storage/store_test_util.h"
 #include "tests/testing/data_paths.h"
+#include "tests/testing/vocabularies.h"
 
 namespace recog {
 namespace {
 
 TEST(ObjectDatabaseRocksDbTest, ModelsSurviveARestart) {
-  auto loaded =
-      LoadVocabulary(std::string(RECOG_SOURCE_DIR) + "/vocabularies/object_orb_t12_k10_l4.rvoc");
-  ASSERT_TRUE(loaded.ok()) << loaded.status().ToString();
-  auto vocabulary = std::make_shared<const Vocabulary>(std::move(*loaded));
+  const std::shared_ptr<const Vocabulary> vocabulary = testing::BundledObjectVocabulary();
   ModelBuilder builder(vocabulary);
   const auto image = [](const std::string& name) {
     return cv::imread(testing::ProjectTestData(name), cv::IMREAD_GRAYSCALE);

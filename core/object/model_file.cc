@@ -1,5 +1,7 @@
 #include "core/object/model_file.h"
 
+#include "core/common/file_io.h"
+
 #include <bit>
 #include <climits>
 #include <cstdio>
@@ -310,11 +312,6 @@ Status Corrupt(const std::string& where, const std::string& why) {
   return Status::DataLoss(where + " is corrupt (" + why + ")");
 }
 
-struct FileCloser {
-  void operator()(std::FILE* f) const { std::fclose(f); }
-};
-using File = std::unique_ptr<std::FILE, FileCloser>;
-
 }  // namespace
 
 StatusOr<std::string> EncodeObjectModel(const ObjectModel& model) {
@@ -435,23 +432,7 @@ StatusOr<ObjectModel> DecodeObjectModel(std::string_view bytes, const std::strin
 
 Status SaveObjectModel(const ObjectModel& model, const std::string& path) {
   RECOG_ASSIGN_OR_RETURN(const std::string bytes, EncodeObjectModel(model));
-  const std::string tmp = path + ".tmp";
-  {
-    File file(std::fopen(tmp.c_str(), "wb"));
-    if (!file) return Status::NotFound("cannot create '" + tmp + "'");
-    if (std::fwrite(bytes.data(), 1, bytes.size(), file.get()) != bytes.size() ||
-        std::fflush(file.get()) != 0) {
-      std::remove(tmp.c_str());
-      return Status::ResourceExhausted("cannot write '" + tmp + "' (disk full?)");
-    }
-  }
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) {
-    std::remove(tmp.c_str());
-    return Status::Internal("cannot rename '" + tmp + "' to '" + path + "': " + ec.message());
-  }
-  return Status::Ok();
+  return WriteFileAtomically(path, {bytes});
 }
 
 StatusOr<ObjectModel> LoadObjectModel(const std::string& path) {
@@ -462,15 +443,8 @@ StatusOr<ObjectModel> LoadObjectModel(const std::string& path) {
   if (std::filesystem::is_directory(path, ec)) {
     return Status::InvalidArgument("'" + path + "' is a directory, not an object model file");
   }
-  File file(std::fopen(path.c_str(), "rb"));
-  if (!file) return Status::NotFound("cannot open object model file '" + path + "'");
-  std::string bytes;
-  char buffer[1 << 16];
-  size_t got = 0;
-  while ((got = std::fread(buffer, 1, sizeof(buffer), file.get())) > 0) bytes.append(buffer, got);
-  if (std::ferror(file.get()) != 0) {
-    return Status::DataLoss("cannot read object model file '" + path + "'");
-  }
+  RECOG_ASSIGN_OR_RETURN(const std::string bytes,
+                         ReadWholeFile(path, "object model file '" + path + "'"));
   return DecodeObjectModel(bytes, "object model file '" + path + "'");
 }
 

@@ -1,6 +1,10 @@
 // Object models, the object database and recognition, end to end: synthetic views of a planar
 // poster with known poses, and (when the shared data is there) a held-out RoboEarth view.
+#include <unistd.h>
+
 #include <cmath>
+#include <filesystem>
+#include <fstream>
 #include <memory>
 
 #include <gtest/gtest.h>
@@ -15,21 +19,14 @@
 #include "core/object/roboearth.h"
 #include "core/vocabulary/vocabulary_io.h"
 #include "tests/testing/test_data.h"
+#include "tests/testing/vocabularies.h"
 
 namespace recog {
 namespace {
 
 constexpr double kPosterWidth = 0.64, kPosterHeight = 0.48;  // metres
 
-std::shared_ptr<const Vocabulary> ObjectVocabulary() {
-  static const std::shared_ptr<const Vocabulary> vocabulary = [] {
-    auto loaded =
-        LoadVocabulary(std::string(RECOG_SOURCE_DIR) + "/vocabularies/object_orb_t12_k10_l4.rvoc");
-    EXPECT_TRUE(loaded.ok()) << loaded.status().ToString();
-    return std::make_shared<const Vocabulary>(std::move(*loaded));
-  }();
-  return vocabulary;
-}
+std::shared_ptr<const Vocabulary> ObjectVocabulary() { return testing::BundledObjectVocabulary(); }
 
 cv::Mat Poster(const std::string& name = "corridor/1.jpg") {
   return cv::imread(testing::ProjectTestData(name), cv::IMREAD_GRAYSCALE);
@@ -324,6 +321,51 @@ TEST(ModelBuilderTest, RoboEarthLionHeldOutViewIsRecognisedWithItsPose) {
   const RigidTransform& truth = camera_file->camera_from_object;
   EXPECT_LT(RotationErrorDeg(detections[0].camera_from_object.R, truth.R), 3.0);
   EXPECT_LT(cv::norm(detections[0].camera_from_object.t - truth.t) / cv::norm(truth.t), 0.03);
+}
+
+}  // namespace
+}  // namespace recog
+
+namespace recog {
+namespace {
+
+TEST(RgbdViewListTest, ReadsViewsAndRejectsMalformedLists) {
+  const std::filesystem::path dir =
+      std::filesystem::temp_directory_path() / ("recog_rgbd_" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir);
+  cv::imwrite((dir / "rgb.png").string(), Poster());
+  cv::imwrite((dir / "depth.png").string(), cv::Mat(Poster().size(), CV_16U, cv::Scalar(1200)));
+  const auto list = [&dir](const std::string& text) {
+    std::ofstream((dir / "views.txt").string()) << text;
+    return (dir / "views.txt").string();
+  };
+  const std::string identity = " 1 0 0 0 1 0 0 0 1 0 0 0";
+  auto views =
+      ReadRgbdViews(list("# rgb depth fx fy cx cy scale R t\nrgb.png depth.png 500 500 "
+                         "256 192 1000" +
+                         identity + "\n"));
+  ASSERT_TRUE(views.ok()) << views.status().ToString();
+  ASSERT_EQ(views->size(), 1u);
+  EXPECT_EQ((*views)[0].view.name, "rgb");
+  EXPECT_EQ((*views)[0].depth.type(), CV_16U);
+
+  EXPECT_EQ(ReadRgbdViews((dir / "none.txt").string()).status().code(), StatusCode::kNotFound);
+  EXPECT_EQ(ReadRgbdViews(list("# nothing\n")).status().code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(ReadRgbdViews(list("rgb.png depth.png 500 500 256\n")).status().code(),
+            StatusCode::kInvalidArgument);  // too few fields
+  EXPECT_EQ(ReadRgbdViews(list("rgb.png depth.png 500 500 256 192 1000 2 0 0 0 1 0 0 0 1 0 0 0\n"))
+                .status()
+                .code(),
+            StatusCode::kInvalidArgument);  // not a rotation
+  EXPECT_EQ(ReadRgbdViews(list("rgb.png depth.png -5 500 256 192 1000" + identity + "\n"))
+                .status()
+                .code(),
+            StatusCode::kInvalidArgument);  // negative focal length
+  EXPECT_EQ(ReadRgbdViews(list("rgb.png missing.png 500 500 256 192 1000" + identity + "\n"))
+                .status()
+                .code(),
+            StatusCode::kInvalidArgument);  // unreadable depth
+  std::filesystem::remove_all(dir);
 }
 
 }  // namespace

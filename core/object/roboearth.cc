@@ -19,62 +19,12 @@
 
 #include <opencv2/imgcodecs.hpp>
 
+#include "core/common/file_io.h"
+
 namespace recog {
 namespace {
 
 namespace fs = std::filesystem;
-
-// --- Files. ---
-
-struct FileCloser {
-  void operator()(std::FILE* f) const { std::fclose(f); }
-};
-using File = std::unique_ptr<std::FILE, FileCloser>;
-
-// NOT_FOUND unless `path` names a regular file; `what` describes it ("PLY file 'x.ply'").
-Status CheckFileExists(const std::string& path, const std::string& what) {
-  std::error_code ec;
-  const fs::file_status st = fs::status(path, ec);
-  if (ec || !fs::exists(st)) return Status::NotFound(what + " does not exist");
-  if (!fs::is_regular_file(st)) return Status::NotFound(what + " is not a regular file");
-  return Status::Ok();
-}
-
-// Reads a whole file in one call.
-StatusOr<std::string> ReadWholeFile(const std::string& path, const std::string& what) {
-  RECOG_RETURN_IF_ERROR(CheckFileExists(path, what));
-  std::error_code ec;
-  const uintmax_t size = fs::file_size(path, ec);
-  File file(std::fopen(path.c_str(), "rb"));
-  if (ec || !file) return Status::NotFound("cannot open " + what);
-  std::string content(size_t(size), '\0');
-  if (std::fread(content.data(), 1, content.size(), file.get()) != content.size()) {
-    return Status::DataLoss("cannot read " + what);
-  }
-  return content;
-}
-
-// Writes `content` to path + ".tmp", then renames it over `path`, so that readers never see a
-// partly written file.
-Status WriteFileAtomically(const std::string& path, std::string_view content) {
-  const std::string tmp = path + ".tmp";
-  {
-    File file(std::fopen(tmp.c_str(), "wb"));
-    if (!file) return Status::NotFound("cannot create '" + tmp + "'");
-    if (std::fwrite(content.data(), 1, content.size(), file.get()) != content.size() ||
-        std::fflush(file.get()) != 0) {
-      std::remove(tmp.c_str());
-      return Status::ResourceExhausted("cannot write '" + tmp + "' (disk full?)");
-    }
-  }
-  std::error_code ec;
-  fs::rename(tmp, path, ec);
-  if (ec) {
-    std::remove(tmp.c_str());
-    return Status::Internal("cannot rename '" + tmp + "' to '" + path + "': " + ec.message());
-  }
-  return Status::Ok();
-}
 
 // --- Text. ---
 
@@ -902,7 +852,7 @@ Status WritePly(const std::string& path, const PointCloud& cloud) {
     }
     text.back() = '\n';
   }
-  return WriteFileAtomically(path, text);
+  return WriteFileAtomically(path, {text});
 }
 
 StatusOr<BundleCamera> ReadBundleCamera(const std::string& path) {
@@ -946,14 +896,14 @@ Status WriteBundleCamera(const std::string& path, const BundleCamera& camera) {
   const cv::Vec3d& t = camera.camera_from_object.t;
   std::snprintf(line, sizeof(line), "%.12f %.12f %.12f \n", t[0], t[1], t[2]);
   text += line;
-  return WriteFileAtomically(path, text);
+  return WriteFileAtomically(path, {text});
 }
 
 StatusOr<RoboEarthMeta> ReadRoboEarthMeta(const std::string& path) {
   const std::string where = "meta file '" + path + "'";
-  RECOG_RETURN_IF_ERROR(CheckFileExists(path, where));
+  RECOG_ASSIGN_OR_RETURN(const std::string content, ReadWholeFile(path, where));
   tinyxml2::XMLDocument doc;
-  if (doc.LoadFile(path.c_str()) != tinyxml2::XML_SUCCESS) {
+  if (doc.Parse(content.data(), content.size()) != tinyxml2::XML_SUCCESS) {
     return Status::DataLoss(where + " line " + std::to_string(doc.ErrorLineNum()) +
                             ": not well-formed XML (" + doc.ErrorName() + ")");
   }
@@ -984,7 +934,7 @@ Status WriteRoboEarthMeta(const std::string& path, const RoboEarthMeta& meta) {
   }
   tinyxml2::XMLPrinter printer;
   doc.Print(&printer);
-  return WriteFileAtomically(path, std::string_view(printer.CStr(), printer.CStrSize() - 1));
+  return WriteFileAtomically(path, {std::string_view(printer.CStr(), printer.CStrSize() - 1)});
 }
 
 StatusOr<RoboEarthFolder> ReadRoboEarthFolder(const std::string& dir) {
@@ -1034,8 +984,8 @@ Status ExportRoboEarthFolder(const ObjectModel& model, const std::string& dir) {
     const std::string base = (root / stem).string();
     // The bytes are already PNG: written as they are, the image is exactly the one trained on.
     RECOG_RETURN_IF_ERROR(WriteFileAtomically(
-        base + ".png", std::string_view(reinterpret_cast<const char*>(view.image_png.data()),
-                                        view.image_png.size())));
+        base + ".png", {std::string_view(reinterpret_cast<const char*>(view.image_png.data()),
+                                         view.image_png.size())}));
     BundleCamera camera;
     camera.focal = view.camera.fx;
     camera.camera_from_object = view.camera_from_object;

@@ -18,6 +18,7 @@
 #include "core/vocabulary/vocabulary_io.h"
 #include "tests/testing/data_paths.h"
 #include "tests/testing/test_data.h"
+#include "tests/testing/vocabularies.h"
 
 namespace recog {
 namespace {
@@ -679,15 +680,7 @@ TEST_F(RoboEarthTest, FolderWithABadCameraReportsTheCameraFile) {
 
 // --- Export. ---
 
-std::shared_ptr<const Vocabulary> ObjectVocabulary() {
-  static const std::shared_ptr<const Vocabulary> vocabulary = [] {
-    auto loaded =
-        LoadVocabulary(std::string(RECOG_SOURCE_DIR) + "/vocabularies/object_orb_t12_k10_l4.rvoc");
-    EXPECT_TRUE(loaded.ok()) << loaded.status().ToString();
-    return std::make_shared<const Vocabulary>(std::move(*loaded));
-  }();
-  return vocabulary;
-}
+std::shared_ptr<const Vocabulary> ObjectVocabulary() { return testing::BundledObjectVocabulary(); }
 
 cv::Mat PosterImage() { return cv::imread(testing::ProjectTestData("corridor/1.jpg")); }
 

@@ -9,6 +9,7 @@
 
 #include <xxhash.h>
 
+#include "core/common/file_io.h"
 #include "core/vocabulary/dbow2_format.h"
 
 namespace recog {
@@ -18,11 +19,6 @@ constexpr char kMagic[8] = {'R', 'E', 'C', 'O', 'G', 'V', 'O', 'C'};
 constexpr uint32_t kVersion = 1;
 constexpr uint32_t kHeaderSize = 128;
 constexpr size_t kHeaderChecksumSpan = 64;  // header bytes covered by the header checksum
-
-struct FileCloser {
-  void operator()(std::FILE* f) const { std::fclose(f); }
-};
-using File = std::unique_ptr<std::FILE, FileCloser>;
 
 template <class T>
 void Put(uint8_t* header, size_t offset, T value) {
@@ -87,24 +83,9 @@ Status SaveVocabulary(const Vocabulary& vocabulary, const std::string& path) {
   Put<uint64_t>(header.data(), 56, vocabulary.checksum());
   Put<uint64_t>(header.data(), 64, XXH3_64bits(header.data(), kHeaderChecksumSpan));
 
-  const std::string tmp = path + ".tmp";
-  {
-    File file(std::fopen(tmp.c_str(), "wb"));
-    if (!file) return Status::NotFound("cannot create '" + tmp + "'");
-    if (std::fwrite(header.data(), 1, header.size(), file.get()) != header.size() ||
-        std::fwrite(body.data(), 1, body.size(), file.get()) != body.size() ||
-        std::fflush(file.get()) != 0) {
-      std::remove(tmp.c_str());
-      return Status::ResourceExhausted("cannot write '" + tmp + "' (disk full?)");
-    }
-  }
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) {
-    std::remove(tmp.c_str());
-    return Status::Internal("cannot rename '" + tmp + "' to '" + path + "': " + ec.message());
-  }
-  return Status::Ok();
+  return WriteFileAtomically(
+      path, {std::string_view(reinterpret_cast<const char*>(header.data()), header.size()),
+             std::string_view(reinterpret_cast<const char*>(body.data()), body.size())});
 }
 
 StatusOr<Vocabulary> LoadVocabulary(const std::string& path) {
