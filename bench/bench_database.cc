@@ -37,6 +37,14 @@ class DiscardingStore : public IndexStore {
     return Status::Ok();
   }
   StatusOr<EntryId> NextEntryId(MapId) override { return EntryId(0); }
+  Status PutBlob(const std::string&, std::string_view) override { return Status::Ok(); }
+  StatusOr<std::string> GetBlob(const std::string&) override {
+    return Status::NotFound("discarded");
+  }
+  Status DeleteBlob(const std::string&) override { return Status::NotFound("discarded"); }
+  StatusOr<std::vector<std::string>> ListBlobKeys(const std::string&) override {
+    return std::vector<std::string>{};
+  }
   Status Flush() override { return Status::Ok(); }
   Status Checkpoint(const std::string&) override { return Status::FailedPrecondition("none"); }
 

@@ -151,7 +151,7 @@ Status BuildDatabase(size_t distractors, ObjectFixture* fixture) {
     return Status::NotFound("shared data not found under " + testing::SharedDataRoot().string() +
                             " (set RECOG_SHARED_DATA)");
   }
-  RECOG_ASSIGN_OR_RETURN(Vocabulary loaded, LoadVocabulary(cli::DefaultObjectVocabularyPath()));
+  RECOG_ASSIGN_OR_RETURN(Vocabulary loaded, LoadVocabulary(DefaultObjectVocabularyPath()));
   auto vocabulary = std::make_shared<const Vocabulary>(std::move(loaded));
   RECOG_ASSIGN_OR_RETURN(std::unique_ptr<ObjectDatabase> database,
                          ObjectDatabase::Open(&fixture->store, vocabulary));

@@ -6,6 +6,7 @@
 #include <functional>
 #include <memory>
 #include <ostream>
+#include <random>
 #include <string>
 #include <thread>
 #include <vector>
@@ -400,6 +401,124 @@ TEST_P(IndexStoreContractTest, ConcurrentCommitsFromFourThreadsToTwoMapsAllLand)
       EXPECT_EQ(EntryDifference(all[i], MakeTestEntry(EntryId(i), map.id)), "");
     }
     EXPECT_EQ(*store_->NextEntryId(map.id), 2 * kPerThread);
+  }
+}
+
+// --- Blobs ---
+
+TEST_P(IndexStoreContractTest, ABlobRoundTripsExactlyAndPutOverwritesIt) {
+  const std::string binary = std::string("\0\x01\xff\x80model\0", 10) + std::string(1000, '\xfe');
+  ASSERT_TRUE(store_->PutBlob("model/box/1", binary).ok());
+  auto got = store_->GetBlob("model/box/1");
+  ASSERT_TRUE(got.ok()) << got.status().ToString();
+  EXPECT_EQ(*got, binary);
+
+  ASSERT_TRUE(store_->PutBlob("model/box/1", "shorter").ok());
+  EXPECT_EQ(*store_->GetBlob("model/box/1"), "shorter");
+  ASSERT_TRUE(store_->PutBlob("model/box/1", "").ok());  // an empty value is a value
+  got = store_->GetBlob("model/box/1");
+  ASSERT_TRUE(got.ok()) << got.status().ToString();
+  EXPECT_EQ(*got, "");
+}
+
+TEST_P(IndexStoreContractTest, AModelSizedBlobRoundTrips) {
+  std::string value(5 << 20, '\0');
+  std::mt19937 rng(11);
+  for (char& c : value) c = char(rng());
+  ASSERT_TRUE(store_->PutBlob("big", value).ok());
+  auto got = store_->GetBlob("big");
+  ASSERT_TRUE(got.ok()) << got.status().ToString();
+  EXPECT_TRUE(*got == value);
+}
+
+TEST_P(IndexStoreContractTest, DeletedOrUnknownBlobsAreNotFound) {
+  ASSERT_TRUE(store_->PutBlob("a", "1").ok());
+  ASSERT_TRUE(store_->PutBlob("b", "2").ok());
+  ASSERT_TRUE(store_->DeleteBlob("a").ok());
+  EXPECT_EQ(store_->GetBlob("a").status().code(), StatusCode::kNotFound);
+  EXPECT_EQ(store_->DeleteBlob("a").code(), StatusCode::kNotFound);
+  EXPECT_EQ(store_->GetBlob("never").status().code(), StatusCode::kNotFound);
+  EXPECT_EQ(store_->DeleteBlob("never").code(), StatusCode::kNotFound);
+  EXPECT_EQ(*store_->ListBlobKeys(""), std::vector<std::string>{"b"});
+  // A deleted key can be written again.
+  ASSERT_TRUE(store_->PutBlob("a", "3").ok());
+  EXPECT_EQ(*store_->GetBlob("a"), "3");
+}
+
+TEST_P(IndexStoreContractTest, ListBlobKeysReturnsTheKeysWithThePrefixInByteOrder) {
+  // "\x80" sorts after every ASCII byte: the order is that of unsigned bytes.
+  const std::vector<std::string> keys = {
+      "model/b/1", "other",  std::string("model/\x80", 7), "model/a/2", "model",
+      "model/a/1", "modelx", std::string("\0zero", 5)};
+  for (const std::string& key : keys) ASSERT_TRUE(store_->PutBlob(key, "v:" + key).ok());
+
+  auto listed = store_->ListBlobKeys("model/");
+  ASSERT_TRUE(listed.ok()) << listed.status().ToString();
+  EXPECT_EQ(*listed, (std::vector<std::string>{"model/a/1", "model/a/2", "model/b/1",
+                                               std::string("model/\x80", 7)}));
+  EXPECT_EQ(*store_->ListBlobKeys("model/a/"),
+            (std::vector<std::string>{"model/a/1", "model/a/2"}));
+  EXPECT_TRUE(store_->ListBlobKeys("nothing")->empty());
+  EXPECT_TRUE(store_->ListBlobKeys("model/a/1/")->empty());
+  std::vector<std::string> all = keys;
+  std::sort(all.begin(), all.end());
+  EXPECT_EQ(*store_->ListBlobKeys(""), all);
+}
+
+TEST_P(IndexStoreContractTest, BadBlobKeysAndOversizedValuesAreInvalidArgumentAndStoreNothing) {
+  const std::string too_long(IndexStore::kMaxBlobKeyBytes + 1, 'k');
+  for (const std::string& key : {std::string(), too_long}) {
+    SCOPED_TRACE(key.size());
+    EXPECT_EQ(store_->PutBlob(key, "value").code(), StatusCode::kInvalidArgument);
+    EXPECT_EQ(store_->GetBlob(key).status().code(), StatusCode::kInvalidArgument);
+    EXPECT_EQ(store_->DeleteBlob(key).code(), StatusCode::kInvalidArgument);
+  }
+  const std::string too_big(IndexStore::kMaxBlobBytes + 1, 'x');
+  EXPECT_EQ(store_->PutBlob("big", too_big).code(), StatusCode::kInvalidArgument);
+  EXPECT_TRUE(store_->ListBlobKeys("")->empty());
+  // The longest key is fine, and so is any byte in it.
+  std::string longest(IndexStore::kMaxBlobKeyBytes, 'k');
+  longest[0] = '\0';
+  longest[1] = '/';
+  ASSERT_TRUE(store_->PutBlob(longest, "value").ok());
+  EXPECT_EQ(*store_->GetBlob(longest), "value");
+}
+
+TEST_P(IndexStoreContractTest, BlobsAndMapsAreIndependent) {
+  const MapInfo map = NewMap("office");
+  ASSERT_TRUE(store_->CommitEntry(map.id, MakeTestEntry(0)).ok());
+  ASSERT_TRUE(store_->PutBlob("office", "a blob named like the map").ok());
+  ASSERT_TRUE(store_->DeleteMap("office").ok());
+  EXPECT_EQ(*store_->GetBlob("office"), "a blob named like the map");
+  ASSERT_TRUE(store_->DeleteBlob("office").ok());
+  const MapInfo again = NewMap("office");
+  EXPECT_TRUE(ScanAll(again.id).empty());
+  EXPECT_EQ(store_->ListMaps()->size(), 1u);
+}
+
+TEST_P(IndexStoreContractTest, ConcurrentBlobWritesFromFourThreadsAllLand) {
+  constexpr int kPerThread = 20;
+  std::atomic<int> failures{0};
+  std::vector<std::thread> threads;
+  for (int t = 0; t < 4; ++t) {
+    threads.emplace_back([&, t] {
+      for (int i = 0; i < kPerThread; ++i) {
+        std::string key = "t";  // not "t" + std::to_string(t): GCC 12 -Wrestrict false positive
+        key += std::to_string(t) + "/" + std::to_string(i);
+        if (!store_->PutBlob(key, key + std::string(size_t(1000 * i), 'v')).ok()) ++failures;
+        // Every other blob is deleted again.
+        if (i % 2 == 1 && !store_->DeleteBlob(key).ok()) ++failures;
+      }
+    });
+  }
+  for (std::thread& t : threads) t.join();
+  EXPECT_EQ(failures.load(), 0);
+  const std::vector<std::string> keys = *store_->ListBlobKeys("");
+  EXPECT_EQ(keys.size(), size_t(4 * kPerThread / 2));
+  for (const std::string& key : keys) {
+    const size_t i = std::stoul(key.substr(key.find('/') + 1));
+    EXPECT_EQ(i % 2, 0u) << key;
+    EXPECT_EQ(*store_->GetBlob(key), key + std::string(1000 * i, 'v'));
   }
 }
 

@@ -13,7 +13,8 @@
 // cannot write into a deleted map afterwards. Lock order: catalog_write_mutex_ -> map write
 // mutex -> catalog_mutex_. Reads only take catalog_mutex_ (shared, for the map lookup), never a
 // lock held across a RocksDB write; they read a RocksDB snapshot, so that an entry removed
-// concurrently is either read whole or not found, never half.
+// concurrently is either read whole or not found, never half. Blobs have a lock of their own,
+// blob_write_mutex_, held by PutBlob and DeleteBlob (never with another lock).
 #include "storage/rocksdb_index_store.h"
 
 #include <unistd.h>
@@ -60,6 +61,7 @@ enum ColumnFamily : size_t {
   kBowCf,
   kDirectCf,
   kFeaturesCf,
+  kBlobsCf,
   kNumColumnFamilies,
 };
 
@@ -78,6 +80,7 @@ constexpr std::array<ColumnFamilyConfig, kNumColumnFamilies> kColumnFamilies = {
     {kBowCf, "bow", kEntryBow, false, "bow"},
     {kDirectCf, "direct", kEntryDirect, false, "direct index"},
     {kFeaturesCf, "features", kEntryFeatures, false, "features"},
+    {kBlobsCf, "blobs", 0, false, "blob"},
 }};
 constexpr std::array<ColumnFamily, 4> kEntryColumnFamilies = {kMetaCf, kBowCf, kDirectCf,
                                                               kFeaturesCf};
@@ -216,6 +219,10 @@ class RocksDbIndexStore final : public IndexStore {
   Status ScanEntries(MapId map, uint32_t parts,
                      const std::function<Status(EntryRecord&)>& visit) override;
   StatusOr<EntryId> NextEntryId(MapId map) override;
+  Status PutBlob(const std::string& key, std::string_view value) override;
+  StatusOr<std::string> GetBlob(const std::string& key) override;
+  Status DeleteBlob(const std::string& key) override;
+  StatusOr<std::vector<std::string>> ListBlobKeys(const std::string& prefix) override;
   Status Flush() override;
   Status Checkpoint(const std::string& dir) override;
 
@@ -253,6 +260,8 @@ class RocksDbIndexStore final : public IndexStore {
   std::map<std::string, std::shared_ptr<MapState>> maps_by_name_;
   std::unordered_map<MapId, std::shared_ptr<MapState>> maps_by_id_;
   MapId next_map_id_ = 1;  // guarded by catalog_write_mutex_
+  // Serialises PutBlob and DeleteBlob, so that DeleteBlob's "absent?" check is exact.
+  std::mutex blob_write_mutex_;
 
   // kGrouped: the WAL sync thread.
   std::atomic<bool> unsynced_writes_{false};
@@ -753,6 +762,58 @@ StatusOr<EntryId> RocksDbIndexStore::NextEntryId(MapId map) {
   const std::shared_ptr<MapState> state = FindMap(map);
   if (state == nullptr) return UnknownMap(map);
   return state->next_entry_id.load();
+}
+
+// --- Blobs ---
+
+Status RocksDbIndexStore::PutBlob(const std::string& key, std::string_view value) {
+  RECOG_RETURN_IF_ERROR(ValidateBlob(key, value));
+  rocksdb::WriteBatch batch;
+  batch.Put(Cf(kBlobsCf), key, rocksdb::Slice(value.data(), value.size()));
+  std::lock_guard lock(blob_write_mutex_);
+  return Write(&batch, "cannot write blob '" + key + "'");
+}
+
+StatusOr<std::string> RocksDbIndexStore::GetBlob(const std::string& key) {
+  RECOG_RETURN_IF_ERROR(ValidateBlob(key));
+  rocksdb::ReadOptions read_options;
+  read_options.fill_cache = false;  // blobs are large and rarely read: keep the cache for entries
+  rocksdb::PinnableSlice value;
+  const Status got = Get(read_options, kBlobsCf, key, &value, "cannot read blob '" + key + "'");
+  if (got.code() == StatusCode::kNotFound) {
+    return Status::NotFound("blob '" + key + "' does not exist");
+  }
+  RECOG_RETURN_IF_ERROR(got);
+  return value.ToString();
+}
+
+Status RocksDbIndexStore::DeleteBlob(const std::string& key) {
+  RECOG_RETURN_IF_ERROR(ValidateBlob(key));
+  const std::string what = "cannot delete blob '" + key + "'";
+  std::lock_guard lock(blob_write_mutex_);
+  rocksdb::ReadOptions read_options;
+  read_options.fill_cache = false;
+  rocksdb::PinnableSlice existing;
+  const Status found = Get(read_options, kBlobsCf, key, &existing, what);
+  if (found.code() == StatusCode::kNotFound) {
+    return Status::NotFound("blob '" + key + "' does not exist");
+  }
+  RECOG_RETURN_IF_ERROR(found);
+  rocksdb::WriteBatch batch;
+  batch.Delete(Cf(kBlobsCf), key);
+  return Write(&batch, what);
+}
+
+StatusOr<std::vector<std::string>> RocksDbIndexStore::ListBlobKeys(const std::string& prefix) {
+  rocksdb::ReadOptions read_options;
+  read_options.fill_cache = false;
+  std::unique_ptr<rocksdb::Iterator> it(db_->NewIterator(read_options, Cf(kBlobsCf)));
+  std::vector<std::string> keys;
+  for (it->Seek(prefix); it->Valid() && it->key().starts_with(prefix); it->Next()) {
+    keys.push_back(it->key().ToString());
+  }
+  RECOG_RETURN_IF_ERROR(FromRocks(it->status(), "cannot list the blobs of '" + dir_ + "'"));
+  return keys;
 }
 
 Status RocksDbIndexStore::Flush() {

@@ -3,12 +3,17 @@
 // Callers get an IndexStore (core/index/index_store.h) from OpenRocksDbIndexStore and never see
 // a RocksDB type. Inside, each kind of record has its own column family: `maps` (the map catalog:
 // name -> MapInfo, each map's next entry id, the store-wide next map id), `entry_meta`
-// (EntryMetadata), `bow` (BowVector), `direct` (FeatureVector) and `features` (keypoints and
-// descriptors). Entry records are keyed by big-endian `map id | entry id`, so a map's entries are
-// contiguous and in id order; the value encodings are in storage/record_codec.h.
+// (EntryMetadata), `bow` (BowVector), `direct` (FeatureVector), `features` (keypoints and
+// descriptors) and `blobs` (the IndexStore blobs: the raw key bytes -> the value as given). Entry
+// records are keyed by big-endian `map id | entry id`, so a map's entries are contiguous and in id
+// order; the value encodings are in storage/record_codec.h. Opening a store creates the column
+// families it lacks, so a store written before `blobs` existed opens (with no blobs). Reading or
+// listing blobs bypasses the block cache, which stays for the entries; listing reads the blocks
+// that hold the values too (RocksDB keeps them with the keys), so it costs about a full read.
 //
-// Durability. Every CommitEntry / RemoveEntry / CreateMap / DeleteMap is one RocksDB WriteBatch
-// written through the write-ahead log, so a crash never leaves half an entry or half a map.
+// Durability. Every CommitEntry / RemoveEntry / CreateMap / DeleteMap / PutBlob / DeleteBlob is one
+// RocksDB WriteBatch written through the write-ahead log, so a crash never leaves half an entry,
+// half a map or half a blob.
 // When a write has returned OK:
 //  - SyncPolicy::kEveryWrite: the WAL was fsync'ed before returning; the write survives a crash of
 //    the process and of the machine (power loss, kernel panic).

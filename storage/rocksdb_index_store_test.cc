@@ -1,7 +1,8 @@
-// RocksDbIndexStore beyond the common contract: persistence across reopen, checkpoints and
-// restore, damaged stored values, and the ways opening a directory can fail (not a directory,
-// missing, locked, read-only, disk full). The contract suite (index_store_contract_test.cc)
-// covers the IndexStore semantics themselves.
+// RocksDbIndexStore beyond the common contract: persistence of entries and blobs across reopen,
+// stores written before the blobs column family existed, checkpoints and restore, damaged stored
+// values, and the ways opening a directory can fail (not a directory, missing, locked, read-only,
+// disk full). The contract suite (index_store_contract_test.cc) covers the IndexStore semantics
+// themselves.
 //
 // Some tests fork: the child process must not use GoogleTest, reports through its exit code or a
 // pipe, and leaves with _exit. The parent has every store closed when it forks, so that no
@@ -13,6 +14,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <csignal>
@@ -78,6 +80,13 @@ class RawDb {
   }
   void Delete(const std::string& cf, const std::string& key) {
     ASSERT_TRUE(db_->Delete(rocksdb::WriteOptions(), handles_.at(cf), key).ok());
+  }
+  // Drops a column family, as if the store had been written by a version without it.
+  void DropColumnFamily(const std::string& cf) {
+    rocksdb::ColumnFamilyHandle* handle = handles_.at(cf);
+    ASSERT_TRUE(db_->DropColumnFamily(handle).ok());
+    db_->DestroyColumnFamilyHandle(handle);
+    handles_.erase(cf);
   }
   std::string Get(const std::string& cf, const std::string& key) {
     std::string value;
@@ -199,6 +208,72 @@ TEST_F(RocksDbStoreTest, ReopenKeepsMapsEntriesAndNextIds) {
     EXPECT_EQ(store->GetMap("d")->id, d);
     EXPECT_EQ(store->ListMaps()->size(), 3u);
   }
+}
+
+TEST_F(RocksDbStoreTest, BlobsSurviveReopenAndACheckpoint) {
+  const std::string model(3 << 20, '\x5a');
+  for (SyncPolicy sync : {SyncPolicy::kEveryWrite, SyncPolicy::kGrouped}) {
+    SCOPED_TRACE(int(sync));
+    const std::string path = dir_.Sub("store" + std::to_string(int(sync)));
+    const std::string checkpoint = dir_.Sub("checkpoint" + std::to_string(int(sync)));
+    const std::string restored = dir_.Sub("restored" + std::to_string(int(sync)));
+    {
+      auto store = Open(sync, path);
+      ASSERT_NE(store, nullptr);
+      ASSERT_TRUE(store->PutBlob("model/box/0000000001", model).ok());
+      ASSERT_TRUE(store->PutBlob("model/box/0000000002", "v2").ok());
+      ASSERT_TRUE(store->PutBlob("model/cup/0000000001", "first").ok());
+      ASSERT_TRUE(store->PutBlob("model/cup/0000000001", "overwritten").ok());
+      ASSERT_TRUE(store->PutBlob("doomed", "x").ok());
+      ASSERT_TRUE(store->DeleteBlob("doomed").ok());
+    }
+    const std::vector<std::string> expected_keys = {"model/box/0000000001", "model/box/0000000002",
+                                                    "model/cup/0000000001"};
+    {
+      auto store = Open(sync, path);
+      ASSERT_NE(store, nullptr);
+      EXPECT_EQ(*store->ListBlobKeys(""), expected_keys);
+      EXPECT_TRUE(*store->GetBlob("model/box/0000000001") == model);
+      EXPECT_EQ(*store->GetBlob("model/cup/0000000001"), "overwritten");
+      EXPECT_EQ(store->GetBlob("doomed").status().code(), StatusCode::kNotFound);
+      ASSERT_TRUE(store->Checkpoint(checkpoint).ok());
+    }
+    ASSERT_TRUE(RestoreRocksDbCheckpoint(checkpoint, restored).ok());
+    auto store = Open(sync, restored);
+    ASSERT_NE(store, nullptr);
+    EXPECT_EQ(*store->ListBlobKeys(""), expected_keys);
+    EXPECT_TRUE(*store->GetBlob("model/box/0000000001") == model);
+  }
+}
+
+TEST_F(RocksDbStoreTest, AStoreWrittenBeforeBlobsExistedOpensAndTakesBlobs) {
+  const MapId map = MakeStore(3);
+  {
+    RawDb raw(StorePath());
+    raw.DropColumnFamily("blobs");
+  }
+  std::vector<std::string> families;
+  ASSERT_TRUE(rocksdb::DB::ListColumnFamilies(rocksdb::DBOptions(), StorePath(), &families).ok());
+  ASSERT_EQ(std::count(families.begin(), families.end(), "blobs"), 0);
+  {
+    auto store = Open();
+    ASSERT_NE(store, nullptr);
+    Status s;
+    EXPECT_EQ(ScanIds(*store, map, kEntryAllParts, &s), (std::vector<EntryId>{0, 1, 2}));
+    EXPECT_TRUE(s.ok()) << s.ToString();
+    auto keys = store->ListBlobKeys("");
+    ASSERT_TRUE(keys.ok()) << keys.status().ToString();
+    EXPECT_TRUE(keys->empty());
+    EXPECT_EQ(store->GetBlob("model/box/0000000001").status().code(), StatusCode::kNotFound);
+    ASSERT_TRUE(store->PutBlob("model/box/0000000001", "bytes").ok());
+  }
+  families.clear();
+  ASSERT_TRUE(rocksdb::DB::ListColumnFamilies(rocksdb::DBOptions(), StorePath(), &families).ok());
+  EXPECT_EQ(std::count(families.begin(), families.end(), "blobs"), 1);
+  auto store = Open();
+  ASSERT_NE(store, nullptr);
+  EXPECT_EQ(*store->GetBlob("model/box/0000000001"), "bytes");
+  EXPECT_EQ(store->ListMaps()->size(), 1u);
 }
 
 TEST_F(RocksDbStoreTest, GroupedWritesSurviveACleanCloseAndTheSyncThreadStopsPromptly) {

@@ -26,6 +26,8 @@ enum class StatusCode {
   kUnavailable,         // temporarily unable to serve
   kDataLoss,            // stored data is corrupt or truncated (bad checksum, short file)
   kInternal,            // a bug or an unexpected failure of a dependency
+  kUnauthenticated,     // the caller did not prove who it is (no, malformed or unknown credentials)
+  kPermissionDenied,    // the caller is known but may not do this
 };
 
 // Name of a code, e.g. "INVALID_ARGUMENT".
@@ -51,6 +53,12 @@ class [[nodiscard]] Status {
   static Status Unavailable(std::string m) { return {StatusCode::kUnavailable, std::move(m)}; }
   static Status DataLoss(std::string m) { return {StatusCode::kDataLoss, std::move(m)}; }
   static Status Internal(std::string m) { return {StatusCode::kInternal, std::move(m)}; }
+  static Status Unauthenticated(std::string m) {
+    return {StatusCode::kUnauthenticated, std::move(m)};
+  }
+  static Status PermissionDenied(std::string m) {
+    return {StatusCode::kPermissionDenied, std::move(m)};
+  }
 
   bool ok() const { return code_ == StatusCode::kOk; }
   StatusCode code() const { return code_; }

@@ -29,6 +29,12 @@ TEST(StatusTest, ErrorCarriesCodeAndMessage) {
   EXPECT_EQ(s.ToString(), "DATA_LOSS: file x is truncated");
 }
 
+TEST(StatusTest, AuthenticationCodesHaveTheirCanonicalNames) {
+  EXPECT_EQ(Status::Unauthenticated("no token").ToString(), "UNAUTHENTICATED: no token");
+  EXPECT_EQ(Status::PermissionDenied("read only").code(), StatusCode::kPermissionDenied);
+  EXPECT_EQ(StatusCodeName(StatusCode::kPermissionDenied), "PERMISSION_DENIED");
+}
+
 TEST(StatusTest, StatusOrHoldsValueOrError) {
   StatusOr<int> good = ParsePositive(3);
   ASSERT_TRUE(good.ok());

@@ -140,4 +140,33 @@ EpipolarResult VerifyEpipolar(const std::vector<cv::KeyPoint>& a_keypoints,
   return result;
 }
 
+bool RelativePoseFromFundamental(const cv::Matx33d& fundamental, const cv::Matx33d& K,
+                                 const std::vector<cv::KeyPoint>& a_keypoints,
+                                 const std::vector<cv::KeyPoint>& b_keypoints,
+                                 const std::vector<Match>& inliers, cv::Matx33d* R, cv::Vec3d* t) {
+  if (cv::norm(fundamental) == 0.0 || inliers.size() < 5) return false;
+  std::vector<cv::Point2d> pa, pb;
+  pa.reserve(inliers.size());
+  pb.reserve(inliers.size());
+  for (const Match& m : inliers) {
+    if (m.a >= a_keypoints.size() || m.b >= b_keypoints.size()) return false;
+    pa.emplace_back(a_keypoints[m.a].pt);
+    pb.emplace_back(b_keypoints[m.b].pt);
+  }
+  const cv::Matx33d essential = K.t() * fundamental * K;
+  cv::Mat rotation, translation;
+  int in_front = 0;
+  try {
+    in_front = cv::recoverPose(cv::Mat(essential), pa, pb, cv::Mat(K), rotation, translation);
+  } catch (const cv::Exception&) {
+    return false;  // degenerate essential matrix
+  }
+  if (in_front < 5) return false;
+  rotation.convertTo(rotation, CV_64F);
+  translation.convertTo(translation, CV_64F);
+  *R = cv::Matx33d(rotation);
+  *t = cv::Vec3d(translation);
+  return true;
+}
+
 }  // namespace recog

@@ -129,5 +129,40 @@ TEST(EpipolarTest, RandomMatchesAndTooFewMatchesAreNotVerified) {
   EXPECT_FALSE(VerifyEpipolar(ka, kb, out_of_range, {}).verified);
 }
 
+TEST(RelativePoseTest, TheMotionBetweenTwoViewsIsRecoveredUpToScale) {
+  std::vector<cv::KeyPoint> ka, kb;
+  TwoViews(80, 3, &ka, &kb);
+  std::vector<Match> matches;
+  for (uint32_t i = 0; i < 80; ++i) matches.push_back({i, i, 0});
+  const EpipolarResult r = VerifyEpipolar(ka, kb, matches, {});
+  ASSERT_TRUE(r.verified);
+  const cv::Matx33d K(500, 0, 320, 0, 500, 240, 0, 0, 1);
+  cv::Matx33d R;
+  cv::Vec3d t;
+  ASSERT_TRUE(RelativePoseFromFundamental(r.fundamental, K, ka, kb, r.inliers, &R, &t));
+  const cv::Matx33d expected(std::cos(0.1), 0, std::sin(0.1), 0, 1, 0, -std::sin(0.1), 0,
+                             std::cos(0.1));
+  EXPECT_LT(cv::norm(R - expected), 0.02);
+  const cv::Vec3d direction = cv::normalize(cv::Vec3d(0.5, 0.05, 0.1));
+  EXPECT_NEAR(cv::norm(t), 1.0, 1e-6);
+  EXPECT_GT(t.dot(direction), 0.995);
+}
+
+TEST(RelativePoseTest, AZeroMatrixOrTooFewInliersGiveNoPose) {
+  std::vector<cv::KeyPoint> ka, kb;
+  TwoViews(10, 4, &ka, &kb);
+  const cv::Matx33d K(500, 0, 320, 0, 500, 240, 0, 0, 1);
+  cv::Matx33d R;
+  cv::Vec3d t;
+  std::vector<Match> all;
+  for (uint32_t i = 0; i < 10; ++i) all.push_back({i, i, 0});
+  EXPECT_FALSE(RelativePoseFromFundamental(cv::Matx33d::zeros(), K, ka, kb, all, &R, &t));
+  std::vector<Match> few(all.begin(), all.begin() + 4);
+  EXPECT_FALSE(RelativePoseFromFundamental(cv::Matx33d::eye(), K, ka, kb, few, &R, &t));
+  std::vector<Match> out_of_range = all;
+  out_of_range[0].b = 99;
+  EXPECT_FALSE(RelativePoseFromFundamental(cv::Matx33d::eye(), K, ka, kb, out_of_range, &R, &t));
+}
+
 }  // namespace
 }  // namespace recog

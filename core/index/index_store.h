@@ -2,7 +2,8 @@
 //
 // core/ keeps its indexes in memory and writes every change through this interface, in domain
 // types only; storage/ implements it with RocksDB (durable), and MemoryIndexStore implements it
-// in memory (tests, throw-away maps). One store holds many maps, each with its own entries.
+// in memory (tests, throw-away maps). One store holds many maps, each with its own entries, and
+// beside them named byte strings ("blobs": object model versions and other files of a few MB).
 //
 // Contract (checked by the contract test suite that runs against every implementation):
 //  - CommitEntry and RemoveEntry are atomic: after a crash an entry is either entirely present
@@ -12,16 +13,23 @@
 //  - ScanEntries visits the entries of a map in increasing id order; an entry missing one of the
 //    requested parts is DATA_LOSS.
 //  - DeleteMap removes every record of the map; its name can then be created again.
-//  - Errors: NOT_FOUND (unknown map or entry), ALREADY_EXISTS (map name taken), INVALID_ARGUMENT
-//    (bad name or record), DATA_LOSS (undecodable or inconsistent stored data), RESOURCE_EXHAUSTED
-//    (disk full), UNAVAILABLE/INTERNAL (I/O failures).
+//  - Blobs are independent of maps. PutBlob (create or overwrite) and DeleteBlob are atomic and
+//    as durable as CommitEntry: after a crash a blob holds its old or its new value, never a mix.
+//    ListBlobKeys returns keys in increasing byte order.
+//  - Errors: NOT_FOUND (unknown map, entry or blob), ALREADY_EXISTS (map name taken),
+//    INVALID_ARGUMENT (bad name, record, blob key or blob size), DATA_LOSS (undecodable or
+//    inconsistent stored data), RESOURCE_EXHAUSTED (disk full), UNAVAILABLE/INTERNAL (I/O
+//    failures).
 //
 // Thread safety: every method may be called from several threads at once. Ordering between
-// concurrent writes to the same map is the caller's business (Database serialises its adds).
+// concurrent writes to the same map or blob is the caller's business (Database serialises its
+// adds).
 #pragma once
 
+#include <cstddef>
 #include <functional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "core/common/status.h"
@@ -55,11 +63,42 @@ class IndexStore {
   // from the end are not reused after a reopen.
   virtual StatusOr<EntryId> NextEntryId(MapId map) = 0;
 
-  // Makes every committed entry durable (a no-op where every write already is).
+  // Blobs: named byte strings kept beside the maps (object model versions, ...). Keys are 1 to
+  // kMaxBlobKeyBytes arbitrary bytes, values at most kMaxBlobBytes; anything else is
+  // INVALID_ARGUMENT (ValidateBlob checks both).
+  static constexpr size_t kMaxBlobKeyBytes = 512;
+  static constexpr size_t kMaxBlobBytes = size_t(256) << 20;  // 256 MiB
+  // Stores `value` under `key`, replacing any previous value, in one atomic write.
+  virtual Status PutBlob(const std::string& key, std::string_view value) = 0;
+  // NOT_FOUND when there is no blob `key`.
+  virtual StatusOr<std::string> GetBlob(const std::string& key) = 0;
+  // NOT_FOUND when there is no blob `key`.
+  virtual Status DeleteBlob(const std::string& key) = 0;
+  // The keys that start with `prefix` (every key for ""), in increasing byte order.
+  virtual StatusOr<std::vector<std::string>> ListBlobKeys(const std::string& prefix) = 0;
+
+  // Makes every acknowledged write (entries, maps, blobs) durable (a no-op where every write
+  // already is).
   virtual Status Flush() = 0;
   // Writes a consistent copy of the whole store to `dir` (which must not exist) while the store
   // keeps serving. FAILED_PRECONDITION where the implementation has nothing on disk.
   virtual Status Checkpoint(const std::string& dir) = 0;
 };
+
+// INVALID_ARGUMENT when `key` is empty or longer than IndexStore::kMaxBlobKeyBytes, or `value`
+// is longer than IndexStore::kMaxBlobBytes; for the implementations of the blob methods.
+inline Status ValidateBlob(const std::string& key, std::string_view value = {}) {
+  if (key.empty() || key.size() > IndexStore::kMaxBlobKeyBytes) {
+    return Status::InvalidArgument("blob keys must have 1 to " +
+                                   std::to_string(IndexStore::kMaxBlobKeyBytes) + " bytes, not " +
+                                   std::to_string(key.size()));
+  }
+  if (value.size() > IndexStore::kMaxBlobBytes) {
+    return Status::InvalidArgument("blob '" + key + "' has " + std::to_string(value.size()) +
+                                   " bytes; at most " + std::to_string(IndexStore::kMaxBlobBytes) +
+                                   " are allowed");
+  }
+  return Status::Ok();
+}
 
 }  // namespace recog

@@ -118,6 +118,39 @@ StatusOr<EntryId> MemoryIndexStore::NextEntryId(MapId map) {
   return stored->next_id;
 }
 
+Status MemoryIndexStore::PutBlob(const std::string& key, std::string_view value) {
+  RECOG_RETURN_IF_ERROR(ValidateBlob(key, value));
+  std::string copy(value);  // allocated, and the old value freed, outside the lock
+  std::lock_guard lock(mutex_);
+  blobs_[key].swap(copy);
+  return Status::Ok();
+}
+
+StatusOr<std::string> MemoryIndexStore::GetBlob(const std::string& key) {
+  RECOG_RETURN_IF_ERROR(ValidateBlob(key));
+  std::lock_guard lock(mutex_);
+  auto it = blobs_.find(key);
+  if (it == blobs_.end()) return Status::NotFound("blob '" + key + "' does not exist");
+  return it->second;
+}
+
+Status MemoryIndexStore::DeleteBlob(const std::string& key) {
+  RECOG_RETURN_IF_ERROR(ValidateBlob(key));
+  std::lock_guard lock(mutex_);
+  if (blobs_.erase(key) == 0) return Status::NotFound("blob '" + key + "' does not exist");
+  return Status::Ok();
+}
+
+StatusOr<std::vector<std::string>> MemoryIndexStore::ListBlobKeys(const std::string& prefix) {
+  std::lock_guard lock(mutex_);
+  std::vector<std::string> keys;
+  for (auto it = blobs_.lower_bound(prefix);
+       it != blobs_.end() && it->first.compare(0, prefix.size(), prefix) == 0; ++it) {
+    keys.push_back(it->first);
+  }
+  return keys;
+}
+
 Status MemoryIndexStore::Checkpoint(const std::string&) {
   return Status::FailedPrecondition("an in-memory store has nothing to checkpoint");
 }

@@ -22,6 +22,10 @@ class MemoryIndexStore : public IndexStore {
   Status ScanEntries(MapId map, uint32_t parts,
                      const std::function<Status(EntryRecord&)>& visit) override;
   StatusOr<EntryId> NextEntryId(MapId map) override;
+  Status PutBlob(const std::string& key, std::string_view value) override;
+  StatusOr<std::string> GetBlob(const std::string& key) override;
+  Status DeleteBlob(const std::string& key) override;
+  StatusOr<std::vector<std::string>> ListBlobKeys(const std::string& prefix) override;
   Status Flush() override { return Status::Ok(); }
   Status Checkpoint(const std::string& dir) override;
 
@@ -35,6 +39,7 @@ class MemoryIndexStore : public IndexStore {
 
   std::mutex mutex_;
   std::map<std::string, StoredMap> maps_;
+  std::map<std::string, std::string> blobs_;  // key -> value, in byte order of the keys
   MapId next_map_id_ = 1;
 };
 

@@ -1,5 +1,6 @@
 #include "core/object/model_file.h"
 
+#include "core/common/byte_codec.h"
 #include "core/common/file_io.h"
 
 #include <bit>
@@ -49,101 +50,40 @@ std::string TagName(uint32_t tag) {
   return "'" + name + "'";
 }
 
-class Writer {
+// The shared encoding plus transforms and sections written in place (the size is patched in
+// once the payload is complete).
+class Writer : public ByteWriter {
  public:
-  template <class T>
-  void Put(T value) {
-    static_assert(std::is_trivially_copyable_v<T>);
-    char bytes[sizeof(T)];
-    std::memcpy(bytes, &value, sizeof(T));
-    out_.append(bytes, sizeof(T));
-  }
-  void PutBytes(const void* data, size_t size) {
-    out_.append(static_cast<const char*>(data), size);
-  }
-  void PutString(const std::string& s) {
-    Put<uint32_t>(uint32_t(s.size()));
-    PutBytes(s.data(), s.size());
-  }
   void PutTransform(const RigidTransform& transform) {
     for (int i = 0; i < 9; ++i) Put<double>(transform.R.val[i]);
     for (int i = 0; i < 3; ++i) Put<double>(transform.t[i]);
   }
-
-  // Sections are written in place: the size is patched in once the payload is complete.
   void BeginSection(uint32_t tag) {
     Put<uint32_t>(tag);
-    section_size_at_ = out_.size();
+    section_size_at_ = bytes().size();
     Put<uint64_t>(0);
     ++num_sections_;
   }
   void EndSection() {
-    const uint64_t size = out_.size() - section_size_at_ - sizeof(uint64_t);
-    std::memcpy(out_.data() + section_size_at_, &size, sizeof(size));
+    const uint64_t size = bytes().size() - section_size_at_ - sizeof(uint64_t);
+    std::memcpy(bytes().data() + section_size_at_, &size, sizeof(size));
   }
-
   uint32_t num_sections() const { return num_sections_; }
-  std::string& bytes() { return out_; }
 
  private:
-  std::string out_;
   size_t section_size_at_ = 0;
   uint32_t num_sections_ = 0;
 };
 
-// Reads values from a byte string, never past its end. Failure is sticky: once a read does not
-// fit, it and every later read yield zeros / empty values and ok() turns false, so a parser can
-// run to its end, allocating nothing the bytes do not justify, and check once.
-class Reader {
+class Reader : public ByteReader {
  public:
-  explicit Reader(std::string_view bytes) : bytes_(bytes) {}
-
-  bool ok() const { return ok_; }
-  size_t left() const { return bytes_.size() - pos_; }
-
-  template <class T>
-  T Get() {
-    static_assert(std::is_trivially_copyable_v<T>);
-    T value{};
-    if (const char* p = Take(sizeof(T))) std::memcpy(&value, p, sizeof(T));
-    return value;
-  }
-  // Points at the next n bytes (nullptr, and the reader fails, when fewer are left).
-  const char* Take(uint64_t n) {
-    if (!ok_ || left() < n) {
-      ok_ = false;
-      return nullptr;
-    }
-    const char* p = bytes_.data() + pos_;
-    pos_ += n;
-    return p;
-  }
-  std::string_view GetBytes(uint64_t n) {
-    const char* p = Take(n);
-    return p == nullptr ? std::string_view() : std::string_view(p, n);
-  }
-  std::string GetString() { return std::string(GetBytes(Get<uint32_t>())); }
-  // A u32 count of items of at least item_bytes each; fails (returning 0) when that many items
-  // cannot fit in what is left.
-  uint32_t GetCount(size_t item_bytes) {
-    const uint32_t count = Get<uint32_t>();
-    if (count > left() / item_bytes) {
-      ok_ = false;
-      return 0;
-    }
-    return count;
-  }
+  using ByteReader::ByteReader;
   RigidTransform GetTransform() {
     RigidTransform transform;
     for (int i = 0; i < 9; ++i) transform.R.val[i] = Get<double>();
     for (int i = 0; i < 3; ++i) transform.t[i] = Get<double>();
     return transform;
   }
-
- private:
-  std::string_view bytes_;
-  size_t pos_ = 0;
-  bool ok_ = true;
 };
 
 void WriteSections(const ObjectModel& model, Writer* w) {

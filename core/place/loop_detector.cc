@@ -11,6 +11,14 @@ double MsSince(Clock::time_point start) {
   return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
 }
 
+// Candidates close in id (eq. 4.2): H is the sum of their eta, `best` the one with the highest.
+struct Island {
+  EntryId first = 0, last = 0;
+  double score = 0;  // H
+  EntryId best = 0;
+  double best_eta = 0, best_score = 0;
+};
+
 }  // namespace
 
 std::string_view LoopStatusName(LoopStatus status) {
@@ -95,24 +103,87 @@ EntryId LoopDetector::QueryBound(double timestamp) const {
   return entry_ids_[size_t(it - entry_timestamps_.begin())];
 }
 
+Status LoopDetector::Convert(const FeatureSet& features, BowVector* bow,
+                             FeatureVector* direct) const {
+  const MapConfig& map = database_->info().config;
+  return database_->vocabulary().Transform(features.descriptors, bow, direct,
+                                           int(map.direct_index_levels_up),
+                                           TraitsOf(map.scoring).normalization);
+}
+
+bool LoopDetector::FindBestIsland(const std::vector<QueryResult>& results, double reference,
+                                  LoopResult* result) const {
+  struct Candidate {
+    EntryId id;
+    double eta, score;
+  };
+  std::vector<Candidate> candidates;
+  for (const QueryResult& r : results) {
+    const double eta = r.score / reference;
+    if (eta >= params_.alpha) candidates.push_back({r.id, eta, r.score});
+  }
+  if (results.empty()) {
+    result->status = LoopStatus::kNoCandidates;
+    return false;
+  }
+  if (candidates.empty()) {
+    result->status = LoopStatus::kLowScore;
+    return false;
+  }
+  std::sort(candidates.begin(), candidates.end(),
+            [](const Candidate& a, const Candidate& b) { return a.id < b.id; });
+  std::vector<Island> islands;
+  size_t island_size = 0;
+  for (size_t i = 0; i < candidates.size(); ++i) {
+    const Candidate& c = candidates[i];
+    if (i == 0 || c.id - islands.back().last > params_.island_max_gap) {
+      if (i > 0 && island_size < params_.island_min_size) islands.pop_back();
+      islands.push_back({c.id, c.id, 0.0, c.id, 0.0, 0.0});
+      island_size = 0;
+    }
+    Island& island = islands.back();
+    island.last = c.id;
+    island.score += c.eta;
+    if (c.eta > island.best_eta) {
+      island.best_eta = c.eta;
+      island.best_score = c.score;
+      island.best = c.id;
+    }
+    ++island_size;
+  }
+  if (island_size < params_.island_min_size) islands.pop_back();
+  if (islands.empty()) {
+    result->status = LoopStatus::kNoConsistentIsland;
+    return false;
+  }
+  // Best island by H; on a tie, the older one.
+  const Island& best =
+      *std::max_element(islands.begin(), islands.end(),
+                        [](const Island& a, const Island& b) { return a.score < b.score; });
+  result->island_first = best.first;
+  result->island_last = best.last;
+  result->island_score = best.score;
+  result->match = best.best;
+  result->normalized_score = best.best_eta;
+  result->score = best.best_score;
+  return true;
+}
+
 StatusOr<LoopResult> LoopDetector::Process(const FeatureSet& features, double timestamp) {
   LoopResult result;
   const uint64_t frame = frames_seen_++;
-  const MapConfig& map = database_->info().config;
 
   auto start = Clock::now();
   BowVector bow;
   FeatureVector direct;
-  RECOG_RETURN_IF_ERROR(database_->vocabulary().Transform(features.descriptors, &bow, &direct,
-                                                          int(map.direct_index_levels_up),
-                                                          TraitsOf(map.scoring).normalization));
+  RECOG_RETURN_IF_ERROR(Convert(features, &bow, &direct));
   result.timings.conversion = MsSince(start);
 
-  const bool enough_features = features.size() >= params_.min_features;
+  const bool enough_features = HasEnoughFeatures(features);
   if (!enough_features) {
     result.status = LoopStatus::kTooFewFeatures;
   } else if (previous_bow_.has_value()) {
-    result.previous_score = Score(map.scoring, bow, *previous_bow_);
+    result.previous_score = Score(database_->info().config.scoring, bow, *previous_bow_);
     if (result.previous_score < params_.min_score_with_previous) {
       result.status = LoopStatus::kLowScoreWithPrevious;
     }
@@ -129,95 +200,94 @@ StatusOr<LoopResult> LoopDetector::Process(const FeatureSet& features, double ti
     result.timings.query = MsSince(start);
 
     start = Clock::now();
-    // Normalised scores, then islands of entries close in id.
-    const std::vector<QueryResult>& kept = query_results_;
-    std::vector<std::pair<EntryId, std::pair<double, double>>> candidates;  // id -> (eta, score)
-    for (const QueryResult& r : kept) {
-      const double eta = r.score / result.previous_score;
-      if (eta >= params_.alpha) candidates.push_back({r.id, {eta, r.score}});
-    }
-    if (kept.empty()) {
-      result.status = LoopStatus::kNoCandidates;
-    } else if (candidates.empty()) {
-      result.status = LoopStatus::kLowScore;
-    } else {
-      std::sort(candidates.begin(), candidates.end());
-      std::vector<Island> islands;
-      size_t island_size = 0;
-      for (size_t i = 0; i < candidates.size(); ++i) {
-        const auto& [id, scores] = candidates[i];
-        if (i == 0 || id - islands.back().last > params_.island_max_gap) {
-          if (i > 0 && island_size < params_.island_min_size) islands.pop_back();
-          islands.push_back({id, id, 0.0, id, 0.0, 0.0});
-          island_size = 0;
-        }
-        Island& island = islands.back();
-        island.last = id;
-        island.score += scores.first;
-        if (scores.first > island.best_eta) {
-          island.best_eta = scores.first;
-          island.best_score = scores.second;
-          island.best = id;
-        }
-        ++island_size;
+    if (FindBestIsland(query_results_, result.previous_score, &result)) {
+      // Temporal consistency with the previous query's island.
+      uint32_t consistent = 0;
+      if (previous_match_.has_value() &&
+          frame - previous_match_->frame <= params_.consistency_max_query_gap) {
+        const PreviousMatch& p = *previous_match_;
+        const bool close =
+            result.island_first <= uint64_t(p.last) + params_.consistency_max_island_gap &&
+            p.first <= uint64_t(result.island_last) + params_.consistency_max_island_gap;
+        if (close) consistent = p.consistent + 1;
       }
-      if (island_size < params_.island_min_size) islands.pop_back();
-      if (islands.empty()) {
-        result.status = LoopStatus::kNoConsistentIsland;
-      } else {
-        // Best island by H; on a tie, the older one.
-        const Island& best =
-            *std::max_element(islands.begin(), islands.end(),
-                              [](const Island& a, const Island& b) { return a.score < b.score; });
-        result.island_first = best.first;
-        result.island_last = best.last;
-        result.island_score = best.score;
-        result.match = best.best;
-        result.normalized_score = best.best_eta;
-        result.score = best.best_score;
-
-        // Temporal consistency with the previous query's island.
-        uint32_t consistent = 0;
-        if (previous_match_.has_value() &&
-            frame - previous_match_->frame <= params_.consistency_max_query_gap) {
-          const PreviousMatch& p = *previous_match_;
-          const bool close = best.first <= uint64_t(p.last) + params_.consistency_max_island_gap &&
-                             p.first <= uint64_t(best.last) + params_.consistency_max_island_gap;
-          if (close) consistent = p.consistent + 1;
-        }
-        previous_match_ = PreviousMatch{frame, best.first, best.last, consistent};
-        result.consistent_queries = consistent;
-        result.status = consistent >= params_.temporal_matches
-                            ? LoopStatus::kLoopDetected
-                            : LoopStatus::kFailedTemporalConsistency;
-      }
+      previous_match_ = PreviousMatch{frame, result.island_first, result.island_last, consistent};
+      result.consistent_queries = consistent;
+      result.status = consistent >= params_.temporal_matches
+                          ? LoopStatus::kLoopDetected
+                          : LoopStatus::kFailedTemporalConsistency;
     }
     result.timings.islands = MsSince(start);
 
-    if (result.status == LoopStatus::kLoopDetected && params_.geometry != GeometryCheck::kNone) {
-      start = Clock::now();
+    if (result.status == LoopStatus::kLoopDetected) {
       RECOG_RETURN_IF_ERROR(Verify(features, direct, &result));
-      result.timings.verification = MsSince(start);
     }
   }
-  if (enough_features) previous_bow_ = bow;
 
   start = Clock::now();
-  EntryMetadata metadata;
-  metadata.timestamp = timestamp;
-  RECOG_ASSIGN_OR_RETURN(result.entry,
-                         database_->AddConverted(bow, direct, features, std::move(metadata)));
-  if (timestamp > 0.0) {
-    entry_timestamps_.push_back(
-        entry_timestamps_.empty() ? timestamp : std::max(timestamp, entry_timestamps_.back()));
-    entry_ids_.push_back(result.entry);
-  }
+  RECOG_ASSIGN_OR_RETURN(result.entry, Insert(features, bow, direct, timestamp));
   result.timings.insertion = MsSince(start);
   return result;
 }
 
+StatusOr<EntryId> LoopDetector::Add(const FeatureSet& features, double timestamp) {
+  ++frames_seen_;
+  BowVector bow;
+  FeatureVector direct;
+  RECOG_RETURN_IF_ERROR(Convert(features, &bow, &direct));
+  return Insert(features, bow, direct, timestamp);
+}
+
+StatusOr<LoopResult> LoopDetector::Query(const FeatureSet& features, double /*timestamp*/) const {
+  LoopResult result;
+
+  auto start = Clock::now();
+  BowVector bow;
+  FeatureVector direct;
+  RECOG_RETURN_IF_ERROR(Convert(features, &bow, &direct));
+  result.timings.conversion = MsSince(start);
+  if (!HasEnoughFeatures(features)) {
+    result.status = LoopStatus::kTooFewFeatures;
+    return result;
+  }
+
+  start = Clock::now();
+  std::vector<QueryResult> results;  // not query_results_: Process may be using it
+  // The whole map, without tau_c: entry_ids_/entry_timestamps_ belong to Process and Add.
+  RECOG_RETURN_IF_ERROR(database_->Query(
+      bow, {.max_results = params_.max_query_results, .max_entry_id = kInvalidEntryId}, &results));
+  result.timings.query = MsSince(start);
+
+  start = Clock::now();
+  // The results come best first: the first score is the reference for eta.
+  const double best_score = results.empty() ? 0.0 : results.front().score;
+  const bool found = FindBestIsland(results, best_score, &result);
+  if (found) result.status = LoopStatus::kLoopDetected;
+  result.timings.islands = MsSince(start);
+
+  if (found) RECOG_RETURN_IF_ERROR(Verify(features, direct, &result));
+  return result;
+}
+
+StatusOr<EntryId> LoopDetector::Insert(const FeatureSet& features, const BowVector& bow,
+                                       const FeatureVector& direct, double timestamp) {
+  if (HasEnoughFeatures(features)) previous_bow_ = bow;
+  EntryMetadata metadata;
+  metadata.timestamp = timestamp;
+  RECOG_ASSIGN_OR_RETURN(const EntryId id,
+                         database_->AddConverted(bow, direct, features, std::move(metadata)));
+  if (timestamp > 0.0) {
+    entry_timestamps_.push_back(
+        entry_timestamps_.empty() ? timestamp : std::max(timestamp, entry_timestamps_.back()));
+    entry_ids_.push_back(id);
+  }
+  return id;
+}
+
 Status LoopDetector::Verify(const FeatureSet& features, const FeatureVector& direct,
-                            LoopResult* result) {
+                            LoopResult* result) const {
+  if (params_.geometry == GeometryCheck::kNone) return Status::Ok();
+  const auto start = Clock::now();
   RECOG_ASSIGN_OR_RETURN(EntryRecord candidate,
                          database_->Get(result->match, kEntryDirect | kEntryFeatures));
   std::vector<Match> matches;
@@ -234,6 +304,7 @@ Status LoopDetector::Verify(const FeatureSet& features, const FeatureVector& dir
   result->fundamental = epipolar.fundamental;
   result->inliers = std::move(epipolar.inliers);
   if (!epipolar.verified) result->status = LoopStatus::kFailedGeometry;
+  result->timings.verification = MsSince(start);
   return Status::Ok();
 }
 

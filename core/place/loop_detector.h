@@ -1,6 +1,8 @@
-// LoopDetector: real-time loop-closure detection over an image sequence (thesis chapter 4).
+// LoopDetector: real-time loop-closure detection over an image sequence (thesis chapter 4), plus
+// the two operations a map server needs beside it: adding frames without querying, and one-off
+// relocalisation queries.
 //
-// For every frame, in order:
+// Process() handles the next frame of the sequence, in order:
 //  1. its bag of words and direct-index entry are computed with the map's vocabulary;
 //  2. the map's database is queried, leaving out the recent entries (tau_c, in frames or seconds);
 //  3. scores are normalised by the score with the previous usable frame, eta = s(v_t, w) /
@@ -16,13 +18,26 @@
 //  7. the frame is added to the database.
 // Every frame gets a LoopResult whose status says why there is, or is not, a loop.
 //
+// Add() is step 7 alone (a robot uploading its keyframes): the frame joins the sequence exactly
+// as a processed frame would — it gets the next entry id, becomes the previous usable frame when
+// it has enough features, and its timestamp counts for tau_c — but nothing is queried.
+//
+// Query() asks "where am I in this map?" for one frame, without adding it or changing the
+// detector: steps 1, 2, 4 and 6 against every entry of the map (no tau_c), with the scores
+// normalised by the best candidate's score instead of the previous frame's (there is none), and
+// no temporal consistency (a single query cannot be consistent with anything).
+//
 // The previous usable frame is the most recent one with enough features: a blank frame (a wall,
 // a covered lens) neither gets queried nor breaks the normalisation of the frames after it.
 //
 // Defaults are thesis Table 4.4 where it gives one (k = 3, alpha = 0.3, direct index level 2,
 // 12 RANSAC inliers, minimum score 0.005 with the previous frame, tau_c = 20 s); the others are
 // documented on each field. One detector per map; independent detectors may run at once.
-// A detector is not thread-safe: feed it from one thread.
+//
+// Thread safety: Process and Add change the detector and must be called from one thread at a
+// time (per detector, i.e. per map). Query reads nothing they change — only the parameters and
+// the database, which is thread-safe — so any number of threads may Query at once, concurrently
+// with the thread that Processes or Adds.
 #pragma once
 
 #include <cstdint>
@@ -83,11 +98,11 @@ struct LoopTimings {  // milliseconds spent in each stage for one frame
 
 struct LoopResult {
   LoopStatus status = LoopStatus::kNoCandidates;
-  EntryId entry = kInvalidEntryId;  // id this frame got in the database
+  EntryId entry = kInvalidEntryId;  // id this frame got in the database (none for Query)
   EntryId match = kInvalidEntryId;  // the candidate (or verified loop) entry, when there is one
   double score = 0;                 // s(v_t, w_match)
   double normalized_score = 0;      // eta of the match
-  double previous_score = 0;        // s(v_t, v_t-1)
+  double previous_score = 0;        // s(v_t, v_t-1) (0 for Query)
   EntryId island_first = kInvalidEntryId, island_last = kInvalidEntryId;
   double island_score = 0;          // H, the sum of eta over the island
   uint32_t consistent_queries = 0;  // previous queries the island is consistent with
@@ -108,15 +123,31 @@ class LoopDetector {
   // failing store; "no loop" is a result.
   StatusOr<LoopResult> Process(const FeatureSet& features, double timestamp = 0.0);
 
+  // Adds the next frame of the sequence (timestamp in seconds, 0 when unknown) to the database
+  // without querying, and returns its entry id. The detector's state moves on as Process would
+  // move it for a frame that is not queried: the frame counts in the sequence (and so in the gap
+  // between queries for temporal consistency), is the previous usable frame when it has enough
+  // features, and its timestamp bounds tau_c. The same errors as Process.
+  StatusOr<EntryId> Add(const FeatureSet& features, double timestamp = 0.0);
+
+  // Looks for the place of a single frame in the map, without adding the frame or changing the
+  // detector (relocalisation). Every entry the map holds when the query runs is a candidate:
+  // tau_c, which keeps a sequence from matching its own recent past, does not apply, so
+  // `timestamp` (accepted for symmetry with Process) changes nothing. As there is no previous
+  // frame, each candidate's score is normalised by the best candidate's, eta = s / s_best, so
+  // alpha still keeps the candidates within a fraction of a reference score; candidates are
+  // grouped into islands as by Process, and the best entry of the best island is verified with
+  // the geometry check of the parameters. The status is kLoopDetected when the place is
+  // recognised, else kTooFewFeatures, kNoCandidates, kLowScore (only when alpha > 1 or every
+  // score is 0, as the best candidate's eta is 1), kNoConsistentIsland or kFailedGeometry. `entry`
+  // stays kInvalidEntryId, `previous_score` and `consistent_queries` 0, and the insertion time 0.
+  // Errors are only for bad input or a failing store. Safe to call from any number of threads,
+  // concurrently with Process and Add.
+  StatusOr<LoopResult> Query(const FeatureSet& features, double timestamp = 0.0) const;
+
   const LoopDetectorParams& params() const { return params_; }
 
  private:
-  struct Island {
-    EntryId first = 0, last = 0;
-    double score = 0;  // H
-    EntryId best = 0;
-    double best_eta = 0, best_score = 0;
-  };
   struct PreviousMatch {
     uint64_t frame = 0;  // index of the query frame in this detector's sequence
     EntryId first = 0, last = 0;
@@ -125,8 +156,27 @@ class LoopDetector {
 
   LoopDetector(Database* database, const LoopDetectorParams& params)
       : database_(database), params_(params) {}
+  bool HasEnoughFeatures(const FeatureSet& features) const {
+    return features.size() >= params_.min_features;
+  }
+  // Step 1: the frame's bag of words and direct-index entry, as the map wants them.
+  Status Convert(const FeatureSet& features, BowVector* bow, FeatureVector* direct) const;
+  // The first entry id too recent to be a candidate for a frame at `timestamp` (tau_c).
   EntryId QueryBound(double timestamp) const;
-  Status Verify(const FeatureSet& features, const FeatureVector& direct, LoopResult* result);
+  // Steps 3 and 4: normalises the scores of `results` by `reference` (eta = s / reference), keeps
+  // those reaching alpha, groups them into islands and fills the match, score, eta and island of
+  // `result` with the best island by H. False, with the status that says why, when no island is
+  // left.
+  bool FindBestIsland(const std::vector<QueryResult>& results, double reference,
+                      LoopResult* result) const;
+  // Step 6: verifies `result->match` with the geometry check of the parameters (nothing for
+  // kNone), filling correspondences, inliers, fundamental matrix and verification time; the
+  // status becomes kFailedGeometry when the check fails.
+  Status Verify(const FeatureSet& features, const FeatureVector& direct, LoopResult* result) const;
+  // Step 7: adds the converted frame to the database and moves the detector's state on (the
+  // previous usable frame, the timestamps for tau_c). Returns the frame's entry id.
+  StatusOr<EntryId> Insert(const FeatureSet& features, const BowVector& bow,
+                           const FeatureVector& direct, double timestamp);
 
   Database* database_;
   LoopDetectorParams params_;
@@ -135,7 +185,7 @@ class LoopDetector {
   std::optional<PreviousMatch> previous_match_;
   std::vector<double> entry_timestamps_;  // of the entries this detector added, by id order
   std::vector<EntryId> entry_ids_;
-  std::vector<QueryResult> query_results_;  // reused
+  std::vector<QueryResult> query_results_;  // reused by Process (Query uses its own)
 };
 
 }  // namespace recog

@@ -1,6 +1,7 @@
 #include "core/place/loop_detector.h"
 
 #include <set>
+#include <string>
 #include <thread>
 
 #include <gtest/gtest.h>
@@ -84,6 +85,32 @@ class LoopDetectorTest : public ::testing::Test {
       results.push_back(std::move(r).value());
     }
     return results;
+  }
+
+  static std::vector<FeatureSet> Extract(const std::vector<cv::Mat>& frames) {
+    auto extractor = CreateFeatureExtractor(FeatureOptions{});
+    std::vector<FeatureSet> features(frames.size());
+    for (size_t i = 0; i < frames.size(); ++i) {
+      EXPECT_TRUE((*extractor)->Extract(frames[i], &features[i]).ok());
+    }
+    return features;
+  }
+
+  // Every field but the timings.
+  static void ExpectSameResult(const LoopResult& a, const LoopResult& b, const std::string& where) {
+    EXPECT_EQ(a.status, b.status) << where;
+    EXPECT_EQ(a.entry, b.entry) << where;
+    EXPECT_EQ(a.match, b.match) << where;
+    EXPECT_EQ(a.score, b.score) << where;
+    EXPECT_EQ(a.normalized_score, b.normalized_score) << where;
+    EXPECT_EQ(a.previous_score, b.previous_score) << where;
+    EXPECT_EQ(a.island_first, b.island_first) << where;
+    EXPECT_EQ(a.island_last, b.island_last) << where;
+    EXPECT_EQ(a.island_score, b.island_score) << where;
+    EXPECT_EQ(a.consistent_queries, b.consistent_queries) << where;
+    EXPECT_EQ(a.correspondences, b.correspondences) << where;
+    EXPECT_EQ(a.inliers, b.inliers) << where;
+    EXPECT_EQ(a.fundamental, b.fundamental) << where;
   }
 
   // Places 0 1 2 3, then places 0 1 again: 4 frames a visit.
@@ -281,6 +308,232 @@ TEST_F(LoopDetectorTest, BadParametersAndBadInputAreErrors) {
   wrong.keypoints.resize(10);
   EXPECT_EQ(detector->Process(wrong).status().code(), StatusCode::kInvalidArgument);
   EXPECT_EQ(db_->size(), 0u) << "a refused frame is not added";
+}
+
+TEST_F(LoopDetectorTest, AddedFramesContinueTheSequenceAsProcessedFramesWould) {
+  // With timestamps, so that tau_c depends on the timestamps of the added entries.
+  const std::vector<FeatureSet> tour = Extract(TourWithRevisits());
+  LoopDetectorParams params = params_;
+  params.recent_seconds = 4.5;  // the 4 frames before, as recent_frames
+  auto processed = LoopDetector::Create(db_.get(), params);
+  MemoryIndexStore store;
+  auto db = Database::Create(&store, "added", *vocabulary_);
+  ASSERT_TRUE(processed.ok() && db.ok());
+  auto added = LoopDetector::Create(db->get(), params);
+  ASSERT_TRUE(added.ok());
+  std::vector<LoopResult> expected;
+  for (size_t i = 0; i < tour.size(); ++i) {
+    auto r = processed->Process(tour[i], 10.0 + double(i));
+    ASSERT_TRUE(r.ok()) << r.status().ToString();
+    expected.push_back(std::move(r).value());
+  }
+  // The last frames of the first visits found no island, so the revisits do not depend on how
+  // the first visits were fed: an island that far back is not consistent with anything.
+  for (size_t i = 16 - params.consistency_max_query_gap; i < 16; ++i) {
+    ASSERT_EQ(expected[i].island_first, kInvalidEntryId) << i;
+  }
+
+  for (size_t i = 0; i < 16; ++i) {
+    auto id = added->Add(tour[i], 10.0 + double(i));
+    ASSERT_TRUE(id.ok()) << id.status().ToString();
+    EXPECT_EQ(*id, EntryId(i));
+  }
+  EXPECT_EQ((*db)->size(), 16u);
+  int detections = 0;
+  for (size_t i = 16; i < tour.size(); ++i) {
+    auto r = added->Process(tour[i], 10.0 + double(i));
+    ASSERT_TRUE(r.ok()) << r.status().ToString();
+    ExpectSameResult(*r, expected[i], "frame " + std::to_string(i));
+    detections += r->status == LoopStatus::kLoopDetected;
+  }
+  EXPECT_GE(detections, 4);
+  // The first processed frame is normalised with the last added one.
+  EXPECT_GT(expected[16].previous_score, params.min_score_with_previous);
+}
+
+TEST_F(LoopDetectorTest, AddedFramesCountInTheGapBetweenConsistentQueries) {
+  const std::vector<FeatureSet> tour = Extract(TourWithRevisits());
+  const std::vector<LoopResult> processed = Run(TourWithRevisits(), params_);
+  ASSERT_NE(processed[16].island_first, kInvalidEntryId);
+  ASSERT_GE(processed[19].consistent_queries, 1u);
+
+  MemoryIndexStore store;
+  auto db = Database::Create(&store, "gap", *vocabulary_);
+  ASSERT_TRUE(db.ok());
+  auto detector = LoopDetector::Create(db->get(), params_);
+  ASSERT_TRUE(detector.ok());
+  for (size_t i = 0; i < 17; ++i) ASSERT_TRUE(detector->Process(tour[i]).ok());
+  // Frames 17 and 18 are added: frame 19 is 3 frames after the last query, more than
+  // consistency_max_query_gap, so its island starts a new count.
+  for (size_t i = 17; i < 19; ++i) EXPECT_EQ(detector->Add(tour[i]).value(), EntryId(i));
+  auto r = detector->Process(tour[19]);
+  ASSERT_TRUE(r.ok());
+  EXPECT_EQ(r->entry, 19u);
+  EXPECT_EQ(r->match, processed[19].match);
+  EXPECT_EQ(r->consistent_queries, 0u);
+  EXPECT_EQ(r->status, LoopStatus::kFailedTemporalConsistency);
+  // Normalised with the added frame 18, as the processed frame 19 was with the processed one.
+  EXPECT_EQ(r->previous_score, processed[19].previous_score);
+}
+
+TEST_F(LoopDetectorTest, QueryRecognisesAnAddedPlaceAndChangesNothing) {
+  const std::vector<FeatureSet> tour = Extract(TourWithRevisits());
+  auto queried = LoopDetector::Create(db_.get(), params_);
+  MemoryIndexStore store;
+  auto db = Database::Create(&store, "untouched", *vocabulary_);
+  ASSERT_TRUE(queried.ok() && db.ok());
+  auto untouched = LoopDetector::Create(db->get(), params_);
+  ASSERT_TRUE(untouched.ok());
+  for (size_t i = 0; i < 16; ++i) {  // the first visits of places 0 1 2 3
+    ASSERT_TRUE(queried->Add(tour[i]).ok());
+    ASSERT_TRUE(untouched->Add(tour[i]).ok());
+  }
+
+  // Every revisit frame (places 0 then 1) is recognised at once, without any temporal
+  // consistency, and nothing is added.
+  for (size_t i = 16; i < tour.size(); ++i) {
+    auto r = queried->Query(tour[i]);
+    ASSERT_TRUE(r.ok()) << r.status().ToString();
+    const EntryId first_visit = i < 20 ? 0 : 4;
+    EXPECT_EQ(r->status, LoopStatus::kLoopDetected) << i << " " << LoopStatusName(r->status);
+    EXPECT_GE(r->match, first_visit) << i;
+    EXPECT_LT(r->match, first_visit + 4) << i;
+    EXPECT_GE(r->inliers.size(), 12u) << i;
+    EXPECT_GE(r->correspondences, r->inliers.size()) << i;
+    EXPECT_EQ(r->entry, kInvalidEntryId);
+    EXPECT_EQ(r->consistent_queries, 0u);
+    EXPECT_EQ(r->previous_score, 0.0);
+    EXPECT_GT(r->score, 0.0);
+    EXPECT_LE(r->normalized_score, 1.0);
+    EXPECT_GE(r->normalized_score, params_.alpha);
+    EXPECT_LE(r->island_first, r->match);
+    EXPECT_GE(r->island_last, r->match);
+    EXPECT_GE(r->island_score, r->normalized_score);
+    EXPECT_EQ(r->timings.insertion, 0.0);
+  }
+  EXPECT_EQ(db_->size(), 16u);
+  EXPECT_EQ(db_->next_entry_id(), 16u);
+
+  // A detector that answered queries between its frames processes them as one that did not.
+  for (size_t i = 16; i < tour.size(); ++i) {
+    ASSERT_TRUE(queried->Query(tour[i]).ok());
+    auto a = queried->Process(tour[i]);
+    auto b = untouched->Process(tour[i]);
+    ASSERT_TRUE(a.ok() && b.ok());
+    ExpectSameResult(*a, *b, "frame " + std::to_string(i));
+  }
+}
+
+TEST_F(LoopDetectorTest, QueryOnAnEmptyMapHasNoCandidates) {
+  const auto detector = LoopDetector::Create(db_.get(), params_);
+  ASSERT_TRUE(detector.ok());
+  auto r = detector->Query(Extract({Places()[0]})[0]);
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  EXPECT_EQ(r->status, LoopStatus::kNoCandidates);
+  EXPECT_EQ(r->match, kInvalidEntryId);
+  EXPECT_EQ(db_->size(), 0u);
+}
+
+TEST_F(LoopDetectorTest, QueryWithTooFewFeaturesIsNotAnswered) {
+  auto detector = LoopDetector::Create(db_.get(), params_);
+  ASSERT_TRUE(detector.ok());
+  const std::vector<FeatureSet> place = Extract(Visit(Places()[0], 2));
+  ASSERT_TRUE(detector->Add(place[0]).ok());
+  // The other view of the same place, cut down to fewer features than min_features.
+  FeatureSet few;
+  few.keypoints.assign(place[1].keypoints.begin(),
+                       place[1].keypoints.begin() + params_.min_features - 1);
+  few.descriptors = place[1].descriptors.rowRange(0, int(params_.min_features) - 1).clone();
+  auto r = detector->Query(few);
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  EXPECT_EQ(r->status, LoopStatus::kTooFewFeatures);
+  EXPECT_EQ(r->match, kInvalidEntryId);
+  r = detector->Query(Extract({cv::Mat(384, 256, CV_8U, cv::Scalar(128))})[0]);  // blank
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  EXPECT_EQ(r->status, LoopStatus::kTooFewFeatures);
+}
+
+TEST_F(LoopDetectorTest, AddAndQueryRefuseDescriptorsOfAnotherFormat) {
+  auto detector = LoopDetector::Create(db_.get(), params_);
+  ASSERT_TRUE(detector.ok());
+  FeatureSet wrong;
+  wrong.descriptors = cv::Mat(30, 64, CV_8U, cv::Scalar(0));
+  wrong.keypoints.resize(30);
+  EXPECT_EQ(detector->Query(wrong).status().code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(detector->Add(wrong).status().code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(db_->size(), 0u) << "a refused frame is not added";
+}
+
+TEST_F(LoopDetectorTest, QueriesFromTwoThreadsWhileAnotherProcessesGiveTheirSerialResults) {
+  const std::vector<cv::Mat> places = Places();
+  std::vector<cv::Mat> map_frames, query_frames, processed_frames;
+  for (int p : {0, 1}) {
+    for (const cv::Mat& v : Visit(places[size_t(p)], 4)) map_frames.push_back(v);
+    for (const cv::Mat& v : Visit(places[size_t(p)], 3, 2)) query_frames.push_back(v);
+  }
+  for (int p : {2, 3}) {
+    for (const cv::Mat& v : Visit(places[size_t(p)], 4)) processed_frames.push_back(v);
+  }
+  const std::vector<FeatureSet> map = Extract(map_frames);
+  const std::vector<FeatureSet> queries = Extract(query_frames);
+  const std::vector<FeatureSet> processed = Extract(processed_frames);
+
+  auto detector = LoopDetector::Create(db_.get(), params_);
+  MemoryIndexStore serial_store;
+  auto serial_db = Database::Create(&serial_store, "serial", *vocabulary_);
+  ASSERT_TRUE(detector.ok() && serial_db.ok());
+  auto serial = LoopDetector::Create(serial_db->get(), params_);
+  ASSERT_TRUE(serial.ok());
+  for (const FeatureSet& f : map) {
+    ASSERT_TRUE(detector->Add(f).ok());
+    ASSERT_TRUE(serial->Add(f).ok());
+  }
+  std::vector<LoopResult> expected_queries;
+  for (size_t i = 0; i < queries.size(); ++i) {
+    expected_queries.push_back(detector->Query(queries[i]).value());
+    const EntryId first_visit = i < 3 ? 0 : 4;
+    EXPECT_EQ(expected_queries[i].status, LoopStatus::kLoopDetected) << i;
+    EXPECT_GE(expected_queries[i].match, first_visit) << i;
+    EXPECT_LT(expected_queries[i].match, first_visit + 4) << i;
+  }
+  std::vector<LoopResult> expected_processed;
+  for (const FeatureSet& f : processed) expected_processed.push_back(serial->Process(f).value());
+
+  constexpr int kRounds = 3;
+  std::vector<LoopResult> processed_results;
+  std::vector<std::vector<LoopResult>> query_results(2);
+  std::thread writer([&] {
+    for (const FeatureSet& f : processed) processed_results.push_back(detector->Process(f).value());
+  });
+  std::vector<std::thread> readers;
+  for (std::vector<LoopResult>& results : query_results) {
+    readers.emplace_back([&] {
+      for (int round = 0; round < kRounds; ++round) {
+        for (const FeatureSet& f : queries) results.push_back(detector->Query(f).value());
+      }
+    });
+  }
+  writer.join();
+  for (std::thread& t : readers) t.join();
+
+  // The processed frames are of other places: they change none of the queries, whichever of them
+  // a query saw.
+  for (size_t i = 0; i < queries.size(); ++i) {
+    ExpectSameResult(detector->Query(queries[i]).value(), expected_queries[i],
+                     "query " + std::to_string(i) + " after processing");
+  }
+  for (size_t t = 0; t < query_results.size(); ++t) {
+    ASSERT_EQ(query_results[t].size(), kRounds * queries.size());
+    for (size_t i = 0; i < query_results[t].size(); ++i) {
+      ExpectSameResult(query_results[t][i], expected_queries[i % queries.size()],
+                       "thread " + std::to_string(t) + " query " + std::to_string(i));
+    }
+  }
+  ASSERT_EQ(processed_results.size(), expected_processed.size());
+  for (size_t i = 0; i < processed_results.size(); ++i) {
+    ExpectSameResult(processed_results[i], expected_processed[i], "frame " + std::to_string(i));
+  }
+  EXPECT_EQ(db_->size(), map.size() + processed.size());
 }
 
 TEST(LoopStatusTest, NamesAreDistinctAndGeometryNamesParse) {

@@ -3,6 +3,7 @@
 #include <array>
 #include <cctype>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <memory>
@@ -155,6 +156,18 @@ StatusOr<Vocabulary> LoadAnyVocabulary(const std::string& path) {
       return ImportDbow2Yaml(path);
   }
   return Status::Internal("unhandled vocabulary format");
+}
+
+std::string BundledVocabularyPath(const std::string& file_name) {
+  if (const char* env = std::getenv("RECOG_VOCABULARY_DIR"); env != nullptr && *env != '\0') {
+    return std::string(env) + "/" + file_name;
+  }
+  return std::string(RECOG_DEFAULT_VOCABULARY_DIR) + "/" + file_name;
+}
+
+std::string DefaultPlaceVocabularyPath() { return BundledVocabularyPath("place_orb_k10_l5.rvoc"); }
+std::string DefaultObjectVocabularyPath() {
+  return BundledVocabularyPath("object_orb_t12_k10_l4.rvoc");
 }
 
 }  // namespace recog

@@ -68,17 +68,6 @@ StatusOr<std::vector<std::string>> ListImages(const std::string& dir) {
   return files;
 }
 
-std::string BundledVocabularyPath(const std::string& file_name) {
-  if (const char* env = std::getenv("RECOG_VOCABULARY_DIR"); env != nullptr && *env != '\0') {
-    return (fs::path(env) / file_name).string();
-  }
-  return (fs::path(RECOG_DEFAULT_VOCABULARY_DIR) / file_name).string();
-}
-
-std::string DefaultPlaceVocabularyPath() { return BundledVocabularyPath("place_orb_k10_l5.rvoc"); }
-std::string DefaultObjectVocabularyPath() {
-  return BundledVocabularyPath("object_orb_t12_k10_l4.rvoc");
-}
 std::string DemoImageDir() { return RECOG_DEMO_DATA_DIR; }
 
 double PeakRssMiB() {

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "core/common/status.h"
+#include "core/vocabulary/vocabulary_io.h"  // BundledVocabularyPath and the defaults
 
 namespace recog::cli {
 
@@ -20,11 +21,6 @@ bool NaturalLess(std::string_view a, std::string_view b);
 // not a folder or holds no image.
 StatusOr<std::vector<std::string>> ListImages(const std::string& dir);
 
-// Path of a bundled vocabulary (e.g. "place_orb_k10_l5.rvoc"): $RECOG_VOCABULARY_DIR when set,
-// otherwise the project's vocabularies/ folder.
-std::string BundledVocabularyPath(const std::string& file_name);
-std::string DefaultPlaceVocabularyPath();
-std::string DefaultObjectVocabularyPath();
 // Folder of the demo images shipped with the project (corridor frames 1, 20, 41, 60).
 std::string DemoImageDir();
 

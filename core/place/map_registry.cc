@@ -1,0 +1,162 @@
+#include "core/place/map_registry.h"
+
+#include <cstdio>
+#include <cstdlib>
+#include <sstream>
+
+namespace recog {
+namespace {
+
+constexpr char kSettingsPrefix[] = "place-settings/";
+
+std::string SettingsKey(const std::string& name) { return kSettingsPrefix + name; }
+
+}  // namespace
+
+std::string EncodePlaceSettings(const LoopDetectorParams& p) {
+  char buffer[512];
+  std::snprintf(buffer, sizeof(buffer),
+                "version 1\nalpha %.17g\ntemporal_matches %u\nmin_inliers %zu\nrecent_seconds "
+                "%.17g\nrecent_frames %u\ngeometry %s\n",
+                p.alpha, p.temporal_matches, p.epipolar.min_inliers, p.recent_seconds,
+                p.recent_frames, std::string(GeometryCheckName(p.geometry)).c_str());
+  return buffer;
+}
+
+StatusOr<LoopDetectorParams> DecodePlaceSettings(std::string_view text) {
+  LoopDetectorParams p;
+  std::istringstream in{std::string(text)};
+  std::string key, value;
+  bool versioned = false;
+  while (in >> key >> value) {
+    char* end = nullptr;
+    const double number = std::strtod(value.c_str(), &end);
+    const bool numeric = end != value.c_str() && *end == '\0';
+    if (key == "version") {
+      if (!numeric || number != 1) {
+        return Status::FailedPrecondition("place settings of an unknown version " + value);
+      }
+      versioned = true;
+    } else if (key == "geometry") {
+      StatusOr<GeometryCheck> geometry = ParseGeometryCheck(value);
+      if (!geometry.ok()) return Status::DataLoss("place settings: " + geometry.status().message());
+      p.geometry = geometry.value();
+    } else if (!numeric) {
+      return Status::DataLoss("place settings: '" + key + "' has a non-numeric value");
+    } else if (key == "alpha") {
+      p.alpha = number;
+    } else if (key == "temporal_matches") {
+      p.temporal_matches = uint32_t(number);
+    } else if (key == "min_inliers") {
+      p.epipolar.min_inliers = size_t(number);
+    } else if (key == "recent_seconds") {
+      p.recent_seconds = number;
+    } else if (key == "recent_frames") {
+      p.recent_frames = uint32_t(number);
+    }  // unknown keys: written by a newer minor version, ignored
+  }
+  if (!versioned) return Status::DataLoss("place settings without a version line");
+  const Status valid = p.Validate();
+  if (!valid.ok()) return Status::DataLoss("place settings: " + valid.message());
+  return p;
+}
+
+StatusOr<std::unique_ptr<MapRegistry>> MapRegistry::Open(
+    IndexStore* store, std::shared_ptr<const Vocabulary> vocabulary,
+    const std::function<void(size_t, size_t)>& progress) {
+  std::unique_ptr<MapRegistry> registry(new MapRegistry(store, std::move(vocabulary)));
+  RECOG_ASSIGN_OR_RETURN(std::vector<std::string> keys, store->ListBlobKeys(kSettingsPrefix));
+  size_t done = 0;
+  for (const std::string& key : keys) {
+    const std::string name = key.substr(sizeof(kSettingsPrefix) - 1);
+    RECOG_ASSIGN_OR_RETURN(std::string text, store->GetBlob(key));
+    StatusOr<LoopDetectorParams> params = DecodePlaceSettings(text);
+    if (!params.ok()) {
+      return Status(params.status().code(), "map '" + name + "': " + params.status().message());
+    }
+    StatusOr<std::shared_ptr<PlaceMap>> map = registry->Load(name, params.value());
+    if (map.status().code() == StatusCode::kNotFound) {
+      // Settings left behind by a deletion that was interrupted: finish it.
+      RECOG_RETURN_IF_ERROR(store->DeleteBlob(key));
+    } else if (!map.ok()) {
+      return Status(map.status().code(), "map '" + name + "': " + map.status().message());
+    } else {
+      registry->maps_.emplace(name, std::move(map).value());
+    }
+    if (progress) progress(++done, keys.size());
+  }
+  return registry;
+}
+
+StatusOr<std::shared_ptr<PlaceMap>> MapRegistry::Load(const std::string& name,
+                                                      const LoopDetectorParams& params) {
+  auto map = std::make_shared<PlaceMap>();
+  map->name = name;
+  map->params = params;
+  RECOG_ASSIGN_OR_RETURN(map->database, Database::Open(store_, name, vocabulary_));
+  StatusOr<LoopDetector> detector = LoopDetector::Create(map->database.get(), params);
+  if (!detector.ok()) return detector.status();
+  map->detector = std::make_unique<LoopDetector>(std::move(detector).value());
+  return map;
+}
+
+StatusOr<std::shared_ptr<PlaceMap>> MapRegistry::Create(const std::string& name,
+                                                        const LoopDetectorParams& params) {
+  RECOG_RETURN_IF_ERROR(params.Validate());
+  std::lock_guard write(write_mutex_);
+  {
+    std::shared_lock read(maps_mutex_);
+    if (maps_.count(name) > 0) {
+      return Status::AlreadyExists("map '" + name + "' already exists");
+    }
+  }
+  // Settings first, then the map: a crash in between leaves settings without a map, which Open
+  // drops (the other order would leave a map that Open does not list but whose name is taken).
+  RECOG_RETURN_IF_ERROR(store_->PutBlob(SettingsKey(name), EncodePlaceSettings(params)));
+  StatusOr<std::unique_ptr<Database>> created = Database::Create(store_, name, vocabulary_);
+  if (!created.ok()) {
+    if (created.status().code() != StatusCode::kAlreadyExists) {
+      (void)store_->DeleteBlob(SettingsKey(name));  // best effort; Open would drop it too
+    }
+    return created.status();
+  }
+  RECOG_ASSIGN_OR_RETURN(std::shared_ptr<PlaceMap> map, Load(name, params));
+  std::unique_lock lock(maps_mutex_);
+  maps_[name] = map;
+  return map;
+}
+
+StatusOr<std::shared_ptr<PlaceMap>> MapRegistry::Get(const std::string& name) const {
+  std::shared_lock lock(maps_mutex_);
+  const auto it = maps_.find(name);
+  if (it == maps_.end()) return Status::NotFound("no map named '" + name + "'");
+  return it->second;
+}
+
+std::vector<std::shared_ptr<PlaceMap>> MapRegistry::List() const {
+  std::shared_lock lock(maps_mutex_);
+  std::vector<std::shared_ptr<PlaceMap>> out;
+  out.reserve(maps_.size());
+  for (const auto& [name, map] : maps_) out.push_back(map);
+  return out;
+}
+
+StatusOr<size_t> MapRegistry::Delete(const std::string& name) {
+  std::lock_guard write(write_mutex_);
+  RECOG_ASSIGN_OR_RETURN(std::shared_ptr<PlaceMap> map, Get(name));
+  size_t frames = 0;
+  {
+    std::lock_guard lock(map->mutex);  // waits for the frame being added, then stops the others
+    frames = map->database->size();
+    RECOG_RETURN_IF_ERROR(store_->DeleteMap(name));
+    map->deleted = true;
+  }
+  {
+    std::unique_lock lock(maps_mutex_);
+    maps_.erase(name);
+  }
+  RECOG_RETURN_IF_ERROR(store_->DeleteBlob(SettingsKey(name)));
+  return frames;
+}
+
+}  // namespace recog

@@ -1,0 +1,78 @@
+// MapRegistry: the place maps of one store, each with its database and its loop detector.
+//
+// A place map is one robot session's sequence of frames (a Database in the store) together with
+// the loop detector that runs on it and the detector's parameters. The registry opens every map
+// of the store at start-up (rebuilding the in-memory inverted indexes), creates and deletes maps,
+// and persists each map's parameters beside it in the store (a blob "place-settings/<name>"), so
+// that a restarted server runs every map as before. Maps other than place maps (the object map)
+// are not touched: the registry only opens maps that have settings.
+//
+// Thread safety: every method may be called from any thread. A PlaceMap's detector is guarded by
+// its `mutex`: hold it for LoopDetector::Process and Add (frames of one map are processed one at a
+// time), not for LoopDetector::Query, which may run concurrently. Deleting a map while it is in
+// use is safe: holders of the PlaceMap see `deleted` (under its mutex) and must stop writing.
+#pragma once
+
+#include <functional>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <shared_mutex>
+#include <string>
+#include <vector>
+
+#include "core/common/status.h"
+#include "core/index/database.h"
+#include "core/index/index_store.h"
+#include "core/place/loop_detector.h"
+
+namespace recog {
+
+struct PlaceMap {
+  std::string name;
+  LoopDetectorParams params;
+  std::unique_ptr<Database> database;
+  std::mutex mutex;                        // guards detector (Process/Add) and deleted
+  std::unique_ptr<LoopDetector> detector;  // never null once the map is registered
+  bool deleted = false;
+};
+
+class MapRegistry {
+ public:
+  // Opens every place map of `store` with `vocabulary` (FAILED_PRECONDITION when a map was built
+  // with another one). `progress`, when set, is called after each map with (done, total).
+  static StatusOr<std::unique_ptr<MapRegistry>> Open(
+      IndexStore* store, std::shared_ptr<const Vocabulary> vocabulary,
+      const std::function<void(size_t, size_t)>& progress = {});
+
+  // Creates an empty map. ALREADY_EXISTS when the name is taken (by any map of the store),
+  // INVALID_ARGUMENT for a bad name or parameters.
+  StatusOr<std::shared_ptr<PlaceMap>> Create(const std::string& name,
+                                             const LoopDetectorParams& params);
+  // NOT_FOUND for an unknown map.
+  StatusOr<std::shared_ptr<PlaceMap>> Get(const std::string& name) const;
+  // Every map, by name.
+  std::vector<std::shared_ptr<PlaceMap>> List() const;
+  // Deletes a map and its frames; returns how many frames it had. NOT_FOUND when unknown.
+  StatusOr<size_t> Delete(const std::string& name);
+
+  const Vocabulary& vocabulary() const { return *vocabulary_; }
+
+ private:
+  MapRegistry(IndexStore* store, std::shared_ptr<const Vocabulary> vocabulary)
+      : store_(store), vocabulary_(std::move(vocabulary)) {}
+  StatusOr<std::shared_ptr<PlaceMap>> Load(const std::string& name,
+                                           const LoopDetectorParams& params);
+
+  IndexStore* store_;
+  std::shared_ptr<const Vocabulary> vocabulary_;
+  std::mutex write_mutex_;                // serialises Create/Delete
+  mutable std::shared_mutex maps_mutex_;  // guards maps_
+  std::map<std::string, std::shared_ptr<PlaceMap>> maps_;
+};
+
+// The parameters a map's settings blob holds, as text ("key value" lines), and back.
+std::string EncodePlaceSettings(const LoopDetectorParams& params);
+StatusOr<LoopDetectorParams> DecodePlaceSettings(std::string_view text);
+
+}  // namespace recog

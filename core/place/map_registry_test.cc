@@ -1,0 +1,105 @@
+#include "core/place/map_registry.h"
+
+#include <gtest/gtest.h>
+
+#include "core/index/memory_index_store.h"
+#include "core/vocabulary/vocabulary_io.h"
+
+namespace recog {
+namespace {
+
+std::shared_ptr<const Vocabulary> PlaceVocabulary() {
+  static const std::shared_ptr<const Vocabulary> vocabulary = [] {
+    auto loaded = LoadVocabulary(DefaultPlaceVocabularyPath());
+    EXPECT_TRUE(loaded.ok()) << loaded.status().ToString();
+    return std::make_shared<const Vocabulary>(std::move(loaded).value());
+  }();
+  return vocabulary;
+}
+
+TEST(MapRegistryTest, MapsAndTheirParametersSurviveAReopen) {
+  MemoryIndexStore store;
+  {
+    auto registry = MapRegistry::Open(&store, PlaceVocabulary());
+    ASSERT_TRUE(registry.ok()) << registry.status().ToString();
+    LoopDetectorParams params;
+    params.alpha = 0.42;
+    params.temporal_matches = 1;
+    params.epipolar.min_inliers = 20;
+    params.geometry = GeometryCheck::kExhaustive;
+    params.recent_seconds = 7.5;
+    params.recent_frames = 9;
+    ASSERT_TRUE((*registry)->Create("b", params).ok());
+    ASSERT_TRUE((*registry)->Create("a", LoopDetectorParams{}).ok());
+    EXPECT_EQ((*registry)->Create("a", {}).status().code(), StatusCode::kAlreadyExists);
+    EXPECT_EQ((*registry)->Create("bad name", {}).status().code(), StatusCode::kInvalidArgument);
+    LoopDetectorParams bad;
+    bad.alpha = -1;
+    EXPECT_EQ((*registry)->Create("c", bad).status().code(), StatusCode::kInvalidArgument);
+  }
+  auto reopened = MapRegistry::Open(&store, PlaceVocabulary());
+  ASSERT_TRUE(reopened.ok()) << reopened.status().ToString();
+  const auto maps = (*reopened)->List();
+  ASSERT_EQ(maps.size(), 2u);
+  EXPECT_EQ(maps[0]->name, "a");
+  EXPECT_EQ(maps[1]->name, "b");
+  const LoopDetectorParams& p = maps[1]->params;
+  EXPECT_EQ(p.alpha, 0.42);
+  EXPECT_EQ(p.temporal_matches, 1u);
+  EXPECT_EQ(p.epipolar.min_inliers, 20u);
+  EXPECT_EQ(p.geometry, GeometryCheck::kExhaustive);
+  EXPECT_EQ(p.recent_seconds, 7.5);
+  EXPECT_EQ(p.recent_frames, 9u);
+  EXPECT_NE(maps[1]->detector, nullptr);
+}
+
+TEST(MapRegistryTest, DeletingAMapMarksItForItsHoldersAndFreesTheName) {
+  MemoryIndexStore store;
+  auto registry = MapRegistry::Open(&store, PlaceVocabulary());
+  ASSERT_TRUE(registry.ok());
+  auto map = (*registry)->Create("m", {});
+  ASSERT_TRUE(map.ok());
+  auto frames = (*registry)->Delete("m");
+  ASSERT_TRUE(frames.ok());
+  EXPECT_EQ(*frames, 0u);
+  EXPECT_TRUE((*map)->deleted);
+  EXPECT_EQ((*registry)->Get("m").status().code(), StatusCode::kNotFound);
+  EXPECT_EQ((*registry)->Delete("m").status().code(), StatusCode::kNotFound);
+  EXPECT_TRUE((*registry)->Create("m", {}).ok());
+  EXPECT_EQ(store.ListBlobKeys("place-settings/").value().size(), 1u);
+}
+
+TEST(MapRegistryTest, LeftoverSettingsAreDroppedAndDamagedOnesRefused) {
+  MemoryIndexStore store;
+  // Settings whose map was never created: a creation interrupted by a crash.
+  ASSERT_TRUE(store.PutBlob("place-settings/ghost", EncodePlaceSettings({})).ok());
+  {
+    auto registry = MapRegistry::Open(&store, PlaceVocabulary());
+    ASSERT_TRUE(registry.ok()) << registry.status().ToString();
+    EXPECT_TRUE((*registry)->List().empty());
+    EXPECT_TRUE(store.ListBlobKeys("place-settings/").value().empty());
+    ASSERT_TRUE((*registry)->Create("real", {}).ok());
+  }
+  ASSERT_TRUE(store.PutBlob("place-settings/real", "alpha 0.3\n").ok());  // no version line
+  EXPECT_EQ(MapRegistry::Open(&store, PlaceVocabulary()).status().code(), StatusCode::kDataLoss);
+  ASSERT_TRUE(store.PutBlob("place-settings/real", "version 1\nalpha banana\n").ok());
+  EXPECT_EQ(MapRegistry::Open(&store, PlaceVocabulary()).status().code(), StatusCode::kDataLoss);
+  ASSERT_TRUE(store.PutBlob("place-settings/real", "version 1\ngeometry sideways\n").ok());
+  EXPECT_EQ(MapRegistry::Open(&store, PlaceVocabulary()).status().code(), StatusCode::kDataLoss);
+  ASSERT_TRUE(store.PutBlob("place-settings/real", "version 9\n").ok());
+  EXPECT_EQ(MapRegistry::Open(&store, PlaceVocabulary()).status().code(),
+            StatusCode::kFailedPrecondition);
+}
+
+TEST(MapRegistryTest, SettingsRoundTripThroughTheirText) {
+  LoopDetectorParams p;
+  p.alpha = 0.1 + 0.2;  // not exactly representable: the text keeps every bit
+  p.geometry = GeometryCheck::kNone;
+  auto decoded = DecodePlaceSettings(EncodePlaceSettings(p));
+  ASSERT_TRUE(decoded.ok());
+  EXPECT_EQ(decoded->alpha, p.alpha);
+  EXPECT_EQ(decoded->geometry, GeometryCheck::kNone);
+}
+
+}  // namespace
+}  // namespace recog
