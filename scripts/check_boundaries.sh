@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
 # Enforces the dependency rules of ARCHITECTURE: core/ never includes gRPC or RocksDB headers
-# (nor generated protobuf code), and only storage/ includes RocksDB.
+# (nor generated protobuf code), only storage/ includes RocksDB, and in server/ only the api/
+# converters and the services (the RPC handlers) see generated protobuf types; the server's
+# infrastructure (config, auth, metrics, runtime) does not.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 status=0
@@ -10,6 +12,10 @@ if git grep -n -E '#include\s*[<"](grpcpp?/|rocksdb/|google/protobuf/)|\.pb\.h' 
 fi
 if git grep -n -E '#include\s*[<"]rocksdb/' -- ':!storage/' ':!*.md' ; then
   echo "check_boundaries: only storage/ may include RocksDB headers" >&2
+  status=1
+fi
+if git grep -n -E '\.pb\.h' -- 'server/config/' 'server/auth/' 'server/metrics/' 'server/runtime/'; then
+  echo "check_boundaries: server/config, auth, metrics and runtime must not see protobuf types" >&2
   status=1
 fi
 [ $status -eq 0 ] && echo "check_boundaries: ok"

@@ -1,10 +1,11 @@
 #!/usr/bin/env bash
 # The README's first command: installs the dependencies (Debian 12 packages), builds the
-# project in build/, and runs the main job. Extra arguments go to the main job.
+# project in build/, and runs the main job: the recognition server, recogd, on 127.0.0.1:50051
+# with its store under ./recog-data and the bundled vocabularies (Ctrl-C stops it cleanly).
+# Extra arguments go to recogd (e.g. --listen 0.0.0.0:50051, --config recogd.yaml).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/install_deps.sh
 cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE=Release
 cmake --build build -j"$(nproc)"
-# Until the server exists (see README), the main job is the offline demo.
-exec build/bin/recog demo "$@"
+exec build/bin/recogd "$@"

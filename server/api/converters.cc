@@ -1,0 +1,306 @@
+#include "server/api/converters.h"
+
+#include <chrono>
+#include <cmath>
+
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+namespace recog::server {
+namespace {
+
+bool Finite(double v) { return std::isfinite(v); }
+
+Status CheckImageSize(uint64_t width, uint64_t height, const char* field) {
+  if (width == 0 || height == 0) {
+    return Status::InvalidArgument(std::string(field) + " has zero size (" + std::to_string(width) +
+                                   "x" + std::to_string(height) + ")");
+  }
+  if (width > kMaxImageSide || height > kMaxImageSide || width * height > kMaxImagePixels) {
+    return Status::InvalidArgument(std::string(field) + " is too large (" + std::to_string(width) +
+                                   "x" + std::to_string(height) + "; at most " +
+                                   std::to_string(kMaxImageSide) + " pixels a side and 64 Mpixel)");
+  }
+  return Status::Ok();
+}
+
+StatusOr<cv::Mat> DecodeEncodedImage(const std::string& bytes) {
+  if (bytes.empty()) return Status::InvalidArgument("frame.encoded_image is empty");
+  const cv::Mat buffer(1, int(bytes.size()), CV_8UC1, const_cast<char*>(bytes.data()));
+  cv::Mat image;
+  try {
+    image = cv::imdecode(buffer, cv::IMREAD_GRAYSCALE);
+  } catch (const cv::Exception&) {
+    image.release();  // OpenCV refused it (e.g. declared dimensions over its limits)
+  }
+  if (image.empty()) {
+    return Status::InvalidArgument("frame.encoded_image is not a decodable JPEG or PNG image (" +
+                                   std::to_string(bytes.size()) + " bytes)");
+  }
+  RECOG_RETURN_IF_ERROR(
+      CheckImageSize(uint64_t(image.cols), uint64_t(image.rows), "frame.encoded_image"));
+  if (image.depth() != CV_8U) image.convertTo(image, CV_8U, 1.0 / 256.0);  // 16-bit PNG
+  return image;
+}
+
+StatusOr<cv::Mat> DecodeRawImage(const pb::RawImage& raw) {
+  RECOG_RETURN_IF_ERROR(CheckImageSize(raw.width(), raw.height(), "frame.raw_image"));
+  int channels = 0;
+  switch (raw.format()) {
+    case pb::PIXEL_FORMAT_GRAY8:
+      channels = 1;
+      break;
+    case pb::PIXEL_FORMAT_BGR8:
+      channels = 3;
+      break;
+    default:
+      return Status::InvalidArgument("frame.raw_image.format must be GRAY8 or BGR8");
+  }
+  const uint64_t expected = uint64_t(raw.width()) * raw.height() * uint64_t(channels);
+  if (raw.pixels().size() != expected) {
+    return Status::InvalidArgument(
+        "frame.raw_image.pixels has " + std::to_string(raw.pixels().size()) + " bytes; " +
+        std::to_string(raw.width()) + "x" + std::to_string(raw.height()) + "x" +
+        std::to_string(channels) + " needs " + std::to_string(expected));
+  }
+  const cv::Mat view(int(raw.height()), int(raw.width()), CV_8UC(channels),
+                     const_cast<char*>(raw.pixels().data()));
+  cv::Mat grey;
+  if (channels == 3) {
+    cv::cvtColor(view, grey, cv::COLOR_BGR2GRAY);
+  } else {
+    grey = view.clone();
+  }
+  return grey;
+}
+
+StatusOr<FeatureSet> DecodeFeatures(const pb::Features& features, const DescriptorFormat& format) {
+  if (features.descriptor_bytes() != format.size_bytes) {
+    return Status::InvalidArgument(
+        "frame.features.descriptor_bytes is " + std::to_string(features.descriptor_bytes()) +
+        "; the server's vocabulary uses " + std::to_string(format.size_bytes) + "-byte " +
+        format.ToString() + " descriptors");
+  }
+  const size_t n = size_t(features.keypoints_size());
+  if (n > kMaxClientFeatures) {
+    return Status::InvalidArgument("frame.features has " + std::to_string(n) +
+                                   " keypoints; at most " + std::to_string(kMaxClientFeatures));
+  }
+  if (features.descriptors().size() != n * format.size_bytes) {
+    return Status::InvalidArgument("frame.features.descriptors has " +
+                                   std::to_string(features.descriptors().size()) + " bytes; " +
+                                   std::to_string(n) + " keypoints need " +
+                                   std::to_string(n * format.size_bytes));
+  }
+  FeatureSet out;
+  out.keypoints.reserve(n);
+  for (size_t i = 0; i < n; ++i) {
+    const pb::Keypoint& k = features.keypoints(int(i));
+    if (!Finite(k.x()) || !Finite(k.y()) || !Finite(k.size()) || !Finite(k.angle()) ||
+        !Finite(k.response())) {
+      return Status::InvalidArgument("frame.features.keypoints[" + std::to_string(i) +
+                                     "] has a non-finite value");
+    }
+    out.keypoints.emplace_back(k.x(), k.y(), k.size(), k.angle(), k.response(), k.octave());
+  }
+  out.descriptors.create(int(n), format.cols(), format.cv_type());
+  if (n > 0)
+    std::memcpy(out.descriptors.data, features.descriptors().data(), n * format.size_bytes);
+  return out;
+}
+
+Status DecodeIntrinsics(const pb::CameraIntrinsics& in, CameraIntrinsics* out) {
+  out->fx = in.fx();
+  out->fy = in.fy();
+  out->cx = in.cx();
+  out->cy = in.cy();
+  out->distortion.assign(in.distortion().begin(), in.distortion().end());
+  const size_t d = out->distortion.size();
+  if (d != 0 && d != 4 && d != 5 && d != 8 && d != 12 && d != 14) {
+    return Status::InvalidArgument("frame.intrinsics.distortion has " + std::to_string(d) +
+                                   " values; OpenCV takes 4, 5, 8, 12 or 14");
+  }
+  const Status valid = out->Validate();
+  if (!valid.ok()) return Status::InvalidArgument("frame.intrinsics: " + valid.message());
+  return Status::Ok();
+}
+
+}  // namespace
+
+StatusOr<DecodedFrame> DecodeFrame(const pb::Frame& frame, const DescriptorFormat& format) {
+  if (frame.camera_id().size() > kMaxFrameIdBytes ||
+      frame.client_frame_id().size() > kMaxFrameIdBytes) {
+    return Status::InvalidArgument(
+        "frame.camera_id and frame.client_frame_id are at most 128 bytes");
+  }
+  if (!Finite(frame.timestamp()) || frame.timestamp() < 0) {
+    return Status::InvalidArgument("frame.timestamp must be finite and >= 0");
+  }
+  DecodedFrame out;
+  out.timestamp = frame.timestamp();
+  out.camera_id = frame.camera_id();
+  if (frame.has_intrinsics()) {
+    CameraIntrinsics intrinsics;
+    RECOG_RETURN_IF_ERROR(DecodeIntrinsics(frame.intrinsics(), &intrinsics));
+    out.intrinsics = std::move(intrinsics);
+  }
+  const auto start = std::chrono::steady_clock::now();
+  switch (frame.content_case()) {
+    case pb::Frame::kEncodedImage: {
+      RECOG_ASSIGN_OR_RETURN(out.image, DecodeEncodedImage(frame.encoded_image()));
+      break;
+    }
+    case pb::Frame::kRawImage: {
+      RECOG_ASSIGN_OR_RETURN(out.image, DecodeRawImage(frame.raw_image()));
+      break;
+    }
+    case pb::Frame::kFeatures: {
+      RECOG_ASSIGN_OR_RETURN(out.features, DecodeFeatures(frame.features(), format));
+      break;
+    }
+    case pb::Frame::CONTENT_NOT_SET:
+      return Status::InvalidArgument(
+          "the frame has no content: set encoded_image, raw_image or features");
+  }
+  out.decode_ms =
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  return out;
+}
+
+Status ApplyMapSettings(const pb::MapSettings& settings, LoopDetectorParams* params) {
+  if (settings.has_alpha()) params->alpha = settings.alpha();
+  if (settings.has_temporal_matches()) params->temporal_matches = settings.temporal_matches();
+  if (settings.has_min_inliers()) params->epipolar.min_inliers = settings.min_inliers();
+  if (settings.has_recent_seconds()) params->recent_seconds = settings.recent_seconds();
+  if (settings.has_recent_frames()) params->recent_frames = settings.recent_frames();
+  if (settings.has_geometry()) {
+    switch (settings.geometry()) {
+      case pb::GEOMETRY_CHECK_UNSPECIFIED:
+        break;
+      case pb::GEOMETRY_CHECK_DIRECT_INDEX:
+        params->geometry = GeometryCheck::kDirectIndex;
+        break;
+      case pb::GEOMETRY_CHECK_EXHAUSTIVE:
+        params->geometry = GeometryCheck::kExhaustive;
+        break;
+      case pb::GEOMETRY_CHECK_NONE:
+        params->geometry = GeometryCheck::kNone;
+        break;
+      default:
+        return Status::InvalidArgument("settings.geometry has an unknown value " +
+                                       std::to_string(int(settings.geometry())));
+    }
+  }
+  if (settings.has_min_inliers() && settings.min_inliers() > 100000) {
+    return Status::InvalidArgument("settings.min_inliers is too large");
+  }
+  const Status valid = params->Validate();
+  if (!valid.ok()) return Status::InvalidArgument("settings: " + valid.message());
+  return Status::Ok();
+}
+
+void ToProto(const LoopDetectorParams& params, pb::MapSettings* out) {
+  out->set_alpha(params.alpha);
+  out->set_temporal_matches(params.temporal_matches);
+  out->set_min_inliers(uint32_t(params.epipolar.min_inliers));
+  out->set_recent_seconds(params.recent_seconds);
+  out->set_recent_frames(params.recent_frames);
+  switch (params.geometry) {
+    case GeometryCheck::kDirectIndex:
+      out->set_geometry(pb::GEOMETRY_CHECK_DIRECT_INDEX);
+      break;
+    case GeometryCheck::kExhaustive:
+      out->set_geometry(pb::GEOMETRY_CHECK_EXHAUSTIVE);
+      break;
+    case GeometryCheck::kNone:
+      out->set_geometry(pb::GEOMETRY_CHECK_NONE);
+      break;
+  }
+}
+
+pb::LoopStatus ToProto(LoopStatus status) {
+  switch (status) {
+    case LoopStatus::kLoopDetected:
+      return pb::LOOP_STATUS_LOOP_DETECTED;
+    case LoopStatus::kTooFewFeatures:
+      return pb::LOOP_STATUS_TOO_FEW_FEATURES;
+    case LoopStatus::kLowScoreWithPrevious:
+      return pb::LOOP_STATUS_LOW_SCORE_WITH_PREVIOUS;
+    case LoopStatus::kNoCandidates:
+      return pb::LOOP_STATUS_NO_CANDIDATES;
+    case LoopStatus::kLowScore:
+      return pb::LOOP_STATUS_LOW_SCORE;
+    case LoopStatus::kNoConsistentIsland:
+      return pb::LOOP_STATUS_NO_CONSISTENT_ISLAND;
+    case LoopStatus::kFailedTemporalConsistency:
+      return pb::LOOP_STATUS_FAILED_TEMPORAL_CONSISTENCY;
+    case LoopStatus::kFailedGeometry:
+      return pb::LOOP_STATUS_FAILED_GEOMETRY;
+  }
+  return pb::LOOP_STATUS_UNSPECIFIED;
+}
+
+void ToProto(const LoopResult& result, pb::LoopResult* out) {
+  out->set_status(ToProto(result.status));
+  if (result.entry != kInvalidEntryId) out->set_frame_id(result.entry);
+  if (result.match != kInvalidEntryId) out->set_match_frame_id(result.match);
+  out->set_score(result.score);
+  out->set_normalized_score(result.normalized_score);
+  out->set_previous_score(result.previous_score);
+  if (result.island_first != kInvalidEntryId) {
+    out->set_island_first(result.island_first);
+    out->set_island_last(result.island_last);
+  }
+  out->set_island_score(result.island_score);
+  out->set_consistent_queries(result.consistent_queries);
+  out->set_correspondences(result.correspondences);
+  out->set_inliers(uint32_t(result.inliers.size()));
+}
+
+void ToProto(const cv::Matx33d& R, const cv::Vec3d& t, pb::Pose* out) {
+  out->clear_rotation();
+  out->clear_translation();
+  for (int i = 0; i < 9; ++i) out->add_rotation(R.val[i]);
+  for (int i = 0; i < 3; ++i) out->add_translation(t[i]);
+}
+
+pb::ObjectType ToProto(ObjectType type) {
+  return type == ObjectType::kPlanar ? pb::OBJECT_TYPE_PLANAR : pb::OBJECT_TYPE_3D;
+}
+
+void ToProto(const Detection& detection, const ObjectMetadata& object, pb::DetectedObject* out) {
+  out->set_name(detection.name);
+  out->set_version(detection.version);
+  out->set_object_class(object.object_class);
+  out->set_type(ToProto(detection.type));
+  ToProto(detection.camera_from_object.R, detection.camera_from_object.t, out->mutable_pose());
+  out->set_units(object.units);
+  out->set_inliers(uint32_t(detection.inliers));
+  out->set_correspondences(uint32_t(detection.correspondences));
+  out->set_reprojection_error_px(detection.reprojection_error_px);
+  out->set_score(detection.score);
+  for (const cv::Point2f& p : detection.outline) {
+    pb::Point2* q = out->add_outline();
+    q->set_x(p.x);
+    q->set_y(p.y);
+  }
+}
+
+void ToProto(const ModelVersionInfo& info, pb::ModelInfo* out) {
+  const ObjectMetadata& m = info.metadata;
+  out->set_name(m.name);
+  out->set_version(m.version);
+  out->set_object_class(m.object_class);
+  out->set_type(ToProto(m.type));
+  for (int i = 0; i < 3; ++i) out->add_dimensions(m.dimensions[i]);
+  out->set_units(m.units);
+  out->set_source(m.source);
+  for (const std::string& tag : info.tags) out->add_tags(tag);
+  out->set_sha256(info.sha256);
+  out->set_size_bytes(info.size_bytes);
+  out->set_created_unix_ms(info.created_unix_ms);
+  out->set_num_points(info.num_points);
+  out->set_num_descriptors(info.num_descriptors);
+}
+
+}  // namespace recog::server

@@ -1,0 +1,64 @@
+// Converters between the wire messages of recognition.v1 and core's types.
+//
+// These are the only server files that see both the generated *.pb.h and core types. Every
+// function that reads a client message validates it completely and returns INVALID_ARGUMENT
+// naming the field for anything core could not use (undecodable image, zero size, wrong
+// descriptor length, bad intrinsics, non-finite numbers), so that core only ever sees good data.
+#pragma once
+
+#include <optional>
+#include <string>
+
+#include <opencv2/core.hpp>
+
+#include "core/common/status.h"
+#include "core/features/feature_extractor.h"
+#include "core/object/model_repository.h"
+#include "core/object/object_recognizer.h"
+#include "core/place/loop_detector.h"
+#include "recognition/v1/object.pb.h"
+#include "recognition/v1/place.pb.h"
+#include "recognition/v1/repository.pb.h"
+
+namespace recog::server {
+
+namespace pb = ::recognition::v1;
+
+// Limits on what a frame may hold (beyond gRPC's message size).
+inline constexpr uint32_t kMaxImageSide = 16384;          // pixels, width or height
+inline constexpr uint64_t kMaxImagePixels = 64ull << 20;  // 64 Mpixel
+inline constexpr uint32_t kMaxClientFeatures = 100000;
+inline constexpr size_t kMaxFrameIdBytes = 128;  // camera_id and client_frame_id
+
+// A frame as the algorithms want it: an 8-bit grey image, or the client's features.
+struct DecodedFrame {
+  cv::Mat image;        // CV_8UC1; empty when the client sent features
+  FeatureSet features;  // the client's features (when image is empty)
+  std::optional<CameraIntrinsics> intrinsics;
+  double timestamp = 0;  // seconds, 0 = unknown
+  std::string camera_id;
+  double decode_ms = 0;  // time spent decoding the image
+  bool has_image() const { return !image.empty(); }
+};
+
+// Decodes and validates a frame. Client features must have `format`'s descriptor length.
+// INVALID_ARGUMENT (naming the field) for anything unusable, including a frame without content.
+StatusOr<DecodedFrame> DecodeFrame(const pb::Frame& frame, const DescriptorFormat& format);
+
+// Map settings. ApplyMapSettings overwrites the fields `settings` sets and validates the result.
+Status ApplyMapSettings(const pb::MapSettings& settings, LoopDetectorParams* params);
+void ToProto(const LoopDetectorParams& params, pb::MapSettings* out);
+
+pb::LoopStatus ToProto(LoopStatus status);
+// The loop result without the match's timestamp/camera id and the optional matrices (the caller
+// adds them: they need the map's stored frames).
+void ToProto(const LoopResult& result, pb::LoopResult* out);
+void ToProto(const cv::Matx33d& R, const cv::Vec3d& t, pb::Pose* out);
+
+// One detection; `object` supplies class and units.
+void ToProto(const Detection& detection, const ObjectMetadata& object, pb::DetectedObject* out);
+pb::ObjectType ToProto(ObjectType type);
+
+void ToProto(const ModelVersionInfo& info, pb::ModelInfo* out);
+
+}  // namespace recog::server

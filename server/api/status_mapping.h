@@ -1,0 +1,34 @@
+// The one place where core statuses become gRPC statuses.
+//
+// Every code of core's Status maps to the canonical gRPC code of the same name, except DATA_LOSS
+// (corrupt stored data): the client gets INTERNAL with a sanitised message, and the details go to
+// the server log with the request id. An INTERNAL status is sanitised the same way.
+#pragma once
+
+#include <string_view>
+
+#include <grpcpp/support/status.h>
+
+#include "core/common/status.h"
+
+namespace recog::server {
+
+// The gRPC code for a core status code.
+grpc::StatusCode ToGrpcCode(StatusCode code);
+
+// The gRPC status for a core status; `request_id` goes into the log line of sanitised errors.
+grpc::Status ToGrpcStatus(const Status& status, std::string_view request_id = {});
+
+// Name of a gRPC code as in the gRPC documentation ("INVALID_ARGUMENT"), for logs and metrics.
+std::string_view GrpcCodeName(grpc::StatusCode code);
+
+}  // namespace recog::server
+
+// In a handler returning grpc::Status: returns the gRPC form of `expr` when it is not OK.
+#define RECOG_RETURN_IF_ERROR_AS_GRPC(expr, request_id)                  \
+  do {                                                                   \
+    const ::recog::Status recog_status_ = (expr);                        \
+    if (!recog_status_.ok()) {                                           \
+      return ::recog::server::ToGrpcStatus(recog_status_, (request_id)); \
+    }                                                                    \
+  } while (false)

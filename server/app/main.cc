@@ -1,0 +1,43 @@
+// recogd: the recognition server. `recogd --help` lists the flags; server/README.md explains the
+// configuration, security and operations.
+#include <csignal>
+#include <cstdio>
+
+#include <spdlog/spdlog.h>
+
+#include "server/app/recognition_server.h"
+
+int main(int argc, char** argv) {
+  using recog::server::RecognitionServer;
+  auto command_line = recog::server::ParseCommandLine(argc, argv);
+  if (!command_line.ok()) {
+    std::fprintf(stderr, "recogd: %s\n", command_line.status().ToString().c_str());
+    return 1;
+  }
+  if (!command_line.value().help.empty()) {
+    std::fputs(command_line.value().help.c_str(), stdout);
+    return 0;
+  }
+  const recog::server::ServerConfig& config = command_line.value().config;
+  spdlog::set_level(spdlog::level::from_str(config.log_level));
+  spdlog::set_pattern("%Y-%m-%dT%H:%M:%S.%e%z %^%l%$ %v");
+
+  // SIGTERM and SIGINT are taken by this thread with sigwait; every thread started from here on
+  // (gRPC's, the workers) inherits the blocked mask.
+  sigset_t signals;
+  sigemptyset(&signals);
+  sigaddset(&signals, SIGTERM);
+  sigaddset(&signals, SIGINT);
+  pthread_sigmask(SIG_BLOCK, &signals, nullptr);
+
+  auto server = RecognitionServer::Start(config);
+  if (!server.ok()) {
+    spdlog::error("recogd: {}", server.status().ToString());
+    return 1;
+  }
+  int signal = 0;
+  sigwait(&signals, &signal);
+  spdlog::info("recogd: {} received, shutting down", signal == SIGTERM ? "SIGTERM" : "SIGINT");
+  server.value()->Shutdown(std::chrono::milliseconds(config.shutdown_grace_ms));
+  return 0;
+}

@@ -1,0 +1,177 @@
+#include "server/app/recognition_server.h"
+
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include <grpcpp/ext/proto_server_reflection_plugin.h>
+#include <grpcpp/health_check_service_interface.h>
+#include <spdlog/spdlog.h>
+
+#include "core/vocabulary/vocabulary_io.h"
+#include "server/runtime/sha256.h"
+#include "server/services/object_service.h"
+#include "server/services/place_service.h"
+#include "server/services/repository_service.h"
+#include "server/services/server_state.h"
+#include "storage/rocksdb_index_store.h"
+
+namespace recog::server {
+namespace {
+
+StatusOr<std::string> ReadPem(const std::string& path, const char* what) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return Status::NotFound(std::string(what) + " '" + path + "' cannot be read");
+  std::ostringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
+StatusOr<std::shared_ptr<grpc::ServerCredentials>> Credentials(const TlsConfig& tls) {
+  if (tls.cert.empty()) return grpc::InsecureServerCredentials();
+  RECOG_ASSIGN_OR_RETURN(std::string cert, ReadPem(tls.cert, "TLS certificate"));
+  RECOG_ASSIGN_OR_RETURN(std::string key, ReadPem(tls.key, "TLS key"));
+  grpc::SslServerCredentialsOptions options(
+      tls.client_ca.empty() ? GRPC_SSL_DONT_REQUEST_CLIENT_CERTIFICATE
+                            : GRPC_SSL_REQUEST_AND_REQUIRE_CLIENT_CERTIFICATE_AND_VERIFY);
+  if (!tls.client_ca.empty()) {
+    RECOG_ASSIGN_OR_RETURN(options.pem_root_certs, ReadPem(tls.client_ca, "client CA"));
+  }
+  options.pem_key_cert_pairs.push_back({std::move(key), std::move(cert)});
+  return grpc::SslServerCredentials(options);
+}
+
+StatusOr<std::shared_ptr<const Vocabulary>> OpenVocabulary(const std::string& configured,
+                                                           const std::string& bundled) {
+  const std::string path = configured.empty() ? bundled : configured;
+  RECOG_ASSIGN_OR_RETURN(Vocabulary vocabulary, LoadVocabulary(path));
+  spdlog::info("vocabulary {}: {} words", path, vocabulary.num_words());
+  return std::make_shared<const Vocabulary>(std::move(vocabulary));
+}
+
+}  // namespace
+
+RecognitionServer::RecognitionServer() = default;
+
+RecognitionServer::~RecognitionServer() { Shutdown(std::chrono::milliseconds(0)); }
+
+int RecognitionServer::metrics_port() const { return state_->metrics.HttpPort(); }
+
+StatusOr<std::unique_ptr<RecognitionServer>> RecognitionServer::Start(const ServerConfig& config) {
+  RECOG_RETURN_IF_ERROR(config.Validate());
+  StatusOr<TokenAuthenticator> auth = config.token_file.empty()
+                                          ? TokenAuthenticator::AllowAll()
+                                          : TokenAuthenticator::Load(config.token_file);
+  if (!auth.ok()) return auth.status();
+  RECOG_ASSIGN_OR_RETURN(std::shared_ptr<grpc::ServerCredentials> credentials,
+                         Credentials(config.tls));
+
+  std::unique_ptr<RecognitionServer> server(new RecognitionServer());
+  server->state_ = std::make_unique<ServerState>(config, std::move(auth).value());
+  ServerState& state = *server->state_;
+  state.pool = std::make_unique<WorkerPool>(config.WorkerCount(), config.queue_capacity);
+  if (!config.metrics_listen.empty()) {
+    RECOG_RETURN_IF_ERROR(state.metrics.StartHttp(config.metrics_listen));
+  }
+  server->place_service_ = std::make_unique<PlaceService>(&state);
+  server->object_service_ = std::make_unique<ObjectService>(&state);
+  server->repository_service_ = std::make_unique<RepositoryService>(&state);
+
+  grpc::EnableDefaultHealthCheckService(true);
+  grpc::reflection::InitProtoReflectionServerBuilderPlugin();
+  grpc::ServerBuilder builder;
+  builder.AddListeningPort(config.listen, credentials, &server->port_);
+  builder.SetMaxReceiveMessageSize(int(config.max_message_bytes));
+  builder.SetMaxSendMessageSize(int(config.max_message_bytes));
+  builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_TIME_MS, int(config.keepalive.time_ms));
+  builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_TIMEOUT_MS, int(config.keepalive.timeout_ms));
+  builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_PERMIT_WITHOUT_CALLS,
+                             config.keepalive.permit_without_calls ? 1 : 0);
+  builder.AddChannelArgument(GRPC_ARG_HTTP2_MIN_RECV_PING_INTERVAL_WITHOUT_DATA_MS,
+                             int(config.keepalive.min_ping_interval_ms));
+  builder.AddChannelArgument(GRPC_ARG_HTTP2_MAX_PING_STRIKES, 2);
+  builder.RegisterService(server->place_service_.get());
+  builder.RegisterService(server->object_service_.get());
+  builder.RegisterService(server->repository_service_.get());
+  server->server_ = builder.BuildAndStart();
+  if (server->server_ == nullptr || server->port_ == 0) {
+    server->server_.reset();
+    return Status::Unavailable("cannot listen on " + config.listen +
+                               " (address in use, or not an address of this machine)");
+  }
+  server->server_->GetHealthCheckService()->SetServingStatus(false);
+  spdlog::info("recogd listening on port {} ({}), opening {}", server->port_,
+               config.tls.cert.empty() ? "plaintext" : "TLS", config.data_dir);
+  RECOG_RETURN_IF_ERROR(server->Open());
+  server->server_->GetHealthCheckService()->SetServingStatus(true);
+  spdlog::info("recogd ready: {} place maps, {} objects, {} workers, metrics on {}",
+               state.maps->List().size(), state.objects->size(), state.pool->threads(),
+               config.metrics_listen.empty() ? "(off)" : config.metrics_listen);
+  return server;
+}
+
+Status RecognitionServer::Open() {
+  ServerState& state = *state_;
+  const ServerConfig& config = state.config;
+  std::error_code error;
+  std::filesystem::create_directories(config.data_dir, error);
+  if (error) {
+    return Status::FailedPrecondition("cannot create the data directory '" + config.data_dir +
+                                      "': " + error.message());
+  }
+  RocksDbStoreOptions store_options;
+  store_options.sync =
+      config.store.sync == StoreSync::kEveryWrite ? SyncPolicy::kEveryWrite : SyncPolicy::kGrouped;
+  store_options.group_sync_interval_ms = config.store.group_sync_interval_ms;
+  store_options.block_cache_mb = size_t(config.store.block_cache_mb);
+  RECOG_ASSIGN_OR_RETURN(state.store,
+                         OpenRocksDbIndexStore(config.data_dir + "/store", store_options));
+
+  RECOG_ASSIGN_OR_RETURN(std::shared_ptr<const Vocabulary> place_vocabulary,
+                         OpenVocabulary(config.place_vocabulary, DefaultPlaceVocabularyPath()));
+  RECOG_ASSIGN_OR_RETURN(std::shared_ptr<const Vocabulary> object_vocabulary,
+                         OpenVocabulary(config.object_vocabulary, DefaultObjectVocabularyPath()));
+  RECOG_ASSIGN_OR_RETURN(
+      state.maps,
+      MapRegistry::Open(state.store.get(), place_vocabulary, [](size_t done, size_t total) {
+        spdlog::info("opened place map {}/{}", done, total);
+      }));
+  RECOG_ASSIGN_OR_RETURN(std::unique_ptr<ObjectDatabase> objects,
+                         ObjectDatabase::Open(state.store.get(), object_vocabulary));
+  state.objects = std::move(objects);
+  RECOG_ASSIGN_OR_RETURN(state.repository,
+                         ModelRepository::Open(state.store.get(), state.objects, Sha256Hex));
+  for (const std::shared_ptr<PlaceMap>& map : state.maps->List()) {
+    state.metrics.SetMapEntries(map->name, map->database->size());
+  }
+  state.metrics.SetObjects(state.objects->size());
+  state.ready = true;
+  return Status::Ok();
+}
+
+void RecognitionServer::Shutdown(std::chrono::milliseconds grace) {
+  std::call_once(shutdown_once_, [&] {
+    if (state_ == nullptr) return;
+    ServerState& state = *state_;
+    state.draining = true;
+    if (server_ != nullptr) {
+      spdlog::info("recogd draining (up to {} ms)", grace.count());
+      server_->GetHealthCheckService()->SetServingStatus(false);
+      repository_service_->CloseWatchers();
+      server_->Shutdown(std::chrono::system_clock::now() + grace);
+    }
+    if (state.pool != nullptr) state.pool->Stop();
+    if (state.store != nullptr) {
+      const Status flushed = state.store->Flush();
+      if (!flushed.ok()) spdlog::error("flushing the store failed: {}", flushed.ToString());
+    }
+    // Close in dependency order: the repository and databases write through the store.
+    state.repository.reset();
+    state.objects.reset();
+    state.maps.reset();
+    state.store.reset();
+    if (server_ != nullptr) spdlog::info("recogd stopped");
+  });
+}
+
+}  // namespace recog::server

@@ -1,0 +1,63 @@
+// RecognitionServer: recogd assembled — the gRPC server, its services and the store behind them.
+//
+// Start() begins listening at once, with the health service reporting NOT_SERVING and every RPC
+// answering UNAVAILABLE, then opens the RocksDB store under <data_dir>/store, the vocabularies,
+// every place map and the object repository, and only then reports SERVING. It returns when the
+// server is ready (or failed to become so).
+//
+// Shutdown(grace) drains: health NOT_SERVING, new calls get UNAVAILABLE, streams end after the
+// frame they are answering, watch streams end; calls in flight get up to `grace` to finish, then
+// are cancelled; the workers stop, the store is flushed (every acknowledged write made durable)
+// and closed. The destructor shuts down with no grace if Shutdown was not called.
+//
+// Also serving: grpc.health.v1.Health, server reflection, and Prometheus metrics over HTTP on
+// `metrics_listen` (unless empty).
+#pragma once
+
+#include <chrono>
+#include <memory>
+#include <mutex>
+
+#include <grpcpp/grpcpp.h>
+
+#include "core/common/status.h"
+#include "server/config/server_config.h"
+
+namespace recog::server {
+
+struct ServerState;
+class PlaceService;
+class ObjectService;
+class RepositoryService;
+
+class RecognitionServer {
+ public:
+  // FAILED_PRECONDITION / NOT_FOUND / DATA_LOSS ... from the store, the vocabularies or the token
+  // file; UNAVAILABLE when the address cannot be bound. `config` must be valid.
+  static StatusOr<std::unique_ptr<RecognitionServer>> Start(const ServerConfig& config);
+  ~RecognitionServer();
+  RecognitionServer(const RecognitionServer&) = delete;
+  RecognitionServer& operator=(const RecognitionServer&) = delete;
+
+  // The port the gRPC server listens on (the one picked when `listen` ends in ":0").
+  int port() const { return port_; }
+  // The metrics port, 0 when metrics are off.
+  int metrics_port() const;
+
+  // Graceful shutdown (see the header comment). Idempotent; thread-safe.
+  void Shutdown(std::chrono::milliseconds grace);
+
+ private:
+  RecognitionServer();
+  Status Open();  // the store and everything in it; sets ready
+
+  std::unique_ptr<ServerState> state_;
+  std::unique_ptr<PlaceService> place_service_;
+  std::unique_ptr<ObjectService> object_service_;
+  std::unique_ptr<RepositoryService> repository_service_;
+  std::unique_ptr<grpc::Server> server_;
+  int port_ = 0;
+  std::once_flag shutdown_once_;
+};
+
+}  // namespace recog::server

@@ -1,0 +1,183 @@
+#include "server/auth/token_auth.h"
+
+#include <yaml-cpp/yaml.h>
+
+#include <algorithm>
+#include <cctype>
+#include <utility>
+
+#include "core/common/file_io.h"
+#include "server/runtime/sha256.h"
+
+namespace recog::server {
+namespace {
+
+constexpr std::string_view kAnonymous = "anonymous";
+
+bool IsVisibleAscii(std::string_view text) {
+  return std::all_of(text.begin(), text.end(), [](char c) { return c > ' ' && c < 0x7f; });
+}
+
+std::string_view TrimSpaces(std::string_view text) {
+  const size_t first = text.find_first_not_of(" \t");
+  if (first == std::string_view::npos) return {};
+  const size_t last = text.find_last_not_of(" \t");
+  return text.substr(first, last - first + 1);
+}
+
+bool EqualsIgnoringCase(std::string_view a, std::string_view b) {
+  return a.size() == b.size() && std::equal(a.begin(), a.end(), b.begin(), [](char x, char y) {
+           return std::tolower(static_cast<unsigned char>(x)) ==
+                  std::tolower(static_cast<unsigned char>(y));
+         });
+}
+
+// "entry 2 (line 5)": where an entry of the token file is, for errors.
+std::string EntryName(size_t index, const YAML::Node& entry) {
+  std::string name = "entry " + std::to_string(index + 1);
+  if (entry.Mark().line >= 0) name += " (line " + std::to_string(entry.Mark().line + 1) + ")";
+  return name;
+}
+
+// Reads one entry of the `tokens` list into *caller and *token.
+Status ReadEntry(const YAML::Node& entry, const std::string& where, Caller* caller,
+                 std::string* token) {
+  if (!entry.IsMap()) return Status::InvalidArgument(where + " must be a mapping");
+  for (const auto& item : entry) {
+    const std::string key = item.first.IsScalar() ? item.first.Scalar() : "";
+    if (key != "name" && key != "token" && key != "rights") {
+      return Status::InvalidArgument(where + " has an unknown key '" + key +
+                                     "' (name, token, rights)");
+    }
+  }
+  const YAML::Node name = entry["name"];
+  if (!name.IsDefined() || !name.IsScalar() || name.Scalar().empty()) {
+    return Status::InvalidArgument(where + " needs a non-empty name");
+  }
+  caller->name = name.Scalar();
+  const std::string named = where + " ('" + caller->name + "')";
+
+  const YAML::Node secret = entry["token"];
+  if (!secret.IsDefined() || !secret.IsScalar())
+    return Status::InvalidArgument(named + " needs a token");
+  *token = secret.Scalar();
+  if (token->size() < TokenAuthenticator::kMinTokenLength) {
+    return Status::InvalidArgument(named + ": the token must be at least " +
+                                   std::to_string(TokenAuthenticator::kMinTokenLength) +
+                                   " characters long");
+  }
+  if (!IsVisibleAscii(*token)) {
+    return Status::InvalidArgument(named +
+                                   ": the token may only hold visible ASCII characters (no "
+                                   "spaces)");
+  }
+
+  const YAML::Node rights = entry["rights"];
+  if (!rights.IsDefined() || !rights.IsSequence() || rights.size() == 0) {
+    return Status::InvalidArgument(named + " needs a list of rights, e.g. [read] or [write]");
+  }
+  for (const YAML::Node& right : rights) {
+    const std::string text = right.IsScalar() ? right.Scalar() : "";
+    if (text == RightName(Right::kRead)) {
+      caller->can_read = true;
+    } else if (text == RightName(Right::kWrite)) {
+      caller->can_read = true;  // write implies read
+      caller->can_write = true;
+    } else {
+      return Status::InvalidArgument(named + " has an unknown right '" + text +
+                                     "' (read or write)");
+    }
+  }
+  return Status::Ok();
+}
+
+}  // namespace
+
+std::string_view RightName(Right right) {
+  switch (right) {
+    case Right::kRead:
+      return "read";
+    case Right::kWrite:
+      return "write";
+  }
+  return "unknown";
+}
+
+StatusOr<TokenAuthenticator> TokenAuthenticator::Load(const std::string& path) {
+  const std::string what = "token file '" + path + "'";
+  RECOG_ASSIGN_OR_RETURN(const std::string text, ReadWholeFile(path, what));
+  TokenAuthenticator authenticator;
+  std::unordered_map<std::string, std::string> entry_of_digest;  // for duplicate errors
+  try {
+    const YAML::Node root = YAML::Load(text);
+    if (!root.IsMap()) {
+      return Status::InvalidArgument(what + " must be a mapping with a 'tokens' list");
+    }
+    for (const auto& item : root) {
+      if (!item.first.IsScalar() || item.first.Scalar() != "tokens") {
+        return Status::InvalidArgument(
+            what + " has an unknown key '" +
+            (item.first.IsScalar() ? item.first.Scalar() : std::string()) + "' (only 'tokens')");
+      }
+    }
+    const YAML::Node tokens = root["tokens"];
+    if (!tokens.IsDefined() || !tokens.IsSequence() || tokens.size() == 0) {
+      return Status::InvalidArgument(
+          what + " has no tokens (to turn authentication off, configure no token file)");
+    }
+    for (size_t i = 0; i < tokens.size(); ++i) {
+      const YAML::Node entry = tokens[i];
+      const std::string where = EntryName(i, entry);
+      Caller caller;
+      std::string token;
+      const Status status = ReadEntry(entry, where, &caller, &token);
+      if (!status.ok()) return Status::InvalidArgument(what + ": " + status.message());
+      std::string digest = Sha256Hex(token);
+      const std::string named = where + " ('" + caller.name + "')";
+      auto [it, inserted] = entry_of_digest.emplace(digest, named);
+      if (!inserted) {
+        return Status::InvalidArgument(what + ": " + named + " has the same token as " +
+                                       it->second);
+      }
+      authenticator.callers_.emplace(std::move(digest), std::move(caller));
+    }
+  } catch (const YAML::Exception& e) {
+    return Status::InvalidArgument(what + " is not valid YAML: " + e.what());
+  }
+  return authenticator;
+}
+
+TokenAuthenticator TokenAuthenticator::AllowAll() {
+  TokenAuthenticator authenticator;
+  authenticator.allows_all_ = true;
+  return authenticator;
+}
+
+StatusOr<Caller> TokenAuthenticator::Authenticate(std::string_view authorization_header) const {
+  if (allows_all_) return Caller{std::string(kAnonymous), true, true};
+  const std::string_view header = TrimSpaces(authorization_header);
+  if (header.empty()) {
+    return Status::Unauthenticated("missing authorization header (expected 'Bearer <token>')");
+  }
+  const size_t space = header.find_first_of(" \t");
+  const std::string_view scheme = header.substr(0, space);
+  const std::string_view token =
+      space == std::string_view::npos ? std::string_view() : TrimSpaces(header.substr(space));
+  if (!EqualsIgnoringCase(scheme, "bearer") || token.empty() ||
+      token.find_first_of(" \t") != std::string_view::npos) {
+    return Status::Unauthenticated("malformed authorization header (expected 'Bearer <token>')");
+  }
+  const std::string digest = Sha256Hex(token);
+  const auto it = callers_.find(digest);
+  if (it == callers_.end()) return Status::Unauthenticated("unknown token");
+  return it->second;
+}
+
+Status TokenAuthenticator::Check(const Caller& caller, Right right) {
+  const bool allowed = right == Right::kRead ? caller.can_read : caller.can_write;
+  if (allowed) return Status::Ok();
+  return Status::PermissionDenied("'" + caller.name + "' does not have the " +
+                                  std::string(RightName(right)) + " right");
+}
+
+}  // namespace recog::server

@@ -1,0 +1,76 @@
+// TokenAuthenticator: bearer-token authentication with per-token rights.
+//
+// Each client (a robot, an operator's tool) sends `authorization: Bearer <token>` with every call.
+// The tokens, each with a name for the logs and its rights, come from a YAML file:
+//
+//   tokens:
+//     - name: robot-7          # shown in logs, never the secret
+//       token: "s3cret..."     # at least 16 visible ASCII characters, unique in the file
+//       rights: [read]         # read and/or write
+//
+// `read` allows queries, recognition, listing and downloading; `write` allows all of that and
+// also creating and deleting maps, adding and streaming frames, uploading and deleting models
+// (write implies read). Two entries may share a name (e.g. a robot's old and new token while it
+// is rotated), never a token.
+//
+// Only the SHA-256 digests of the tokens are kept, and a presented token is found by looking up
+// its digest, so the time Authenticate takes says nothing useful about the secrets. Error
+// messages and Caller never contain a token. An authenticator is immutable once built and safe to
+// use from any number of threads; to reload the file, build a new one.
+#pragma once
+
+#include <string>
+#include <string_view>
+#include <unordered_map>
+
+#include "core/common/status.h"
+
+namespace recog::server {
+
+// What a caller may do.
+enum class Right {
+  kRead,   // queries, recognition, listing and downloading
+  kWrite,  // creating/deleting maps, adding/streaming frames, uploading/deleting models
+};
+std::string_view RightName(Right right);  // "read", "write"
+
+// An authenticated caller.
+struct Caller {
+  std::string name;        // the token's name from the file, or "anonymous" with AllowAll
+  bool can_read = false;   // holds Right::kRead
+  bool can_write = false;  // holds Right::kWrite
+};
+
+class TokenAuthenticator {
+ public:
+  // Reads the token file at `path`. NOT_FOUND when it is missing; INVALID_ARGUMENT naming the
+  // entry (its number and line) for a missing or empty name, a token shorter than
+  // kMinTokenLength or with characters other than visible ASCII, a token used twice, an unknown
+  // or missing right, an unknown key, a file without tokens, or malformed YAML.
+  static StatusOr<TokenAuthenticator> Load(const std::string& path);
+
+  // No authentication: every call, with or without a header, is made by "anonymous" with both
+  // rights. For servers configured without a token file.
+  static TokenAuthenticator AllowAll();
+
+  // The caller that `authorization_header` (the value of the `authorization` metadata, e.g.
+  // "Bearer s3cret...", empty when absent) proves to be. UNAUTHENTICATED when the header is
+  // missing, is not a bearer token, or the token is unknown.
+  StatusOr<Caller> Authenticate(std::string_view authorization_header) const;
+
+  // OK when `caller` holds `right`, else PERMISSION_DENIED naming the caller and the right.
+  static Status Check(const Caller& caller, Right right);
+
+  // True for AllowAll().
+  bool allows_all() const { return allows_all_; }
+
+  static constexpr size_t kMinTokenLength = 16;
+
+ private:
+  TokenAuthenticator() = default;
+
+  bool allows_all_ = false;
+  std::unordered_map<std::string, Caller> callers_;  // by the SHA-256 digest of the token
+};
+
+}  // namespace recog::server

@@ -1,0 +1,216 @@
+#include "server/auth/token_auth.h"
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace recog::server {
+namespace {
+
+namespace fs = std::filesystem;
+using ::testing::HasSubstr;
+using ::testing::Not;
+
+constexpr char kReaderToken[] = "reader-token-0123456789";
+constexpr char kWriterToken[] = "writer-token-0123456789";
+constexpr char kBothToken[] = "both-rights-0123456789";
+
+constexpr char kTokenFile[] = R"(tokens:
+  - name: robot-7
+    token: "reader-token-0123456789"
+    rights: [read]
+  - name: mapper
+    token: writer-token-0123456789
+    rights: [write]
+  - name: operator
+    token: "both-rights-0123456789"
+    rights: [read, write]
+)";
+
+class TokenAuthTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() /
+           ("recog_token_auth_" + std::to_string(::getpid()) + "_" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+
+  StatusOr<TokenAuthenticator> LoadText(const std::string& yaml) {
+    const fs::path path = dir_ / "tokens.yaml";
+    std::ofstream(path) << yaml;
+    return TokenAuthenticator::Load(path.string());
+  }
+
+  fs::path dir_;
+};
+
+TEST_F(TokenAuthTest, EachTokenAuthenticatesAsItsNameWithItsRights) {
+  StatusOr<TokenAuthenticator> auth = LoadText(kTokenFile);
+  ASSERT_TRUE(auth.ok()) << auth.status().ToString();
+  EXPECT_FALSE(auth->allows_all());
+
+  StatusOr<Caller> reader = auth->Authenticate(std::string("Bearer ") + kReaderToken);
+  ASSERT_TRUE(reader.ok()) << reader.status().ToString();
+  EXPECT_EQ(reader->name, "robot-7");
+  EXPECT_TRUE(reader->can_read);
+  EXPECT_FALSE(reader->can_write);
+
+  StatusOr<Caller> writer = auth->Authenticate(std::string("Bearer ") + kWriterToken);
+  ASSERT_TRUE(writer.ok());
+  EXPECT_EQ(writer->name, "mapper");
+  EXPECT_TRUE(writer->can_read);  // write implies read
+  EXPECT_TRUE(writer->can_write);
+
+  StatusOr<Caller> both = auth->Authenticate(std::string("Bearer ") + kBothToken);
+  ASSERT_TRUE(both.ok());
+  EXPECT_EQ(both->name, "operator");
+  EXPECT_TRUE(both->can_read);
+  EXPECT_TRUE(both->can_write);
+}
+
+TEST_F(TokenAuthTest, TheSchemeIsCaseInsensitiveAndSurroundingSpacesAreIgnored) {
+  StatusOr<TokenAuthenticator> auth = LoadText(kTokenFile);
+  ASSERT_TRUE(auth.ok());
+  for (const std::string& header :
+       {std::string("bearer ") + kReaderToken, std::string("BEARER ") + kReaderToken,
+        std::string("  Bearer \t ") + kReaderToken + "  "}) {
+    StatusOr<Caller> caller = auth->Authenticate(header);
+    ASSERT_TRUE(caller.ok()) << header;
+    EXPECT_EQ(caller->name, "robot-7");
+  }
+}
+
+TEST_F(TokenAuthTest, MissingMalformedAndUnknownTokensAreUnauthenticated) {
+  StatusOr<TokenAuthenticator> auth = LoadText(kTokenFile);
+  ASSERT_TRUE(auth.ok());
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"", "missing authorization header"},
+      {"   ", "missing authorization header"},
+      {kReaderToken, "malformed"},
+      {std::string("Basic ") + kReaderToken, "malformed"},
+      {"Bearer", "malformed"},
+      {"Bearer ", "malformed"},
+      {std::string("Bearer ") + kReaderToken + " extra", "malformed"},
+      {"Bearer not-a-known-token-at-all", "unknown token"},
+      {std::string("Bearer ") + kReaderToken + "x", "unknown token"},
+      {std::string("Bearer ") + std::string(kReaderToken).substr(1), "unknown token"},
+  };
+  for (const auto& [header, expected] : cases) {
+    StatusOr<Caller> caller = auth->Authenticate(header);
+    ASSERT_FALSE(caller.ok()) << header;
+    EXPECT_EQ(caller.status().code(), StatusCode::kUnauthenticated) << header;
+    EXPECT_THAT(caller.status().message(), HasSubstr(expected)) << header;
+    EXPECT_THAT(caller.status().message(), Not(HasSubstr("token-0123"))) << header;
+  }
+}
+
+TEST_F(TokenAuthTest, CheckDeniesRightsTheCallerDoesNotHold) {
+  const Caller reader{"robot-7", true, false};
+  EXPECT_TRUE(TokenAuthenticator::Check(reader, Right::kRead).ok());
+  const Status denied = TokenAuthenticator::Check(reader, Right::kWrite);
+  EXPECT_EQ(denied.code(), StatusCode::kPermissionDenied);
+  EXPECT_THAT(denied.message(), HasSubstr("'robot-7'"));
+  EXPECT_THAT(denied.message(), HasSubstr("write"));
+
+  const Caller nobody{"nobody", false, false};
+  EXPECT_EQ(TokenAuthenticator::Check(nobody, Right::kRead).code(), StatusCode::kPermissionDenied);
+  const Caller writer{"mapper", true, true};
+  EXPECT_TRUE(TokenAuthenticator::Check(writer, Right::kWrite).ok());
+}
+
+TEST_F(TokenAuthTest, AllowAllLetsEveryCallerDoEverythingAsAnonymous) {
+  const TokenAuthenticator auth = TokenAuthenticator::AllowAll();
+  EXPECT_TRUE(auth.allows_all());
+  for (const std::string& header :
+       {std::string(), std::string("Bearer whatever"), std::string("garbage")}) {
+    StatusOr<Caller> caller = auth.Authenticate(header);
+    ASSERT_TRUE(caller.ok()) << header;
+    EXPECT_EQ(caller->name, "anonymous");
+    EXPECT_TRUE(TokenAuthenticator::Check(*caller, Right::kRead).ok());
+    EXPECT_TRUE(TokenAuthenticator::Check(*caller, Right::kWrite).ok());
+  }
+}
+
+TEST_F(TokenAuthTest, MissingFileIsNotFound) {
+  StatusOr<TokenAuthenticator> auth = TokenAuthenticator::Load((dir_ / "absent.yaml").string());
+  ASSERT_FALSE(auth.ok());
+  EXPECT_EQ(auth.status().code(), StatusCode::kNotFound);
+  EXPECT_THAT(auth.status().message(), HasSubstr("absent.yaml"));
+}
+
+TEST_F(TokenAuthTest, BadEntriesAreRejectedNamingTheEntryButNeverTheSecret) {
+  const std::string good = "  - name: good\n    token: good-token-0123456789\n    rights: [read]\n";
+  const std::vector<std::pair<std::string, std::vector<std::string>>> cases = {
+      {"  - name: short\n    token: short-secret\n    rights: [read]\n",
+       {"entry 2 (line 5)", "'short'", "at least 16 characters"}},
+      {"  - name: dup\n    token: good-token-0123456789\n    rights: [write]\n",
+       {"entry 2 (line 5) ('dup') has the same token as entry 1 (line 2) ('good')"}},
+      {"  - name: bad-right\n    token: other-token-0123456789\n    rights: [read, admin]\n",
+       {"entry 2", "unknown right 'admin'"}},
+      {"  - name: \"\"\n    token: other-token-0123456789\n    rights: [read]\n",
+       {"entry 2", "non-empty name"}},
+      {"  - token: other-token-0123456789\n    rights: [read]\n", {"entry 2", "non-empty name"}},
+      {"  - name: no-token\n    rights: [read]\n", {"entry 2", "('no-token') needs a token"}},
+      {"  - name: no-rights\n    token: other-token-0123456789\n", {"entry 2", "list of rights"}},
+      {"  - name: empty-rights\n    token: other-token-0123456789\n    rights: []\n",
+       {"entry 2", "list of rights"}},
+      {"  - name: typo\n    token: other-token-0123456789\n    right: [read]\n",
+       {"entry 2", "unknown key 'right'"}},
+      {"  - name: spaces\n    token: \"other token 0123456789\"\n    rights: [read]\n",
+       {"entry 2", "visible ASCII"}},
+      {"  - just-a-string\n", {"entry 2", "must be a mapping"}},
+  };
+  for (const auto& [entry, expected] : cases) {
+    StatusOr<TokenAuthenticator> auth = LoadText("tokens:\n" + good + entry);
+    ASSERT_FALSE(auth.ok()) << entry;
+    EXPECT_EQ(auth.status().code(), StatusCode::kInvalidArgument) << entry;
+    for (const std::string& part : expected) {
+      EXPECT_THAT(auth.status().message(), HasSubstr(part)) << entry;
+    }
+    EXPECT_THAT(auth.status().message(), Not(HasSubstr("0123456789"))) << entry;
+    EXPECT_THAT(auth.status().message(), Not(HasSubstr("short-secret"))) << entry;
+  }
+}
+
+TEST_F(TokenAuthTest, FilesWithoutATokenListAreRejected) {
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"", "must be a mapping"},
+      {"tokens: []\n", "has no tokens"},
+      {"{}\n", "has no tokens"},
+      {"tokens:\n", "has no tokens"},
+      {"tokens: robot\n", "has no tokens"},
+      {"tokenz: []\n", "unknown key 'tokenz'"},
+      {"tokens: [\n", "not valid YAML"},
+  };
+  for (const auto& [yaml, expected] : cases) {
+    StatusOr<TokenAuthenticator> auth = LoadText(yaml);
+    ASSERT_FALSE(auth.ok()) << yaml;
+    EXPECT_EQ(auth.status().code(), StatusCode::kInvalidArgument) << yaml;
+    EXPECT_THAT(auth.status().message(), HasSubstr(expected)) << yaml;
+  }
+}
+
+TEST_F(TokenAuthTest, TwoEntriesMayShareANameDuringTokenRotation) {
+  StatusOr<TokenAuthenticator> auth = LoadText(R"(tokens:
+  - name: robot-7
+    token: old-token-0123456789
+    rights: [write]
+  - name: robot-7
+    token: new-token-0123456789
+    rights: [write]
+)");
+  ASSERT_TRUE(auth.ok()) << auth.status().ToString();
+  EXPECT_EQ(auth->Authenticate("Bearer old-token-0123456789")->name, "robot-7");
+  EXPECT_EQ(auth->Authenticate("Bearer new-token-0123456789")->name, "robot-7");
+}
+
+}  // namespace
+}  // namespace recog::server

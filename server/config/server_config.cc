@@ -1,0 +1,339 @@
+#include "server/config/server_config.h"
+
+#include <yaml-cpp/yaml.h>
+
+#include <algorithm>
+#include <climits>
+#include <thread>
+#include <utility>
+#include <vector>
+
+#include <spdlog/common.h>
+
+#include "core/common/file_io.h"
+
+namespace recog::server {
+namespace {
+
+constexpr uint32_t kMinMessageBytes = 1u << 20;
+constexpr uint32_t kMaxWorkers = 1024;
+constexpr uint32_t kMaxGroupSyncIntervalMs = 60000;
+constexpr uint64_t kMaxBlockCacheMb = uint64_t{1} << 20;  // 1 TiB
+
+// How a value of type T is described in errors ("key 'workers' must be <description>").
+template <typename T>
+std::string_view Describe() {
+  if constexpr (std::is_same_v<T, bool>) {
+    return "true or false";
+  } else if constexpr (std::is_unsigned_v<T>) {
+    return "a non-negative integer";
+  } else if constexpr (std::is_floating_point_v<T>) {
+    return "a number";
+  } else {
+    return "a string";
+  }
+}
+
+// One YAML mapping of the file (the root or a section). Reads the known keys and then rejects any
+// other key, so that typos are errors.
+class YamlSection {
+ public:
+  YamlSection(YAML::Node node, std::string path) : node_(std::move(node)), path_(std::move(path)) {}
+
+  // Reads `key` into *value when present; leaves *value alone when absent.
+  template <typename T>
+  Status Read(const std::string& key, T* value) {
+    known_.push_back(key);
+    const YAML::Node child = Child(key);
+    if (!child.IsDefined()) return Status::Ok();
+    if (!child.IsScalar() || !YAML::convert<T>::decode(child, *value)) {
+      return Status::InvalidArgument("key '" + Name(key) + "' must be " +
+                                     std::string(Describe<T>()) + ", got " + Quote(child));
+    }
+    return Status::Ok();
+  }
+
+  // Reads a string `key` and converts it with `parse` (a function returning StatusOr<T>).
+  template <typename T, typename Parse>
+  Status ReadParsed(const std::string& key, T* value, Parse parse) {
+    if (!Child(key).IsDefined()) {
+      known_.push_back(key);
+      return Status::Ok();
+    }
+    std::string text;
+    RECOG_RETURN_IF_ERROR(Read(key, &text));
+    StatusOr<T> parsed = parse(text);
+    if (!parsed.ok()) {
+      return Status::InvalidArgument("key '" + Name(key) + "': " + parsed.status().message());
+    }
+    *value = *parsed;
+    return Status::Ok();
+  }
+
+  // The nested mapping `key`; an absent or empty (null) section has no keys.
+  StatusOr<YamlSection> Section(const std::string& key) {
+    known_.push_back(key);
+    const YAML::Node child = Child(key);
+    if (!child.IsDefined() || child.IsNull()) return YamlSection(YAML::Node(), Name(key));
+    if (!child.IsMap()) {
+      return Status::InvalidArgument("key '" + Name(key) + "' must be a section (a mapping)");
+    }
+    return YamlSection(child, Name(key));
+  }
+
+  // INVALID_ARGUMENT naming the first key that no Read or Section asked for.
+  Status RejectUnknownKeys() const {
+    if (!node_.IsMap()) return Status::Ok();
+    for (const auto& item : node_) {
+      if (!item.first.IsScalar()) {
+        return Status::InvalidArgument("section '" + path_ + "' has a key that is not a string");
+      }
+      const std::string& key = item.first.Scalar();
+      if (std::find(known_.begin(), known_.end(), key) == known_.end()) {
+        return Status::InvalidArgument("unknown key '" + Name(key) + "'");
+      }
+    }
+    return Status::Ok();
+  }
+
+ private:
+  // Const lookup: unlike the non-const operator[], it never inserts `key`.
+  YAML::Node Child(const std::string& key) const { return node_[key]; }
+
+  std::string Name(const std::string& key) const { return path_.empty() ? key : path_ + "." + key; }
+
+  static std::string Quote(const YAML::Node& node) {
+    if (node.IsScalar()) return "'" + node.Scalar() + "'";
+    if (node.IsSequence()) return "a list";
+    if (node.IsMap()) return "a mapping";
+    return "nothing";
+  }
+
+  YAML::Node node_;
+  std::string path_;  // "" for the root, "keepalive" for a section
+  std::vector<std::string> known_;
+};
+
+Status ReadConfig(const YAML::Node& root, ServerConfig* config) {
+  YamlSection top(root, "");
+  RECOG_RETURN_IF_ERROR(top.Read("listen", &config->listen));
+  RECOG_RETURN_IF_ERROR(top.Read("data_dir", &config->data_dir));
+  RECOG_RETURN_IF_ERROR(top.Read("place_vocabulary", &config->place_vocabulary));
+  RECOG_RETURN_IF_ERROR(top.Read("object_vocabulary", &config->object_vocabulary));
+  RECOG_RETURN_IF_ERROR(top.Read("workers", &config->workers));
+  RECOG_RETURN_IF_ERROR(top.Read("queue_capacity", &config->queue_capacity));
+  RECOG_RETURN_IF_ERROR(top.Read("retry_after_ms", &config->retry_after_ms));
+  RECOG_RETURN_IF_ERROR(top.Read("max_message_bytes", &config->max_message_bytes));
+  RECOG_RETURN_IF_ERROR(top.Read("token_file", &config->token_file));
+  RECOG_RETURN_IF_ERROR(top.Read("metrics_listen", &config->metrics_listen));
+  RECOG_RETURN_IF_ERROR(top.Read("shutdown_grace_ms", &config->shutdown_grace_ms));
+  RECOG_RETURN_IF_ERROR(top.Read("log_level", &config->log_level));
+
+  RECOG_ASSIGN_OR_RETURN(YamlSection keepalive, top.Section("keepalive"));
+  RECOG_RETURN_IF_ERROR(keepalive.Read("time_ms", &config->keepalive.time_ms));
+  RECOG_RETURN_IF_ERROR(keepalive.Read("timeout_ms", &config->keepalive.timeout_ms));
+  RECOG_RETURN_IF_ERROR(
+      keepalive.Read("permit_without_calls", &config->keepalive.permit_without_calls));
+  RECOG_RETURN_IF_ERROR(
+      keepalive.Read("min_ping_interval_ms", &config->keepalive.min_ping_interval_ms));
+  RECOG_RETURN_IF_ERROR(keepalive.RejectUnknownKeys());
+
+  RECOG_ASSIGN_OR_RETURN(YamlSection tls, top.Section("tls"));
+  RECOG_RETURN_IF_ERROR(tls.Read("cert", &config->tls.cert));
+  RECOG_RETURN_IF_ERROR(tls.Read("key", &config->tls.key));
+  RECOG_RETURN_IF_ERROR(tls.Read("client_ca", &config->tls.client_ca));
+  RECOG_RETURN_IF_ERROR(tls.RejectUnknownKeys());
+
+  RECOG_ASSIGN_OR_RETURN(YamlSection store, top.Section("store"));
+  RECOG_RETURN_IF_ERROR(store.ReadParsed("sync", &config->store.sync, ParseStoreSync));
+  RECOG_RETURN_IF_ERROR(
+      store.Read("group_sync_interval_ms", &config->store.group_sync_interval_ms));
+  RECOG_RETURN_IF_ERROR(store.Read("block_cache_mb", &config->store.block_cache_mb));
+  RECOG_RETURN_IF_ERROR(store.RejectUnknownKeys());
+
+  RECOG_ASSIGN_OR_RETURN(YamlSection place, top.Section("place"));
+  RECOG_RETURN_IF_ERROR(place.Read("alpha", &config->place.alpha));
+  RECOG_RETURN_IF_ERROR(place.Read("temporal_matches", &config->place.temporal_matches));
+  RECOG_RETURN_IF_ERROR(place.Read("min_inliers", &config->place.epipolar.min_inliers));
+  RECOG_RETURN_IF_ERROR(place.ReadParsed("geometry", &config->place.geometry, ParseGeometryCheck));
+  RECOG_RETURN_IF_ERROR(place.Read("recent_seconds", &config->place.recent_seconds));
+  RECOG_RETURN_IF_ERROR(place.Read("recent_frames", &config->place.recent_frames));
+  RECOG_RETURN_IF_ERROR(place.RejectUnknownKeys());
+
+  return top.RejectUnknownKeys();
+}
+
+bool IsLogLevel(const std::string& name) {
+  return name == "off" || spdlog::level::from_str(name) != spdlog::level::off;
+}
+
+// Adds --config and the flags of AddFlags, then parses. *help receives the usage text when -h or
+// --help was given.
+Status ParseWith(int argc, const char* const* argv, std::string* config_file, ServerConfig* config,
+                 std::string* help) {
+  CLI::App app{"recogd: place and object recognition server", "recogd"};
+  app.add_option("-c,--config", *config_file,
+                 "YAML configuration file; the other flags override its values");
+  AddFlags(app, config);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::CallForHelp&) {
+    *help = app.help();
+  } catch (const CLI::CallForAllHelp&) {
+    *help = app.help("", CLI::AppFormatMode::All);
+  } catch (const CLI::Error& e) {
+    return Status::InvalidArgument(e.what());
+  }
+  return Status::Ok();
+}
+
+}  // namespace
+
+std::string_view StoreSyncName(StoreSync sync) {
+  switch (sync) {
+    case StoreSync::kGrouped:
+      return "grouped";
+    case StoreSync::kEveryWrite:
+      return "every_write";
+  }
+  return "unknown";
+}
+
+StatusOr<StoreSync> ParseStoreSync(std::string_view name) {
+  for (StoreSync sync : {StoreSync::kGrouped, StoreSync::kEveryWrite}) {
+    if (name == StoreSyncName(sync)) return sync;
+  }
+  return Status::InvalidArgument("unknown store sync policy '" + std::string(name) +
+                                 "' (grouped or every_write)");
+}
+
+StatusOr<ServerConfig> ServerConfig::LoadYaml(const std::string& path) {
+  const std::string what = "config file '" + path + "'";
+  RECOG_ASSIGN_OR_RETURN(const std::string text, ReadWholeFile(path, what));
+  ServerConfig config;
+  try {
+    const YAML::Node root = YAML::Load(text);
+    if (!root.IsNull() && !root.IsMap()) {
+      return Status::InvalidArgument(what + " must be a mapping of keys to values");
+    }
+    const Status status = ReadConfig(root, &config);
+    if (!status.ok()) return Status::InvalidArgument(what + ": " + status.message());
+  } catch (const YAML::Exception& e) {
+    return Status::InvalidArgument(what + " is not valid YAML: " + e.what());
+  }
+  return config;
+}
+
+Status ServerConfig::Validate() const {
+  if (listen.empty()) return Status::InvalidArgument("listen must not be empty");
+  if (data_dir.empty()) return Status::InvalidArgument("data_dir must not be empty");
+  if (workers > kMaxWorkers) {
+    return Status::InvalidArgument("workers must be at most " + std::to_string(kMaxWorkers) +
+                                   " (0 = one per hardware thread), got " +
+                                   std::to_string(workers));
+  }
+  if (queue_capacity < 1) return Status::InvalidArgument("queue_capacity must be at least 1");
+  if (max_message_bytes < kMinMessageBytes || max_message_bytes > INT_MAX) {
+    return Status::InvalidArgument("max_message_bytes must be between 1 MiB (1048576) and " +
+                                   std::to_string(INT_MAX) + ", got " +
+                                   std::to_string(max_message_bytes));
+  }
+  if (keepalive.time_ms < 1) return Status::InvalidArgument("keepalive.time_ms must be at least 1");
+  if (keepalive.timeout_ms < 1) {
+    return Status::InvalidArgument("keepalive.timeout_ms must be at least 1");
+  }
+  if (!tls.key.empty() && tls.cert.empty()) {
+    return Status::InvalidArgument("tls.key is set but tls.cert is not");
+  }
+  if (!tls.cert.empty() && tls.key.empty()) {
+    return Status::InvalidArgument("tls.cert is set but tls.key is not");
+  }
+  if (!tls.client_ca.empty() && tls.cert.empty()) {
+    return Status::InvalidArgument(
+        "tls.client_ca (mutual TLS) needs the server's own tls.cert and tls.key");
+  }
+  // Two ":0" addresses are not a clash: each picks its own free port (tests do this).
+  const bool picks_free_port = listen.ends_with(":0");
+  if (!metrics_listen.empty() && metrics_listen == listen && !picks_free_port) {
+    return Status::InvalidArgument("metrics_listen must differ from listen ('" + listen + "')");
+  }
+  if (store.group_sync_interval_ms < 1 || store.group_sync_interval_ms > kMaxGroupSyncIntervalMs) {
+    return Status::InvalidArgument("store.group_sync_interval_ms must be between 1 and " +
+                                   std::to_string(kMaxGroupSyncIntervalMs));
+  }
+  if (store.block_cache_mb > kMaxBlockCacheMb) {
+    return Status::InvalidArgument("store.block_cache_mb must be at most " +
+                                   std::to_string(kMaxBlockCacheMb) + " (1 TiB)");
+  }
+  if (!IsLogLevel(log_level)) {
+    return Status::InvalidArgument(
+        "log_level must be trace, debug, info, warn, err, critical or off, got '" + log_level +
+        "'");
+  }
+  const Status place_status = place.Validate();
+  if (!place_status.ok()) return Status::InvalidArgument("place: " + place_status.message());
+  return Status::Ok();
+}
+
+uint32_t ServerConfig::WorkerCount() const {
+  if (workers > 0) return workers;
+  return std::max(1u, std::thread::hardware_concurrency());
+}
+
+void AddFlags(CLI::App& app, ServerConfig* config) {
+  app.add_option("--listen", config->listen, "gRPC address (host:port, [v6]:port or unix:path)")
+      ->capture_default_str();
+  app.add_option("--data-dir", config->data_dir, "Directory of the store")->capture_default_str();
+  app.add_option("--place-vocabulary", config->place_vocabulary,
+                 "Vocabulary of new place maps (default: the bundled one)");
+  app.add_option("--object-vocabulary", config->object_vocabulary,
+                 "Vocabulary of object models (default: the bundled one)");
+  app.add_option("--workers", config->workers, "Worker threads (0 = one per hardware thread)")
+      ->capture_default_str();
+  app.add_option("--queue-capacity", config->queue_capacity,
+                 "Tasks that may wait for a worker before calls fail with RESOURCE_EXHAUSTED")
+      ->capture_default_str();
+  app.add_option("--max-message-bytes", config->max_message_bytes,
+                 "Largest request or response in bytes")
+      ->capture_default_str();
+  app.add_option("--token-file", config->token_file,
+                 "YAML file of bearer tokens (default: no authentication)");
+  app.add_option("--tls-cert", config->tls.cert, "PEM certificate chain of the server");
+  app.add_option("--tls-key", config->tls.key, "PEM private key of the server");
+  app.add_option("--tls-client-ca", config->tls.client_ca,
+                 "PEM CA of client certificates (requires mutual TLS)");
+  app.add_option("--metrics-listen", config->metrics_listen,
+                 "Prometheus endpoint host:port (empty: none)")
+      ->capture_default_str();
+  app.add_option_function<std::string>(
+         "--sync",
+         // The check below lets only valid names through, so the parse cannot fail here.
+         [config](const std::string& name) { config->store.sync = *ParseStoreSync(name); },
+         "When the store fsyncs acknowledged writes")
+      ->check(CLI::IsMember({std::string(StoreSyncName(StoreSync::kGrouped)),
+                             std::string(StoreSyncName(StoreSync::kEveryWrite))}))
+      ->default_str(std::string(StoreSyncName(config->store.sync)));
+  app.add_option("--shutdown-grace-ms", config->shutdown_grace_ms,
+                 "Time calls in flight get to finish on SIGTERM/SIGINT")
+      ->capture_default_str();
+  app.add_option("--log-level", config->log_level, "trace, debug, info, warn, err, critical or off")
+      ->capture_default_str();
+}
+
+StatusOr<CommandLine> ParseCommandLine(int argc, const char* const* argv) {
+  CommandLine result;
+  // First pass: find --config, catch --help and bad flags. The flags land in a scratch copy.
+  ServerConfig scratch;
+  RECOG_RETURN_IF_ERROR(ParseWith(argc, argv, &result.config_file, &scratch, &result.help));
+  if (!result.help.empty()) return result;
+  if (!result.config_file.empty()) {
+    RECOG_ASSIGN_OR_RETURN(result.config, ServerConfig::LoadYaml(result.config_file));
+  }
+  // Second pass: the flags given override what the file set.
+  std::string unused_help;
+  RECOG_RETURN_IF_ERROR(ParseWith(argc, argv, &result.config_file, &result.config, &unused_help));
+  RECOG_RETURN_IF_ERROR(result.config.Validate());
+  return result;
+}
+
+}  // namespace recog::server

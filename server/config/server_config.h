@@ -1,0 +1,145 @@
+// ServerConfig: everything recogd can be configured with, from a YAML file and command-line flags.
+//
+// A configuration starts from the defaults documented on each field, then the YAML file named by
+// --config (if any) overrides them, then the flags given on the command line override the file:
+// `recogd --config recogd.yaml --workers 8` takes everything from the file except the number of
+// workers. The YAML keys are the field names, with the nested structs as sections:
+//
+//   listen: "0.0.0.0:50051"
+//   data_dir: /var/lib/recog
+//   keepalive: {time_ms: 20000, timeout_ms: 10000}
+//   tls: {cert: server.crt, key: server.key, client_ca: robots-ca.crt}
+//   store: {sync: every_write}
+//   place: {alpha: 0.3, geometry: direct_index}
+//
+// An unknown key or a value of the wrong type is an error naming the key, so that a typo is never
+// silently ignored. Loading does not validate: Validate() checks the combination of values
+// (ParseCommandLine calls it). The struct is a plain value, safe to copy and to read from any
+// number of threads.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <string_view>
+
+#include <CLI/CLI.hpp>
+
+#include "core/common/status.h"
+#include "core/place/loop_detector.h"
+
+namespace recog::server {
+
+// When the store fsyncs an acknowledged write (mirrors storage's SyncPolicy; the server converts).
+enum class StoreSync {
+  kGrouped,     // a background thread fsyncs the write-ahead log every group_sync_interval_ms
+  kEveryWrite,  // every write is fsync'ed before it is acknowledged
+};
+std::string_view StoreSyncName(StoreSync sync);  // "grouped", "every_write"
+StatusOr<StoreSync> ParseStoreSync(std::string_view name);
+
+// HTTP/2 keepalive, tuned for robots on Wi-Fi: dead connections are noticed within
+// time_ms + timeout_ms, and clients may ping idle connections.
+struct KeepaliveConfig {
+  // Default 20000: the server pings a connection that has been idle this long.
+  uint32_t time_ms = 20000;
+  // Default 10000: a ping not answered within this time closes the connection.
+  uint32_t timeout_ms = 10000;
+  // Default true: pings are sent (and accepted) on connections without an active call.
+  bool permit_without_calls = true;
+  // Default 10000: clients pinging more often than this are sent GOAWAY (too_many_pings).
+  uint32_t min_ping_interval_ms = 10000;
+};
+
+// Transport security. All empty (the default): plaintext. cert and key: TLS. client_ca as well:
+// mutual TLS, every client must present a certificate signed by that CA.
+struct TlsConfig {
+  std::string cert;       // default "": PEM file of the server's certificate chain
+  std::string key;        // default "": PEM file of the server's private key
+  std::string client_ca;  // default "": PEM file of the CA that signs client certificates
+};
+
+// The RocksDB store under data_dir (see storage/rocksdb_index_store.h).
+struct StoreConfig {
+  // Default kGrouped ("grouped"): writes survive a crash of the process; a crash of the machine
+  // may lose the last group_sync_interval_ms of them. "every_write": durable, slower.
+  StoreSync sync = StoreSync::kGrouped;
+  // Default 50: how often the grouped policy fsyncs, 1 to 60000 ms.
+  uint32_t group_sync_interval_ms = 50;
+  // Default 64: block cache shared by all column families, in MiB; 0 turns it off.
+  uint64_t block_cache_mb = 64;
+};
+
+struct ServerConfig {
+  // Default "127.0.0.1:50051": the gRPC address (host:port, [v6]:port or unix:path).
+  std::string listen = "127.0.0.1:50051";
+  // Default "./recog-data": the directory of the store (maps, entries, object models).
+  std::string data_dir = "./recog-data";
+  // Default "": the vocabulary of new place maps; empty means the bundled place vocabulary.
+  std::string place_vocabulary;
+  // Default "": the vocabulary of object models; empty means the bundled object vocabulary.
+  std::string object_vocabulary;
+  // Default 0: threads recognising frames; 0 means one per hardware thread (see WorkerCount()).
+  uint32_t workers = 0;
+  // Default 64: tasks that may wait for a worker; beyond that, calls fail with
+  // RESOURCE_EXHAUSTED. At least 1.
+  uint32_t queue_capacity = 64;
+  // Default 100: the retry delay (ms) suggested to clients with RESOURCE_EXHAUSTED.
+  uint32_t retry_after_ms = 100;
+  // Default 32 MiB: the largest request or response, enough for a 1920x1080 PNG or raw BGR
+  // frame. 1 MiB to 2 GiB - 1 (gRPC's limit).
+  uint32_t max_message_bytes = 32u << 20;
+  KeepaliveConfig keepalive;  // YAML section "keepalive"
+  TlsConfig tls;              // YAML section "tls"
+  // Default "": the token file (server/auth/token_auth.h); empty means no authentication.
+  std::string token_file;
+  // Default "127.0.0.1:9464": the Prometheus endpoint (host:port, serves /metrics); empty means
+  // none.
+  std::string metrics_listen = "127.0.0.1:9464";
+  StoreConfig store;  // YAML section "store"
+  // Default 10000: on SIGTERM/SIGINT, calls in flight get this long to finish before they are
+  // cancelled.
+  uint32_t shutdown_grace_ms = 10000;
+  // Default "info": spdlog level: trace, debug, info, warn (or warning), err (or error),
+  // critical or off.
+  std::string log_level = "info";
+  // Loop detector parameters of new place maps, defaults as in LoopDetectorParams (alpha 0.3,
+  // temporal_matches 3, epipolar.min_inliers 12, geometry direct_index, recent_seconds 20,
+  // recent_frames 20). YAML section "place" with keys alpha, temporal_matches, min_inliers,
+  // geometry, recent_seconds and recent_frames; the other parameters keep their defaults.
+  LoopDetectorParams place;
+
+  // Defaults overridden by the YAML file at `path`. NOT_FOUND when the file is missing;
+  // INVALID_ARGUMENT naming the key for unknown keys and values of the wrong type, with the line
+  // for YAML syntax errors. Does not call Validate().
+  static StatusOr<ServerConfig> LoadYaml(const std::string& path);
+
+  // INVALID_ARGUMENT naming the first bad field (as its YAML key, e.g. "tls.key").
+  Status Validate() const;
+
+  // The number of worker threads: `workers`, or the hardware concurrency (at least 1) when 0.
+  uint32_t WorkerCount() const;
+};
+
+// Adds one flag per commonly changed field (--listen, --data-dir, --place-vocabulary,
+// --object-vocabulary, --workers, --queue-capacity, --max-message-bytes, --token-file,
+// --tls-cert, --tls-key, --tls-client-ca, --metrics-listen, --sync, --shutdown-grace-ms,
+// --log-level), bound to `config`: parsing `app` overwrites exactly the fields whose flags were
+// given. The help shows the values `config` holds now as defaults. `config` must outlive `app`.
+void AddFlags(CLI::App& app, ServerConfig* config);
+
+// The result of ParseCommandLine.
+struct CommandLine {
+  ServerConfig config;      // defaults, then the --config file, then the flags; validated
+  std::string config_file;  // the value of --config; empty when none was given
+  // Not empty when --help (-h) was given: the usage text, for the caller to print before it
+  // exits successfully. `config` then holds the defaults and nothing else was checked.
+  std::string help;
+};
+
+// Parses recogd's command line: `--config FILE` (-c) and the flags of AddFlags. Flags override the
+// file wherever they stand relative to --config. Never prints and never exits: INVALID_ARGUMENT
+// with CLI11's message for unknown flags and bad values, the errors of LoadYaml for the file, and
+// those of Validate() for the result.
+StatusOr<CommandLine> ParseCommandLine(int argc, const char* const* argv);
+
+}  // namespace recog::server

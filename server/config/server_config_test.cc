@@ -1,0 +1,403 @@
+#include "server/config/server_config.h"
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <string>
+#include <thread>
+#include <vector>
+
+namespace recog::server {
+namespace {
+
+namespace fs = std::filesystem;
+using ::testing::HasSubstr;
+
+class ServerConfigTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() /
+           ("recog_server_config_" + std::to_string(::getpid()) + "_" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+
+  // Writes `text` to a file in the test's directory and returns its path.
+  std::string WriteFile(const std::string& name, const std::string& text) {
+    const fs::path path = dir_ / name;
+    std::ofstream(path) << text;
+    return path.string();
+  }
+
+  StatusOr<ServerConfig> Load(const std::string& yaml) {
+    return ServerConfig::LoadYaml(WriteFile("recogd.yaml", yaml));
+  }
+
+  fs::path dir_;
+};
+
+StatusOr<CommandLine> Parse(std::vector<std::string> args) {
+  args.insert(args.begin(), "recogd");
+  std::vector<const char*> argv;
+  for (const std::string& a : args) argv.push_back(a.c_str());
+  return ParseCommandLine(static_cast<int>(argv.size()), argv.data());
+}
+
+TEST_F(ServerConfigTest, DefaultsAreValidAndAsDocumented) {
+  const ServerConfig config;
+  EXPECT_TRUE(config.Validate().ok()) << config.Validate().ToString();
+  EXPECT_EQ(config.listen, "127.0.0.1:50051");
+  EXPECT_EQ(config.data_dir, "./recog-data");
+  EXPECT_EQ(config.place_vocabulary, "");
+  EXPECT_EQ(config.object_vocabulary, "");
+  EXPECT_EQ(config.workers, 0u);
+  EXPECT_EQ(config.queue_capacity, 64u);
+  EXPECT_EQ(config.retry_after_ms, 100u);
+  EXPECT_EQ(config.max_message_bytes, 32u * 1024 * 1024);
+  EXPECT_EQ(config.keepalive.time_ms, 20000u);
+  EXPECT_EQ(config.keepalive.timeout_ms, 10000u);
+  EXPECT_TRUE(config.keepalive.permit_without_calls);
+  EXPECT_EQ(config.keepalive.min_ping_interval_ms, 10000u);
+  EXPECT_EQ(config.tls.cert, "");
+  EXPECT_EQ(config.tls.key, "");
+  EXPECT_EQ(config.tls.client_ca, "");
+  EXPECT_EQ(config.token_file, "");
+  EXPECT_EQ(config.metrics_listen, "127.0.0.1:9464");
+  EXPECT_EQ(config.store.sync, StoreSync::kGrouped);
+  EXPECT_EQ(config.store.group_sync_interval_ms, 50u);
+  EXPECT_EQ(config.store.block_cache_mb, 64u);
+  EXPECT_EQ(config.shutdown_grace_ms, 10000u);
+  EXPECT_EQ(config.log_level, "info");
+  EXPECT_DOUBLE_EQ(config.place.alpha, 0.3);
+  EXPECT_EQ(config.place.temporal_matches, 3u);
+  EXPECT_EQ(config.place.epipolar.min_inliers, 12u);
+  EXPECT_EQ(config.place.geometry, GeometryCheck::kDirectIndex);
+  EXPECT_DOUBLE_EQ(config.place.recent_seconds, 20.0);
+  EXPECT_EQ(config.place.recent_frames, 20u);
+}
+
+TEST_F(ServerConfigTest, ZeroWorkersMeansOnePerHardwareThread) {
+  ServerConfig config;
+  EXPECT_EQ(config.WorkerCount(), std::max(1u, std::thread::hardware_concurrency()));
+  config.workers = 3;
+  EXPECT_EQ(config.WorkerCount(), 3u);
+}
+
+TEST_F(ServerConfigTest, StoreSyncNamesRoundTrip) {
+  for (StoreSync sync : {StoreSync::kGrouped, StoreSync::kEveryWrite}) {
+    StatusOr<StoreSync> parsed = ParseStoreSync(StoreSyncName(sync));
+    ASSERT_TRUE(parsed.ok());
+    EXPECT_EQ(*parsed, sync);
+  }
+  EXPECT_EQ(ParseStoreSync("sometimes").status().code(), StatusCode::kInvalidArgument);
+}
+
+TEST_F(ServerConfigTest, YamlSetsEveryFieldOfEverySection) {
+  StatusOr<ServerConfig> config = Load(R"(
+listen: "0.0.0.0:6000"
+data_dir: /var/lib/recog
+place_vocabulary: /voc/place.rvoc
+object_vocabulary: /voc/object.rvoc
+workers: 6
+queue_capacity: 10
+retry_after_ms: 250
+max_message_bytes: 2097152
+keepalive:
+  time_ms: 30000
+  timeout_ms: 5000
+  permit_without_calls: false
+  min_ping_interval_ms: 2000
+tls:
+  cert: server.crt
+  key: server.key
+  client_ca: ca.crt
+token_file: tokens.yaml
+metrics_listen: "0.0.0.0:9000"
+store:
+  sync: every_write
+  group_sync_interval_ms: 200
+  block_cache_mb: 0
+shutdown_grace_ms: 500
+log_level: debug
+place:
+  alpha: 0.25
+  temporal_matches: 2
+  min_inliers: 20
+  geometry: exhaustive
+  recent_seconds: 5.5
+  recent_frames: 7
+)");
+  ASSERT_TRUE(config.ok()) << config.status().ToString();
+  EXPECT_EQ(config->listen, "0.0.0.0:6000");
+  EXPECT_EQ(config->data_dir, "/var/lib/recog");
+  EXPECT_EQ(config->place_vocabulary, "/voc/place.rvoc");
+  EXPECT_EQ(config->object_vocabulary, "/voc/object.rvoc");
+  EXPECT_EQ(config->workers, 6u);
+  EXPECT_EQ(config->queue_capacity, 10u);
+  EXPECT_EQ(config->retry_after_ms, 250u);
+  EXPECT_EQ(config->max_message_bytes, 2097152u);
+  EXPECT_EQ(config->keepalive.time_ms, 30000u);
+  EXPECT_EQ(config->keepalive.timeout_ms, 5000u);
+  EXPECT_FALSE(config->keepalive.permit_without_calls);
+  EXPECT_EQ(config->keepalive.min_ping_interval_ms, 2000u);
+  EXPECT_EQ(config->tls.cert, "server.crt");
+  EXPECT_EQ(config->tls.key, "server.key");
+  EXPECT_EQ(config->tls.client_ca, "ca.crt");
+  EXPECT_EQ(config->token_file, "tokens.yaml");
+  EXPECT_EQ(config->metrics_listen, "0.0.0.0:9000");
+  EXPECT_EQ(config->store.sync, StoreSync::kEveryWrite);
+  EXPECT_EQ(config->store.group_sync_interval_ms, 200u);
+  EXPECT_EQ(config->store.block_cache_mb, 0u);
+  EXPECT_EQ(config->shutdown_grace_ms, 500u);
+  EXPECT_EQ(config->log_level, "debug");
+  EXPECT_DOUBLE_EQ(config->place.alpha, 0.25);
+  EXPECT_EQ(config->place.temporal_matches, 2u);
+  EXPECT_EQ(config->place.epipolar.min_inliers, 20u);
+  EXPECT_EQ(config->place.geometry, GeometryCheck::kExhaustive);
+  EXPECT_DOUBLE_EQ(config->place.recent_seconds, 5.5);
+  EXPECT_EQ(config->place.recent_frames, 7u);
+  EXPECT_TRUE(config->Validate().ok()) << config->Validate().ToString();
+}
+
+TEST_F(ServerConfigTest, AbsentKeysKeepTheirDefaults) {
+  StatusOr<ServerConfig> config = Load("workers: 2\nkeepalive:\n  time_ms: 1000\ntls:\n");
+  ASSERT_TRUE(config.ok()) << config.status().ToString();
+  EXPECT_EQ(config->workers, 2u);
+  EXPECT_EQ(config->keepalive.time_ms, 1000u);
+  EXPECT_EQ(config->keepalive.timeout_ms, 10000u);
+  EXPECT_EQ(config->listen, "127.0.0.1:50051");
+  EXPECT_EQ(config->tls.cert, "");
+  EXPECT_DOUBLE_EQ(config->place.alpha, 0.3);
+}
+
+TEST_F(ServerConfigTest, EmptyFileGivesTheDefaults) {
+  StatusOr<ServerConfig> config = Load("# nothing configured\n");
+  ASSERT_TRUE(config.ok()) << config.status().ToString();
+  EXPECT_EQ(config->listen, ServerConfig().listen);
+  EXPECT_EQ(config->queue_capacity, ServerConfig().queue_capacity);
+}
+
+TEST_F(ServerConfigTest, UnknownKeysAreRejectedByName) {
+  StatusOr<ServerConfig> top = Load("listen: \"127.0.0.1:1\"\nworkerz: 4\n");
+  ASSERT_FALSE(top.ok());
+  EXPECT_EQ(top.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_THAT(top.status().message(), HasSubstr("unknown key 'workerz'"));
+
+  StatusOr<ServerConfig> nested = Load("keepalive:\n  time_ms: 1\n  timeout: 5\n");
+  ASSERT_FALSE(nested.ok());
+  EXPECT_THAT(nested.status().message(), HasSubstr("unknown key 'keepalive.timeout'"));
+
+  StatusOr<ServerConfig> place = Load("place:\n  min_features: 5\n");
+  ASSERT_FALSE(place.ok());
+  EXPECT_THAT(place.status().message(), HasSubstr("unknown key 'place.min_features'"));
+}
+
+TEST_F(ServerConfigTest, ValuesOfTheWrongTypeAreRejectedByName) {
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"workers: many\n", "key 'workers' must be a non-negative integer, got 'many'"},
+      {"queue_capacity: -1\n", "key 'queue_capacity' must be a non-negative integer"},
+      {"workers: 99999999999\n", "key 'workers'"},
+      {"listen: [a, b]\n", "key 'listen' must be a string, got a list"},
+      {"data_dir:\n", "key 'data_dir' must be a string, got nothing"},
+      {"keepalive:\n  permit_without_calls: sometimes\n",
+       "key 'keepalive.permit_without_calls' must be true or false"},
+      {"place:\n  alpha: high\n", "key 'place.alpha' must be a number"},
+      {"place:\n  geometry: magic\n", "key 'place.geometry': unknown geometry check 'magic'"},
+      {"store:\n  sync: sometimes\n", "key 'store.sync': unknown store sync policy 'sometimes'"},
+      {"tls: yes\n", "key 'tls' must be a section"},
+  };
+  for (const auto& [yaml, expected] : cases) {
+    StatusOr<ServerConfig> config = Load(yaml);
+    ASSERT_FALSE(config.ok()) << yaml;
+    EXPECT_EQ(config.status().code(), StatusCode::kInvalidArgument) << yaml;
+    EXPECT_THAT(config.status().message(), HasSubstr(expected)) << yaml;
+  }
+}
+
+TEST_F(ServerConfigTest, MalformedYamlIsRejectedWithItsLine) {
+  StatusOr<ServerConfig> syntax = Load("listen: \"127.0.0.1:1\"\nworkers: [1\n");
+  ASSERT_FALSE(syntax.ok());
+  EXPECT_EQ(syntax.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_THAT(syntax.status().message(), HasSubstr("not valid YAML"));
+  EXPECT_THAT(syntax.status().message(), HasSubstr("line"));
+
+  StatusOr<ServerConfig> list = Load("- listen\n- workers\n");
+  ASSERT_FALSE(list.ok());
+  EXPECT_THAT(list.status().message(), HasSubstr("must be a mapping"));
+}
+
+TEST_F(ServerConfigTest, MissingFileIsNotFound) {
+  StatusOr<ServerConfig> config = ServerConfig::LoadYaml((dir_ / "absent.yaml").string());
+  ASSERT_FALSE(config.ok());
+  EXPECT_EQ(config.status().code(), StatusCode::kNotFound);
+  EXPECT_THAT(config.status().message(), HasSubstr("absent.yaml"));
+}
+
+TEST_F(ServerConfigTest, ValidateNamesTheBadField) {
+  const std::vector<std::pair<std::function<void(ServerConfig&)>, std::string>> cases = {
+      {[](ServerConfig& c) { c.listen = ""; }, "listen"},
+      {[](ServerConfig& c) { c.data_dir = ""; }, "data_dir"},
+      {[](ServerConfig& c) { c.workers = 100000; }, "workers"},
+      {[](ServerConfig& c) { c.queue_capacity = 0; }, "queue_capacity"},
+      {[](ServerConfig& c) { c.max_message_bytes = 1000; }, "max_message_bytes"},
+      {[](ServerConfig& c) { c.max_message_bytes = 3u << 30; }, "max_message_bytes"},
+      {[](ServerConfig& c) { c.keepalive.time_ms = 0; }, "keepalive.time_ms"},
+      {[](ServerConfig& c) { c.keepalive.timeout_ms = 0; }, "keepalive.timeout_ms"},
+      {[](ServerConfig& c) { c.tls.key = "k.pem"; }, "tls.key is set but tls.cert is not"},
+      {[](ServerConfig& c) { c.tls.cert = "c.pem"; }, "tls.cert is set but tls.key is not"},
+      {[](ServerConfig& c) { c.tls.client_ca = "ca.pem"; }, "tls.client_ca"},
+      {[](ServerConfig& c) { c.metrics_listen = c.listen; }, "metrics_listen"},
+      {[](ServerConfig& c) { c.store.group_sync_interval_ms = 0; }, "store.group_sync_interval_ms"},
+      {[](ServerConfig& c) { c.store.group_sync_interval_ms = 60001; },
+       "store.group_sync_interval_ms"},
+      {[](ServerConfig& c) { c.store.block_cache_mb = uint64_t{1} << 30; }, "store.block_cache_mb"},
+      {[](ServerConfig& c) { c.log_level = "verbose"; }, "log_level"},
+      {[](ServerConfig& c) { c.place.alpha = -1; }, "place: alpha"},
+      {[](ServerConfig& c) { c.place.epipolar.min_inliers = 3; }, "place: RANSAC"},
+  };
+  for (const auto& [mutate, expected] : cases) {
+    ServerConfig config;
+    mutate(config);
+    const Status status = config.Validate();
+    EXPECT_EQ(status.code(), StatusCode::kInvalidArgument) << expected;
+    EXPECT_THAT(status.message(), HasSubstr(expected));
+  }
+}
+
+TEST_F(ServerConfigTest, ValidateAcceptsMutualTlsTwoFreePortsAndEverySpdlogLevel) {
+  ServerConfig config;
+  config.tls = {"c.pem", "k.pem", "ca.pem"};
+  config.metrics_listen = "";
+  EXPECT_TRUE(config.Validate().ok());
+  config.listen = config.metrics_listen = "127.0.0.1:0";  // two free ports, no clash
+  EXPECT_TRUE(config.Validate().ok());
+  for (const char* level :
+       {"trace", "debug", "info", "warn", "warning", "err", "error", "critical", "off"}) {
+    config.log_level = level;
+    EXPECT_TRUE(config.Validate().ok()) << level;
+  }
+}
+
+TEST_F(ServerConfigTest, CommandLineFlagsOverrideTheFileWhereverTheyStand) {
+  const std::string file = WriteFile("recogd.yaml", R"(
+listen: "0.0.0.0:6000"
+workers: 6
+queue_capacity: 10
+store:
+  sync: every_write
+)");
+  for (const std::vector<std::string>& args :
+       {std::vector<std::string>{"--config", file, "--workers", "2", "--sync", "grouped"},
+        std::vector<std::string>{"--workers=2", "--sync", "grouped", "-c", file}}) {
+    StatusOr<CommandLine> parsed = Parse(args);
+    ASSERT_TRUE(parsed.ok()) << parsed.status().ToString();
+    EXPECT_EQ(parsed->config_file, file);
+    EXPECT_TRUE(parsed->help.empty());
+    EXPECT_EQ(parsed->config.workers, 2u);                        // flag
+    EXPECT_EQ(parsed->config.store.sync, StoreSync::kGrouped);    // flag
+    EXPECT_EQ(parsed->config.listen, "0.0.0.0:6000");             // file
+    EXPECT_EQ(parsed->config.queue_capacity, 10u);                // file
+    EXPECT_EQ(parsed->config.data_dir, ServerConfig().data_dir);  // default
+  }
+}
+
+TEST_F(ServerConfigTest, EveryFlagSetsItsField) {
+  StatusOr<CommandLine> parsed = Parse({"--listen",
+                                        "0.0.0.0:7000",
+                                        "--data-dir",
+                                        "/data",
+                                        "--place-vocabulary",
+                                        "p.rvoc",
+                                        "--object-vocabulary",
+                                        "o.rvoc",
+                                        "--workers",
+                                        "4",
+                                        "--queue-capacity",
+                                        "9",
+                                        "--max-message-bytes",
+                                        "4194304",
+                                        "--token-file",
+                                        "t.yaml",
+                                        "--tls-cert",
+                                        "c.pem",
+                                        "--tls-key",
+                                        "k.pem",
+                                        "--tls-client-ca",
+                                        "ca.pem",
+                                        "--metrics-listen",
+                                        "",
+                                        "--sync",
+                                        "every_write",
+                                        "--shutdown-grace-ms",
+                                        "0",
+                                        "--log-level",
+                                        "warn"});
+  ASSERT_TRUE(parsed.ok()) << parsed.status().ToString();
+  const ServerConfig& c = parsed->config;
+  EXPECT_EQ(parsed->config_file, "");
+  EXPECT_EQ(c.listen, "0.0.0.0:7000");
+  EXPECT_EQ(c.data_dir, "/data");
+  EXPECT_EQ(c.place_vocabulary, "p.rvoc");
+  EXPECT_EQ(c.object_vocabulary, "o.rvoc");
+  EXPECT_EQ(c.workers, 4u);
+  EXPECT_EQ(c.queue_capacity, 9u);
+  EXPECT_EQ(c.max_message_bytes, 4194304u);
+  EXPECT_EQ(c.token_file, "t.yaml");
+  EXPECT_EQ(c.tls.cert, "c.pem");
+  EXPECT_EQ(c.tls.key, "k.pem");
+  EXPECT_EQ(c.tls.client_ca, "ca.pem");
+  EXPECT_EQ(c.metrics_listen, "");
+  EXPECT_EQ(c.store.sync, StoreSync::kEveryWrite);
+  EXPECT_EQ(c.shutdown_grace_ms, 0u);
+  EXPECT_EQ(c.log_level, "warn");
+}
+
+TEST_F(ServerConfigTest, HelpIsReturnedNotPrintedAndSkipsTheFile) {
+  StatusOr<CommandLine> parsed = Parse({"--config", (dir_ / "absent.yaml").string(), "--help"});
+  ASSERT_TRUE(parsed.ok()) << parsed.status().ToString();
+  EXPECT_THAT(parsed->help, HasSubstr("--listen"));
+  EXPECT_THAT(parsed->help, HasSubstr("--config"));
+  EXPECT_THAT(parsed->help, HasSubstr("127.0.0.1:50051"));  // defaults are shown
+  EXPECT_EQ(parsed->config.listen, ServerConfig().listen);
+}
+
+TEST_F(ServerConfigTest, BadFlagsAreInvalidArgumentWithCli11sMessage) {
+  StatusOr<CommandLine> unknown = Parse({"--wrokers", "2"});
+  ASSERT_FALSE(unknown.ok());
+  EXPECT_EQ(unknown.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_THAT(unknown.status().message(), HasSubstr("--wrokers"));
+
+  for (const std::vector<std::string>& args :
+       {std::vector<std::string>{"--workers", "many"}, std::vector<std::string>{"--workers", "-2"},
+        std::vector<std::string>{"--sync", "sometimes"}, std::vector<std::string>{"--listen"}}) {
+    StatusOr<CommandLine> parsed = Parse(args);
+    ASSERT_FALSE(parsed.ok()) << args[0];
+    EXPECT_EQ(parsed.status().code(), StatusCode::kInvalidArgument) << args[0];
+    EXPECT_THAT(parsed.status().message(), HasSubstr(args[0]));
+  }
+}
+
+TEST_F(ServerConfigTest, CommandLineReportsFileErrorsAndValidatesTheResult) {
+  StatusOr<CommandLine> missing = Parse({"--config", (dir_ / "absent.yaml").string()});
+  EXPECT_EQ(missing.status().code(), StatusCode::kNotFound);
+
+  StatusOr<CommandLine> typo = Parse({"--config", WriteFile("typo.yaml", "listne: x\n")});
+  EXPECT_EQ(typo.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_THAT(typo.status().message(), HasSubstr("listne"));
+
+  StatusOr<CommandLine> invalid = Parse({"--queue-capacity", "0"});
+  EXPECT_EQ(invalid.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_THAT(invalid.status().message(), HasSubstr("queue_capacity"));
+
+  const std::string key_only = WriteFile("key_only.yaml", "tls:\n  key: k.pem\n");
+  EXPECT_EQ(Parse({"--config", key_only}).status().code(), StatusCode::kInvalidArgument);
+  EXPECT_TRUE(Parse({"--config", key_only, "--tls-cert", "c.pem"}).ok());
+}
+
+}  // namespace
+}  // namespace recog::server

@@ -1,0 +1,115 @@
+// ServerMetrics: recogd's Prometheus metrics, and the HTTP endpoint that serves them.
+//
+// One instance per server owns a registry with these metrics:
+//   recog_rpc_duration_seconds{method, code}  histogram, 1 ms to 10 s: every finished RPC
+//   recog_frames_total{kind}                   counter: frames processed, kind "place" or "object"
+//   recog_loop_detections_total                counter: verified loop closures
+//   recog_object_detections_total              counter: recognised object instances
+//   recog_worker_queue_depth                   gauge: tasks waiting for a worker
+//   recog_worker_busy                          gauge: workers running a task
+//   recog_map_entries{map}                     gauge: entries of each place map
+//   recog_objects                              gauge: object models in the database
+//   recog_stream_active{rpc}                   gauge: open streaming calls per RPC
+// StartHttp serves them as text on http://<listen_address>/metrics; Serialize returns the same
+// text. Every method is thread-safe; ObserveRpc, on every call's path, takes a shared lock and
+// allocates nothing once a (method, code) pair has been seen. No method throws.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <shared_mutex>
+#include <string>
+#include <string_view>
+#include <unordered_map>
+
+#include "core/common/status.h"
+
+namespace prometheus {
+class Counter;
+class Exposer;
+class Gauge;
+class Histogram;
+class Registry;
+template <typename T>
+class Family;
+}  // namespace prometheus
+
+namespace recog::server {
+
+enum class FrameKind {
+  kPlace,   // a frame given to a place map (loop detection, query, keyframe)
+  kObject,  // a frame searched for objects
+};
+
+class ServerMetrics {
+ public:
+  ServerMetrics();
+  ~ServerMetrics();
+  ServerMetrics(const ServerMetrics&) = delete;
+  ServerMetrics& operator=(const ServerMetrics&) = delete;
+
+  // Records a finished RPC: `method` is the full name ("/recognition.v1.PlaceRecognition/
+  // QueryPlace"), `code` the gRPC status code name ("OK", "NOT_FOUND").
+  void ObserveRpc(std::string_view method, std::string_view code, double seconds);
+
+  void AddFrames(FrameKind kind, uint64_t count = 1);
+  void AddLoopDetections(uint64_t count = 1);
+  void AddObjectDetections(uint64_t count);
+
+  void SetWorkerQueueDepth(uint64_t tasks);
+  void SetBusyWorkers(uint64_t workers);
+
+  // The number of entries of place map `map`; RemoveMap drops its series (a deleted map).
+  void SetMapEntries(std::string_view map, uint64_t entries);
+  void RemoveMap(std::string_view map);
+  void SetObjects(uint64_t objects);
+
+  // A streaming call of `rpc` (e.g. "StreamFrames") opened or closed.
+  void StreamOpened(std::string_view rpc);
+  void StreamClosed(std::string_view rpc);
+
+  // Serves the metrics on http://<listen_address>/metrics ("127.0.0.1:9464"; port 0 picks a free
+  // port, see HttpPort) from two background threads until the object is destroyed; destruction
+  // then waits up to 2 s for civetweb's listener thread to notice.
+  // INVALID_ARGUMENT for an empty address, FAILED_PRECONDITION when already serving, UNAVAILABLE
+  // when the address cannot be bound (port in use, no such interface).
+  Status StartHttp(const std::string& listen_address);
+  // The port StartHttp bound, 0 before.
+  int HttpPort() const;
+
+  // Every metric in Prometheus' text exposition format, as /metrics serves it.
+  std::string Serialize() const;
+
+ private:
+  // Heterogeneous lookup by string_view, so that looking up a seen label value does not allocate.
+  struct StringHash {
+    using is_transparent = void;
+    size_t operator()(std::string_view s) const { return std::hash<std::string_view>{}(s); }
+  };
+  template <typename V>
+  using StringMap = std::unordered_map<std::string, V, StringHash, std::equal_to<>>;
+
+  std::shared_ptr<prometheus::Registry> registry_;
+  std::unique_ptr<prometheus::Exposer> exposer_;  // null until StartHttp succeeds
+
+  prometheus::Family<prometheus::Histogram>* rpc_duration_;
+  prometheus::Family<prometheus::Gauge>* map_entries_;
+  prometheus::Family<prometheus::Gauge>* stream_active_;
+  prometheus::Counter* place_frames_;
+  prometheus::Counter* object_frames_;
+  prometheus::Counter* loop_detections_;
+  prometheus::Counter* object_detections_;
+  prometheus::Gauge* queue_depth_;
+  prometheus::Gauge* busy_workers_;
+  prometheus::Gauge* objects_;
+
+  // rpc_duration_'s histograms by method, then code; the registry owns them.
+  mutable std::shared_mutex rpc_mutex_;
+  StringMap<StringMap<prometheus::Histogram*>> rpc_histograms_;
+  std::mutex map_mutex_;  // makes RemoveMap's find-and-remove atomic with SetMapEntries
+  mutable std::mutex exposer_mutex_;
+};
+
+}  // namespace recog::server

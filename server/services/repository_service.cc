@@ -1,0 +1,349 @@
+#include "server/services/repository_service.h"
+
+#include <algorithm>
+#include <deque>
+
+#include "server/api/converters.h"
+#include "server/api/status_mapping.h"
+#include "server/runtime/sha256.h"
+#include "server/services/call.h"
+
+namespace recog::server {
+namespace {
+
+constexpr char kService[] = "/recognition.v1.ObjectRepository/";
+constexpr size_t kDefaultChunkBytes = 1u << 20, kMaxChunkBytes = 2u << 20;
+std::string Method(const char* name) { return std::string(kService) + name; }
+
+bool IsSha256Hex(const std::string& s) {
+  return s.size() == 64 && std::all_of(s.begin(), s.end(), [](char c) {
+           return (c >= '0' && c <= '9') || (c >= 'a' && c <= 'f');
+         });
+}
+
+// PutModel: a header, then the file's chunks; checked and stored once the client is done.
+class ModelUpload final : public grpc::ServerReadReactor<pb::PutModelRequest> {
+ public:
+  ModelUpload(ServerState& state, grpc::CallbackServerContext* context,
+              pb::PutModelResponse* response)
+      : state_(state), context_(context), response_(response) {
+    const grpc::Status status =
+        BeginCall(state_, context_, Method("PutModel"), Right::kWrite, &call_);
+    if (!status.ok()) {
+      End(status);
+      return;
+    }
+    StartRead(&request_);
+  }
+
+ private:
+  void OnReadDone(bool ok) override {
+    if (!ok) {  // the client sent everything
+      if (!has_header_) {
+        End({grpc::StatusCode::FAILED_PRECONDITION, "PutModel needs a PutModelHeader first"});
+      } else if (!state_.pool->TrySubmit([this] { End(Store()); })) {
+        End(Busy(state_, context_));
+      }
+      return;
+    }
+    const grpc::Status status = has_header_ ? TakeChunk() : TakeHeader();
+    if (!status.ok()) {
+      End(status);
+      return;
+    }
+    StartRead(&request_);
+  }
+
+  grpc::Status TakeHeader() {
+    if (!request_.has_header()) {
+      return {grpc::StatusCode::FAILED_PRECONDITION,
+              "the first message of PutModel must be a PutModelHeader"};
+    }
+    header_ = request_.header();
+    call_.map = header_.name();
+    if (header_.size_bytes() == 0) {
+      return {grpc::StatusCode::INVALID_ARGUMENT, "header.size_bytes is required"};
+    }
+    if (header_.size_bytes() > RepositoryService::kMaxModelBytes) {
+      return {grpc::StatusCode::RESOURCE_EXHAUSTED,
+              "the model file has " + std::to_string(header_.size_bytes()) +
+                  " bytes; the server takes at most " +
+                  std::to_string(RepositoryService::kMaxModelBytes)};
+    }
+    if (!IsSha256Hex(header_.sha256())) {
+      return {grpc::StatusCode::INVALID_ARGUMENT,
+              "header.sha256 must be 64 lowercase hex digits (SHA-256 of the file)"};
+    }
+    bytes_.reserve(size_t(header_.size_bytes()));
+    has_header_ = true;
+    return grpc::Status::OK;
+  }
+
+  grpc::Status TakeChunk() {
+    if (!request_.has_chunk()) {
+      return {grpc::StatusCode::INVALID_ARGUMENT, "only the first message of PutModel is a header"};
+    }
+    if (bytes_.size() + request_.chunk().size() > header_.size_bytes()) {
+      return {grpc::StatusCode::INVALID_ARGUMENT, "the upload is longer than header.size_bytes (" +
+                                                      std::to_string(header_.size_bytes()) + ")"};
+    }
+    bytes_ += request_.chunk();
+    return grpc::Status::OK;
+  }
+
+  grpc::Status Store() {
+    if (bytes_.size() != header_.size_bytes()) {
+      return {grpc::StatusCode::INVALID_ARGUMENT,
+              "the upload has " + std::to_string(bytes_.size()) + " bytes; the header said " +
+                  std::to_string(header_.size_bytes())};
+    }
+    if (Sha256Hex(bytes_) != header_.sha256()) {
+      return {grpc::StatusCode::INVALID_ARGUMENT,
+              "the upload's SHA-256 differs from header.sha256 (damaged in transit?)"};
+    }
+    std::vector<std::string> tags(header_.tags().begin(), header_.tags().end());
+    StatusOr<ModelVersionInfo> stored =
+        state_.repository->Put(bytes_, header_.name(), std::move(tags));
+    if (!stored.ok()) return ToGrpcStatus(stored.status(), call_.request_id);
+    call_.map = stored.value().metadata.name;
+    ToProto(stored.value(), response_->mutable_model());
+    state_.metrics.SetObjects(state_.objects->size());
+    return grpc::Status::OK;
+  }
+
+  void End(const grpc::Status& status) {
+    EndCall(state_, call_, status);
+    Finish(status);
+  }
+  void OnDone() override { delete this; }
+
+  ServerState& state_;
+  grpc::CallbackServerContext* const context_;
+  pb::PutModelResponse* const response_;
+  CallInfo call_;
+  pb::PutModelRequest request_;
+  pb::PutModelHeader header_;
+  bool has_header_ = false;
+  std::string bytes_;
+};
+
+// GetModel: the ModelInfo, then the file in chunks, one write at a time.
+class ModelDownload final : public grpc::ServerWriteReactor<pb::GetModelResponse> {
+ public:
+  ModelDownload(ServerState& state, grpc::CallbackServerContext* context,
+                const pb::GetModelRequest& request)
+      : state_(state), context_(context) {
+    grpc::Status status = BeginCall(state_, context_, Method("GetModel"), Right::kRead, &call_);
+    call_.map = request.name();
+    chunk_bytes_ = request.chunk_bytes() == 0
+                       ? kDefaultChunkBytes
+                       : std::min<size_t>(request.chunk_bytes(), kMaxChunkBytes);
+    if (status.ok()) {
+      const std::string name = request.name();
+      const uint32_t version = request.version();
+      if (state_.pool->TrySubmit([this, name, version] { Fetch(name, version); })) return;
+      status = Busy(state_, context_);
+    }
+    End(status);
+  }
+
+ private:
+  void Fetch(const std::string& name, uint32_t version) {
+    StatusOr<std::pair<ModelVersionInfo, std::string>> model =
+        state_.repository->Get(name, version);
+    if (!model.ok()) {
+      End(ToGrpcStatus(model.status(), call_.request_id));
+      return;
+    }
+    bytes_ = std::move(model.value().second);
+    ToProto(model.value().first, response_.mutable_info());
+    StartWrite(&response_);
+  }
+
+  void OnWriteDone(bool ok) override {
+    if (!ok) {
+      End({grpc::StatusCode::CANCELLED, "the client went away"});
+      return;
+    }
+    if (offset_ >= bytes_.size()) {
+      End(grpc::Status::OK);
+      return;
+    }
+    const size_t n = std::min(chunk_bytes_, bytes_.size() - offset_);
+    response_.set_chunk(bytes_.data() + offset_, n);
+    offset_ += n;
+    StartWrite(&response_);
+  }
+
+  void End(const grpc::Status& status) {
+    EndCall(state_, call_, status);
+    Finish(status);
+  }
+  void OnDone() override { delete this; }
+
+  ServerState& state_;
+  grpc::CallbackServerContext* const context_;
+  CallInfo call_;
+  size_t chunk_bytes_ = kDefaultChunkBytes;
+  std::string bytes_;
+  size_t offset_ = 0;
+  pb::GetModelResponse response_;
+};
+
+}  // namespace
+
+// WatchModels: the repository's events, filtered by name prefix, through a bounded queue.
+class ModelWatch final : public grpc::ServerWriteReactor<pb::WatchModelsResponse> {
+ public:
+  ModelWatch(RepositoryService& service, grpc::CallbackServerContext* context,
+             const pb::WatchModelsRequest& request)
+      : service_(service), state_(service.state_), prefix_(request.name_prefix()) {
+    state_.metrics.StreamOpened("WatchModels");
+    const grpc::Status status =
+        BeginCall(state_, context, Method("WatchModels"), Right::kRead, &call_);
+    std::lock_guard lock(mutex_);
+    if (!status.ok()) {
+      FinishLocked(status);
+      return;
+    }
+    {
+      std::lock_guard watches(service_.watches_mutex_);
+      service_.watches_.insert(this);
+    }
+    watch_id_ = state_.repository->Watch([this](const ModelEvent& event) { OnEvent(event); });
+    watching_ = true;
+  }
+
+  void Close() {
+    std::lock_guard lock(mutex_);
+    FinishLocked({grpc::StatusCode::UNAVAILABLE, "the server is shutting down"});
+  }
+
+ private:
+  void OnEvent(const ModelEvent& event) {
+    if (event.info.metadata.name.compare(0, prefix_.size(), prefix_) != 0) return;
+    std::lock_guard lock(mutex_);
+    if (finished_) return;
+    if (pending_.size() >= RepositoryService::kMaxPendingEvents) {
+      FinishLocked({grpc::StatusCode::RESOURCE_EXHAUSTED,
+                    "the watcher fell behind by " +
+                        std::to_string(RepositoryService::kMaxPendingEvents) +
+                        " changes; list the models again, then watch anew"});
+      return;
+    }
+    pb::WatchModelsResponse& response = pending_.emplace_back();
+    response.set_change(event.kind == ModelEvent::Kind::kPut ? pb::MODEL_CHANGE_PUT
+                                                             : pb::MODEL_CHANGE_DELETED);
+    ToProto(event.info, response.mutable_model());
+    response.set_sequence(event.sequence);
+    if (!writing_) WriteNextLocked();
+  }
+
+  void WriteNextLocked() {
+    response_ = std::move(pending_.front());
+    pending_.pop_front();
+    writing_ = true;
+    StartWrite(&response_);
+  }
+
+  void OnWriteDone(bool ok) override {
+    std::lock_guard lock(mutex_);
+    writing_ = false;
+    if (!ok) {
+      FinishLocked({grpc::StatusCode::CANCELLED, "the client went away"});
+    } else if (finish_pending_) {
+      FinishLocked(final_status_);
+    } else if (!pending_.empty() && !finished_) {
+      WriteNextLocked();
+    }
+  }
+
+  void OnCancel() override {
+    std::lock_guard lock(mutex_);
+    FinishLocked({grpc::StatusCode::CANCELLED, "the client cancelled"});
+  }
+
+  // Finishes once; after the outstanding write, if there is one.
+  void FinishLocked(const grpc::Status& status) {
+    if (finished_) return;
+    if (writing_) {
+      if (!finish_pending_) final_status_ = status;
+      finish_pending_ = true;
+      return;
+    }
+    finished_ = true;
+    EndCall(state_, call_, status);
+    Finish(status);
+  }
+
+  void OnDone() override {
+    if (watching_) state_.repository->Unwatch(watch_id_);  // no event after this returns
+    {
+      std::lock_guard watches(service_.watches_mutex_);
+      service_.watches_.erase(this);
+    }
+    state_.metrics.StreamClosed("WatchModels");
+    delete this;
+  }
+
+  RepositoryService& service_;
+  ServerState& state_;
+  const std::string prefix_;
+  CallInfo call_;
+  uint64_t watch_id_ = 0;
+  bool watching_ = false;
+  std::mutex mutex_;  // guards everything below
+  std::deque<pb::WatchModelsResponse> pending_;
+  pb::WatchModelsResponse response_;  // being written
+  bool writing_ = false, finished_ = false, finish_pending_ = false;
+  grpc::Status final_status_;
+};
+
+grpc::ServerReadReactor<pb::PutModelRequest>* RepositoryService::PutModel(
+    grpc::CallbackServerContext* context, pb::PutModelResponse* response) {
+  return new ModelUpload(state_, context, response);
+}
+
+grpc::ServerWriteReactor<pb::GetModelResponse>* RepositoryService::GetModel(
+    grpc::CallbackServerContext* context, const pb::GetModelRequest* request) {
+  return new ModelDownload(state_, context, *request);
+}
+
+grpc::ServerUnaryReactor* RepositoryService::ListModels(grpc::CallbackServerContext* context,
+                                                        const pb::ListModelsRequest* request,
+                                                        pb::ListModelsResponse* response) {
+  return RunUnary(state_, context, Method("ListModels"), Right::kRead, [=, this](CallInfo& call) {
+    const ModelFilter filter{request->name_prefix(), request->object_class(), request->tag()};
+    StatusOr<ModelPage> page =
+        state_.repository->List(filter, request->page_size(), request->page_token());
+    if (!page.ok()) return ToGrpcStatus(page.status(), call.request_id);
+    for (const ModelVersionInfo& info : page.value().models) ToProto(info, response->add_models());
+    response->set_next_page_token(page.value().next_page_token);
+    return grpc::Status::OK;
+  });
+}
+
+grpc::ServerUnaryReactor* RepositoryService::DeleteModel(grpc::CallbackServerContext* context,
+                                                         const pb::DeleteModelRequest* request,
+                                                         pb::DeleteModelResponse* response) {
+  return RunUnary(state_, context, Method("DeleteModel"), Right::kWrite, [=, this](CallInfo& call) {
+    call.map = request->name();
+    const size_t versions = state_.repository->Versions(request->name()).size();
+    RECOG_RETURN_IF_ERROR_AS_GRPC(state_.repository->Remove(request->name()), call.request_id);
+    response->set_versions_deleted(uint32_t(versions));
+    state_.metrics.SetObjects(state_.objects->size());
+    return grpc::Status::OK;
+  });
+}
+
+grpc::ServerWriteReactor<pb::WatchModelsResponse>* RepositoryService::WatchModels(
+    grpc::CallbackServerContext* context, const pb::WatchModelsRequest* request) {
+  return new ModelWatch(*this, context, *request);
+}
+
+void RepositoryService::CloseWatchers() {
+  std::lock_guard lock(watches_mutex_);
+  for (ModelWatch* watch : watches_) watch->Close();
+}
+
+}  // namespace recog::server

@@ -1,0 +1,46 @@
+// ServerState: everything the RPC handlers of one recogd share.
+//
+// Built by RecognitionServer (server/app/recognition_server.h) before the gRPC server starts, so
+// that health checks can answer while the store opens. Until `ready` is set, the domain members
+// (store, maps, objects, repository) are null and every RPC answers UNAVAILABLE; once set they
+// never change until the server is destroyed. `draining` is set on shutdown: streams stop after
+// the frame they are answering, new calls get UNAVAILABLE.
+#pragma once
+
+#include <atomic>
+#include <memory>
+
+#include "core/features/feature_extractor.h"
+#include "core/index/index_store.h"
+#include "core/object/model_repository.h"
+#include "core/object/object_database.h"
+#include "core/object/object_recognizer.h"
+#include "core/place/map_registry.h"
+#include "server/auth/token_auth.h"
+#include "server/config/server_config.h"
+#include "server/metrics/metrics.h"
+#include "server/runtime/worker_pool.h"
+
+namespace recog::server {
+
+struct ServerState {
+  ServerState(ServerConfig config, TokenAuthenticator authenticator)
+      : config(std::move(config)), auth(std::move(authenticator)) {}
+
+  const ServerConfig config;
+  const TokenAuthenticator auth;
+  ServerMetrics metrics;
+  std::unique_ptr<WorkerPool> pool;
+  std::atomic<bool> ready{false};
+  std::atomic<bool> draining{false};
+
+  // Set once before `ready`.
+  std::unique_ptr<IndexStore> store;
+  std::unique_ptr<MapRegistry> maps;
+  std::shared_ptr<ObjectDatabase> objects;
+  std::unique_ptr<ModelRepository> repository;
+  FeatureOptions place_features;   // how frames sent as images are described for place maps
+  RecognitionOptions recognition;  // object recognition settings
+};
+
+}  // namespace recog::server

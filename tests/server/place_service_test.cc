@@ -1,0 +1,342 @@
+// Loopback tests of the PlaceRecognition service: maps, frames, streams and bad input.
+#include <atomic>
+#include <condition_variable>
+#include <mutex>
+
+#include <opencv2/imgcodecs.hpp>
+
+#include "core/features/feature_extractor.h"
+#include "tests/server/server_fixture.h"
+
+namespace recog::server::testing {
+namespace {
+
+class PlaceServiceTest : public ServerFixture {};
+
+pb::Frame FeaturesFrame(const std::string& jpeg) {
+  const cv::Mat image =
+      cv::imdecode(cv::Mat(1, int(jpeg.size()), CV_8U, (void*)jpeg.data()), cv::IMREAD_GRAYSCALE);
+  auto extractor = CreateFeatureExtractor(FeatureOptions{});
+  FeatureSet features;
+  EXPECT_TRUE(extractor.value()->Extract(image, &features).ok());
+  pb::Frame frame;
+  pb::Features* out = frame.mutable_features();
+  for (const cv::KeyPoint& k : features.keypoints) {
+    pb::Keypoint* p = out->add_keypoints();
+    p->set_x(k.pt.x);
+    p->set_y(k.pt.y);
+    p->set_size(k.size);
+    p->set_angle(k.angle);
+    p->set_response(k.response);
+    p->set_octave(k.octave);
+  }
+  out->set_descriptors(features.descriptors.data, features.descriptors.total());
+  out->set_descriptor_bytes(32);
+  return frame;
+}
+
+TEST_F(PlaceServiceTest, MapsAreCreatedDescribedListedAndDeleted) {
+  pb::MapSettings settings;
+  settings.set_alpha(0.5);
+  ASSERT_TRUE(CreateMap("robot-a", settings).ok());
+  ASSERT_TRUE(CreateMap("robot-b").ok());
+  EXPECT_EQ(CreateMap("robot-a").error_code(), grpc::StatusCode::ALREADY_EXISTS);
+  EXPECT_EQ(CreateMap("bad name!").error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  pb::MapSettings negative;
+  negative.set_alpha(-1);
+  EXPECT_EQ(CreateMap("robot-c", negative).error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+
+  pb::MapInfo a, b;
+  ASSERT_TRUE(GetMap("robot-a", &a).ok());
+  ASSERT_TRUE(GetMap("robot-b", &b).ok());
+  EXPECT_EQ(a.settings().alpha(), 0.5);
+  EXPECT_EQ(b.settings().alpha(), 0.3);  // thesis Table 4.4 defaults
+  EXPECT_EQ(b.settings().temporal_matches(), 3u);
+  EXPECT_EQ(b.settings().min_inliers(), 12u);
+  EXPECT_EQ(b.settings().geometry(), pb::GEOMETRY_CHECK_DIRECT_INDEX);
+  EXPECT_EQ(a.frames(), 0u);
+  EXPECT_NE(a.id(), b.id());
+  EXPECT_EQ(a.vocabulary_checksum().size(), 18u);
+
+  pb::ListMapsRequest list;
+  list.set_page_size(1);
+  pb::ListMapsResponse first, second;
+  ASSERT_TRUE(places_->ListMaps(Context().get(), list, &first).ok());
+  ASSERT_EQ(first.maps_size(), 1);
+  EXPECT_EQ(first.maps(0).name(), "robot-a");
+  ASSERT_FALSE(first.next_page_token().empty());
+  list.set_page_token(first.next_page_token());
+  ASSERT_TRUE(places_->ListMaps(Context().get(), list, &second).ok());
+  ASSERT_EQ(second.maps_size(), 1);
+  EXPECT_EQ(second.maps(0).name(), "robot-b");
+  EXPECT_TRUE(second.next_page_token().empty());
+
+  pb::AddFrameResponse added;
+  ASSERT_TRUE(AddFrame("robot-a", JpegFrame(CorridorJpeg(1)), &added).ok());
+  pb::DeleteMapRequest remove;
+  remove.set_name("robot-a");
+  pb::DeleteMapResponse removed;
+  ASSERT_TRUE(places_->DeleteMap(Context().get(), remove, &removed).ok());
+  EXPECT_EQ(removed.frames_deleted(), 1u);
+  EXPECT_EQ(GetMap("robot-a").error_code(), grpc::StatusCode::NOT_FOUND);
+  EXPECT_EQ(places_->DeleteMap(Context().get(), remove, &removed).error_code(),
+            grpc::StatusCode::NOT_FOUND);
+  ASSERT_TRUE(CreateMap("robot-a").ok());  // the name is free again
+}
+
+TEST_F(PlaceServiceTest, AnAddedPlaceIsFoundByARelocalisationQueryThatChangesNothing) {
+  ASSERT_TRUE(CreateMap("hall").ok());
+  for (int n : {1, 20, 41, 60}) {
+    pb::AddFrameResponse added;
+    ASSERT_TRUE(AddFrame("hall", JpegFrame(CorridorJpeg(n), n), &added).ok());
+    EXPECT_GT(added.num_features(), 300u);
+  }
+  pb::QueryPlaceRequest query;
+  query.set_map("hall");
+  *query.mutable_frame() = JpegFrame(CorridorJpeg(41));
+  query.mutable_frame()->set_client_frame_id("probe-1");
+  query.mutable_options()->set_include_fundamental(true);
+  pb::QueryPlaceResponse response;
+  ASSERT_TRUE(places_->QueryPlace(Context().get(), query, &response).ok());
+  const pb::LoopResult& result = response.result();
+  EXPECT_EQ(result.status(), pb::LOOP_STATUS_LOOP_DETECTED);
+  EXPECT_EQ(result.match_frame_id(), 2u);
+  EXPECT_EQ(result.match_timestamp(), 41.0);
+  EXPECT_FALSE(result.has_frame_id());  // nothing was added
+  EXPECT_GE(result.inliers(), 12u);
+  EXPECT_EQ(result.fundamental_size(), 9);
+  EXPECT_EQ(response.client_frame_id(), "probe-1");
+  EXPECT_GT(response.timing().features_ms(), 0.0);
+  pb::MapInfo info;
+  ASSERT_TRUE(GetMap("hall", &info).ok());
+  EXPECT_EQ(info.frames(), 4u);
+}
+
+TEST_F(PlaceServiceTest, ClientSideFeaturesWorkLikeImages) {
+  ASSERT_TRUE(CreateMap("light").ok());
+  pb::AddFrameResponse added;
+  ASSERT_TRUE(AddFrame("light", FeaturesFrame(CorridorJpeg(20)), &added).ok());
+  EXPECT_EQ(added.frame_id(), 0u);
+  EXPECT_GT(added.num_features(), 300u);
+  pb::QueryPlaceRequest query;
+  query.set_map("light");
+  *query.mutable_frame() = JpegFrame(CorridorJpeg(20));
+  pb::QueryPlaceResponse response;
+  ASSERT_TRUE(places_->QueryPlace(Context().get(), query, &response).ok());
+  EXPECT_EQ(response.result().status(), pb::LOOP_STATUS_LOOP_DETECTED);
+  EXPECT_EQ(response.result().match_frame_id(), 0u);
+}
+
+// Streams the frames after `config` and collects every answer.
+std::vector<pb::StreamFramesResponse> Stream(pb::PlaceRecognition::Stub& stub,
+                                             const pb::StreamConfig& config,
+                                             const std::vector<pb::Frame>& frames,
+                                             grpc::Status* status) {
+  grpc::ClientContext context;
+  auto stream = stub.StreamFrames(&context);
+  pb::StreamFramesRequest request;
+  *request.mutable_config() = config;
+  std::vector<pb::StreamFramesResponse> answers;
+  if (stream->Write(request)) {
+    for (const pb::Frame& frame : frames) {
+      *request.mutable_frame() = frame;
+      if (!stream->Write(request)) break;
+      pb::StreamFramesResponse answer;
+      if (!stream->Read(&answer)) break;
+      answers.push_back(answer);
+    }
+  }
+  stream->WritesDone();
+  *status = stream->Finish();
+  return answers;
+}
+
+TEST_F(PlaceServiceTest, AStreamAnswersEveryFrameInOrderAndDetectsTheRevisit) {
+  pb::StreamConfig config;
+  config.set_map("tour");
+  config.set_create_if_missing(true);
+  config.mutable_settings()->set_temporal_matches(0);  // four frames cannot build consistency
+  config.mutable_settings()->set_recent_frames(1);
+  std::vector<pb::Frame> frames;
+  for (int n : {1, 20, 41, 60, 1}) frames.push_back(JpegFrame(CorridorJpeg(n)));
+  grpc::Status status;
+  const auto answers = Stream(*places_, config, frames, &status);
+  ASSERT_TRUE(status.ok()) << status.error_message();
+  ASSERT_EQ(answers.size(), 5u);
+  for (size_t i = 0; i < answers.size(); ++i) {
+    EXPECT_EQ(answers[i].sequence(), i);
+    ASSERT_TRUE(answers[i].has_result()) << answers[i].error().message();
+    EXPECT_EQ(answers[i].result().frame_id(), i);
+  }
+  EXPECT_EQ(answers[0].result().status(), pb::LOOP_STATUS_LOW_SCORE_WITH_PREVIOUS);
+  EXPECT_EQ(answers[4].result().status(), pb::LOOP_STATUS_LOOP_DETECTED);
+  EXPECT_EQ(answers[4].result().match_frame_id(), 0u);
+  pb::MapInfo info;
+  ASSERT_TRUE(GetMap("tour", &info).ok());
+  EXPECT_EQ(info.frames(), 5u);
+  EXPECT_EQ(info.settings().temporal_matches(), 0u);
+}
+
+TEST_F(PlaceServiceTest, BadFramesAreAnsweredWithTheirErrorAndTheStreamGoesOn) {
+  ASSERT_TRUE(CreateMap("noisy").ok());
+  std::vector<pb::Frame> frames;
+  frames.push_back(JpegFrame("\xff\xd8 this is not a JPEG"));  // undecodable image
+  pb::Frame zero;
+  zero.mutable_raw_image()->set_format(pb::PIXEL_FORMAT_GRAY8);  // zero-size image
+  frames.push_back(zero);
+  pb::Frame short_pixels;
+  short_pixels.mutable_raw_image()->set_width(64);
+  short_pixels.mutable_raw_image()->set_height(48);
+  short_pixels.mutable_raw_image()->set_format(pb::PIXEL_FORMAT_BGR8);
+  short_pixels.mutable_raw_image()->set_pixels(std::string(100, '\x7f'));  // garbage length
+  frames.push_back(short_pixels);
+  pb::Frame wrong_length = FeaturesFrame(CorridorJpeg(1));
+  wrong_length.mutable_features()->set_descriptor_bytes(16);  // wrong descriptor length
+  frames.push_back(wrong_length);
+  pb::Frame garbage_descriptors = FeaturesFrame(CorridorJpeg(1));
+  garbage_descriptors.mutable_features()->set_descriptors("garbage");
+  frames.push_back(garbage_descriptors);
+  frames.push_back(pb::Frame());  // no content at all
+  frames.push_back(JpegFrame(CorridorJpeg(1)));
+  pb::StreamConfig config;
+  config.set_map("noisy");
+  grpc::Status status;
+  const auto answers = Stream(*places_, config, frames, &status);
+  ASSERT_TRUE(status.ok()) << status.error_message();
+  ASSERT_EQ(answers.size(), frames.size());
+  for (size_t i = 0; i + 1 < answers.size(); ++i) {
+    ASSERT_TRUE(answers[i].has_error()) << "frame " << i;
+    EXPECT_EQ(answers[i].error().code(), int(grpc::StatusCode::INVALID_ARGUMENT)) << i;
+    EXPECT_FALSE(answers[i].error().message().empty());
+  }
+  ASSERT_TRUE(answers.back().has_result());
+  EXPECT_EQ(answers.back().result().frame_id(), 0u);  // the failed frames added nothing
+}
+
+TEST_F(PlaceServiceTest, StreamsNeedAConfigFirstAndAnExistingMap) {
+  grpc::ClientContext context;
+  auto stream = places_->StreamFrames(&context);
+  pb::StreamFramesRequest request;
+  *request.mutable_frame() = JpegFrame(CorridorJpeg(1));
+  stream->Write(request);
+  stream->WritesDone();
+  pb::StreamFramesResponse ignored;
+  EXPECT_FALSE(stream->Read(&ignored));
+  EXPECT_EQ(stream->Finish().error_code(), grpc::StatusCode::FAILED_PRECONDITION);
+
+  pb::StreamConfig config;
+  config.set_map("nowhere");
+  grpc::Status status;
+  EXPECT_TRUE(Stream(*places_, config, {JpegFrame(CorridorJpeg(1))}, &status).empty());
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::NOT_FOUND);
+  EXPECT_EQ(GetMap("nowhere").error_code(), grpc::StatusCode::NOT_FOUND);
+}
+
+TEST_F(PlaceServiceTest, BadUnaryInputGetsItsCodeAndTheServerKeepsServing) {
+  ASSERT_TRUE(CreateMap("m").ok());
+  pb::AddFrameResponse added;
+  EXPECT_EQ(AddFrame("m", JpegFrame("GIF89a garbage"), &added).error_code(),
+            grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(AddFrame("unknown", JpegFrame(CorridorJpeg(1)), &added).error_code(),
+            grpc::StatusCode::NOT_FOUND);
+  pb::Frame bad_intrinsics = JpegFrame(CorridorJpeg(1));
+  bad_intrinsics.mutable_intrinsics()->set_fx(-3);
+  EXPECT_EQ(AddFrame("m", bad_intrinsics, &added).error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  pb::Frame negative_time = JpegFrame(CorridorJpeg(1), -1);
+  EXPECT_EQ(AddFrame("m", negative_time, &added).error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  pb::QueryPlaceRequest query;
+  query.set_map("m");
+  pb::QueryPlaceResponse response;
+  EXPECT_EQ(places_->QueryPlace(Context().get(), query, &response).error_code(),
+            grpc::StatusCode::INVALID_ARGUMENT);  // a frame without content
+  pb::MapInfo info;
+  ASSERT_TRUE(GetMap("m", &info).ok());
+  EXPECT_EQ(info.frames(), 0u);
+  ASSERT_TRUE(AddFrame("m", JpegFrame(CorridorJpeg(1)), &added).ok());
+}
+
+TEST_F(PlaceServiceTest, AnOversizedMessageIsRefusedWithResourceExhausted) {
+  StopServer();
+  config().max_message_bytes = 1u << 20;
+  StartServer();
+  ASSERT_TRUE(CreateMap("m").ok());
+  pb::AddFrameResponse added;
+  EXPECT_EQ(AddFrame("m", JpegFrame(std::string(2u << 20, 'x')), &added).error_code(),
+            grpc::StatusCode::RESOURCE_EXHAUSTED);
+  ASSERT_TRUE(AddFrame("m", JpegFrame(CorridorJpeg(1)), &added).ok());
+}
+
+TEST_F(PlaceServiceTest, MapsAndTheirSettingsSurviveARestart) {
+  pb::MapSettings settings;
+  settings.set_alpha(0.45);
+  settings.set_geometry(pb::GEOMETRY_CHECK_EXHAUSTIVE);
+  ASSERT_TRUE(CreateMap("kept", settings).ok());
+  for (int n : {1, 20, 41}) {
+    pb::AddFrameResponse added;
+    ASSERT_TRUE(AddFrame("kept", JpegFrame(CorridorJpeg(n)), &added).ok());
+  }
+  RestartServer();
+  pb::MapInfo info;
+  ASSERT_TRUE(GetMap("kept", &info).ok());
+  EXPECT_EQ(info.frames(), 3u);
+  EXPECT_EQ(info.settings().alpha(), 0.45);
+  EXPECT_EQ(info.settings().geometry(), pb::GEOMETRY_CHECK_EXHAUSTIVE);
+  pb::QueryPlaceRequest query;
+  query.set_map("kept");
+  *query.mutable_frame() = JpegFrame(CorridorJpeg(20));
+  pb::QueryPlaceResponse response;
+  ASSERT_TRUE(places_->QueryPlace(Context().get(), query, &response).ok());
+  EXPECT_EQ(response.result().status(), pb::LOOP_STATUS_LOOP_DETECTED);
+  EXPECT_EQ(response.result().match_frame_id(), 1u);
+  pb::AddFrameResponse added;
+  ASSERT_TRUE(AddFrame("kept", JpegFrame(CorridorJpeg(60)), &added).ok());
+  EXPECT_EQ(added.frame_id(), 3u);
+}
+
+TEST_F(PlaceServiceTest, AFullQueueAnswersResourceExhaustedWithARetryHint) {
+  StopServer();
+  config().workers = 1;
+  config().queue_capacity = 1;
+  StartServer();
+  ASSERT_TRUE(CreateMap("busy").ok());
+  constexpr int kCalls = 16;
+  std::mutex mutex;
+  std::condition_variable done;
+  int finished = 0, ok = 0, busy = 0, hinted = 0;
+  std::vector<std::unique_ptr<grpc::ClientContext>> contexts;
+  std::vector<pb::AddFrameRequest> requests(kCalls);
+  std::vector<pb::AddFrameResponse> responses(kCalls);
+  const std::string jpeg = CorridorJpeg(1);
+  for (int i = 0; i < kCalls; ++i) {
+    contexts.push_back(Context());
+    requests[i].set_map("busy");
+    *requests[i].mutable_frame() = JpegFrame(jpeg);
+  }
+  for (int i = 0; i < kCalls; ++i) {
+    grpc::ClientContext* context = contexts[i].get();
+    places_->async()->AddFrame(context, &requests[i], &responses[i],
+                               [&, context](grpc::Status status) {
+                                 std::lock_guard lock(mutex);
+                                 if (status.ok()) ++ok;
+                                 if (status.error_code() == grpc::StatusCode::RESOURCE_EXHAUSTED) {
+                                   ++busy;
+                                   if (context->GetServerTrailingMetadata().count("retry-after-ms"))
+                                     ++hinted;
+                                 }
+                                 ++finished;
+                                 done.notify_all();
+                               });
+  }
+  std::unique_lock lock(mutex);
+  done.wait(lock, [&] { return finished == kCalls; });
+  EXPECT_GT(busy, 0);
+  EXPECT_EQ(hinted, busy);
+  EXPECT_EQ(ok + busy, kCalls);
+  lock.unlock();
+  pb::MapInfo info;
+  ASSERT_TRUE(GetMap("busy", &info).ok());
+  EXPECT_EQ(info.frames(), uint64_t(ok));  // refused calls added nothing
+}
+
+}  // namespace
+}  // namespace recog::server::testing

@@ -1,0 +1,306 @@
+// Loopback tests of the ObjectRepository and ObjectRecognition services: versioned uploads and
+// downloads, watching, recognition of what was uploaded, bad uploads and bad frames.
+#include <thread>
+
+#include <opencv2/imgcodecs.hpp>
+
+#include "core/object/model_builder.h"
+#include "core/object/model_file.h"
+#include "server/runtime/sha256.h"
+#include "tests/server/server_fixture.h"
+#include "tests/testing/vocabularies.h"
+
+namespace recog::server::testing {
+namespace {
+
+// A planar poster model (0.64 x 0.48 m) of corridor image `n`, as a .robj file.
+std::string PosterModelFile(const std::string& name, int n, const std::string& object_class) {
+  ModelBuilder builder(recog::testing::BundledObjectVocabulary());
+  const cv::Mat image =
+      cv::imread(recog::testing::ProjectTestData("corridor/" + std::to_string(n) + ".jpg"),
+                 cv::IMREAD_GRAYSCALE);
+  auto model = builder.FromFaceImages(name, {{BoxSide::kFront, image}}, 0.64, 0.48);
+  EXPECT_TRUE(model.ok()) << model.status().ToString();
+  model.value().metadata.object_class = object_class;
+  auto bytes = EncodeObjectModel(model.value());
+  EXPECT_TRUE(bytes.ok());
+  return bytes.value();
+}
+
+class RepositoryServiceTest : public ServerFixture {
+ protected:
+  // Uploads `bytes` in 64 KiB chunks with the header's size and SHA-256 (or the given ones).
+  grpc::Status Put(const std::string& bytes, const std::string& name,
+                   std::vector<std::string> tags = {}, pb::ModelInfo* info = nullptr,
+                   std::string sha256 = {}, uint64_t size = 0) {
+    auto context = Context();
+    pb::PutModelResponse response;
+    auto writer = models_->PutModel(context.get(), &response);
+    pb::PutModelRequest request;
+    pb::PutModelHeader* header = request.mutable_header();
+    header->set_name(name);
+    for (const std::string& tag : tags) header->add_tags(tag);
+    header->set_sha256(sha256.empty() ? Sha256Hex(bytes) : sha256);
+    header->set_size_bytes(size == 0 ? bytes.size() : size);
+    writer->Write(request);
+    for (size_t offset = 0; offset < bytes.size(); offset += 65536) {
+      request.set_chunk(bytes.substr(offset, 65536));
+      if (!writer->Write(request)) break;
+    }
+    writer->WritesDone();
+    grpc::Status status = writer->Finish();
+    if (info != nullptr) *info = response.model();
+    return status;
+  }
+
+  // Downloads a version; returns the bytes and fills the info.
+  grpc::Status Get(const std::string& name, uint32_t version, pb::ModelInfo* info,
+                   std::string* bytes) {
+    auto context = Context();
+    pb::GetModelRequest request;
+    request.set_name(name);
+    request.set_version(version);
+    request.set_chunk_bytes(50000);
+    auto reader = models_->GetModel(context.get(), request);
+    pb::GetModelResponse response;
+    bytes->clear();
+    while (reader->Read(&response)) {
+      if (response.has_info()) *info = response.info();
+      if (response.has_chunk()) *bytes += response.chunk();
+    }
+    return reader->Finish();
+  }
+
+  grpc::Status Recognize(const pb::Frame& frame, pb::RecognizeObjectsResponse* response,
+                         const pb::ObjectFilter& filter = {}) {
+    pb::RecognizeObjectsRequest request;
+    *request.mutable_frame() = frame;
+    *request.mutable_filter() = filter;
+    return objects_->RecognizeObjects(Context().get(), request, response);
+  }
+
+  // Corridor image `n` seen straight on, with intrinsics.
+  static pb::Frame PosterView(int n) {
+    pb::Frame frame = JpegFrame(CorridorJpeg(n));
+    pb::CameraIntrinsics* k = frame.mutable_intrinsics();
+    k->set_fx(500);
+    k->set_fy(500);
+    k->set_cx(256);
+    k->set_cy(192);
+    return frame;
+  }
+};
+
+TEST_F(RepositoryServiceTest, EveryUploadIsANewVersionAndTheLatestIsRecognisedAtOnce) {
+  const std::string v1 = PosterModelFile("poster", 1, "poster");
+  pb::ModelInfo info;
+  ASSERT_TRUE(Put(v1, "", {"hall", "paper"}, &info).ok());
+  EXPECT_EQ(info.name(), "poster");
+  EXPECT_EQ(info.version(), 1u);
+  EXPECT_EQ(info.object_class(), "poster");
+  EXPECT_EQ(info.type(), pb::OBJECT_TYPE_PLANAR);
+  EXPECT_GT(info.num_descriptors(), 300u);
+  EXPECT_EQ(info.tags_size(), 2);
+
+  pb::RecognizeObjectsResponse seen;
+  ASSERT_TRUE(Recognize(PosterView(1), &seen).ok());
+  ASSERT_EQ(seen.objects_size(), 1);
+  EXPECT_EQ(seen.objects(0).name(), "poster");
+  EXPECT_EQ(seen.objects(0).version(), 1u);
+  EXPECT_EQ(seen.objects(0).pose().rotation_size(), 9);
+  EXPECT_GT(seen.objects(0).pose().translation(2), 0.0);  // in front of the camera
+  EXPECT_GE(seen.objects(0).inliers(), 12u);
+  EXPECT_GE(seen.objects(0).outline_size(), 3);
+
+  // A second upload of the name (another picture) is version 2; version 1 stays downloadable.
+  pb::ModelInfo info2;
+  ASSERT_TRUE(Put(PosterModelFile("whatever", 41, "poster"), "poster", {}, &info2).ok());
+  EXPECT_EQ(info2.version(), 2u);
+  pb::ModelInfo got;
+  std::string bytes;
+  ASSERT_TRUE(Get("poster", 1, &got, &bytes).ok());
+  EXPECT_EQ(got.version(), 1u);
+  EXPECT_EQ(Sha256Hex(bytes), got.sha256());
+  EXPECT_EQ(bytes.size(), got.size_bytes());
+  auto decoded = DecodeObjectModel(bytes, "download");
+  ASSERT_TRUE(decoded.ok()) << decoded.status().ToString();
+  EXPECT_EQ(decoded.value().metadata.version, 1u);
+  ASSERT_TRUE(Get("poster", 0, &got, &bytes).ok());
+  EXPECT_EQ(got.version(), 2u);
+  EXPECT_EQ(Get("poster", 3, &got, &bytes).error_code(), grpc::StatusCode::NOT_FOUND);
+  EXPECT_EQ(Get("nothing", 0, &got, &bytes).error_code(), grpc::StatusCode::NOT_FOUND);
+
+  ASSERT_TRUE(Recognize(PosterView(41), &seen).ok());
+  ASSERT_EQ(seen.objects_size(), 1);
+  EXPECT_EQ(seen.objects(0).version(), 2u);
+}
+
+TEST_F(RepositoryServiceTest, ListingFiltersByPrefixClassAndTagAPageAtATime) {
+  ASSERT_TRUE(Put(PosterModelFile("a", 1, "poster"), "shelf-a", {"kitchen"}).ok());
+  ASSERT_TRUE(Put(PosterModelFile("b", 20, "box"), "shelf-b", {"kitchen"}).ok());
+  ASSERT_TRUE(Put(PosterModelFile("c", 41, "poster"), "wall-c", {"hall"}).ok());
+  pb::ListModelsRequest request;
+  pb::ListModelsResponse response;
+  request.set_name_prefix("shelf-");
+  ASSERT_TRUE(models_->ListModels(Context().get(), request, &response).ok());
+  ASSERT_EQ(response.models_size(), 2);
+  EXPECT_EQ(response.models(0).name(), "shelf-a");
+  request.Clear();
+  request.set_object_class("poster");
+  ASSERT_TRUE(models_->ListModels(Context().get(), request, &response).ok());
+  ASSERT_EQ(response.models_size(), 2);
+  EXPECT_EQ(response.models(1).name(), "wall-c");
+  request.Clear();
+  request.set_tag("kitchen");
+  request.set_page_size(1);
+  ASSERT_TRUE(models_->ListModels(Context().get(), request, &response).ok());
+  ASSERT_EQ(response.models_size(), 1);
+  ASSERT_FALSE(response.next_page_token().empty());
+  request.set_page_token(response.next_page_token());
+  ASSERT_TRUE(models_->ListModels(Context().get(), request, &response).ok());
+  ASSERT_EQ(response.models_size(), 1);
+  EXPECT_EQ(response.models(0).name(), "shelf-b");
+  request.set_page_token("garbage token");
+  EXPECT_EQ(models_->ListModels(Context().get(), request, &response).error_code(),
+            grpc::StatusCode::INVALID_ARGUMENT);
+}
+
+TEST_F(RepositoryServiceTest, BadUploadsAreRefusedAndStoreNothing) {
+  const std::string file = PosterModelFile("poster", 1, "");
+  std::string damaged = file;
+  damaged[damaged.size() / 2] ^= 0x55;
+  EXPECT_EQ(Put(damaged, "", {}, nullptr, Sha256Hex(file)).error_code(),
+            grpc::StatusCode::INVALID_ARGUMENT);  // damaged in transit: checksum mismatch
+  EXPECT_EQ(Put(file, "", {}, nullptr, "", file.size() + 1).error_code(),
+            grpc::StatusCode::INVALID_ARGUMENT);  // shorter than announced
+  EXPECT_EQ(Put(file, "", {}, nullptr, "", file.size() - 1).error_code(),
+            grpc::StatusCode::INVALID_ARGUMENT);  // longer than announced
+  EXPECT_EQ(Put(file, "", {}, nullptr, "not-hex").error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(Put("garbage bytes, checksum right", "x").error_code(),
+            grpc::StatusCode::INVALID_ARGUMENT);  // not a model file
+  EXPECT_EQ(Put(file, "bad/name").error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(Put(file, "", {}, nullptr, "", uint64_t(1) << 40).error_code(),
+            grpc::StatusCode::RESOURCE_EXHAUSTED);  // larger than the server takes
+  {
+    auto context = Context();
+    pb::PutModelResponse response;
+    auto writer = models_->PutModel(context.get(), &response);
+    pb::PutModelRequest chunk;
+    chunk.set_chunk(file.substr(0, 100));
+    writer->Write(chunk);
+    writer->WritesDone();
+    EXPECT_EQ(writer->Finish().error_code(), grpc::StatusCode::FAILED_PRECONDITION);  // no header
+  }
+  pb::ListModelsResponse listed;
+  ASSERT_TRUE(models_->ListModels(Context().get(), {}, &listed).ok());
+  EXPECT_EQ(listed.models_size(), 0);
+  ASSERT_TRUE(Put(file, "").ok());  // the server still takes good uploads
+}
+
+TEST_F(RepositoryServiceTest, WatchersSeeEveryChangeInOrder) {
+  grpc::ClientContext context;
+  pb::WatchModelsRequest request;
+  request.set_name_prefix("watched");
+  auto reader = models_->WatchModels(&context, request);
+  std::vector<pb::WatchModelsResponse> events;
+  std::thread watcher([&] {
+    pb::WatchModelsResponse event;
+    while (events.size() < 3 && reader->Read(&event)) events.push_back(event);
+  });
+  // The watch is registered once the server handled the call; give it a moment.
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  const std::string file = PosterModelFile("x", 1, "");
+  ASSERT_TRUE(Put(file, "watched-1").ok());
+  ASSERT_TRUE(Put(file, "other").ok());  // filtered out by the prefix
+  ASSERT_TRUE(Put(file, "watched-1").ok());
+  pb::DeleteModelRequest remove;
+  remove.set_name("watched-1");
+  pb::DeleteModelResponse removed;
+  ASSERT_TRUE(models_->DeleteModel(Context().get(), remove, &removed).ok());
+  EXPECT_EQ(removed.versions_deleted(), 2u);
+  watcher.join();
+  context.TryCancel();
+  reader->Finish();
+  ASSERT_EQ(events.size(), 3u);
+  EXPECT_EQ(events[0].change(), pb::MODEL_CHANGE_PUT);
+  EXPECT_EQ(events[0].model().version(), 1u);
+  EXPECT_EQ(events[1].change(), pb::MODEL_CHANGE_PUT);
+  EXPECT_EQ(events[1].model().version(), 2u);
+  EXPECT_EQ(events[2].change(), pb::MODEL_CHANGE_DELETED);
+  EXPECT_LT(events[0].sequence(), events[1].sequence());
+  EXPECT_LT(events[1].sequence(), events[2].sequence());
+  EXPECT_EQ(models_->DeleteModel(Context().get(), remove, &removed).error_code(),
+            grpc::StatusCode::NOT_FOUND);
+}
+
+TEST_F(RepositoryServiceTest, RecognitionFiltersAndRefusesFramesItCannotUse) {
+  ASSERT_TRUE(Put(PosterModelFile("poster", 1, "poster"), "").ok());
+  pb::RecognizeObjectsResponse seen;
+  pb::ObjectFilter only_boxes;
+  only_boxes.add_classes("box");
+  ASSERT_TRUE(Recognize(PosterView(1), &seen, only_boxes).ok());
+  EXPECT_EQ(seen.objects_size(), 0);
+  pb::ObjectFilter by_name;
+  by_name.add_names("poster");
+  ASSERT_TRUE(Recognize(PosterView(1), &seen, by_name).ok());
+  EXPECT_EQ(seen.objects_size(), 1);
+  ASSERT_TRUE(Recognize(PosterView(60), &seen).ok());
+  EXPECT_EQ(seen.objects_size(), 0);  // another picture: nothing, and not an error
+
+  EXPECT_EQ(Recognize(JpegFrame(CorridorJpeg(1)), &seen).error_code(),
+            grpc::StatusCode::INVALID_ARGUMENT);  // no intrinsics
+  pb::Frame garbage = PosterView(1);
+  garbage.set_encoded_image("\x89PNG garbage");
+  EXPECT_EQ(Recognize(garbage, &seen).error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+
+  // The stream answers each frame, errors included, and goes on.
+  grpc::ClientContext context;
+  auto stream = objects_->StreamRecognizeObjects(&context);
+  pb::StreamRecognizeObjectsRequest request;
+  request.mutable_config();
+  ASSERT_TRUE(stream->Write(request));
+  std::vector<pb::StreamRecognizeObjectsResponse> answers;
+  for (const pb::Frame& frame :
+       {PosterView(1), garbage, JpegFrame(CorridorJpeg(1)), PosterView(1)}) {
+    *request.mutable_frame() = frame;
+    ASSERT_TRUE(stream->Write(request));
+    pb::StreamRecognizeObjectsResponse answer;
+    ASSERT_TRUE(stream->Read(&answer));
+    answers.push_back(answer);
+  }
+  stream->WritesDone();
+  EXPECT_TRUE(stream->Finish().ok());
+  ASSERT_EQ(answers.size(), 4u);
+  EXPECT_EQ(answers[0].objects_size(), 1);
+  EXPECT_EQ(answers[1].error().code(), int(grpc::StatusCode::INVALID_ARGUMENT));
+  EXPECT_EQ(answers[2].error().code(), int(grpc::StatusCode::INVALID_ARGUMENT));
+  EXPECT_EQ(answers[3].objects_size(), 1);
+  EXPECT_EQ(answers[3].sequence(), 3u);
+}
+
+TEST_F(RepositoryServiceTest, ModelsSurviveARestartAndDeletedOnesStayDeleted) {
+  const std::string file = PosterModelFile("poster", 1, "poster");
+  ASSERT_TRUE(Put(file, "kept").ok());
+  ASSERT_TRUE(Put(file, "kept").ok());
+  ASSERT_TRUE(Put(file, "dropped").ok());
+  pb::DeleteModelRequest remove;
+  remove.set_name("dropped");
+  pb::DeleteModelResponse removed;
+  ASSERT_TRUE(models_->DeleteModel(Context().get(), remove, &removed).ok());
+  RestartServer();
+  pb::ListModelsResponse listed;
+  ASSERT_TRUE(models_->ListModels(Context().get(), {}, &listed).ok());
+  ASSERT_EQ(listed.models_size(), 1);
+  EXPECT_EQ(listed.models(0).name(), "kept");
+  EXPECT_EQ(listed.models(0).version(), 2u);
+  pb::ModelInfo info;
+  std::string bytes;
+  ASSERT_TRUE(Get("kept", 1, &info, &bytes).ok());
+  pb::RecognizeObjectsResponse seen;
+  ASSERT_TRUE(Recognize(PosterView(1), &seen).ok());
+  ASSERT_EQ(seen.objects_size(), 1);
+  EXPECT_EQ(seen.objects(0).name(), "kept");
+}
+
+}  // namespace
+}  // namespace recog::server::testing

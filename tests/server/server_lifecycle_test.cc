@@ -1,0 +1,364 @@
+// Loopback tests of what surrounds the RPCs: health, authentication and TLS, metrics, draining on
+// shutdown, a kill -9 in the middle of a stream, and network results equal to the offline tools'.
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/socket.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <fstream>
+#include <future>
+#include <thread>
+
+#include <grpcpp/generic/generic_stub.h>
+
+#include "core/vocabulary/vocabulary_io.h"
+#include "server/api/converters.h"
+#include "tests/server/server_fixture.h"
+#include "tests/testing/test_data.h"
+#include "tools/recog/ground_truth.h"
+#include "tools/recog/place_evaluation.h"
+
+extern char** environ;
+
+namespace recog::server::testing {
+namespace {
+
+constexpr char kRobotToken[] = "robot-token-0123456789";
+constexpr char kOperatorToken[] = "operator-token-0123456789";
+
+// grpc.health.v1.Health/Check over a generic stub (the health proto is not compiled here): the
+// response is field 1, a varint; SERVING = 1, NOT_SERVING = 2.
+int HealthStatus(const std::shared_ptr<grpc::Channel>& channel) {
+  grpc::GenericStub stub(channel);
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(5));
+  grpc::ByteBuffer request, response;
+  grpc::Slice empty("");
+  request = grpc::ByteBuffer(&empty, 1);
+  std::promise<grpc::Status> done;
+  stub.UnaryCall(&context, "/grpc.health.v1.Health/Check", grpc::StubOptions(), &request, &response,
+                 [&](grpc::Status status) { done.set_value(status); });
+  if (!done.get_future().get().ok()) return -1;
+  std::vector<grpc::Slice> slices;
+  if (!response.Dump(&slices).ok() || slices.empty() || slices[0].size() < 2) return 0;
+  return slices[0].begin()[1];
+}
+
+// A free loopback port (bound, read, released: another process may take it, rarely).
+int FreePort() {
+  const int fd = socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in address{};
+  address.sin_family = AF_INET;
+  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  bind(fd, reinterpret_cast<sockaddr*>(&address), sizeof(address));
+  socklen_t size = sizeof(address);
+  getsockname(fd, reinterpret_cast<sockaddr*>(&address), &size);
+  close(fd);
+  return ntohs(address.sin_port);
+}
+
+// GET http://127.0.0.1:<port>/metrics with a plain socket.
+std::string FetchMetrics(int port) {
+  const int fd = socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in address{};
+  address.sin_family = AF_INET;
+  address.sin_port = htons(uint16_t(port));
+  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  std::string body;
+  if (connect(fd, reinterpret_cast<sockaddr*>(&address), sizeof(address)) == 0) {
+    const std::string request = "GET /metrics HTTP/1.0\r\nHost: localhost\r\n\r\n";
+    if (write(fd, request.data(), request.size()) == ssize_t(request.size())) {
+      char buffer[4096];
+      for (ssize_t n; (n = read(fd, buffer, sizeof(buffer))) > 0;) body.append(buffer, size_t(n));
+    }
+  }
+  close(fd);
+  return body;
+}
+
+class ServerLifecycleTest : public ServerFixture {};
+
+TEST_F(ServerLifecycleTest, HealthReportsServingAndTheMetricsEndpointCountsCalls) {
+  EXPECT_EQ(HealthStatus(channel_), 1);
+  StopServer();
+  config().metrics_listen = "127.0.0.1:0";
+  StartServer();
+  ASSERT_TRUE(CreateMap("m").ok());
+  EXPECT_EQ(CreateMap("m").error_code(), grpc::StatusCode::ALREADY_EXISTS);
+  pb::AddFrameResponse added;
+  ASSERT_TRUE(AddFrame("m", JpegFrame(CorridorJpeg(1)), &added).ok());
+  const std::string metrics = FetchMetrics(server_->metrics_port());
+  EXPECT_NE(metrics.find("recog_rpc_duration_seconds_count{code=\"OK\",method=\"/recognition.v1."
+                         "PlaceRecognition/CreateMap\"} 1"),
+            std::string::npos)
+      << metrics;
+  EXPECT_NE(metrics.find("code=\"ALREADY_EXISTS\""), std::string::npos);
+  EXPECT_NE(metrics.find("recog_frames_total{kind=\"place\"} 1"), std::string::npos);
+  EXPECT_NE(metrics.find("recog_map_entries{map=\"m\"} 1"), std::string::npos);
+}
+
+TEST_F(ServerLifecycleTest, TokensDecideWhoMayReadAndWhoMayWrite) {
+  const std::string token_file = data_dir_.Sub("tokens.yaml");
+  std::ofstream(token_file) << "tokens:\n"
+                            << "  - {name: robot-7, token: \"" << kRobotToken
+                            << "\", rights: [read]}\n"
+                            << "  - {name: operator, token: \"" << kOperatorToken
+                            << "\", rights: [read, write]}\n";
+  StopServer();
+  config().token_file = token_file;
+  StartServer();
+  pb::CreateMapRequest create;
+  create.set_name("shared");
+  pb::CreateMapResponse created;
+  EXPECT_EQ(places_->CreateMap(Context().get(), create, &created).error_code(),
+            grpc::StatusCode::UNAUTHENTICATED);
+  EXPECT_EQ(
+      places_->CreateMap(Context("wrong-token-0123456789").get(), create, &created).error_code(),
+      grpc::StatusCode::UNAUTHENTICATED);
+  EXPECT_EQ(places_->CreateMap(Context(kRobotToken).get(), create, &created).error_code(),
+            grpc::StatusCode::PERMISSION_DENIED);
+  ASSERT_TRUE(places_->CreateMap(Context(kOperatorToken).get(), create, &created).ok());
+  pb::ListMapsResponse listed;
+  ASSERT_TRUE(places_->ListMaps(Context(kRobotToken).get(), {}, &listed).ok());
+  EXPECT_EQ(listed.maps_size(), 1);
+
+  // A robot with the read right may look places up but not add them.
+  pb::QueryPlaceRequest query;
+  query.set_map("shared");
+  *query.mutable_frame() = JpegFrame(CorridorJpeg(1));
+  pb::QueryPlaceResponse answer;
+  EXPECT_TRUE(places_->QueryPlace(Context(kRobotToken).get(), query, &answer).ok());
+  query.set_add_frame(true);
+  EXPECT_EQ(places_->QueryPlace(Context(kRobotToken).get(), query, &answer).error_code(),
+            grpc::StatusCode::PERMISSION_DENIED);
+  for (const bool query_only : {false, true}) {
+    auto context = Context(kRobotToken);
+    auto stream = places_->StreamFrames(context.get());
+    pb::StreamFramesRequest request;
+    request.mutable_config()->set_map("shared");
+    request.mutable_config()->set_query_only(query_only);
+    stream->Write(request);
+    *request.mutable_frame() = JpegFrame(CorridorJpeg(1));
+    stream->Write(request);
+    pb::StreamFramesResponse response;
+    const bool answered = stream->Read(&response);
+    stream->WritesDone();
+    const grpc::Status status = stream->Finish();
+    EXPECT_EQ(answered, query_only);
+    EXPECT_EQ(status.error_code(),
+              query_only ? grpc::StatusCode::OK : grpc::StatusCode::PERMISSION_DENIED);
+  }
+  pb::DeleteModelRequest remove;
+  remove.set_name("anything");
+  pb::DeleteModelResponse removed;
+  EXPECT_EQ(models_->DeleteModel(Context(kRobotToken).get(), remove, &removed).error_code(),
+            grpc::StatusCode::PERMISSION_DENIED);
+  EXPECT_EQ(models_->DeleteModel(Context(kOperatorToken).get(), remove, &removed).error_code(),
+            grpc::StatusCode::NOT_FOUND);
+}
+
+TEST_F(ServerLifecycleTest, MutualTlsAdmitsOnlyClientsWithACertificateFromTheCa) {
+  const auto tls = [](const std::string& name) {
+    return ReadFileBytes(recog::testing::ProjectTestData("tls/" + name));
+  };
+  StopServer();
+  config().tls.cert = recog::testing::ProjectTestData("tls/server.crt");
+  config().tls.key = recog::testing::ProjectTestData("tls/server.key");
+  config().tls.client_ca = recog::testing::ProjectTestData("tls/ca.crt");
+  StartServer();
+  const std::string target = "localhost:" + std::to_string(server_->port());
+  grpc::SslCredentialsOptions with_cert{tls("ca.crt"), tls("client.key"), tls("client.crt")};
+  grpc::SslCredentialsOptions without_cert{tls("ca.crt"), "", ""};
+  for (const bool present : {true, false}) {
+    auto channel =
+        grpc::CreateChannel(target, grpc::SslCredentials(present ? with_cert : without_cert));
+    auto stub = pb::PlaceRecognition::NewStub(channel);
+    pb::ListMapsResponse listed;
+    const grpc::Status status = stub->ListMaps(Context().get(), {}, &listed);
+    EXPECT_EQ(status.ok(), present) << status.error_message();
+  }
+  // A plaintext client cannot talk to a TLS server.
+  auto plain = pb::PlaceRecognition::NewStub(
+      grpc::CreateChannel(target, grpc::InsecureChannelCredentials()));
+  pb::ListMapsResponse listed;
+  EXPECT_FALSE(plain->ListMaps(Context().get(), {}, &listed).ok());
+}
+
+TEST_F(ServerLifecycleTest, ShutdownDrainsAStreamWithoutLosingAnsweredFrames) {
+  ASSERT_TRUE(CreateMap("drained").ok());
+  grpc::ClientContext context;
+  auto stream = places_->StreamFrames(&context);
+  pb::StreamFramesRequest request;
+  request.mutable_config()->set_map("drained");
+  ASSERT_TRUE(stream->Write(request));
+  for (int n : {1, 20}) {
+    *request.mutable_frame() = JpegFrame(CorridorJpeg(n));
+    ASSERT_TRUE(stream->Write(request));
+    pb::StreamFramesResponse response;
+    ASSERT_TRUE(stream->Read(&response));
+  }
+  const auto start = std::chrono::steady_clock::now();
+  server_->Shutdown(std::chrono::milliseconds(500));  // the idle stream is cut at the deadline
+  EXPECT_LT(std::chrono::steady_clock::now() - start, std::chrono::seconds(10));
+  EXPECT_FALSE(stream->Finish().ok());
+  RestartServer();
+  pb::MapInfo info;
+  ASSERT_TRUE(GetMap("drained", &info).ok());
+  EXPECT_EQ(info.frames(), 2u);
+}
+
+TEST_F(ServerLifecycleTest, KillNineDuringAStreamLosesNoAcknowledgedFrame) {
+  StopServer();  // the store is the child's now
+  const int port = FreePort();
+  const std::string listen = "127.0.0.1:" + std::to_string(port);
+  const std::string dir = data_dir_.path().string();
+  std::vector<std::string> args = {RECOGD_PATH,        "--listen", listen,        "--data-dir", dir,
+                                   "--metrics-listen", "",         "--log-level", "warn"};
+  std::vector<char*> argv;
+  for (std::string& a : args) argv.push_back(a.data());
+  argv.push_back(nullptr);
+  pid_t child = 0;
+  ASSERT_EQ(posix_spawn(&child, RECOGD_PATH, nullptr, nullptr, argv.data(), environ), 0);
+  auto channel = grpc::CreateChannel(listen, grpc::InsecureChannelCredentials());
+  auto stub = pb::PlaceRecognition::NewStub(channel);
+  grpc::Status ready;
+  for (int attempt = 0; attempt < 300; ++attempt) {  // wait until it serves
+    pb::ListMapsResponse listed;
+    ready = stub->ListMaps(Context().get(), {}, &listed);
+    if (ready.ok()) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  ASSERT_TRUE(ready.ok()) << ready.error_message();
+
+  grpc::ClientContext context;
+  auto stream = stub->StreamFrames(&context);
+  pb::StreamFramesRequest request;
+  request.mutable_config()->set_map("crash");
+  request.mutable_config()->set_create_if_missing(true);
+  ASSERT_TRUE(stream->Write(request));
+  const std::string jpegs[] = {CorridorJpeg(1), CorridorJpeg(20), CorridorJpeg(41),
+                               CorridorJpeg(60)};
+  // The writer keeps several frames in flight so that the kill lands mid-frame.
+  std::thread writer([&] {
+    for (int i = 0; i < 200; ++i) {
+      *request.mutable_frame() = JpegFrame(jpegs[i % 4]);
+      if (!stream->Write(request)) return;
+    }
+  });
+  uint64_t acknowledged = 0;
+  pb::StreamFramesResponse response;
+  while (stream->Read(&response)) {
+    ASSERT_TRUE(response.has_result());
+    EXPECT_EQ(response.result().frame_id(), acknowledged);
+    if (++acknowledged == 12) kill(child, SIGKILL);
+  }
+  writer.join();
+  stream->Finish();
+  int status = 0;
+  waitpid(child, &status, 0);
+  EXPECT_TRUE(WIFSIGNALED(status));
+  EXPECT_GE(acknowledged, 12u);
+
+  StartServer();  // same data directory, in this process
+  pb::MapInfo info;
+  ASSERT_TRUE(GetMap("crash", &info).ok());
+  EXPECT_GE(info.frames(), acknowledged);  // frames ids 0 .. acknowledged - 1 all present
+  EXPECT_EQ(info.frames(), info.next_frame_id());
+  pb::AddFrameResponse added;
+  ASSERT_TRUE(AddFrame("crash", JpegFrame(jpegs[0]), &added).ok());
+  EXPECT_EQ(added.frame_id(), info.frames());
+}
+
+TEST_F(ServerLifecycleTest, StreamingTheCorridorGivesTheOfflineEvaluationsResults) {
+  RECOG_SKIP_WITHOUT_SHARED_DATA("places/corridor/ground_truth.txt");
+  const std::string images = recog::testing::SharedData("places/corridor/images");
+  // Offline: what `recog eval place` computes.
+  auto source = cli::FrameSource::Open(images);
+  ASSERT_TRUE(source.ok());
+  auto sequence = cli::ExtractSequence(*source, FeatureOptions{}, false);
+  ASSERT_TRUE(sequence.ok());
+  auto truth = cli::ReadGroundTruth(recog::testing::SharedData("places/corridor/ground_truth.txt"));
+  ASSERT_TRUE(truth.ok());
+  auto vocabulary = LoadVocabulary(DefaultPlaceVocabularyPath());
+  ASSERT_TRUE(vocabulary.ok());
+  std::vector<LoopResult> offline;
+  auto evaluation = cli::EvaluatePlace(
+      *sequence, *truth, std::make_shared<const Vocabulary>(std::move(vocabulary).value()),
+      cli::PlaceEvaluationOptions{}, &offline);
+  ASSERT_TRUE(evaluation.ok());
+
+  // Over the network: the same files, as JPEG bytes, through one stream.
+  grpc::ClientContext context;
+  auto stream = places_->StreamFrames(&context);
+  pb::StreamFramesRequest request;
+  request.mutable_config()->set_map("corridor");
+  request.mutable_config()->set_create_if_missing(true);
+  ASSERT_TRUE(stream->Write(request));
+  std::vector<pb::LoopResult> online;
+  for (const std::string& name : sequence->names) {
+    *request.mutable_frame() = JpegFrame(ReadFileBytes(name));
+    ASSERT_TRUE(stream->Write(request));
+    pb::StreamFramesResponse response;
+    ASSERT_TRUE(stream->Read(&response));
+    ASSERT_TRUE(response.has_result()) << response.error().message();
+    online.push_back(response.result());
+  }
+  stream->WritesDone();
+  ASSERT_TRUE(stream->Finish().ok());
+  ASSERT_EQ(online.size(), offline.size());
+  int loops = 0;
+  for (size_t i = 0; i < online.size(); ++i) {
+    EXPECT_EQ(online[i].status(), ToProto(offline[i].status)) << "frame " << i;
+    if (offline[i].match != kInvalidEntryId) {
+      EXPECT_EQ(online[i].match_frame_id(), offline[i].match) << "frame " << i;
+    }
+    EXPECT_EQ(online[i].inliers(), offline[i].inliers.size()) << "frame " << i;
+    loops += online[i].status() == pb::LOOP_STATUS_LOOP_DETECTED;
+  }
+  EXPECT_EQ(loops, evaluation->detections);
+}
+
+TEST_F(ServerLifecycleTest, RelocalisationGivesTheRelativePoseOfTheNeighbouringFrame) {
+  RECOG_SKIP_WITHOUT_SHARED_DATA("places/corridor/images/10.jpg");
+  const auto corridor = [](int n) {
+    return JpegFrame(ReadFileBytes(
+        recog::testing::SharedData("places/corridor/images/" + std::to_string(n) + ".jpg")));
+  };
+  ASSERT_TRUE(CreateMap("walk").ok());
+  for (int n = 2; n <= 20; n += 2) {
+    pb::AddFrameResponse added;
+    ASSERT_TRUE(AddFrame("walk", corridor(n), &added).ok());
+  }
+  pb::QueryPlaceRequest query;
+  query.set_map("walk");
+  *query.mutable_frame() = corridor(11);
+  pb::CameraIntrinsics* k = query.mutable_frame()->mutable_intrinsics();
+  k->set_fx(400);
+  k->set_fy(400);
+  k->set_cx(256);
+  k->set_cy(192);
+  query.mutable_options()->set_include_relative_pose(true);
+  query.mutable_options()->set_include_fundamental(true);
+  pb::QueryPlaceResponse response;
+  ASSERT_TRUE(places_->QueryPlace(Context().get(), query, &response).ok());
+  const pb::LoopResult& result = response.result();
+  ASSERT_EQ(result.status(), pb::LOOP_STATUS_LOOP_DETECTED);
+  EXPECT_TRUE(result.match_frame_id() == 4u || result.match_frame_id() == 5u)  // frame 10 or 12
+      << result.match_frame_id();
+  ASSERT_EQ(result.fundamental_size(), 9);
+  ASSERT_EQ(result.relative_pose().rotation_size(), 9);
+  ASSERT_EQ(result.relative_pose().translation_size(), 3);
+  cv::Matx33d R;
+  for (int i = 0; i < 9; ++i) R.val[i] = result.relative_pose().rotation(i);
+  EXPECT_LT(cv::norm(R * R.t() - cv::Matx33d::eye()), 1e-6);  // a rotation
+  EXPECT_GT(cv::determinant(R), 0.0);
+  const cv::Vec3d t(result.relative_pose().translation(0), result.relative_pose().translation(1),
+                    result.relative_pose().translation(2));
+  EXPECT_NEAR(cv::norm(t), 1.0, 1e-6);  // direction only
+}
+
+}  // namespace
+}  // namespace recog::server::testing
