@@ -10,6 +10,7 @@
 #include <grpcpp/support/status.h>
 
 #include "core/common/status.h"
+#include "proto/grpc_code_names.h"  // GrpcCodeName
 
 namespace recog::server {
 
@@ -18,9 +19,6 @@ grpc::StatusCode ToGrpcCode(StatusCode code);
 
 // The gRPC status for a core status; `request_id` goes into the log line of sanitised errors.
 grpc::Status ToGrpcStatus(const Status& status, std::string_view request_id = {});
-
-// Name of a gRPC code as in the gRPC documentation ("INVALID_ARGUMENT"), for logs and metrics.
-std::string_view GrpcCodeName(grpc::StatusCode code);
 
 }  // namespace recog::server
 

@@ -9,7 +9,7 @@
 #include <spdlog/spdlog.h>
 
 #include "core/vocabulary/vocabulary_io.h"
-#include "server/runtime/sha256.h"
+#include "proto/sha256.h"
 #include "server/services/object_service.h"
 #include "server/services/place_service.h"
 #include "server/services/repository_service.h"

@@ -7,7 +7,7 @@
 #include <utility>
 
 #include "core/common/file_io.h"
-#include "server/runtime/sha256.h"
+#include "proto/sha256.h"
 
 namespace recog::server {
 namespace {

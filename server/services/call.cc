@@ -44,10 +44,14 @@ grpc::Status BeginCall(ServerState& state, grpc::CallbackServerContext* context,
   call->caller = std::move(caller).value();
   const Status allowed = TokenAuthenticator::Check(call->caller, right);
   if (!allowed.ok()) return ToGrpcStatus(allowed, call->request_id);
+  // Refusals that nothing was applied for carry the retry hint, so that clients may retry even
+  // calls that change the server.
   if (state.draining.load()) {
+    context->AddTrailingMetadata("retry-after-ms", std::to_string(state.config.retry_after_ms));
     return {grpc::StatusCode::UNAVAILABLE, "the server is shutting down"};
   }
   if (!state.ready.load()) {
+    context->AddTrailingMetadata("retry-after-ms", std::to_string(state.config.retry_after_ms));
     return {grpc::StatusCode::UNAVAILABLE, "the server is starting (opening its store)"};
   }
   return grpc::Status::OK;

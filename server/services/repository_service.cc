@@ -3,9 +3,9 @@
 #include <algorithm>
 #include <deque>
 
+#include "proto/sha256.h"
 #include "server/api/converters.h"
 #include "server/api/status_mapping.h"
-#include "server/runtime/sha256.h"
 #include "server/services/call.h"
 
 namespace recog::server {
@@ -127,12 +127,12 @@ class ModelUpload final : public grpc::ServerReadReactor<pb::PutModelRequest> {
   std::string bytes_;
 };
 
-// GetModel: the ModelInfo, then the file in chunks, one write at a time.
+// GetModel: the ModelInfo, then the file in chunks from the requested offset, one write at a time.
 class ModelDownload final : public grpc::ServerWriteReactor<pb::GetModelResponse> {
  public:
   ModelDownload(ServerState& state, grpc::CallbackServerContext* context,
                 const pb::GetModelRequest& request)
-      : state_(state), context_(context) {
+      : state_(state), context_(context), offset_(request.offset()) {
     grpc::Status status = BeginCall(state_, context_, Method("GetModel"), Right::kRead, &call_);
     call_.map = request.name();
     chunk_bytes_ = request.chunk_bytes() == 0
@@ -156,6 +156,12 @@ class ModelDownload final : public grpc::ServerWriteReactor<pb::GetModelResponse
       return;
     }
     bytes_ = std::move(model.value().second);
+    if (offset_ > bytes_.size()) {
+      End({grpc::StatusCode::OUT_OF_RANGE, "offset " + std::to_string(offset_) +
+                                               " is beyond the end of the file (" +
+                                               std::to_string(bytes_.size()) + " bytes)"});
+      return;
+    }
     ToProto(model.value().first, response_.mutable_info());
     StartWrite(&response_);
   }
@@ -186,7 +192,7 @@ class ModelDownload final : public grpc::ServerWriteReactor<pb::GetModelResponse
   CallInfo call_;
   size_t chunk_bytes_ = kDefaultChunkBytes;
   std::string bytes_;
-  size_t offset_ = 0;
+  uint64_t offset_;  // the next byte to send
   pb::GetModelResponse response_;
 };
 

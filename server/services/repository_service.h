@@ -3,9 +3,10 @@
 //
 // Uploads are read one chunk at a time into memory (at most kMaxModelBytes), checked against the
 // size and SHA-256 of their header, then stored on a worker. Downloads are written one chunk at a
-// time. Watchers get the repository's change events through a bounded queue each; a watcher that
-// falls kMaxPendingEvents behind is ended with RESOURCE_EXHAUSTED. CloseWatchers() ends every
-// watch stream (server shutdown: they would otherwise hold the drain until its deadline).
+// time, from the requested offset (a client resuming a broken download). Watchers get the
+// repository's change events through a bounded queue each; a watcher that falls kMaxPendingEvents
+// behind is ended with RESOURCE_EXHAUSTED. CloseWatchers() ends every watch stream (server
+// shutdown: they would otherwise hold the drain until its deadline).
 #pragma once
 
 #include <mutex>

@@ -6,7 +6,7 @@
 
 #include "core/object/model_builder.h"
 #include "core/object/model_file.h"
-#include "server/runtime/sha256.h"
+#include "proto/sha256.h"
 #include "tests/server/server_fixture.h"
 #include "tests/testing/vocabularies.h"
 
@@ -53,14 +53,15 @@ class RepositoryServiceTest : public ServerFixture {
     return status;
   }
 
-  // Downloads a version; returns the bytes and fills the info.
+  // Downloads a version from byte `offset` on; returns the bytes and fills the info.
   grpc::Status Get(const std::string& name, uint32_t version, pb::ModelInfo* info,
-                   std::string* bytes) {
+                   std::string* bytes, uint64_t offset = 0) {
     auto context = Context();
     pb::GetModelRequest request;
     request.set_name(name);
     request.set_version(version);
     request.set_chunk_bytes(50000);
+    request.set_offset(offset);
     auto reader = models_->GetModel(context.get(), request);
     pb::GetModelResponse response;
     bytes->clear();
@@ -133,6 +134,25 @@ TEST_F(RepositoryServiceTest, EveryUploadIsANewVersionAndTheLatestIsRecognisedAt
   ASSERT_TRUE(Recognize(PosterView(41), &seen).ok());
   ASSERT_EQ(seen.objects_size(), 1);
   EXPECT_EQ(seen.objects(0).version(), 2u);
+}
+
+TEST_F(RepositoryServiceTest, ADownloadFromAnOffsetSendsTheTailAndOneBeyondTheEndIsOutOfRange) {
+  const std::string file = PosterModelFile("poster", 1, "poster");
+  ASSERT_GT(file.size(), 60000u);  // more than one 50000-byte chunk
+  ASSERT_TRUE(Put(file, "").ok());
+  pb::ModelInfo info;
+  std::string bytes;
+  for (const uint64_t offset : {uint64_t{1}, uint64_t{50000}, uint64_t{file.size() - 7}}) {
+    ASSERT_TRUE(Get("poster", 1, &info, &bytes, offset).ok());
+    EXPECT_EQ(info.size_bytes(), file.size());  // the info describes the whole file
+    EXPECT_EQ(info.sha256(), Sha256Hex(file));
+    EXPECT_EQ(bytes, file.substr(offset)) << "offset " << offset;
+  }
+  ASSERT_TRUE(Get("poster", 1, &info, &bytes, file.size()).ok());
+  EXPECT_EQ(info.version(), 1u);
+  EXPECT_TRUE(bytes.empty());  // at the end: the info and nothing else
+  const grpc::Status beyond = Get("poster", 1, &info, &bytes, file.size() + 1);
+  EXPECT_EQ(beyond.error_code(), grpc::StatusCode::OUT_OF_RANGE) << beyond.error_message();
 }
 
 TEST_F(RepositoryServiceTest, ListingFiltersByPrefixClassAndTagAPageAtATime) {

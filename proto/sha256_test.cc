@@ -1,8 +1,8 @@
-#include "server/runtime/sha256.h"
+#include "proto/sha256.h"
 
 #include <gtest/gtest.h>
 
-namespace recog::server {
+namespace recog {
 namespace {
 
 TEST(Sha256Test, MatchesTheStandardTestVectors) {
@@ -13,4 +13,4 @@ TEST(Sha256Test, MatchesTheStandardTestVectors) {
 }
 
 }  // namespace
-}  // namespace recog::server
+}  // namespace recog
