@@ -2,7 +2,8 @@
 # Enforces the dependency rules of ARCHITECTURE: core/ never includes gRPC or RocksDB headers
 # (nor generated protobuf code), only storage/ includes RocksDB, and in server/ only the api/
 # converters and the services (the RPC handlers) see generated protobuf types; the server's
-# infrastructure (config, auth, metrics, runtime) does not.
+# infrastructure (config, auth, metrics, runtime) does not; the client library (client/) sees the
+# generated API only, never core/, storage/ or server/ (its tests may, to start a server).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 status=0
@@ -16,6 +17,11 @@ if git grep -n -E '#include\s*[<"]rocksdb/' -- ':!storage/' ':!*.md' ; then
 fi
 if git grep -n -E '\.pb\.h' -- 'server/config/' 'server/auth/' 'server/metrics/' 'server/runtime/'; then
   echo "check_boundaries: server/config, auth, metrics and runtime must not see protobuf types" >&2
+  status=1
+fi
+if git grep -n -E '#include\s*"(core|storage|server|tools|tests)/' -- 'client/' ':!*_test.cc' \
+    ':!*_test_fixture.h'; then
+  echo "check_boundaries: the client library must not include core/, storage/ or server/ headers" >&2
   status=1
 fi
 [ $status -eq 0 ] && echo "check_boundaries: ok"

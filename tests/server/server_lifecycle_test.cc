@@ -17,6 +17,7 @@
 #include "core/vocabulary/vocabulary_io.h"
 #include "server/api/converters.h"
 #include "tests/server/server_fixture.h"
+#include "tests/testing/free_port.h"
 #include "tests/testing/test_data.h"
 #include "tools/recog/ground_truth.h"
 #include "tools/recog/place_evaluation.h"
@@ -45,19 +46,6 @@ int HealthStatus(const std::shared_ptr<grpc::Channel>& channel) {
   std::vector<grpc::Slice> slices;
   if (!response.Dump(&slices).ok() || slices.empty() || slices[0].size() < 2) return 0;
   return slices[0].begin()[1];
-}
-
-// A free loopback port (bound, read, released: another process may take it, rarely).
-int FreePort() {
-  const int fd = socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in address{};
-  address.sin_family = AF_INET;
-  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  bind(fd, reinterpret_cast<sockaddr*>(&address), sizeof(address));
-  socklen_t size = sizeof(address);
-  getsockname(fd, reinterpret_cast<sockaddr*>(&address), &size);
-  close(fd);
-  return ntohs(address.sin_port);
 }
 
 // GET http://127.0.0.1:<port>/metrics with a plain socket.
@@ -212,7 +200,7 @@ TEST_F(ServerLifecycleTest, ShutdownDrainsAStreamWithoutLosingAnsweredFrames) {
 
 TEST_F(ServerLifecycleTest, KillNineDuringAStreamLosesNoAcknowledgedFrame) {
   StopServer();  // the store is the child's now
-  const int port = FreePort();
+  const int port = recog::testing::FreePort();
   const std::string listen = "127.0.0.1:" + std::to_string(port);
   const std::string dir = data_dir_.path().string();
   std::vector<std::string> args = {RECOGD_PATH,        "--listen", listen,        "--data-dir", dir,

@@ -20,6 +20,8 @@ int main(int argc, char** argv) {
   recog::cli::AddEvalCommand(app, &exit_code);
   recog::cli::AddObjectCommands(app, &exit_code);
   recog::cli::AddModelExportCommand(app, &exit_code);
+  recog::cli::AddServerCommands(app, &exit_code);
+  recog::cli::AddLoadCommand(app, &exit_code);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

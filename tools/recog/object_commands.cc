@@ -1,9 +1,8 @@
-// recog model build|info, recog recognize and recog eval objects: object models and object
-// recognition from the command line.
+// recog model build|info, recog recognize (offline, or on recogd with --server) and recog eval
+// objects: object models and object recognition from the command line.
 #include <cstdio>
 #include <filesystem>
 #include <memory>
-#include <sstream>
 #include <string>
 #include <vector>
 
@@ -20,6 +19,8 @@
 #include "tools/recog/commands.h"
 #include "tools/recog/object_evaluation.h"
 #include "tools/recog/place_evaluation.h"
+#include "tools/recog/remote_support.h"
+#include "tools/recog/server_flags.h"
 #include "tools/recog/visp_files.h"
 
 namespace recog::cli {
@@ -27,40 +28,6 @@ namespace {
 
 namespace fs = std::filesystem;
 using nlohmann::json;
-
-int Fail(const char* command, const Status& s) {
-  std::fprintf(stderr, "recog %s: %s\n", command, s.ToString().c_str());
-  return 1;
-}
-
-StatusOr<std::shared_ptr<const Vocabulary>> LoadObjectVocabulary(const std::string& path) {
-  RECOG_ASSIGN_OR_RETURN(Vocabulary vocabulary,
-                         LoadAnyVocabulary(path.empty() ? DefaultObjectVocabularyPath() : path));
-  return std::make_shared<const Vocabulary>(std::move(vocabulary));
-}
-
-// "fx,fy,cx,cy[,k1,k2,p1,p2[,k3]]".
-StatusOr<CameraIntrinsics> ParseCamera(const std::string& text) {
-  std::vector<double> values;
-  std::stringstream in(text);
-  std::string field;
-  while (std::getline(in, field, ',')) {
-    try {
-      size_t used = 0;
-      values.push_back(std::stod(field, &used));
-      if (used != field.size()) throw std::invalid_argument(field);
-    } catch (const std::exception&) {
-      return Status::InvalidArgument("--camera: '" + field + "' is not a number");
-    }
-  }
-  if (values.size() != 4 && values.size() != 8 && values.size() != 9) {
-    return Status::InvalidArgument("--camera needs fx,fy,cx,cy[,k1,k2,p1,p2[,k3]]");
-  }
-  CameraIntrinsics camera{values[0], values[1], values[2], values[3],
-                          std::vector<double>(values.begin() + 4, values.end())};
-  RECOG_RETURN_IF_ERROR(camera.Validate());
-  return camera;
-}
 
 json MetadataJson(const ObjectMetadata& m) {
   return {{"name", m.name},
@@ -180,32 +147,21 @@ int RunModelInfo(const std::string& path, bool as_json) {
 
 // ---- recog recognize ----
 
+// Offline (--models: core in this process) or on recogd (--server, whose models are those of its
+// repository); both print and draw alike.
 struct RecognizeArgs {
   std::vector<std::string> models;
   std::string image, camera, draw, vocabulary;
-  bool json = false;
+  ServerFlags server;  // --server "" (this command's default): offline; --json belongs here too
 };
 
-// Model files (.robj) and RoboEarth folders named by `paths` (folders are searched one level).
+// Model files (.robj) and RoboEarth folders named by `paths` (see FindModelSources).
 Status LoadModels(const std::vector<std::string>& paths, ModelBuilder* builder,
                   ObjectDatabase* database) {
   for (const std::string& path : paths) {
-    std::vector<fs::path> found;
-    if (fs::is_directory(path) && !fs::exists(fs::path(path) / "meta.xml")) {
-      for (const auto& entry : fs::directory_iterator(path)) found.push_back(entry.path());
-      std::sort(found.begin(), found.end());
-    } else {
-      found.push_back(path);
-    }
-    for (const fs::path& item : found) {
-      StatusOr<ObjectModel> model = Status::Internal("unset");
-      if (fs::is_directory(item) && fs::exists(item / "meta.xml")) {
-        model = builder->FromRoboEarth(item.string());
-      } else if (item.extension() == ".robj" || found.size() == 1) {
-        model = LoadObjectModel(item.string());
-      } else {
-        continue;
-      }
+    for (const ModelSource& source : FindModelSources(path)) {
+      StatusOr<ObjectModel> model =
+          source.roboearth ? builder->FromRoboEarth(source.path) : LoadObjectModel(source.path);
       RECOG_RETURN_IF_ERROR(model.status());
       RECOG_RETURN_IF_ERROR(database->Put(*model).status());
     }
@@ -214,26 +170,86 @@ Status LoadModels(const std::vector<std::string>& paths, ModelBuilder* builder,
   return Status::Ok();
 }
 
+// Recognises with the models of --models; `timing` gets the stages' milliseconds.
+Status RecognizeOffline(const RecognizeArgs& args, const cv::Mat& image,
+                        const CameraIntrinsics& camera, std::vector<Detection>* detections,
+                        json* timing) {
+  RECOG_ASSIGN_OR_RETURN(std::shared_ptr<const Vocabulary> vocabulary,
+                         LoadObjectVocabulary(args.vocabulary));
+  MemoryIndexStore store;
+  RECOG_ASSIGN_OR_RETURN(std::unique_ptr<ObjectDatabase> database,
+                         ObjectDatabase::Open(&store, vocabulary));
+  ModelBuildOptions build;
+  build.keep_images = false;
+  ModelBuilder builder(vocabulary, build);
+  RECOG_RETURN_IF_ERROR(LoadModels(args.models, &builder, database.get()));
+  ObjectRecognizer recognizer(std::shared_ptr<const ObjectDatabase>(std::move(database)));
+  RecognitionTiming stages;
+  RECOG_RETURN_IF_ERROR(recognizer.Recognize(image, camera, detections, &stages));
+  *timing = TimingJson(stages);
+  return Status::Ok();
+}
+
+// A detection as recogd reports it (without inlier pixels, which it does not send).
+Detection FromProto(const pb::DetectedObject& object) {
+  Detection d;
+  d.name = object.name();
+  d.version = object.version();
+  d.type = object.type() == pb::OBJECT_TYPE_PLANAR ? ObjectType::kPlanar : ObjectType::k3D;
+  const pb::Pose& pose = object.pose();
+  for (int i = 0; i < 9 && i < pose.rotation_size(); ++i) {
+    d.camera_from_object.R.val[i] = pose.rotation(i);
+  }
+  for (int i = 0; i < 3 && i < pose.translation_size(); ++i) {
+    d.camera_from_object.t[i] = pose.translation(i);
+  }
+  d.inliers = object.inliers();
+  d.correspondences = object.correspondences();
+  d.reprojection_error_px = object.reprojection_error_px();
+  d.score = object.score();
+  for (const pb::Point2& p : object.outline()) d.outline.emplace_back(p.x(), p.y());
+  return d;
+}
+
+// Sends the image with its intrinsics to recogd's RecognizeObjects; `timing` gets the server's
+// milliseconds (decode, features, recognition, queue).
+grpc::Status RecognizeOnServer(const RecognizeArgs& args, const cv::Mat& image,
+                               const CameraIntrinsics& camera, std::vector<Detection>* detections,
+                               json* timing) {
+  auto client = args.server.Connect();
+  if (!client.ok()) return client.status();
+  auto frame = FrameFromImageFile(args.image, image);
+  if (!frame.ok()) return frame.status();
+  SetIntrinsics(camera, &*frame);
+  auto response = (*client)->RecognizeObjects(*frame);
+  if (!response.ok()) return response.status();
+  for (const pb::DetectedObject& object : response->objects()) {
+    detections->push_back(FromProto(object));
+  }
+  const pb::Timing& t = response->timing();
+  *timing = {{"decode", t.decode_ms()},
+             {"features", t.features_ms()},
+             {"recognition", t.recognition_ms()},
+             {"queue", t.queue_ms()}};
+  return grpc::Status::OK;
+}
+
 int RunRecognize(const RecognizeArgs& args) {
+  const bool remote = !args.server.server.empty();
+  if (!remote && args.models.empty()) {
+    return Fail("recognize",
+                Status::InvalidArgument("give --models (recognise here) or --server (on recogd)"));
+  }
   auto camera = ParseCamera(args.camera);
   if (!camera.ok()) return Fail("recognize", camera.status());
   auto image = ReadGrayImage(args.image);
   if (!image.ok()) return Fail("recognize", image.status());
-  auto vocabulary = LoadObjectVocabulary(args.vocabulary);
-  if (!vocabulary.ok()) return Fail("recognize", vocabulary.status());
-  MemoryIndexStore store;
-  auto database = ObjectDatabase::Open(&store, *vocabulary);
-  if (!database.ok()) return Fail("recognize", database.status());
-  ModelBuildOptions build;
-  build.keep_images = false;
-  ModelBuilder builder(*vocabulary, build);
-  if (Status s = LoadModels(args.models, &builder, database->get()); !s.ok()) {
-    return Fail("recognize", s);
-  }
-  ObjectRecognizer recognizer(std::shared_ptr<const ObjectDatabase>(std::move(*database)));
   std::vector<Detection> detections;
-  RecognitionTiming timing;
-  if (Status s = recognizer.Recognize(*image, *camera, &detections, &timing); !s.ok()) {
+  json timing;
+  if (remote) {
+    const grpc::Status s = RecognizeOnServer(args, *image, *camera, &detections, &timing);
+    if (!s.ok()) return Fail("recognize", s);
+  } else if (Status s = RecognizeOffline(args, *image, *camera, &detections, &timing); !s.ok()) {
     return Fail("recognize", s);
   }
   json out = json::array();
@@ -260,9 +276,8 @@ int RunRecognize(const RecognizeArgs& args) {
       return Fail("recognize", Status::InvalidArgument("cannot write '" + args.draw + "'"));
     }
   }
-  if (args.json) {
-    std::printf("%s\n",
-                json({{"detections", out}, {"timing_ms", TimingJson(timing)}}).dump(2).c_str());
+  if (args.server.json) {
+    std::printf("%s\n", json({{"detections", out}, {"timing_ms", timing}}).dump(2).c_str());
   } else {
     for (const Detection& d : detections) {
       const cv::Vec3d& t = d.camera_from_object.t;
@@ -492,17 +507,28 @@ void AddObjectCommands(CLI::App& app, int* exit_code) {
       [info_path, info_json, exit_code] { *exit_code = RunModelInfo(*info_path, *info_json); });
 
   auto recognize_args = std::make_shared<RecognizeArgs>();
-  CLI::App* recognize = app.add_subcommand("recognize", "Recognise objects in one image");
-  recognize
-      ->add_option("--models", recognize_args->models,
-                   "Model files, folders of them, or RoboEarth folders")
-      ->required();
+  CLI::App* recognize = app.add_subcommand(
+      "recognize",
+      "Recognise objects in one image: with the models of --models here, or on recogd (--server)");
+  CLI::Option* models = recognize->add_option("--models", recognize_args->models,
+                                              "Model files, folders of them, or RoboEarth folders");
   recognize->add_option("--image", recognize_args->image, "Image")->required();
   recognize->add_option("--camera", recognize_args->camera, "fx,fy,cx,cy[,k1,k2,p1,p2[,k3]]")
       ->required();
   recognize->add_option("--draw", recognize_args->draw, "PNG with outlines and axes");
-  recognize->add_option("--vocab", recognize_args->vocabulary, "Vocabulary");
-  recognize->add_flag("--json", recognize_args->json, "Print JSON");
+  CLI::Option* vocabulary =
+      recognize->add_option("--vocab", recognize_args->vocabulary, "Vocabulary (with --models)");
+  recognize_args->server.server.clear();  // no --server: offline
+  recognize_args->server.AddTo(recognize);
+  CLI::Option* server = recognize->get_option("--server");
+  server->description(
+      "recogd address host:port: recognise there, with its repository's models, instead of "
+      "--models (default: offline)");
+  models->excludes(server);
+  vocabulary->excludes(server);
+  for (const char* name : {"--token-file", "--tls-ca", "--tls-cert", "--tls-key"}) {
+    recognize->get_option(name)->needs(server);
+  }
   recognize->callback([recognize_args, exit_code] { *exit_code = RunRecognize(*recognize_args); });
 }
 

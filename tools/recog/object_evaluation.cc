@@ -1,8 +1,10 @@
 #include "tools/recog/object_evaluation.h"
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <memory>
+#include <sstream>
 
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -118,6 +120,55 @@ double RotationErrorDeg(const cv::Matx33d& a, const cv::Matx33d& b) {
   const cv::Matx33d d = a * b.t();
   const double c = std::clamp((cv::trace(d) - 1.0) / 2.0, -1.0, 1.0);
   return std::acos(c) * 180.0 / CV_PI;
+}
+
+StatusOr<CameraIntrinsics> ParseCamera(const std::string& text) {
+  std::vector<double> values;
+  std::stringstream in(text);
+  std::string field;
+  while (std::getline(in, field, ',')) {
+    try {
+      size_t used = 0;
+      values.push_back(std::stod(field, &used));
+      if (used != field.size()) throw std::invalid_argument(field);
+    } catch (const std::exception&) {
+      return Status::InvalidArgument("--camera: '" + field + "' is not a number");
+    }
+  }
+  if (values.size() != 4 && values.size() != 8 && values.size() != 9) {
+    return Status::InvalidArgument("--camera needs fx,fy,cx,cy[,k1,k2,p1,p2[,k3]]");
+  }
+  CameraIntrinsics camera{values[0], values[1], values[2], values[3],
+                          std::vector<double>(values.begin() + 4, values.end())};
+  RECOG_RETURN_IF_ERROR(camera.Validate());
+  return camera;
+}
+
+StatusOr<std::shared_ptr<const Vocabulary>> LoadObjectVocabulary(const std::string& path) {
+  RECOG_ASSIGN_OR_RETURN(Vocabulary vocabulary,
+                         LoadAnyVocabulary(path.empty() ? DefaultObjectVocabularyPath() : path));
+  return std::make_shared<const Vocabulary>(std::move(vocabulary));
+}
+
+std::vector<ModelSource> FindModelSources(const std::string& path) {
+  std::error_code ec;
+  const auto is_roboearth = [&ec](const fs::path& p) {
+    return fs::is_directory(p, ec) && fs::exists(p / "meta.xml", ec);
+  };
+  if (!fs::is_directory(path, ec)) return {{path, false}};
+  if (is_roboearth(path)) return {{path, true}};
+  std::vector<fs::path> entries;
+  for (const auto& entry : fs::directory_iterator(path, ec)) entries.push_back(entry.path());
+  std::sort(entries.begin(), entries.end());
+  std::vector<ModelSource> sources;
+  for (const fs::path& entry : entries) {
+    if (is_roboearth(entry)) {
+      sources.push_back({entry.string(), true});
+    } else if (entry.extension() == ".robj") {
+      sources.push_back({entry.string(), false});
+    }
+  }
+  return sources;
 }
 
 void DrawDetection(const Detection& detection, const CameraIntrinsics& camera,

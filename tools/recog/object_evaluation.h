@@ -1,5 +1,6 @@
 // Leave-one-view-out evaluation of object recognition on RoboEarth model folders (`recog eval
-// objects`).
+// objects`), and the pieces the object subcommands share (camera strings, model sources, the
+// object vocabulary, drawing a detection).
 //
 // Every RoboEarth folder under the root becomes a model built from all its views; those are the
 // database. Then, for every 3D object with at least `min_views` views and every view v: the
@@ -11,6 +12,7 @@
 #pragma once
 
 #include <functional>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -74,6 +76,23 @@ struct ObjectEvaluation {
 };
 
 StatusOr<ObjectEvaluation> EvaluateObjects(const ObjectEvaluationOptions& options);
+
+// "fx,fy,cx,cy[,k1,k2,p1,p2[,k3]]" (the --camera option). INVALID_ARGUMENT naming the problem.
+StatusOr<CameraIntrinsics> ParseCamera(const std::string& text);
+
+// The vocabulary at `path`, or the bundled object vocabulary when `path` is empty.
+StatusOr<std::shared_ptr<const Vocabulary>> LoadObjectVocabulary(const std::string& path);
+
+// One object model named on the command line.
+struct ModelSource {
+  std::string path;
+  bool roboearth = false;  // a RoboEarth model folder (with meta.xml); else a model file (.robj)
+};
+
+// The models `path` names: a RoboEarth model folder, a model file (any name), or a folder of
+// those (one level: its RoboEarth folders and .robj files, by name; other entries are skipped).
+// An empty list when the folder holds none.
+std::vector<ModelSource> FindModelSources(const std::string& path);
 
 // Draws a detection over an image: outline, model axes, inlier points; writes nothing.
 void DrawDetection(const Detection& detection, const CameraIntrinsics& camera,

@@ -67,6 +67,12 @@ StatusOr<bool> FrameSource::Next(cv::Mat* gray, std::string* name) {
   return true;
 }
 
+size_t FrameSource::size() const {
+  if (!video_) return files_.size();
+  const double count = video_->get(cv::CAP_PROP_FRAME_COUNT);
+  return count > 0 ? size_t(count) : 0;
+}
+
 StatusOr<SequenceFeatures> ExtractSequence(FrameSource& source, const FeatureOptions& options,
                                            bool keep_images,
                                            const std::function<void(size_t)>& progress) {
@@ -117,6 +123,23 @@ StageStats Stats(const std::vector<double>& values) {
 
 }  // namespace
 
+StatusOr<std::vector<LoopResult>> DetectLoops(const SequenceFeatures& sequence,
+                                              std::shared_ptr<const Vocabulary> vocabulary,
+                                              const PlaceEvaluationOptions& options) {
+  MemoryIndexStore store;
+  RECOG_ASSIGN_OR_RETURN(std::unique_ptr<Database> db,
+                         Database::Create(&store, "evaluation", std::move(vocabulary),
+                                          options.scoring, options.direct_index_levels_up));
+  RECOG_ASSIGN_OR_RETURN(LoopDetector detector, LoopDetector::Create(db.get(), options.detector));
+  std::vector<LoopResult> results;
+  results.reserve(sequence.features.size());
+  for (const FeatureSet& features : sequence.features) {
+    RECOG_ASSIGN_OR_RETURN(LoopResult r, detector.Process(features));
+    results.push_back(std::move(r));
+  }
+  return results;
+}
+
 StatusOr<PlaceEvaluation> EvaluatePlace(const SequenceFeatures& sequence, const GroundTruth& truth,
                                         std::shared_ptr<const Vocabulary> vocabulary,
                                         const PlaceEvaluationOptions& options,
@@ -126,19 +149,15 @@ StatusOr<PlaceEvaluation> EvaluatePlace(const SequenceFeatures& sequence, const 
     return Status::InvalidArgument("the ground truth covers " + std::to_string(truth.frames) +
                                    " frames but the sequence has " + std::to_string(frames));
   }
-  MemoryIndexStore store;
-  RECOG_ASSIGN_OR_RETURN(std::unique_ptr<Database> db,
-                         Database::Create(&store, "evaluation", std::move(vocabulary),
-                                          options.scoring, options.direct_index_levels_up));
-  RECOG_ASSIGN_OR_RETURN(LoopDetector detector, LoopDetector::Create(db.get(), options.detector));
+  RECOG_ASSIGN_OR_RETURN(std::vector<LoopResult> detected,
+                         DetectLoops(sequence, std::move(vocabulary), options));
 
   PlaceEvaluation eval;
   eval.frames = frames;
   eval.query_frames_with_truth = truth.QueriesWithMatches();
   std::map<std::string, std::vector<double>> times;
-  if (results != nullptr) results->clear();
   for (int i = 0; i < frames; ++i) {
-    RECOG_ASSIGN_OR_RETURN(LoopResult r, detector.Process(sequence.features[size_t(i)]));
+    const LoopResult& r = detected[size_t(i)];
     const LoopTimings& t = r.timings;
     times["features"].push_back(sequence.feature_ms[size_t(i)]);
     times["conversion"].push_back(t.conversion);
@@ -163,12 +182,12 @@ StatusOr<PlaceEvaluation> EvaluatePlace(const SequenceFeatures& sequence, const 
       }
       eval.loops.push_back(loop);
     }
-    if (results != nullptr) results->push_back(std::move(r));
   }
   for (const auto& [stage, values] : times) eval.timing_ms[stage] = Stats(values);
   eval.precision = eval.detections > 0 ? double(eval.correct) / eval.detections : 1.0;
   eval.recall =
       eval.query_frames_with_truth > 0 ? double(eval.correct) / eval.query_frames_with_truth : 0.0;
+  if (results != nullptr) *results = std::move(detected);
   return eval;
 }
 

@@ -20,8 +20,14 @@ namespace recog::cli {
 class FrameSource {
  public:
   static StatusOr<FrameSource> Open(const std::string& spec);
-  // The next frame as 8-bit grey; false at the end. Undecodable images are INVALID_ARGUMENT.
+  // The next frame as 8-bit grey; false at the end. Undecodable images are INVALID_ARGUMENT
+  // (the next call goes on with the following image). `name` is the image's path, or
+  // "<video file name>#<frame number from 1>".
   StatusOr<bool> Next(cv::Mat* gray, std::string* name);
+  // True for a video, whose frames have no file of their own.
+  bool is_video() const { return video_ != nullptr; }
+  // Frames in the sequence: exact for images, the container's count for a video (0: unknown).
+  size_t size() const;
 
  private:
   std::vector<std::string> files_;
@@ -73,8 +79,14 @@ struct PlaceEvaluationOptions {
   uint32_t direct_index_levels_up = 2;
 };
 
-// Runs a fresh detector (in-memory database) over the sequence in order and scores it against
-// the ground truth. `results`, when not null, receives every frame's LoopResult.
+// Runs a fresh detector (in-memory database) over the sequence in order: every frame's
+// LoopResult, in order (what a recogd map with the same parameters answers frame for frame).
+StatusOr<std::vector<LoopResult>> DetectLoops(const SequenceFeatures& sequence,
+                                              std::shared_ptr<const Vocabulary> vocabulary,
+                                              const PlaceEvaluationOptions& options);
+
+// DetectLoops, scored against the ground truth. `results`, when not null, receives every frame's
+// LoopResult.
 StatusOr<PlaceEvaluation> EvaluatePlace(const SequenceFeatures& sequence, const GroundTruth& truth,
                                         std::shared_ptr<const Vocabulary> vocabulary,
                                         const PlaceEvaluationOptions& options,

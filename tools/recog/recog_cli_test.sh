@@ -190,5 +190,14 @@ else
   echo "skipping the RoboEarth box checks: $shared/objects/roboearth/models/box not found (set RECOG_SHARED_DATA)"
 fi
 
+# recog load refuses bad options before it connects (its runs: tools/load_generator_test).
+expect_ok "help of load" "$recog" load --help
+expect_error "load with no robot" "INVALID_ARGUMENT" "$recog" load --sequences "$images" --robots 0 \
+  --frames 1
+expect_error "load without --frames or --duration" "INVALID_ARGUMENT" "$recog" load \
+  --sequences "$images" --robots 2
+expect_error "load of a missing folder" "NOT_FOUND" "$recog" load --sequences "$tmp/none" \
+  --robots 1 --frames 1
+
 echo "$((checks - failures)) passed, $failures failed"
 [ "$failures" -eq 0 ]

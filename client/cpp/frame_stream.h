@@ -1,0 +1,99 @@
+// FrameStream and ObjectStream: a robot's streaming session — one bidirectional gRPC call
+// (StreamFrames on one place map, or StreamRecognizeObjects) carrying frame after frame, each
+// answered by the server in order.
+//
+// Send() never blocks: the frame is queued and written as soon as the previous one is, so several
+// frames can be in flight (up to ClientOptions::max_frames_in_flight; a frame beyond that is
+// answered at once with RESOURCE_EXHAUSTED and not sent). The server answers one frame at a time
+// and holds further frames back with gRPC flow control. Answers come back in the order the frames
+// were sent, through a future or a callback. Both run on the gRPC callback API (no thread of the
+// library's own): callbacks are called on a gRPC thread, one at a time, in order; they must not
+// block for long and must not destroy the stream.
+//
+// A frame that fails on its own (an undecodable image, missing intrinsics) is answered normally,
+// with the error inside the answer (`error`), and the stream goes on. When the stream itself fails
+// (an unknown map, a missing right, a broken connection, a server shutting down), every frame
+// still waiting for an answer gets the stream's status as its Result, and so does every later
+// Send. Close() half-closes, waits for the remaining answers and returns the stream's final
+// status; destroying a stream that was not closed cancels it. Streams are not retried, and have no
+// deadline. Thread-safe: any thread may Send, while another closes.
+//
+// A stream keeps its own reference to the client's connection and may outlive the client.
+#pragma once
+
+#include <cstddef>
+#include <functional>
+#include <future>
+#include <memory>
+
+#include "client/cpp/recognition_client.h"
+#include "client/cpp/result.h"
+
+namespace recog::client {
+
+namespace internal {
+template <class Request, class Response>
+class OrderedStream;
+}  // namespace internal
+
+// StreamFrames: frames of one place map, each answered with its loop result.
+class FrameStream {
+ public:
+  using Answer = Result<pb::StreamFramesResponse>;
+
+  // Starts the stream with `config` (the map, whether to create it, query-only, result options).
+  // INVALID_ARGUMENT when config.map is empty; every other error (NOT_FOUND for an unknown map
+  // without create_if_missing, PERMISSION_DENIED) arrives with the first answers and Close().
+  static Result<std::unique_ptr<FrameStream>> Open(RecognitionClient& client,
+                                                   const pb::StreamConfig& config);
+  ~FrameStream();
+  FrameStream(const FrameStream&) = delete;
+  FrameStream& operator=(const FrameStream&) = delete;
+
+  // Sends a frame; its answer completes the future.
+  std::future<Answer> Send(pb::Frame frame);
+  // Sends a frame; `on_answer` gets its answer.
+  void Send(pb::Frame frame, std::function<void(Answer)> on_answer);
+  // Frames sent and not yet answered.
+  size_t in_flight() const;
+  // Half-closes, waits for every answer and returns the stream's final status (OK when the
+  // server answered every frame). Later Sends are refused with FAILED_PRECONDITION.
+  grpc::Status Close();
+  // Ends the stream at once; waiting frames get CANCELLED.
+  void Cancel();
+
+ private:
+  FrameStream(std::unique_ptr<pb::PlaceRecognition::Stub> stub, size_t max_in_flight);
+  std::unique_ptr<pb::PlaceRecognition::Stub> stub_;
+  std::unique_ptr<internal::OrderedStream<pb::StreamFramesRequest, pb::StreamFramesResponse>>
+      stream_;
+};
+
+// StreamRecognizeObjects: frames (with intrinsics), each answered with the objects it shows.
+class ObjectStream {
+ public:
+  using Answer = Result<pb::StreamRecognizeObjectsResponse>;
+
+  // Starts the stream with `config` (which objects are of interest; default: all).
+  static Result<std::unique_ptr<ObjectStream>> Open(RecognitionClient& client,
+                                                    const pb::RecognitionConfig& config = {});
+  ~ObjectStream();
+  ObjectStream(const ObjectStream&) = delete;
+  ObjectStream& operator=(const ObjectStream&) = delete;
+
+  // As FrameStream's.
+  std::future<Answer> Send(pb::Frame frame);
+  void Send(pb::Frame frame, std::function<void(Answer)> on_answer);
+  size_t in_flight() const;
+  grpc::Status Close();
+  void Cancel();
+
+ private:
+  ObjectStream(std::unique_ptr<pb::ObjectRecognition::Stub> stub, size_t max_in_flight);
+  std::unique_ptr<pb::ObjectRecognition::Stub> stub_;
+  std::unique_ptr<internal::OrderedStream<pb::StreamRecognizeObjectsRequest,
+                                          pb::StreamRecognizeObjectsResponse>>
+      stream_;
+};
+
+}  // namespace recog::client

@@ -1,0 +1,161 @@
+#include "client/cpp/frames.h"
+
+#include <algorithm>
+#include <fstream>
+#include <numeric>
+#include <sstream>
+
+#include <opencv2/features2d.hpp>
+#include <opencv2/imgproc.hpp>
+
+namespace recog::client {
+namespace {
+
+// The server's default place features (core/features/feature_extractor.h, FeatureOptions{}).
+constexpr int kOrbFeatures = 1000;
+constexpr float kOrbScaleFactor = 1.2f;
+constexpr int kOrbLevels = 8;
+constexpr int kOrbEdgeThreshold = 31;
+constexpr int kOrbPatchSize = 31;
+constexpr int kOrbFastThreshold = 20;
+constexpr int kDescriptorBytes = 32;
+
+grpc::Status Invalid(const std::string& message) {
+  return {grpc::StatusCode::INVALID_ARGUMENT, message};
+}
+
+bool IsJpegOrPng(const std::string& bytes) {
+  static constexpr char kJpeg[] = "\xff\xd8\xff";
+  static constexpr char kPng[] = "\x89PNG\r\n\x1a\n";
+  return bytes.starts_with(std::string_view(kJpeg, 3)) ||
+         bytes.starts_with(std::string_view(kPng, 8));
+}
+
+grpc::Status CheckPixels(const cv::Mat& image) {
+  if (image.empty()) return Invalid("the image is empty");
+  if (image.dims != 2 || (image.type() != CV_8UC1 && image.type() != CV_8UC3)) {
+    return Invalid("the image has pixel type " + cv::typeToString(image.type()) +
+                   "; expected 8-bit grey (CV_8UC1) or 8-bit BGR (CV_8UC3)");
+  }
+  return grpc::Status::OK;
+}
+
+// Core's deterministic order of features: strongest first, then top to bottom, left to right;
+// the remaining fields separate keypoints that share a position.
+bool StrongerFirst(const cv::KeyPoint& a, const cv::KeyPoint& b) {
+  if (a.response != b.response) return a.response > b.response;
+  if (a.pt.y != b.pt.y) return a.pt.y < b.pt.y;
+  if (a.pt.x != b.pt.x) return a.pt.x < b.pt.x;
+  if (a.octave != b.octave) return a.octave < b.octave;
+  if (a.size != b.size) return a.size < b.size;
+  return a.angle < b.angle;
+}
+
+// The pyramid levels that exist for an image of `size` (OpenCV fails on levels that round to
+// zero pixels), as the server counts them.
+int UsableLevels(cv::Size size) {
+  int levels = 0;
+  double scale = 1.0;
+  while (levels < kOrbLevels && cvRound(size.width / scale) >= 1 &&
+         cvRound(size.height / scale) >= 1) {
+    ++levels;
+    scale *= kOrbScaleFactor;
+  }
+  return std::max(levels, 1);
+}
+
+}  // namespace
+
+Result<pb::Frame> FrameFromEncodedFile(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return grpc::Status(grpc::StatusCode::NOT_FOUND, "cannot open '" + path + "'");
+  std::ostringstream bytes;
+  bytes << in.rdbuf();
+  std::string content = std::move(bytes).str();
+  if (content.empty()) return Invalid("'" + path + "' is empty");
+  if (!IsJpegOrPng(content)) return Invalid("'" + path + "' is neither a JPEG nor a PNG file");
+  pb::Frame frame;
+  frame.set_encoded_image(std::move(content));
+  return frame;
+}
+
+Result<pb::Frame> FrameFromImage(const cv::Mat& image) {
+  if (grpc::Status status = CheckPixels(image); !status.ok()) return status;
+  pb::Frame frame;
+  pb::RawImage* raw = frame.mutable_raw_image();
+  raw->set_width(uint32_t(image.cols));
+  raw->set_height(uint32_t(image.rows));
+  raw->set_format(image.channels() == 1 ? pb::PIXEL_FORMAT_GRAY8 : pb::PIXEL_FORMAT_BGR8);
+  const size_t row_bytes = size_t(image.cols) * image.elemSize();
+  std::string* pixels = raw->mutable_pixels();
+  pixels->reserve(row_bytes * size_t(image.rows));
+  for (int y = 0; y < image.rows; ++y) pixels->append(image.ptr<char>(y), row_bytes);
+  return frame;
+}
+
+Result<OrbFeatures> ExtractOrbFeatures(const cv::Mat& image) {
+  if (grpc::Status status = CheckPixels(image); !status.ok()) return status;
+  cv::Mat grey = image;
+  if (image.type() == CV_8UC3) cv::cvtColor(image, grey, cv::COLOR_BGR2GRAY);
+  std::vector<cv::KeyPoint> keypoints;
+  cv::Mat descriptors;
+  try {
+    cv::Ptr<cv::ORB> orb = cv::ORB::create(kOrbFeatures, kOrbScaleFactor, UsableLevels(grey.size()),
+                                           kOrbEdgeThreshold, /*firstLevel=*/0, /*WTA_K=*/2,
+                                           cv::ORB::HARRIS_SCORE, kOrbPatchSize, kOrbFastThreshold);
+    orb->detectAndCompute(grey, cv::noArray(), keypoints, descriptors);
+  } catch (const cv::Exception& e) {
+    return grpc::Status(grpc::StatusCode::INTERNAL, std::string("ORB failed: ") + e.what());
+  }
+  OrbFeatures out;
+  out.descriptors.create(0, kDescriptorBytes, CV_8UC1);
+  if (keypoints.empty()) return out;
+  std::vector<size_t> order(keypoints.size());
+  std::iota(order.begin(), order.end(), size_t{0});
+  std::sort(order.begin(), order.end(),
+            [&](size_t a, size_t b) { return StrongerFirst(keypoints[a], keypoints[b]); });
+  order.resize(std::min(order.size(), size_t(kOrbFeatures)));
+  out.keypoints.reserve(order.size());
+  out.descriptors.create(int(order.size()), kDescriptorBytes, CV_8UC1);
+  for (size_t i = 0; i < order.size(); ++i) {
+    out.keypoints.push_back(keypoints[order[i]]);
+    descriptors.row(int(order[i])).copyTo(out.descriptors.row(int(i)));
+  }
+  return out;
+}
+
+Result<pb::Frame> FrameFromFeatures(const std::vector<cv::KeyPoint>& keypoints,
+                                    const cv::Mat& descriptors, cv::Size image_size) {
+  if (descriptors.rows != int(keypoints.size())) {
+    return Invalid(std::to_string(descriptors.rows) + " descriptor rows for " +
+                   std::to_string(keypoints.size()) + " keypoints");
+  }
+  if (!keypoints.empty() &&
+      (descriptors.type() != CV_8UC1 || descriptors.cols != kDescriptorBytes)) {
+    return Invalid("descriptors must be 32-byte binary rows (CV_8UC1, 32 columns), got " +
+                   cv::typeToString(descriptors.type()) + " with " +
+                   std::to_string(descriptors.cols) + " columns");
+  }
+  pb::Frame frame;
+  pb::Features* out = frame.mutable_features();
+  out->mutable_keypoints()->Reserve(int(keypoints.size()));
+  for (const cv::KeyPoint& k : keypoints) {
+    pb::Keypoint* p = out->add_keypoints();
+    p->set_x(k.pt.x);
+    p->set_y(k.pt.y);
+    p->set_size(k.size);
+    p->set_angle(k.angle);
+    p->set_response(k.response);
+    p->set_octave(k.octave);
+  }
+  std::string* bytes = out->mutable_descriptors();
+  bytes->reserve(keypoints.size() * kDescriptorBytes);
+  for (int r = 0; r < descriptors.rows; ++r)
+    bytes->append(descriptors.ptr<char>(r), kDescriptorBytes);
+  out->set_descriptor_bytes(kDescriptorBytes);
+  out->set_image_width(uint32_t(std::max(image_size.width, 0)));
+  out->set_image_height(uint32_t(std::max(image_size.height, 0)));
+  return frame;
+}
+
+}  // namespace recog::client

@@ -1,0 +1,54 @@
+// Frame helpers: the three forms of pb::Frame (proto/recognition/v1/common.proto) built from
+// what a robot has at hand — an image file, decoded pixels, or features it extracted itself.
+//
+// Client-side features move the extraction onto the robot and cost about 60 KB a frame (1000
+// keypoints and 32-byte descriptors) whatever the camera's resolution. ExtractOrbFeatures computes
+// exactly what the server computes for a frame sent as an image with its default place settings
+// (core's FeatureOptions{}: ORB, 1000 features, scale factor 1.2, 8 levels, FAST threshold 20, edge
+// threshold 31, Harris score, 31-pixel patches, no grid bucketing; features sorted strongest
+// first), so a map built from either form answers the same. Equal features need equal grey pixels:
+// the server decodes images with cv::IMREAD_GRAYSCALE, so read files that way (cv::imread(path,
+// cv::IMREAD_GRAYSCALE)); converting a colour image yourself rounds differently.
+//
+// Timestamps, camera ids, intrinsics and client frame ids are left for the caller to set on the
+// returned frame. None of these functions throws; they are thread-safe.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "client/cpp/result.h"
+#include "recognition/v1/common.pb.h"
+
+namespace recog::client {
+
+namespace pb = ::recognition::v1;
+
+// The bytes of a JPEG or PNG file, sent as they are (the server decodes them). NOT_FOUND when
+// the file cannot be read, INVALID_ARGUMENT when it is empty or neither JPEG nor PNG.
+Result<pb::Frame> FrameFromEncodedFile(const std::string& path);
+
+// Raw pixels: an 8-bit grey (CV_8UC1, sent as GRAY8) or 8-bit BGR (CV_8UC3, sent as BGR8)
+// image, any stride. INVALID_ARGUMENT for an empty image or another pixel type.
+Result<pb::Frame> FrameFromImage(const cv::Mat& image);
+
+// ORB keypoints with their 32-byte descriptors.
+struct OrbFeatures {
+  std::vector<cv::KeyPoint> keypoints;
+  cv::Mat descriptors;  // CV_8UC1, one 32-byte row per keypoint
+};
+
+// The server's default place features of an 8-bit grey or BGR image (BGR is converted to grey
+// first, as the server does with raw BGR frames). An image too small for any feature gives none.
+// INVALID_ARGUMENT for an empty image or another pixel type.
+Result<OrbFeatures> ExtractOrbFeatures(const cv::Mat& image);
+
+// A frame carrying features: one keypoint per descriptor row, 32-byte (CV_8UC1, 32 columns)
+// descriptors as the server's vocabularies use. `image_size` (optional) is recorded for drawing.
+// INVALID_ARGUMENT when the descriptors do not match the keypoints or are not 32-byte binary.
+Result<pb::Frame> FrameFromFeatures(const std::vector<cv::KeyPoint>& keypoints,
+                                    const cv::Mat& descriptors, cv::Size image_size = {});
+
+}  // namespace recog::client

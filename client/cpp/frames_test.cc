@@ -1,0 +1,141 @@
+// Tests of the frame helpers: client-side ORB features equal to the server's (core's extractor
+// with FeatureOptions{}), feature frames, encoded files and raw pixels.
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+
+#include <gtest/gtest.h>
+#include <opencv2/imgcodecs.hpp>
+
+#include "client/cpp/frames.h"
+#include "core/features/feature_extractor.h"
+#include "tests/testing/data_paths.h"
+
+namespace recog::client {
+namespace {
+
+const std::string kCorridor1 = recog::testing::ProjectTestData("corridor/1.jpg");
+
+// What the server extracts from `image` for a place map.
+FeatureSet ServerFeatures(const cv::Mat& image) {
+  auto extractor = CreateFeatureExtractor(FeatureOptions{});
+  EXPECT_TRUE(extractor.ok());
+  FeatureSet features;
+  EXPECT_TRUE(extractor.value()->Extract(image, &features).ok());
+  return features;
+}
+
+void ExpectSameFeatures(const OrbFeatures& client, const FeatureSet& server) {
+  ASSERT_EQ(client.keypoints.size(), server.keypoints.size());
+  for (size_t i = 0; i < client.keypoints.size(); ++i) {
+    const cv::KeyPoint& a = client.keypoints[i];
+    const cv::KeyPoint& b = server.keypoints[i];
+    ASSERT_TRUE(a.pt == b.pt && a.size == b.size && a.angle == b.angle &&
+                a.response == b.response && a.octave == b.octave)
+        << "keypoint " << i;
+  }
+  ASSERT_EQ(client.descriptors.type(), server.descriptors.type());
+  ASSERT_EQ(client.descriptors.size(), server.descriptors.size());
+  EXPECT_EQ(
+      std::memcmp(client.descriptors.data, server.descriptors.data, client.descriptors.total()), 0);
+}
+
+TEST(FramesTest, ClientOrbFeaturesEqualTheServersOnACorridorImage) {
+  const cv::Mat grey = cv::imread(kCorridor1, cv::IMREAD_GRAYSCALE);
+  ASSERT_FALSE(grey.empty());
+  Result<OrbFeatures> features = ExtractOrbFeatures(grey);
+  ASSERT_TRUE(features.ok()) << features.status().error_message();
+  EXPECT_GT(features->keypoints.size(), 300u);
+  EXPECT_LE(features->keypoints.size(), 1000u);
+  ExpectSameFeatures(*features, ServerFeatures(grey));
+
+  // Colour images are converted to grey as the server converts raw BGR frames.
+  const cv::Mat colour = cv::imread(kCorridor1, cv::IMREAD_COLOR);
+  Result<OrbFeatures> from_colour = ExtractOrbFeatures(colour);
+  ASSERT_TRUE(from_colour.ok());
+  ExpectSameFeatures(*from_colour, ServerFeatures(colour));
+}
+
+TEST(FramesTest, AnImageTooSmallForFeaturesHasNoneAndABadImageIsRefused) {
+  Result<OrbFeatures> none = ExtractOrbFeatures(cv::Mat(12, 12, CV_8UC1, cv::Scalar(7)));
+  ASSERT_TRUE(none.ok());
+  EXPECT_TRUE(none->keypoints.empty());
+  EXPECT_EQ(none->descriptors.cols, 32);
+  EXPECT_EQ(ExtractOrbFeatures(cv::Mat()).status().error_code(),
+            grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(ExtractOrbFeatures(cv::Mat(64, 64, CV_32FC1)).status().error_code(),
+            grpc::StatusCode::INVALID_ARGUMENT);
+}
+
+TEST(FramesTest, AFeaturesFrameCarriesEveryKeypointAndDescriptorInOrder) {
+  const cv::Mat grey = cv::imread(kCorridor1, cv::IMREAD_GRAYSCALE);
+  Result<OrbFeatures> features = ExtractOrbFeatures(grey);
+  ASSERT_TRUE(features.ok());
+  Result<pb::Frame> frame =
+      FrameFromFeatures(features->keypoints, features->descriptors, grey.size());
+  ASSERT_TRUE(frame.ok()) << frame.status().error_message();
+  const pb::Features& sent = frame->features();
+  ASSERT_EQ(size_t(sent.keypoints_size()), features->keypoints.size());
+  EXPECT_EQ(sent.descriptor_bytes(), 32u);
+  EXPECT_EQ(sent.image_width(), uint32_t(grey.cols));
+  EXPECT_EQ(sent.image_height(), uint32_t(grey.rows));
+  const cv::KeyPoint& last = features->keypoints.back();
+  const pb::Keypoint& last_sent = sent.keypoints(sent.keypoints_size() - 1);
+  EXPECT_EQ(last_sent.x(), last.pt.x);
+  EXPECT_EQ(last_sent.y(), last.pt.y);
+  EXPECT_EQ(last_sent.octave(), last.octave);
+  ASSERT_EQ(sent.descriptors().size(), features->keypoints.size() * 32);
+  EXPECT_EQ(
+      std::memcmp(sent.descriptors().data(), features->descriptors.data, sent.descriptors().size()),
+      0);
+
+  std::vector<cv::KeyPoint> one_less(features->keypoints.begin() + 1, features->keypoints.end());
+  EXPECT_EQ(FrameFromFeatures(one_less, features->descriptors).status().error_code(),
+            grpc::StatusCode::INVALID_ARGUMENT);
+  cv::Mat floats;
+  features->descriptors.convertTo(floats, CV_32F);
+  EXPECT_EQ(FrameFromFeatures(features->keypoints, floats).status().error_code(),
+            grpc::StatusCode::INVALID_ARGUMENT);
+}
+
+TEST(FramesTest, EncodedFilesAreSentAsTheyAreAndOtherFilesAreRefused) {
+  Result<pb::Frame> frame = FrameFromEncodedFile(kCorridor1);
+  ASSERT_TRUE(frame.ok()) << frame.status().error_message();
+  std::ifstream in(kCorridor1, std::ios::binary);
+  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_EQ(frame->encoded_image(), bytes);
+
+  EXPECT_EQ(FrameFromEncodedFile(kCorridor1 + ".missing").status().error_code(),
+            grpc::StatusCode::NOT_FOUND);
+  const std::string text =
+      (std::filesystem::temp_directory_path() / "recog_client_not_an_image.txt").string();
+  std::ofstream(text) << "hello";
+  EXPECT_EQ(FrameFromEncodedFile(text).status().error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  std::filesystem::remove(text);
+}
+
+TEST(FramesTest, RawImagesAreSentRowByRowWithoutPadding) {
+  const cv::Mat colour = cv::imread(kCorridor1, cv::IMREAD_COLOR);
+  const cv::Mat window = colour(cv::Rect(10, 20, 100, 50));  // not continuous
+  ASSERT_FALSE(window.isContinuous());
+  Result<pb::Frame> frame = FrameFromImage(window);
+  ASSERT_TRUE(frame.ok());
+  const pb::RawImage& raw = frame->raw_image();
+  EXPECT_EQ(raw.format(), pb::PIXEL_FORMAT_BGR8);
+  EXPECT_EQ(raw.width(), 100u);
+  EXPECT_EQ(raw.height(), 50u);
+  const cv::Mat packed = window.clone();
+  ASSERT_EQ(raw.pixels().size(), packed.total() * 3);
+  EXPECT_EQ(std::memcmp(raw.pixels().data(), packed.data, raw.pixels().size()), 0);
+
+  Result<pb::Frame> grey = FrameFromImage(cv::Mat(4, 6, CV_8UC1, cv::Scalar(9)));
+  ASSERT_TRUE(grey.ok());
+  EXPECT_EQ(grey->raw_image().format(), pb::PIXEL_FORMAT_GRAY8);
+  EXPECT_EQ(grey->raw_image().pixels(), std::string(24, '\x09'));
+  EXPECT_EQ(FrameFromImage(cv::Mat(4, 6, CV_16UC1)).status().error_code(),
+            grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(FrameFromImage(cv::Mat()).status().error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+}
+
+}  // namespace
+}  // namespace recog::client

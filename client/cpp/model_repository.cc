@@ -1,0 +1,282 @@
+// RecognitionClient's model repository calls: chunked uploads, verified and resumable downloads,
+// listings, deletions, and the WatchModels stream.
+#include <algorithm>
+#include <condition_variable>
+#include <filesystem>
+#include <fstream>
+#include <mutex>
+#include <sstream>
+
+#include "client/cpp/recognition_client.h"
+#include "client/cpp/retry.h"
+#include "client/cpp/sha256.h"
+#include "proto/sha256.h"
+
+namespace recog::client {
+namespace {
+
+using internal::CallKind;
+
+constexpr size_t kChunkBytes = 256u << 10;
+
+grpc::Status CannotWrite(const std::string& path, const std::string& why = {}) {
+  return {grpc::StatusCode::FAILED_PRECONDITION,
+          "cannot write '" + path + "'" + (why.empty() ? "" : ": " + why)};
+}
+
+// OK when the file at `path` has the size and SHA-256 of `info`; DATA_LOSS otherwise.
+grpc::Status Verify(const std::string& path, const pb::ModelInfo& info) {
+  std::error_code error;
+  const uint64_t size = std::filesystem::file_size(path, error);
+  if (error) return CannotWrite(path, error.message());
+  if (size != info.size_bytes()) {
+    return {grpc::StatusCode::DATA_LOSS, "the download has " + std::to_string(size) +
+                                             " bytes; the server announced " +
+                                             std::to_string(info.size_bytes())};
+  }
+  Result<std::string> sha256 = internal::Sha256HexOfFile(path);
+  if (!sha256.ok()) return sha256.status();
+  if (*sha256 != info.sha256()) {
+    return {grpc::StatusCode::DATA_LOSS,
+            "the download's SHA-256 differs from the one the server announced"};
+  }
+  return grpc::Status::OK;
+}
+
+}  // namespace
+
+// --- WatchModels ---
+
+namespace internal {
+
+// One WatchModels call on the gRPC callback API: each event read goes to the callback, then the
+// next read starts; OnDone records the status for Wait(). It holds a reference to the channel, so
+// that the call may outlive the client.
+class WatchReactor final : public grpc::ClientReadReactor<pb::WatchModelsResponse> {
+ public:
+  WatchReactor(std::shared_ptr<grpc::Channel> channel,
+               std::function<void(const pb::WatchModelsResponse&)> on_change)
+      : channel_(std::move(channel)), on_change_(std::move(on_change)) {}
+
+  grpc::ClientContext& context() { return context_; }
+  pb::WatchModelsRequest& request() { return request_; }
+
+  void Start() {
+    StartRead(&event_);
+    StartCall();
+  }
+  void Cancel() { context_.TryCancel(); }
+  grpc::Status Wait() {
+    std::unique_lock lock(mutex_);
+    done_changed_.wait(lock, [this] { return done_; });
+    return status_;
+  }
+
+ private:
+  void OnReadDone(bool ok) override {
+    if (!ok) return;  // OnDone follows
+    if (on_change_) on_change_(event_);
+    StartRead(&event_);
+  }
+  void OnDone(const grpc::Status& status) override {
+    std::lock_guard lock(mutex_);
+    status_ = status;
+    done_ = true;
+    done_changed_.notify_all();
+  }
+
+  const std::shared_ptr<grpc::Channel> channel_;
+  const std::function<void(const pb::WatchModelsResponse&)> on_change_;
+  grpc::ClientContext context_;
+  pb::WatchModelsRequest request_;
+  pb::WatchModelsResponse event_;
+  std::mutex mutex_;  // guards the three below
+  std::condition_variable done_changed_;
+  bool done_ = false;
+  grpc::Status status_;
+};
+
+}  // namespace internal
+
+ModelWatch::ModelWatch(std::unique_ptr<internal::WatchReactor> reactor)
+    : reactor_(std::move(reactor)) {}
+
+ModelWatch::~ModelWatch() {
+  reactor_->Cancel();
+  reactor_->Wait();
+}
+
+void ModelWatch::Cancel() { reactor_->Cancel(); }
+
+grpc::Status ModelWatch::Wait() { return reactor_->Wait(); }
+
+std::unique_ptr<ModelWatch> RecognitionClient::WatchModels(
+    const std::string& name_prefix, std::function<void(const pb::WatchModelsResponse&)> on_change) {
+  auto reactor = std::make_unique<internal::WatchReactor>(channel_, std::move(on_change));
+  PrepareContext(reactor->context(), nullptr);
+  reactor->request().set_name_prefix(name_prefix);
+  models_->async()->WatchModels(&reactor->context(), &reactor->request(), reactor.get());
+  reactor->Start();
+  return std::unique_ptr<ModelWatch>(new ModelWatch(std::move(reactor)));
+}
+
+// --- Uploads ---
+
+Result<pb::ModelInfo> RecognitionClient::UploadModel(std::string_view file_bytes,
+                                                     const std::string& name,
+                                                     const std::vector<std::string>& tags) {
+  if (file_bytes.empty()) {
+    return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, "the model file is empty");
+  }
+  pb::PutModelRequest header;
+  header.mutable_header()->set_name(name);
+  for (const std::string& tag : tags) header.mutable_header()->add_tags(tag);
+  header.mutable_header()->set_sha256(Sha256Hex(file_bytes));
+  header.mutable_header()->set_size_bytes(file_bytes.size());
+  pb::PutModelResponse response;
+  const grpc::Status status =
+      Run(CallKind::kChanging, std::chrono::system_clock::now() + options_.transfer_deadline,
+          [&](grpc::ClientContext& context) {
+            response.Clear();
+            std::unique_ptr<grpc::ClientWriter<pb::PutModelRequest>> writer =
+                models_->PutModel(&context, &response);
+            bool open = writer->Write(header);
+            pb::PutModelRequest chunk;
+            for (size_t offset = 0; open && offset < file_bytes.size(); offset += kChunkBytes) {
+              chunk.set_chunk(file_bytes.data() + offset,
+                              std::min(kChunkBytes, file_bytes.size() - offset));
+              open = writer->Write(chunk);
+            }
+            if (open) writer->WritesDone();
+            return writer->Finish();
+          });
+  if (!status.ok()) return status;
+  return std::move(*response.mutable_model());
+}
+
+Result<pb::ModelInfo> RecognitionClient::UploadModelFile(const std::string& path,
+                                                         const std::string& name,
+                                                         const std::vector<std::string>& tags) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return grpc::Status(grpc::StatusCode::NOT_FOUND, "cannot open '" + path + "'");
+  std::ostringstream bytes;
+  bytes << in.rdbuf();
+  if (in.bad()) {
+    return grpc::Status(grpc::StatusCode::FAILED_PRECONDITION, "cannot read '" + path + "'");
+  }
+  return UploadModel(bytes.view(), name, tags);
+}
+
+// --- Downloads ---
+
+Result<pb::ModelInfo> RecognitionClient::DownloadModel(const std::string& name, uint32_t version,
+                                                       const std::string& path) {
+  const std::string part = path + ".part";
+  const Deadline deadline = std::chrono::system_clock::now() + options_.transfer_deadline;
+  std::error_code error;
+  uint64_t have = std::filesystem::is_regular_file(part, error)
+                      ? std::filesystem::file_size(part, error)
+                      : 0;  // bytes of an earlier broken download
+  if (error) have = 0;
+  // Whether every byte in `part` came from this call's version, fetched from byte 0: a file that
+  // then does not verify is not fetched again.
+  bool from_start = have == 0;
+  pb::ModelInfo info;  // of the version being fetched, once the server has named it
+  int failures = 0;    // failed attempts since the last one that received bytes (included)
+  for (;;) {
+    grpc::ClientContext context;
+    PrepareContext(context, &deadline);
+    pb::GetModelRequest request;
+    request.set_name(name);
+    request.set_version(info.version() != 0 ? info.version() : version);  // resume that version
+    request.set_chunk_bytes(kChunkBytes);
+    request.set_offset(have);
+    std::ofstream out(part, std::ios::binary | (have == 0 ? std::ios::trunc : std::ios::app));
+    if (!out) return CannotWrite(part);
+
+    std::unique_ptr<grpc::ClientReader<pb::GetModelResponse>> reader =
+        models_->GetModel(&context, request);
+    pb::GetModelResponse response;
+    bool progressed = false, too_long = false;
+    while (reader->Read(&response)) {
+      if (response.has_info()) {
+        info = response.info();
+        continue;
+      }
+      const std::string& chunk = response.chunk();
+      too_long = have + chunk.size() > info.size_bytes();
+      if (too_long || !out.write(chunk.data(), std::streamsize(chunk.size()))) break;
+      have += chunk.size();
+      progressed = true;
+    }
+    if (too_long || !out) context.TryCancel();  // ends the server's side; Finish collects it
+    grpc::Status status = reader->Finish();
+    out.close();
+    if (!out) return CannotWrite(part);
+    if (too_long) {
+      status = {grpc::StatusCode::DATA_LOSS, "the server sent more bytes than it announced"};
+    } else if (status.ok()) {
+      status = Verify(part, info);
+      if (status.ok()) {
+        std::filesystem::rename(part, path, error);
+        if (error) return CannotWrite(path, error.message());
+        return info;
+      }
+    }
+    const bool bad_file = status.error_code() == grpc::StatusCode::DATA_LOSS ||
+                          status.error_code() == grpc::StatusCode::OUT_OF_RANGE;
+    if (bad_file) {
+      std::filesystem::remove(part, error);
+      have = 0;
+      if (!from_start) {  // the partial file was not (all) this version's: fetch it whole
+        from_start = true;
+        failures = 0;
+        continue;
+      }
+      return status;
+    }
+    failures = progressed ? 1 : failures + 1;
+    const std::optional<std::chrono::milliseconds> retry_after = internal::RetryAfter(context);
+    if (!internal::ShouldRetry(status, CallKind::kRepeatable, /*sent=*/true, retry_after) ||
+        failures >= options_.retry.max_attempts || !Backoff(failures, retry_after, deadline)) {
+      return status;  // `part` stays, for a later call to continue
+    }
+  }
+}
+
+// --- Listings and deletions ---
+
+Result<std::vector<pb::ModelInfo>> RecognitionClient::ListModels(const ModelFilter& filter) {
+  std::vector<pb::ModelInfo> models;
+  pb::ListModelsRequest request;
+  request.set_name_prefix(filter.name_prefix);
+  request.set_object_class(filter.object_class);
+  request.set_tag(filter.tag);
+  pb::ListModelsResponse response;
+  do {
+    const grpc::Status status =
+        Run(CallKind::kRepeatable, UnaryDeadline(), [&](grpc::ClientContext& context) {
+          response.Clear();
+          return models_->ListModels(&context, request, &response);
+        });
+    if (!status.ok()) return status;
+    for (pb::ModelInfo& model : *response.mutable_models()) models.push_back(std::move(model));
+    request.set_page_token(response.next_page_token());
+  } while (!request.page_token().empty());
+  return models;
+}
+
+Result<uint32_t> RecognitionClient::DeleteModel(const std::string& name) {
+  pb::DeleteModelRequest request;
+  request.set_name(name);
+  pb::DeleteModelResponse response;
+  const grpc::Status status =
+      Run(CallKind::kChanging, UnaryDeadline(), [&](grpc::ClientContext& context) {
+        response.Clear();
+        return models_->DeleteModel(&context, request, &response);
+      });
+  if (!status.ok()) return status;
+  return response.versions_deleted();
+}
+
+}  // namespace recog::client

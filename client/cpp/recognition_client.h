@@ -1,0 +1,177 @@
+// RecognitionClient: one connection to recogd and every call of its API
+// (proto/recognition/v1/): place maps, frames and place queries, object recognition, and the
+// model repository (uploads, resumable downloads, listings, change notifications).
+//
+// One client holds one gRPC channel; it is thread-safe, and meant to be shared by every thread of
+// a process. Connect() checks the options and reads the TLS and token files, then returns at
+// once: the channel connects in the background, and a server that is not listening yet is met by
+// the retries of the first calls (ClientOptions, retry rule). Each call adds the bearer token, the
+// deadline (ClientOptions::deadline for unary calls, transfer_deadline for model files) and
+// retries as ClientOptions describes. Errors are grpc::Status values with canonical codes (see
+// result.h); nothing throws.
+//
+// Frame streams are separate objects (FrameStream, ObjectStream in frame_stream.h), opened on a
+// client; they and ModelWatch handles may outlive it.
+//
+// Model files travel in 256 KiB chunks. UploadModel computes the SHA-256 the server checks.
+// DownloadModel writes to `<path>.part`, verifies the size and SHA-256 the server announced, and
+// renames the file into place; when the connection breaks mid-file it asks for the rest from the
+// byte it has, and a `<path>.part` left by an earlier broken download is continued the same way
+// (if the result does not verify, the file is fetched once more from the start). One download per
+// path at a time.
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <grpcpp/grpcpp.h>
+
+#include "client/cpp/client_options.h"
+#include "client/cpp/result.h"
+#include "recognition/v1/object.grpc.pb.h"
+#include "recognition/v1/place.grpc.pb.h"
+#include "recognition/v1/repository.grpc.pb.h"
+
+namespace recog::client {
+
+namespace pb = ::recognition::v1;
+
+namespace internal {
+class WatchReactor;
+enum class CallKind;  // retry.h
+}  // namespace internal
+
+// What QueryPlace does with the frame.
+enum class QueryMode {
+  kRelocalise,  // look the frame up and change nothing (needs the read right; retried freely)
+  kAddFrame,    // run the map's loop detector and keep the frame, as a stream frame does
+};
+
+// Which models ListModels returns; empty fields match everything. The initializers let callers
+// name only the fields they set: ListModels({.tag = "kitchen"}).
+struct ModelFilter {
+  std::string name_prefix = {};   // default "": any name
+  std::string object_class = {};  // default "": any class
+  std::string tag = {};           // default "": any tag
+};
+
+// A running WatchModels stream. Events arrive on a gRPC thread, one at a time and in order; the
+// callbacks must not block for long and must not destroy the handle. Destroying the handle
+// cancels the stream and waits for it to end.
+class ModelWatch {
+ public:
+  ~ModelWatch();
+  ModelWatch(const ModelWatch&) = delete;
+  ModelWatch& operator=(const ModelWatch&) = delete;
+
+  // Ends the stream (Wait() then returns CANCELLED unless it had already ended).
+  void Cancel();
+  // Blocks until the stream ends; returns why: CANCELLED after Cancel(), RESOURCE_EXHAUSTED when
+  // this watcher fell too far behind (list the models again, then watch anew), UNAVAILABLE when
+  // the server shut down or the connection broke, UNAUTHENTICATED / PERMISSION_DENIED.
+  grpc::Status Wait();
+
+ private:
+  friend class RecognitionClient;
+  explicit ModelWatch(std::unique_ptr<internal::WatchReactor> reactor);
+  std::unique_ptr<internal::WatchReactor> reactor_;
+};
+
+class RecognitionClient {
+ public:
+  // INVALID_ARGUMENT for bad options (ClientOptions::Validate) or a token file without a usable
+  // token; NOT_FOUND when a TLS or token file cannot be read.
+  static Result<std::unique_ptr<RecognitionClient>> Connect(const ClientOptions& options);
+  ~RecognitionClient();
+  RecognitionClient(const RecognitionClient&) = delete;
+  RecognitionClient& operator=(const RecognitionClient&) = delete;
+
+  const ClientOptions& options() const { return options_; }
+
+  // --- Place maps ---
+
+  // Creates an empty map; unset settings take the server's defaults. ALREADY_EXISTS.
+  Result<pb::MapInfo> CreateMap(const std::string& name, const pb::MapSettings& settings = {});
+  // NOT_FOUND for an unknown map.
+  Result<pb::MapInfo> GetMap(const std::string& name);
+  // Every map, by name (all pages).
+  Result<std::vector<pb::MapInfo>> ListMaps();
+  // Deletes a map and its frames; returns the number of frames deleted. NOT_FOUND.
+  Result<uint64_t> DeleteMap(const std::string& name);
+  // Adds a frame to a map without querying it (keyframe upload).
+  Result<pb::AddFrameResponse> AddFrame(const std::string& map, const pb::Frame& frame);
+  // Looks a frame up in a map (see QueryMode). `result_options` asks for the fundamental matrix
+  // or the relative pose of a verified loop.
+  Result<pb::QueryPlaceResponse> QueryPlace(const std::string& map, const pb::Frame& frame,
+                                            QueryMode mode = QueryMode::kRelocalise,
+                                            const pb::ResultOptions& result_options = {});
+
+  // --- Objects ---
+
+  // The known objects a frame shows (the frame needs intrinsics), best first.
+  Result<pb::RecognizeObjectsResponse> RecognizeObjects(const pb::Frame& frame,
+                                                        const pb::ObjectFilter& filter = {});
+
+  // --- Model repository ---
+
+  // Uploads a model file (.robj) as a new version of `name` ("" = the name inside the file),
+  // with `tags`; returns the version created. INVALID_ARGUMENT for an empty file.
+  Result<pb::ModelInfo> UploadModel(std::string_view file_bytes, const std::string& name = {},
+                                    const std::vector<std::string>& tags = {});
+  // The same for a file on disk (read whole: models are at most 256 MiB). NOT_FOUND.
+  Result<pb::ModelInfo> UploadModelFile(const std::string& path, const std::string& name = {},
+                                        const std::vector<std::string>& tags = {});
+  // Downloads `version` of a model (0 = the latest) to `path` (replaced if it exists), verified
+  // and resumable as the header comment describes; returns the version's info. NOT_FOUND,
+  // DATA_LOSS when the file does not verify even when fetched from the start,
+  // FAILED_PRECONDITION when the file cannot be written.
+  Result<pb::ModelInfo> DownloadModel(const std::string& name, uint32_t version,
+                                      const std::string& path);
+  // The latest version of every model that passes the filter, by name (all pages).
+  Result<std::vector<pb::ModelInfo>> ListModels(const ModelFilter& filter = {});
+  // Deletes every version of a model; returns how many there were. NOT_FOUND.
+  Result<uint32_t> DeleteModel(const std::string& name);
+  // Streams every change to the models whose names start with `name_prefix` ("" = all) from now
+  // on: `on_change` gets each upload and deletion, in order. The server registers the watcher
+  // shortly after the call starts; changes before that are not reported.
+  std::unique_ptr<ModelWatch> WatchModels(
+      const std::string& name_prefix,
+      std::function<void(const pb::WatchModelsResponse&)> on_change);
+
+ private:
+  friend class FrameStream;
+  friend class ObjectStream;
+  using Deadline = std::chrono::system_clock::time_point;
+  using Attempt = std::function<grpc::Status(grpc::ClientContext&)>;
+
+  RecognitionClient(const ClientOptions& options, std::string token,
+                    std::shared_ptr<grpc::Channel> channel);
+
+  // Sets the bearer token and, when given, the deadline.
+  void PrepareContext(grpc::ClientContext& context, const Deadline* deadline) const;
+  // Runs `attempt` with a fresh prepared context until it succeeds, or fails in a way the retry
+  // rule does not retry, or the attempts or the deadline run out.
+  grpc::Status Run(internal::CallKind kind, Deadline deadline, const Attempt& attempt) const;
+  // OK once the channel is connected; UNAVAILABLE as soon as connecting failed,
+  // DEADLINE_EXCEEDED when `deadline` passed first.
+  grpc::Status WaitForConnection(Deadline deadline) const;
+  Deadline UnaryDeadline() const;
+  // Waits before a retry; false when the delay would end after `deadline`.
+  bool Backoff(int retry, std::optional<std::chrono::milliseconds> retry_after,
+               Deadline deadline) const;
+
+  const ClientOptions options_;
+  const std::string token_;  // the bearer token from options_.token or token_file; "" = none
+  const std::shared_ptr<grpc::Channel> channel_;
+  const std::unique_ptr<pb::PlaceRecognition::Stub> places_;
+  const std::unique_ptr<pb::ObjectRecognition::Stub> objects_;
+  const std::unique_ptr<pb::ObjectRepository::Stub> models_;
+};
+
+}  // namespace recog::client

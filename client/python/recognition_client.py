@@ -1,0 +1,309 @@
+"""A thin Python client of the recognition server (recogd), API ``recognition.v1``.
+
+The generated stubs must be importable: put the directory CMake writes them to
+(``<build>/python``, target ``recog_python_stubs``) on ``sys.path`` or ``PYTHONPATH``.
+
+Images are given as the bytes of a JPEG or PNG file, as the path of such a file, or as a ready
+``common_pb2.Frame`` (for raw pixels, client-side features, intrinsics or a ``client_frame_id``;
+see :func:`make_frame`). Results are the generated protobuf messages, documented in
+``proto/recognition/v1/*.proto``.
+
+Errors: every method raises ``grpc.RpcError`` when the server refuses a call or cannot be
+reached; ``error.code()`` is the canonical ``grpc.StatusCode`` (``NOT_FOUND``,
+``ALREADY_EXISTS``, ``INVALID_ARGUMENT``, ``UNAVAILABLE``, ...) and ``error.details()`` the
+server's message. Streams of frames report a single frame's failure inside that frame's
+response (``response.error``) and go on. :meth:`RecognitionClient.download_model` raises
+``ValueError`` when the downloaded bytes do not match the size and SHA-256 the server announced.
+
+Example::
+
+    with RecognitionClient("127.0.0.1:50051") as client:
+        client.create_map("lab", {"temporal_matches": 3})
+        for response in client.stream_frames("lab", ["1.jpg", "2.jpg"]):
+            print(response.sequence, response.result.status)
+"""
+
+import hashlib
+import os
+from collections.abc import Iterable, Iterator, Mapping, Sequence
+
+import grpc
+
+from recognition.v1 import (common_pb2, object_pb2, object_pb2_grpc, place_pb2, place_pb2_grpc,
+                            repository_pb2, repository_pb2_grpc)
+
+#: Size of the chunks :meth:`RecognitionClient.upload_model` sends.
+UPLOAD_CHUNK_BYTES = 1 << 20
+
+Image = bytes | str | os.PathLike | common_pb2.Frame
+
+
+def read_bytes(source: bytes | str | os.PathLike) -> bytes:
+    """Returns ``source`` if it is bytes, otherwise the contents of the file at that path."""
+    if isinstance(source, (bytes, bytearray, memoryview)):
+        return bytes(source)
+    with open(source, "rb") as file:
+        return file.read()
+
+
+def make_intrinsics(intrinsics: common_pb2.CameraIntrinsics | Sequence[float]
+                    ) -> common_pb2.CameraIntrinsics:
+    """Returns camera intrinsics as a message.
+
+    ``intrinsics`` is a ``CameraIntrinsics`` (returned as it is) or the sequence
+    ``(fx, fy, cx, cy, *distortion)`` in pixels, with 0, 4, 5, 8, 12 or 14 OpenCV distortion
+    coefficients.
+    """
+    if isinstance(intrinsics, common_pb2.CameraIntrinsics):
+        return intrinsics
+    fx, fy, cx, cy, *distortion = intrinsics
+    return common_pb2.CameraIntrinsics(fx=fx, fy=fy, cx=cx, cy=cy, distortion=distortion)
+
+
+def make_frame(image: bytes | str | os.PathLike, timestamp: float = 0.0,
+               intrinsics: common_pb2.CameraIntrinsics | Sequence[float] | None = None,
+               client_frame_id: str = "") -> common_pb2.Frame:
+    """Builds a frame from a JPEG or PNG image (bytes or path).
+
+    ``timestamp`` is in seconds in the client's clock (0 = unknown), ``intrinsics`` as in
+    :func:`make_intrinsics`, ``client_frame_id`` free text (at most 128 bytes) that the server
+    echoes in its answer.
+    """
+    frame = common_pb2.Frame(encoded_image=read_bytes(image), timestamp=timestamp,
+                             client_frame_id=client_frame_id)
+    if intrinsics is not None:
+        frame.intrinsics.CopyFrom(make_intrinsics(intrinsics))
+    return frame
+
+
+def _as_frame(image: Image, timestamp: float = 0.0) -> common_pb2.Frame:
+    """Returns ``image`` if it is a Frame, otherwise a frame of it with ``timestamp``."""
+    if isinstance(image, common_pb2.Frame):
+        return image
+    return make_frame(image, timestamp)
+
+
+def _map_settings(settings: place_pb2.MapSettings | Mapping | None) -> place_pb2.MapSettings:
+    """Returns map settings given as a message, a mapping of its fields, or None (defaults)."""
+    if isinstance(settings, place_pb2.MapSettings):
+        return settings
+    return place_pb2.MapSettings(**(settings or {}))
+
+
+class RecognitionClient:
+    """A connection to recogd and one method per RPC of its three services.
+
+    Arguments:
+        target: the server's ``host:port``.
+        token: bearer token sent with every call (``authorization: Bearer <token>``), or None
+            when the server runs without a token file.
+        root_certificates: PEM bytes of the certificate authority of the server's TLS
+            certificate; None connects without TLS.
+        timeout: deadline in seconds of every call except :meth:`stream_frames` and
+            :meth:`watch_models`, which last until their caller stops them.
+
+    The client is a context manager; :meth:`close` releases the channel.
+    """
+
+    def __init__(self, target: str = "127.0.0.1:50051", token: str | None = None,
+                 root_certificates: bytes | None = None, timeout: float = 10.0):
+        """Opens the channel (lazily: the first call connects)."""
+        if root_certificates is None:
+            self._channel = grpc.insecure_channel(target)
+        else:
+            credentials = grpc.ssl_channel_credentials(root_certificates=root_certificates)
+            self._channel = grpc.secure_channel(target, credentials)
+        self._metadata = (("authorization", f"Bearer {token}"),) if token else ()
+        self._timeout = timeout
+        self._places = place_pb2_grpc.PlaceRecognitionStub(self._channel)
+        self._objects = object_pb2_grpc.ObjectRecognitionStub(self._channel)
+        self._repository = repository_pb2_grpc.ObjectRepositoryStub(self._channel)
+
+    def close(self) -> None:
+        """Closes the channel; calls in progress are cancelled."""
+        self._channel.close()
+
+    def __enter__(self) -> "RecognitionClient":
+        """Returns the client itself."""
+        return self
+
+    def __exit__(self, *exc_info) -> None:
+        """Closes the client."""
+        self.close()
+
+    def _call(self, method, request):
+        """Runs a unary call with the client's deadline and credentials."""
+        return method(request, timeout=self._timeout, metadata=self._metadata)
+
+    # Place recognition.
+
+    def create_map(self, name: str, settings: place_pb2.MapSettings | Mapping | None = None
+                   ) -> place_pb2.MapInfo:
+        """Creates an empty map and returns its description.
+
+        ``settings`` is a ``MapSettings``, a mapping of its fields (e.g.
+        ``{"temporal_matches": 0, "recent_frames": 1}``) or None; unset fields take the server's
+        defaults. ``ALREADY_EXISTS`` when the name is taken.
+        """
+        request = place_pb2.CreateMapRequest(name=name, settings=_map_settings(settings))
+        return self._call(self._places.CreateMap, request).map
+
+    def get_map(self, name: str) -> place_pb2.MapInfo:
+        """Returns the description of a map (``NOT_FOUND`` when there is none)."""
+        return self._call(self._places.GetMap, place_pb2.GetMapRequest(name=name)).map
+
+    def list_maps(self, page_size: int = 0) -> list[place_pb2.MapInfo]:
+        """Returns every map, by name, reading all pages (``page_size`` 0: the server's)."""
+        maps = []
+        request = place_pb2.ListMapsRequest(page_size=page_size)
+        while True:
+            response = self._call(self._places.ListMaps, request)
+            maps.extend(response.maps)
+            if not response.next_page_token:
+                return maps
+            request.page_token = response.next_page_token
+
+    def delete_map(self, name: str) -> int:
+        """Deletes a map and its frames; returns how many frames it had."""
+        response = self._call(self._places.DeleteMap, place_pb2.DeleteMapRequest(name=name))
+        return response.frames_deleted
+
+    def add_frame(self, map_name: str, image: Image, timestamp: float = 0.0
+                  ) -> place_pb2.AddFrameResponse:
+        """Adds a frame to a map without querying it; the response carries its ``frame_id``.
+
+        ``timestamp`` (seconds, 0 = unknown) is used when ``image`` is not already a Frame.
+        """
+        request = place_pb2.AddFrameRequest(map=map_name, frame=_as_frame(image, timestamp))
+        return self._call(self._places.AddFrame, request)
+
+    def query_place(self, map_name: str, image: Image, add_frame: bool = False
+                    ) -> place_pb2.QueryPlaceResponse:
+        """Looks a frame up in a map; ``response.result`` is its ``LoopResult``.
+
+        Without ``add_frame`` this is a relocalisation query that changes nothing; with it the
+        frame runs the map's loop detector and is kept, like one frame of :meth:`stream_frames`.
+        """
+        request = place_pb2.QueryPlaceRequest(map=map_name, frame=_as_frame(image),
+                                              add_frame=add_frame)
+        return self._call(self._places.QueryPlace, request)
+
+    def stream_frames(self, map_name: str, frames: Iterable[Image], create_if_missing: bool = True,
+                      settings: place_pb2.MapSettings | Mapping | None = None,
+                      query_only: bool = False) -> Iterator[place_pb2.StreamFramesResponse]:
+        """Streams frames into a map; returns the iterator of their answers, in frame order.
+
+        ``frames`` may be lazy (a generator reading a camera): each is sent when gRPC flow
+        control lets it, and the server answers one frame before reading the next. Each answer
+        has its ``sequence`` (index in ``frames``) and either ``result`` (a ``LoopResult``) or
+        ``error`` (this frame failed, e.g. an undecodable image; the stream goes on).
+        ``settings`` (as in :meth:`create_map`) apply when ``create_if_missing`` creates the map;
+        ``query_only`` looks every frame up without adding it.
+
+        The returned object is also the ``grpc.Call``: ``cancel()`` ends the stream from any
+        thread. An error of the whole stream raises ``grpc.RpcError`` during the iteration; so
+        does an exception raised while reading ``frames`` (a missing file, say), which aborts the
+        stream with ``UNKNOWN`` ("Exception iterating requests!").
+        """
+        config = place_pb2.StreamConfig(map=map_name, create_if_missing=create_if_missing,
+                                        settings=_map_settings(settings), query_only=query_only)
+
+        def requests():
+            yield place_pb2.StreamFramesRequest(config=config)
+            for image in frames:
+                yield place_pb2.StreamFramesRequest(frame=_as_frame(image))
+
+        return self._places.StreamFrames(requests(), metadata=self._metadata)
+
+    # Object recognition.
+
+    def recognize_objects(self, image: Image,
+                          intrinsics: common_pb2.CameraIntrinsics | Sequence[float],
+                          names: Iterable[str] = (), classes: Iterable[str] = ()
+                          ) -> object_pb2.RecognizeObjectsResponse:
+        """Recognises the known objects in one image; ``response.objects`` is best first.
+
+        ``intrinsics`` as in :func:`make_intrinsics` (required: poses are solved with them; they
+        replace those of a given Frame). ``names`` and ``classes`` restrict the answer to those
+        objects (empty: every object). Finding nothing is an empty list, not an error.
+        """
+        frame = common_pb2.Frame()
+        frame.CopyFrom(_as_frame(image))
+        frame.intrinsics.CopyFrom(make_intrinsics(intrinsics))
+        request = object_pb2.RecognizeObjectsRequest(
+            frame=frame, filter=object_pb2.ObjectFilter(names=names, classes=classes))
+        return self._call(self._objects.RecognizeObjects, request)
+
+    # Object model repository.
+
+    def upload_model(self, model: bytes | str | os.PathLike, name: str = "",
+                     tags: Iterable[str] = ()) -> repository_pb2.ModelInfo:
+        """Uploads a ``.robj`` model file (bytes or path) as a new version; returns its info.
+
+        ``name`` empty keeps the name inside the file. The file is sent in chunks after a header
+        with its size and SHA-256, which the server checks before storing anything.
+        """
+        data = read_bytes(model)
+        header = repository_pb2.PutModelHeader(name=name, tags=tags,
+                                               sha256=hashlib.sha256(data).hexdigest(),
+                                               size_bytes=len(data))
+
+        def requests():
+            yield repository_pb2.PutModelRequest(header=header)
+            for offset in range(0, len(data), UPLOAD_CHUNK_BYTES):
+                yield repository_pb2.PutModelRequest(
+                    chunk=data[offset:offset + UPLOAD_CHUNK_BYTES])
+
+        return self._call(self._repository.PutModel, requests()).model
+
+    def download_model(self, name: str, version: int = 0) -> bytes:
+        """Returns the file of a model version (0: the latest).
+
+        Raises ``ValueError`` when the bytes received differ in size or SHA-256 from the
+        ``ModelInfo`` the server sent first.
+        """
+        request = repository_pb2.GetModelRequest(name=name, version=version)
+        info = None
+        chunks = []
+        for response in self._call(self._repository.GetModel, request):
+            if response.WhichOneof("response") == "info":
+                info = response.info
+            else:
+                chunks.append(response.chunk)
+        data = b"".join(chunks)
+        if info is None:
+            raise ValueError(f"the download of model {name!r} carried no ModelInfo")
+        if len(data) != info.size_bytes or hashlib.sha256(data).hexdigest() != info.sha256:
+            raise ValueError(f"model {name!r} version {info.version}: the download does not "
+                             f"match its size ({info.size_bytes}) and SHA-256 ({info.sha256})")
+        return data
+
+    def list_models(self, name_prefix: str = "", object_class: str = "", tag: str = ""
+                    ) -> list[repository_pb2.ModelInfo]:
+        """Returns the latest version of every model passing the filters (empty: any), by name."""
+        models = []
+        request = repository_pb2.ListModelsRequest(name_prefix=name_prefix,
+                                                   object_class=object_class, tag=tag)
+        while True:
+            response = self._call(self._repository.ListModels, request)
+            models.extend(response.models)
+            if not response.next_page_token:
+                return models
+            request.page_token = response.next_page_token
+
+    def delete_model(self, name: str) -> int:
+        """Deletes every version of a model; returns how many there were."""
+        response = self._call(self._repository.DeleteModel,
+                              repository_pb2.DeleteModelRequest(name=name))
+        return response.versions_deleted
+
+    def watch_models(self, prefix: str = "") -> Iterator[repository_pb2.WatchModelsResponse]:
+        """Returns the endless iterator of changes to the models whose name starts with ``prefix``.
+
+        Every upload and deletion from now on, in order. The returned object is also the
+        ``grpc.Call``: ``cancel()`` (from any thread) stops watching, after which the iteration
+        raises ``grpc.RpcError`` with ``CANCELLED``. A watcher that falls too far behind is ended
+        with ``RESOURCE_EXHAUSTED`` and should list the models again before watching anew.
+        """
+        request = repository_pb2.WatchModelsRequest(name_prefix=prefix)
+        return self._repository.WatchModels(request, metadata=self._metadata)

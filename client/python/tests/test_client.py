@@ -1,0 +1,210 @@
+"""Tests of the Python client against the real recogd.
+
+The server binary is taken from the environment variable RECOGD and the corridor images from
+RECOG_SOURCE_DIR/tests/data/corridor; the generated stubs and recognition_client.py must be on
+PYTHONPATH (ctest sets all three: ``ctest -R python``). Exits with 77 (skipped) when Python's
+grpc or protobuf modules are missing.
+"""
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+import unittest
+from pathlib import Path
+
+try:
+    import grpc
+    from recognition.v1 import place_pb2
+    from recognition_client import RecognitionClient
+except ModuleNotFoundError as missing:
+    if missing.name.split(".")[0] not in ("grpc", "google"):
+        raise  # the stubs or the client are not on PYTHONPATH: an error, not a skip
+    print(f"SKIP: {missing} (Debian: apt-get install python3-grpcio python3-protobuf)",
+          file=sys.stderr)
+    sys.exit(77)
+
+CORRIDOR = Path(os.environ.get("RECOG_SOURCE_DIR", ".")) / "tests" / "data" / "corridor"
+EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "stream_folder.py"
+STARTUP_SECONDS = 30
+SHUTDOWN_SECONDS = 30
+
+
+def corridor(n: int) -> Path:
+    """The path of tests/data/corridor/<n>.jpg (n = 1, 20, 41, 60)."""
+    return CORRIDOR / f"{n}.jpg"
+
+
+def free_port() -> int:
+    """A free loopback port (bound, read, released: another process may take it, rarely)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+class RecognitionClientTest(unittest.TestCase):
+    """One recogd for the whole class, on a free loopback port and a fresh data directory."""
+
+    @classmethod
+    def setUpClass(cls):
+        """Starts recogd and waits until it serves."""
+        recogd = os.environ.get("RECOGD")
+        if not recogd:
+            raise RuntimeError("set RECOGD to the path of the recogd binary")
+        cls.data_dir = tempfile.TemporaryDirectory(prefix="recog-python-test-")
+        cls.target = f"127.0.0.1:{free_port()}"
+        cls.server = subprocess.Popen([recogd, "--listen", cls.target, "--data-dir",
+                                       cls.data_dir.name, "--metrics-listen", "",
+                                       "--log-level", "warn"])
+        cls.client = RecognitionClient(cls.target)
+        try:
+            cls.wait_until_serving()
+        except BaseException:
+            cls.client.close()
+            cls.server.kill()
+            cls.server.wait()
+            cls.data_dir.cleanup()
+            raise
+
+    @classmethod
+    def wait_until_serving(cls):
+        """Polls list_maps until it stops answering UNAVAILABLE (at most STARTUP_SECONDS)."""
+        deadline = time.monotonic() + STARTUP_SECONDS
+        while True:
+            if cls.server.poll() is not None:
+                raise RuntimeError(f"recogd exited with {cls.server.returncode} at start-up")
+            try:
+                cls.client.list_maps()
+                return
+            except grpc.RpcError as error:
+                if error.code() != grpc.StatusCode.UNAVAILABLE or time.monotonic() > deadline:
+                    raise
+            time.sleep(0.1)
+
+    @classmethod
+    def tearDownClass(cls):
+        """Stops recogd with SIGTERM and checks that it exits with 0."""
+        cls.client.close()
+        cls.server.send_signal(signal.SIGTERM)
+        try:
+            code = cls.server.wait(timeout=SHUTDOWN_SECONDS)
+        except subprocess.TimeoutExpired:
+            cls.server.kill()
+            cls.server.wait()
+            raise AssertionError(f"recogd did not stop within {SHUTDOWN_SECONDS} s of SIGTERM")
+        finally:
+            cls.data_dir.cleanup()
+        if code != 0:
+            raise AssertionError(f"recogd exited with {code} after SIGTERM")
+
+    def assert_code(self, code: grpc.StatusCode, call, *args):
+        """Checks that ``call(*args)`` raises grpc.RpcError with ``code``."""
+        with self.assertRaises(grpc.RpcError) as raised:
+            call(*args)
+        self.assertEqual(raised.exception.code(), code, raised.exception.details())
+
+    def test_map_lifecycle(self):
+        info = self.client.create_map("lifecycle", {"temporal_matches": 2})
+        self.assertEqual(info.name, "lifecycle")
+        self.assertEqual(info.settings.temporal_matches, 2)
+        self.assertEqual(info.frames, 0)
+        self.assert_code(grpc.StatusCode.ALREADY_EXISTS, self.client.create_map, "lifecycle")
+        self.assertIn("lifecycle", [m.name for m in self.client.list_maps()])
+        self.assertEqual(self.client.get_map("lifecycle").id, info.id)
+        self.assertEqual(self.client.delete_map("lifecycle"), 0)
+        self.assert_code(grpc.StatusCode.NOT_FOUND, self.client.get_map, "lifecycle")
+        self.assert_code(grpc.StatusCode.NOT_FOUND, self.client.delete_map, "lifecycle")
+
+    def test_list_maps_reads_every_page(self):
+        names = ["page-a", "page-b", "page-c"]
+        for name in names:
+            self.client.create_map(name)
+        listed = [m.name for m in self.client.list_maps(page_size=2)]
+        self.assertEqual(listed, sorted(listed))
+        self.assertTrue(set(names) <= set(listed), listed)
+
+    def test_added_place_is_found_by_a_query_that_changes_nothing(self):
+        self.client.create_map("hall")
+        for frame_id, n in enumerate([1, 20, 41, 60]):
+            added = self.client.add_frame("hall", corridor(n), timestamp=n)
+            self.assertEqual(added.frame_id, frame_id)
+            self.assertGreater(added.num_features, 300)
+        response = self.client.query_place("hall", corridor(41).read_bytes())
+        self.assertEqual(response.result.status, place_pb2.LOOP_STATUS_LOOP_DETECTED)
+        self.assertEqual(response.result.match_frame_id, 2)
+        self.assertFalse(response.result.HasField("frame_id"))  # nothing was added
+        self.assertEqual(self.client.get_map("hall").frames, 4)
+
+    def test_stream_answers_in_order_and_detects_the_revisit(self):
+        frames = [corridor(n) for n in (1, 20, 41, 60, 1)]
+        answers = list(self.client.stream_frames(
+            "tour", frames, settings={"temporal_matches": 0, "recent_frames": 1}))
+        self.assertEqual(len(answers), 5)
+        for i, answer in enumerate(answers):
+            self.assertEqual(answer.sequence, i)
+            self.assertTrue(answer.HasField("result"), answer.error.message)
+            self.assertEqual(answer.result.frame_id, i)
+        self.assertEqual(answers[-1].result.status, place_pb2.LOOP_STATUS_LOOP_DETECTED)
+        self.assertEqual(answers[-1].result.match_frame_id, 0)
+        self.assertEqual(self.client.get_map("tour").frames, 5)
+
+    def test_a_bad_frame_gets_its_error_and_the_stream_goes_on(self):
+        frames = [b"\xff\xd8 this is not a JPEG", corridor(1)]
+        answers = list(self.client.stream_frames("noisy", frames))
+        self.assertEqual(len(answers), 2)
+        self.assertTrue(answers[0].HasField("error"))
+        self.assertEqual(answers[0].error.code, grpc.StatusCode.INVALID_ARGUMENT.value[0])
+        self.assertTrue(answers[0].error.message)
+        self.assertTrue(answers[1].HasField("result"), answers[1].error.message)
+        self.assertEqual(answers[1].result.frame_id, 0)  # the failed frame added nothing
+
+    def test_objects_and_models(self):
+        self.assertEqual(self.client.list_models(), [])
+        response = self.client.recognize_objects(corridor(1), (500.0, 500.0, 320.0, 240.0))
+        self.assertEqual(len(response.objects), 0)
+        self.assert_code(grpc.StatusCode.NOT_FOUND, self.client.download_model, "nothing")
+        self.assert_code(grpc.StatusCode.NOT_FOUND, self.client.delete_model, "nothing")
+
+    def test_an_upload_passes_the_size_and_checksum_checks_before_the_file_is_refused(self):
+        # Three chunks of bytes that are not a model: the server accepts the header's size and
+        # SHA-256, then refuses the contents (a different message than a checksum mismatch).
+        with self.assertRaises(grpc.RpcError) as raised:
+            self.client.upload_model(os.urandom(5 << 19), name="noise")
+        self.assertEqual(raised.exception.code(), grpc.StatusCode.INVALID_ARGUMENT)
+        self.assertNotIn("SHA-256", raised.exception.details())
+        self.assertNotIn("bytes; the header said", raised.exception.details())
+        self.assertEqual(self.client.list_models(), [])
+
+    def test_a_watch_ends_when_cancelled(self):
+        watch = self.client.watch_models("noise")
+        outcome = []
+
+        def consume():
+            try:
+                outcome.extend(watch)
+            except grpc.RpcError as error:
+                outcome.append(error.code())
+
+        consumer = threading.Thread(target=consume)
+        consumer.start()
+        time.sleep(0.5)  # the watch is established and waiting
+        watch.cancel()
+        consumer.join(timeout=10)
+        self.assertFalse(consumer.is_alive())
+        self.assertEqual(outcome, [grpc.StatusCode.CANCELLED])
+
+    def test_the_example_streams_a_folder(self):
+        run = subprocess.run([sys.executable, str(EXAMPLE), "--server", self.target,
+                              "--map", "example", str(CORRIDOR)],
+                             capture_output=True, text=True, timeout=120, check=False)
+        self.assertEqual(run.returncode, 0, run.stderr)
+        self.assertIn("streamed 4 images into map 'example'", run.stdout)
+        self.assertEqual(self.client.get_map("example").frames, 4)
+
+
+if __name__ == "__main__":
+    unittest.main(verbosity=2)

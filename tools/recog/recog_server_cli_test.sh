@@ -1,0 +1,188 @@
+#!/usr/bin/env bash
+# End-to-end test of the recog subcommands that use recogd (stream, query, maps, models,
+# recognize --server) against a real recogd on a free port with a temporary data directory: their
+# results, their one-line errors and exit statuses, and the server's clean exit on SIGTERM. With
+# the shared data ($RECOG_SHARED_DATA/places/corridor), `recog stream` must find exactly the loops
+# of `recog eval place` on the same 84 images.
+# Usage: recog_server_cli_test.sh RECOG_BINARY RECOGD_BINARY PROJECT_DIR
+set -u
+recog=$1
+recogd=$2
+project=$3
+tmp=$(mktemp -d)
+server_pid=
+cleanup() {
+  [ -n "$server_pid" ] && kill -KILL "$server_pid" 2>/dev/null
+  rm -rf "$tmp"
+}
+trap cleanup EXIT
+failures=0
+checks=0
+
+pass() { checks=$((checks + 1)); }
+fail() { checks=$((checks + 1)); failures=$((failures + 1)); echo "FAIL: $*"; }
+
+# expect_ok DESCRIPTION CMD...: the command exits 0.
+expect_ok() {
+  local what=$1; shift
+  if "$@" >"$tmp/out" 2>"$tmp/err"; then pass; else fail "$what (exit $?): $(cat "$tmp/err")"; fi
+}
+# expect_error DESCRIPTION PATTERN CMD...: exits 1 with exactly one stderr line matching.
+expect_error() {
+  local what=$1 pattern=$2; shift 2
+  "$@" >"$tmp/out" 2>"$tmp/err"
+  local code=$?
+  if [ "$code" -ne 1 ]; then fail "$what: exit $code, expected 1"; return; fi
+  local lines; lines=$(wc -l <"$tmp/err")
+  if [ "$lines" -ne 1 ]; then fail "$what: expected one error line, got $lines: $(cat "$tmp/err")"; return; fi
+  if grep -q -- "$pattern" "$tmp/err"; then pass; else fail "$what: '$(cat "$tmp/err")' lacks '$pattern'"; fi
+}
+# expect_usage_error DESCRIPTION PATTERN CMD...: refused by the command line parser: a non-zero
+# exit (CLI11's code) and one stderr line matching.
+expect_usage_error() {
+  local what=$1 pattern=$2; shift 2
+  if "$@" >"$tmp/out" 2>"$tmp/err"; then fail "$what: exited 0"; return; fi
+  local lines; lines=$(wc -l <"$tmp/err")
+  if [ "$lines" -ne 1 ]; then fail "$what: expected one error line, got $lines: $(cat "$tmp/err")"; return; fi
+  if grep -q -- "$pattern" "$tmp/err"; then pass; else fail "$what: '$(cat "$tmp/err")' lacks '$pattern'"; fi
+}
+# json_check DESCRIPTION PYTHON: runs PYTHON with `d`, the JSON document in $tmp/out.
+json_check() {
+  /usr/bin/python3 -c "import json; d=json.load(open('$tmp/out')); $2" && pass || fail "$1"
+}
+
+images=$project/tests/data/corridor
+port=$(/usr/bin/python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])')
+server=(--server "127.0.0.1:$port")
+"$recogd" --listen "127.0.0.1:$port" --data-dir "$tmp/data" --metrics-listen "" --workers 2 \
+  >"$tmp/recogd.log" 2>&1 &
+server_pid=$!
+for _ in $(seq 100); do
+  "$recog" maps list "${server[@]}" >/dev/null 2>&1 && break
+  kill -0 "$server_pid" 2>/dev/null || break
+  sleep 0.1
+done
+if ! "$recog" maps list "${server[@]}" >/dev/null 2>&1; then
+  echo "FAIL: recogd did not start: $(cat "$tmp/recogd.log")"
+  exit 1
+fi
+
+for sub in "stream" "query" "maps list" "maps create" "maps delete" "maps stats" "models push" \
+    "models pull" "models list" "models delete" "models watch"; do
+  # shellcheck disable=SC2086
+  expect_ok "help of $sub" "$recog" $sub --help
+done
+
+# Maps.
+expect_ok "maps create" "$recog" maps create lab --alpha 0.25 --min-inliers 15 --geometry exhaustive \
+  --json "${server[@]}"
+json_check "maps create --json shows the settings given and the server's defaults" \
+  "s=d['settings']; assert d['name']=='lab' and d['frames']==0 and s['alpha']==0.25 and s['min_inliers']==15 and s['geometry']=='exhaustive' and s['temporal_matches']==3, d"
+expect_error "maps create of an existing map" "ALREADY_EXISTS" "$recog" maps create lab "${server[@]}"
+expect_usage_error "maps create with a bad geometry" "geometry" "$recog" maps create lab2 --geometry homography "${server[@]}"
+expect_error "maps create with too few inliers" "INVALID_ARGUMENT" "$recog" maps create lab2 --min-inliers 3 "${server[@]}"
+expect_ok "maps list" "$recog" maps list --json "${server[@]}"
+json_check "maps list shows the map" "assert [m['name'] for m in d]==['lab'], d"
+expect_ok "maps stats" "$recog" maps stats lab "${server[@]}"
+grep -q "^alpha *0.25" "$tmp/out" && pass || fail "maps stats prints the settings: $(cat "$tmp/out")"
+expect_error "maps stats of an unknown map" "NOT_FOUND" "$recog" maps stats nowhere "${server[@]}"
+expect_ok "maps delete" "$recog" maps delete lab "${server[@]}"
+expect_error "maps delete of an unknown map" "NOT_FOUND" "$recog" maps delete lab "${server[@]}"
+
+# Stream the four bundled frames, then relocalise one of them.
+expect_error "stream into an unknown map" "NOT_FOUND" "$recog" stream --map corridor \
+  --images "$images" -q "${server[@]}"
+expect_ok "stream the bundled frames" "$recog" stream --map corridor --create --images "$images" \
+  --rate 50 -q "${server[@]}"
+grep -q "^4 frames, 0 loops, 0 errors" "$tmp/out" && pass || fail "stream summary: $(cat "$tmp/out")"
+expect_ok "query" "$recog" query --map corridor "$images/41.jpg" --json "${server[@]}"
+json_check "query of 41.jpg finds frame 2" \
+  "assert d['status']=='loop_detected' and d['match']==2 and d['inliers']>=12 and 'frame' not in d, d"
+expect_ok "query with a camera" "$recog" query --map corridor "$images/41.jpg" --camera 500,500,256,192 "${server[@]}"
+grep -q "^status *loop_detected" "$tmp/out" && pass || fail "query prints the status: $(cat "$tmp/out")"
+expect_ok "query --add" "$recog" query --map corridor "$images/60.jpg" --add --json "${server[@]}"
+json_check "query --add adds frame 4" "assert d['frame']==4, d"
+expect_ok "stream the same frames as features" "$recog" stream --map corridor --images "$images" \
+  --features-on-client --timestamps --json -q "${server[@]}"
+/usr/bin/python3 -c "
+import json; e=[json.loads(l) for l in open('$tmp/out')]
+assert e[-1]['event']=='summary' and e[-1]['frames']==4 and e[-1]['errors']==0, e" \
+  && pass || fail "stream --json ends with the summary"
+expect_ok "maps stats after streaming" "$recog" maps stats corridor --json "${server[@]}"
+json_check "the map has the 9 frames" "assert d['frames']==9 and d['next_frame_id']==9, d"
+expect_error "query of an unknown map" "NOT_FOUND" "$recog" query --map nowhere "$images/41.jpg" "${server[@]}"
+expect_error "query of a missing image" "NOT_FOUND" "$recog" query --map corridor "$tmp/none.jpg" "${server[@]}"
+
+# Models: push, list, pull, recognise on the server, delete.
+expect_ok "model build of a planar poster" "$recog" model build --planar "$images/1.jpg" \
+  --width 0.64 --height 0.48 --name poster -o "$tmp/poster.robj"
+"$recog" models watch --prefix watched --count 1 --json "${server[@]}" >"$tmp/watch.out" 2>"$tmp/watch.err" &
+watch_pid=$!
+expect_ok "models push" "$recog" models push "$tmp/poster.robj" --tag lab --json "${server[@]}"
+json_check "models push reports version 1" "assert d[0]['name']=='poster' and d[0]['version']==1, d"
+expect_ok "models list" "$recog" models list --tag lab --json "${server[@]}"
+json_check "models list shows the poster" "assert [(m['name'], m['type'], m['tags']) for m in d]==[('poster', 'planar', ['lab'])], d"
+expect_ok "models list by another class" "$recog" models list --class nothing --json "${server[@]}"
+json_check "models list filters by class" "assert d==[], d"
+expect_ok "models pull" "$recog" models pull poster -o "$tmp/pulled.robj" "${server[@]}"
+cmp -s "$tmp/poster.robj" "$tmp/pulled.robj" && pass || fail "the pulled model is the pushed file"
+expect_error "models pull of an unknown version" "NOT_FOUND" "$recog" models pull poster --version 7 \
+  -o "$tmp/v7.robj" "${server[@]}"
+expect_ok "recognize --server" "$recog" recognize --server "127.0.0.1:$port" --image "$images/1.jpg" \
+  --camera 500,500,256,192 --json --draw "$tmp/poster.png"
+json_check "recognize --server finds the poster" \
+  "assert [(x['name'], x['version']) for x in d['detections']]==[('poster', 1)] and 'recognition' in d['timing_ms'], d"
+/usr/bin/python3 -c "assert open('$tmp/poster.png', 'rb').read(8) == b'\\x89PNG\\r\\n\\x1a\\n'" \
+  && pass || fail "recognize --server --draw writes a PNG"
+expect_usage_error "recognize with --models and --server" "excludes" "$recog" recognize --models "$tmp/poster.robj" \
+  --server "127.0.0.1:$port" --image "$images/1.jpg" --camera 500,500,256,192
+expect_error "recognize with neither --models nor --server" "--models" "$recog" recognize \
+  --image "$images/1.jpg" --camera 500,500,256,192
+expect_ok "models delete" "$recog" models delete poster "${server[@]}"
+expect_error "models delete of an unknown model" "NOT_FOUND" "$recog" models delete poster "${server[@]}"
+expect_error "models push of a folder without models" "INVALID_ARGUMENT" "$recog" models push "$images" "${server[@]}"
+
+# The watcher registers shortly after it starts: push until it has seen a change.
+for i in $(seq 50); do
+  kill -0 "$watch_pid" 2>/dev/null || break
+  "$recog" models push "$tmp/poster.robj" --name "watched-$i" "${server[@]}" >/dev/null 2>&1
+  sleep 0.2
+done
+wait "$watch_pid" && pass || fail "models watch --count 1 exits 0: $(cat "$tmp/watch.err")"
+/usr/bin/python3 -c "
+import json; e=[json.loads(l) for l in open('$tmp/watch.out')]
+assert len(e)==1 and e[0]['change']=='put' and e[0]['model']['name'].startswith('watched-'), e" \
+  && pass || fail "models watch prints the push: $(cat "$tmp/watch.out")"
+
+# The shared corridor sequence: the same loops as recog eval place.
+shared=${RECOG_SHARED_DATA:-$project/../shared/data}
+if [ -d "$shared/places/corridor/images" ]; then
+  expect_ok "stream the shared corridor" "$recog" stream --map shared-corridor --create \
+    --images "$shared/places/corridor/images" --json -q "${server[@]}"
+  mv "$tmp/out" "$tmp/stream.jsonl"
+  expect_ok "eval place on the shared corridor" "$recog" eval place \
+    --images "$shared/places/corridor/images" --ground-truth "$shared/places/corridor/ground_truth.txt" --json -q
+  /usr/bin/python3 -c "
+import json, os
+events = [json.loads(l) for l in open('$tmp/stream.jsonl')]
+streamed = [(e['frame'], e['match'], e['frame_file'], e['match_file']) for e in events if e['event'] == 'loop']
+d = json.load(open('$tmp/out'))
+evaluated = [(l['query'] - 1, l['match'] - 1, os.path.basename(l['query_file']), os.path.basename(l['match_file']))
+             for l in d['loops'] if l['status'] == 'loop_detected']
+assert events[-1]['frames'] == 84 and evaluated and streamed == evaluated, (streamed, evaluated)" \
+    && pass || fail "stream finds exactly the loops of eval place"
+else
+  echo "skipping the shared corridor: $shared/places/corridor/images not found (set RECOG_SHARED_DATA)"
+fi
+
+# A server that is not there, then the server's exit on SIGTERM.
+closed=$(/usr/bin/python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])')
+expect_error "maps list of a closed port" "UNAVAILABLE" "$recog" maps list --server "127.0.0.1:$closed"
+kill -TERM "$server_pid"
+wait "$server_pid"
+code=$?
+server_pid=
+[ "$code" -eq 0 ] && pass || fail "recogd exits 0 on SIGTERM (exit $code): $(tail -5 "$tmp/recogd.log")"
+
+echo "$((checks - failures)) passed, $failures failed"
+[ "$failures" -eq 0 ]

@@ -1,0 +1,36 @@
+// Pieces shared by the recog subcommands that talk to recogd (besides ServerFlags): frames made
+// from the image files they read, intrinsics from --camera, and one-line errors.
+//
+// Image files go as their own JPEG or PNG bytes: the server decodes them as the offline commands
+// read them (8-bit grey), so a map or a recognition on the server answers exactly as `recog eval
+// place` or offline `recog recognize` does on the same files. Other formats (BMP, PGM, TIFF...)
+// and video frames go as raw grey pixels, decoded here.
+#pragma once
+
+#include <string>
+
+#include <grpcpp/support/status.h>
+#include <opencv2/core.hpp>
+
+#include "client/cpp/frames.h"
+#include "client/cpp/result.h"
+#include "core/common/status.h"
+#include "core/object/object_model.h"
+
+namespace recog::cli {
+
+namespace pb = ::recognition::v1;
+
+// The frame of the image file `path`, whose grey pixels (ReadGrayImage, FrameSource) are `gray`:
+// the file's bytes when it is a JPEG or PNG, else `gray` raw. NOT_FOUND when it cannot be read.
+client::Result<pb::Frame> FrameFromImageFile(const std::string& path, const cv::Mat& gray);
+
+// Sets the frame's intrinsics (pinhole and distortion) to `camera`.
+void SetIntrinsics(const CameraIntrinsics& camera, pb::Frame* frame);
+
+// Print "recog <command>: CODE: message" on stderr and return 1, the exit status: for errors of
+// this process (core's Status) and of calls to recogd (grpc::Status).
+int Fail(const char* command, const Status& status);
+int Fail(const char* command, const grpc::Status& status);
+
+}  // namespace recog::cli

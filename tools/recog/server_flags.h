@@ -1,0 +1,35 @@
+// The flags every recog subcommand that talks to recogd takes, and the connection they describe.
+//
+//   --server HOST:PORT   the server (default 127.0.0.1:50051)
+//   --token-file FILE    a file holding the bearer token (default: none)
+//   --tls-ca FILE        trust this CA and use TLS (default: plaintext)
+//   --tls-cert/--tls-key client certificate and key for mutual TLS (default: none)
+//   --json               print machine-readable JSON instead of text
+// Connect() turns them into a RecognitionClient; a failure is one line for the caller to print.
+#pragma once
+
+#include <memory>
+#include <string>
+
+#include <CLI/CLI.hpp>
+
+#include "client/cpp/recognition_client.h"
+
+namespace recog::cli {
+
+struct ServerFlags {
+  std::string server = "127.0.0.1:50051";
+  std::string token_file;
+  std::string tls_ca, tls_cert, tls_key;
+  bool json = false;
+
+  // Adds the flags above to `command`, bound to this object (which must outlive it).
+  void AddTo(CLI::App* command);
+  // Connects with these flags (and the client's default deadlines and retries).
+  client::Result<std::unique_ptr<client::RecognitionClient>> Connect() const;
+};
+
+// "CODE: message" of a failed call, for the one-line errors of the subcommands.
+std::string DescribeStatus(const grpc::Status& status);
+
+}  // namespace recog::cli
