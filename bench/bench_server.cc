@@ -52,6 +52,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "bench/bench_support.h"
+#include "client/cpp/frames.h"
 #include "core/features/feature_extractor.h"
 #include "recognition/v1/place.grpc.pb.h"
 #include "server/app/recognition_server.h"
@@ -258,25 +259,13 @@ pb::StreamFramesRequest EncodedFrameRequest(std::string bytes) {
   return request;
 }
 
-pb::StreamFramesRequest FeaturesFrameRequest(const FeatureSet& features,
-                                             uint32_t descriptor_bytes) {
+// The frame a robot extracting its own features sends.
+StatusOr<pb::StreamFramesRequest> FeaturesFrameRequest(const FeatureSet& features) {
+  client::Result<pb::Frame> frame =
+      client::FrameFromFeatures(features.keypoints, features.descriptors, {kWidth, kHeight});
+  if (!frame.ok()) return Status::InvalidArgument(frame.status().error_message());
   pb::StreamFramesRequest request;
-  pb::Features* out = request.mutable_frame()->mutable_features();
-  for (const cv::KeyPoint& k : features.keypoints) {
-    pb::Keypoint* keypoint = out->add_keypoints();
-    keypoint->set_x(k.pt.x);
-    keypoint->set_y(k.pt.y);
-    keypoint->set_size(k.size);
-    keypoint->set_angle(k.angle);
-    keypoint->set_response(k.response);
-    keypoint->set_octave(k.octave);
-  }
-  const cv::Mat descriptors =
-      features.descriptors.isContinuous() ? features.descriptors : features.descriptors.clone();
-  out->set_descriptors(descriptors.data, descriptors.total() * descriptors.elemSize());
-  out->set_descriptor_bytes(descriptor_bytes);
-  out->set_image_width(kWidth);
-  out->set_image_height(kHeight);
+  *request.mutable_frame() = std::move(frame).value();
   return request;
 }
 
@@ -308,7 +297,8 @@ StatusOr<Frames> PrepareFrames(const std::string& dir) {
     RECOG_RETURN_IF_ERROR(extractor->Extract(cv::imdecode(jpeg, cv::IMREAD_GRAYSCALE), &features));
     frames.corridor.push_back(EncodedFrameRequest(std::move(bytes)));
     frames.jpeg640.push_back(EncodedFrameRequest(std::string(jpeg.begin(), jpeg.end())));
-    frames.features.push_back(FeaturesFrameRequest(features, extractor->format().size_bytes));
+    RECOG_ASSIGN_OR_RETURN(pb::StreamFramesRequest request, FeaturesFrameRequest(features));
+    frames.features.push_back(std::move(request));
   }
   return frames;
 }
@@ -486,7 +476,7 @@ int Run(const Options& options) {
     jpeg_bytes += double(f.frame().encoded_image().size());
   }
   for (const pb::StreamFramesRequest& f : frames->features) {
-    keypoints += f.frame().features().keypoints_size();
+    keypoints += f.frame().features().keypoints().x_size();
   }
   const double n = double(frames->corridor.size());
   std::printf("%zu frames of %dx%d; as 640x480 JPEG %.1f KiB and %.0f ORB features on average\n",

@@ -1,92 +1,92 @@
 #include "client/cpp/frame_stream.h"
 
+#include <type_traits>
+
 #include "client/cpp/ordered_stream.h"
 
 namespace recog::client {
+namespace {
 
-// --- FrameStream ---
+// Starts the stream's RPC on `stub` with `reactor`.
+void StartRpc(pb::PlaceRecognition::Stub& stub, grpc::ClientContext* context,
+              grpc::ClientBidiReactor<pb::StreamFramesRequest, pb::StreamFramesResponse>* reactor) {
+  stub.async()->StreamFrames(context, reactor);
+}
+void StartRpc(pb::ObjectRecognition::Stub& stub, grpc::ClientContext* context,
+              grpc::ClientBidiReactor<pb::StreamRecognizeObjectsRequest,
+                                      pb::StreamRecognizeObjectsResponse>* reactor) {
+  stub.async()->StreamRecognizeObjects(context, reactor);
+}
 
-FrameStream::FrameStream(std::unique_ptr<pb::PlaceRecognition::Stub> stub, size_t max_in_flight)
+}  // namespace
+
+template <class Rpc>
+BasicFrameStream<Rpc>::BasicFrameStream(std::unique_ptr<typename Rpc::Service::Stub> stub,
+                                        size_t max_in_flight)
     : stub_(std::move(stub)),
-      stream_(std::make_unique<
-              internal::OrderedStream<pb::StreamFramesRequest, pb::StreamFramesResponse>>(
-          max_in_flight)) {}
+      stream_(
+          std::make_unique<internal::OrderedStream<typename Rpc::Request, typename Rpc::Response>>(
+              max_in_flight)) {}
 
-FrameStream::~FrameStream() = default;
+template <class Rpc>
+BasicFrameStream<Rpc>::~BasicFrameStream() = default;
 
-Result<std::unique_ptr<FrameStream>> FrameStream::Open(RecognitionClient& client,
-                                                       const pb::StreamConfig& config) {
-  if (config.map().empty()) {
-    return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, "config.map must name a map");
+template <class Rpc>
+Result<std::unique_ptr<BasicFrameStream<Rpc>>> BasicFrameStream<Rpc>::Open(
+    RecognitionClient& client, const Config& config) {
+  if constexpr (std::is_same_v<Rpc, internal::PlaceStreamRpc>) {
+    if (config.map().empty()) {
+      return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, "config.map must name a map");
+    }
   }
-  std::unique_ptr<FrameStream> stream(new FrameStream(
-      pb::PlaceRecognition::NewStub(client.channel_), client.options_.max_frames_in_flight));
+  std::unique_ptr<BasicFrameStream> stream(new BasicFrameStream(
+      Rpc::Service::NewStub(client.channel_), client.options_.max_frames_in_flight));
   client.PrepareContext(stream->stream_->context(), nullptr);
-  pb::StreamFramesRequest first;
-  *first.mutable_config() = config;
-  pb::PlaceRecognition::Stub* stub = stream->stub_.get();
-  stream->stream_->Start([stub](grpc::ClientContext* context,
-                                auto* reactor) { stub->async()->StreamFrames(context, reactor); },
-                         std::move(first));
-  return stream;
-}
-
-std::future<FrameStream::Answer> FrameStream::Send(pb::Frame frame) {
-  pb::StreamFramesRequest request;
-  *request.mutable_frame() = std::move(frame);
-  return stream_->Send(std::move(request));
-}
-
-void FrameStream::Send(pb::Frame frame, std::function<void(Answer)> on_answer) {
-  pb::StreamFramesRequest request;
-  *request.mutable_frame() = std::move(frame);
-  stream_->Send(std::move(request), std::move(on_answer));
-}
-
-size_t FrameStream::in_flight() const { return stream_->in_flight(); }
-grpc::Status FrameStream::Close() { return stream_->Close(); }
-void FrameStream::Cancel() { stream_->Cancel(); }
-
-// --- ObjectStream ---
-
-ObjectStream::ObjectStream(std::unique_ptr<pb::ObjectRecognition::Stub> stub, size_t max_in_flight)
-    : stub_(std::move(stub)),
-      stream_(std::make_unique<internal::OrderedStream<pb::StreamRecognizeObjectsRequest,
-                                                       pb::StreamRecognizeObjectsResponse>>(
-          max_in_flight)) {}
-
-ObjectStream::~ObjectStream() = default;
-
-Result<std::unique_ptr<ObjectStream>> ObjectStream::Open(RecognitionClient& client,
-                                                         const pb::RecognitionConfig& config) {
-  std::unique_ptr<ObjectStream> stream(new ObjectStream(
-      pb::ObjectRecognition::NewStub(client.channel_), client.options_.max_frames_in_flight));
-  client.PrepareContext(stream->stream_->context(), nullptr);
-  pb::StreamRecognizeObjectsRequest first;
-  *first.mutable_config() = config;
-  pb::ObjectRecognition::Stub* stub = stream->stub_.get();
+  auto first = std::make_shared<typename Rpc::Request>();
+  *first->mutable_config() = config;
+  typename Rpc::Service::Stub* stub = stream->stub_.get();
   stream->stream_->Start(
-      [stub](grpc::ClientContext* context, auto* reactor) {
-        stub->async()->StreamRecognizeObjects(context, reactor);
-      },
+      [stub](grpc::ClientContext* context, auto* reactor) { StartRpc(*stub, context, reactor); },
       std::move(first));
   return stream;
 }
 
-std::future<ObjectStream::Answer> ObjectStream::Send(pb::Frame frame) {
-  pb::StreamRecognizeObjectsRequest request;
-  *request.mutable_frame() = std::move(frame);
-  return stream_->Send(std::move(request));
+template <class Rpc>
+typename BasicFrameStream<Rpc>::PreparedFrame BasicFrameStream<Rpc>::Prepare(pb::Frame frame) {
+  auto request = std::make_shared<typename Rpc::Request>();
+  *request->mutable_frame() = std::move(frame);
+  return request;
 }
 
-void ObjectStream::Send(pb::Frame frame, std::function<void(Answer)> on_answer) {
-  pb::StreamRecognizeObjectsRequest request;
-  *request.mutable_frame() = std::move(frame);
-  stream_->Send(std::move(request), std::move(on_answer));
+template <class Rpc>
+std::future<typename BasicFrameStream<Rpc>::Answer> BasicFrameStream<Rpc>::Send(pb::Frame frame) {
+  return stream_->Send(Prepare(std::move(frame)));
 }
 
-size_t ObjectStream::in_flight() const { return stream_->in_flight(); }
-grpc::Status ObjectStream::Close() { return stream_->Close(); }
-void ObjectStream::Cancel() { stream_->Cancel(); }
+template <class Rpc>
+void BasicFrameStream<Rpc>::Send(pb::Frame frame, std::function<void(Answer)> on_answer) {
+  stream_->Send(Prepare(std::move(frame)), std::move(on_answer));
+}
+
+template <class Rpc>
+void BasicFrameStream<Rpc>::Send(PreparedFrame frame, std::function<void(Answer)> on_answer) {
+  stream_->Send(std::move(frame), std::move(on_answer));
+}
+
+template <class Rpc>
+size_t BasicFrameStream<Rpc>::in_flight() const {
+  return stream_->in_flight();
+}
+template <class Rpc>
+grpc::Status BasicFrameStream<Rpc>::Close() {
+  return stream_->Close();
+}
+template <class Rpc>
+void BasicFrameStream<Rpc>::Cancel() {
+  stream_->Cancel();
+}
+
+template class BasicFrameStream<internal::PlaceStreamRpc>;
+template class BasicFrameStream<internal::ObjectStreamRpc>;
 
 }  // namespace recog::client

@@ -1,6 +1,7 @@
 // FrameStream and ObjectStream: a robot's streaming session — one bidirectional gRPC call
 // (StreamFrames on one place map, or StreamRecognizeObjects) carrying frame after frame, each
-// answered by the server in order.
+// answered by the server in order. Both are one class template, BasicFrameStream, over the two
+// RPCs (their config, request and answer types).
 //
 // Send() never blocks: the frame is queued and written as soon as the previous one is, so several
 // frames can be in flight (up to ClientOptions::max_frames_in_flight; a frame beyond that is
@@ -9,6 +10,10 @@
 // were sent, through a future or a callback. Both run on the gRPC callback API (no thread of the
 // library's own): callbacks are called on a gRPC thread, one at a time, in order; they must not
 // block for long and must not destroy the stream.
+//
+// A frame sent many times (a replayed sequence, a load test) can be prepared once: Prepare()
+// wraps it in its request, and sending the PreparedFrame shares it instead of copying its
+// keypoints and descriptors each time.
 //
 // A frame that fails on its own (an undecodable image, missing intrinsics) is answered normally,
 // with the error inside the answer (`error`), and the stream goes on. When the stream itself fails
@@ -34,26 +39,48 @@ namespace recog::client {
 namespace internal {
 template <class Request, class Response>
 class OrderedStream;
-}  // namespace internal
 
 // StreamFrames: frames of one place map, each answered with its loop result.
-class FrameStream {
- public:
-  using Answer = Result<pb::StreamFramesResponse>;
+struct PlaceStreamRpc {
+  using Service = pb::PlaceRecognition;
+  using Config = pb::StreamConfig;  // the map, whether to create it, query-only, result options
+  using Request = pb::StreamFramesRequest;
+  using Response = pb::StreamFramesResponse;
+};
 
-  // Starts the stream with `config` (the map, whether to create it, query-only, result options).
-  // INVALID_ARGUMENT when config.map is empty; every other error (NOT_FOUND for an unknown map
-  // without create_if_missing, PERMISSION_DENIED) arrives with the first answers and Close().
-  static Result<std::unique_ptr<FrameStream>> Open(RecognitionClient& client,
-                                                   const pb::StreamConfig& config);
-  ~FrameStream();
-  FrameStream(const FrameStream&) = delete;
-  FrameStream& operator=(const FrameStream&) = delete;
+// StreamRecognizeObjects: frames (with intrinsics), each answered with the objects it shows.
+struct ObjectStreamRpc {
+  using Service = pb::ObjectRecognition;
+  using Config = pb::RecognitionConfig;  // which objects are of interest; default: all
+  using Request = pb::StreamRecognizeObjectsRequest;
+  using Response = pb::StreamRecognizeObjectsResponse;
+};
+}  // namespace internal
+
+template <class Rpc>
+class BasicFrameStream {
+ public:
+  using Config = typename Rpc::Config;
+  using Answer = Result<typename Rpc::Response>;
+  // A frame wrapped in its request once, to be sent any number of times.
+  using PreparedFrame = std::shared_ptr<const typename Rpc::Request>;
+
+  // Starts the stream with `config`. For FrameStream, INVALID_ARGUMENT when config.map is empty;
+  // every other error (NOT_FOUND for an unknown map without create_if_missing, PERMISSION_DENIED)
+  // arrives with the first answers and Close().
+  static Result<std::unique_ptr<BasicFrameStream>> Open(RecognitionClient& client,
+                                                        const Config& config = {});
+  static PreparedFrame Prepare(pb::Frame frame);
+
+  ~BasicFrameStream();
+  BasicFrameStream(const BasicFrameStream&) = delete;
+  BasicFrameStream& operator=(const BasicFrameStream&) = delete;
 
   // Sends a frame; its answer completes the future.
   std::future<Answer> Send(pb::Frame frame);
   // Sends a frame; `on_answer` gets its answer.
   void Send(pb::Frame frame, std::function<void(Answer)> on_answer);
+  void Send(PreparedFrame frame, std::function<void(Answer)> on_answer);
   // Frames sent and not yet answered.
   size_t in_flight() const;
   // Half-closes, waits for every answer and returns the stream's final status (OK when the
@@ -63,37 +90,15 @@ class FrameStream {
   void Cancel();
 
  private:
-  FrameStream(std::unique_ptr<pb::PlaceRecognition::Stub> stub, size_t max_in_flight);
-  std::unique_ptr<pb::PlaceRecognition::Stub> stub_;
-  std::unique_ptr<internal::OrderedStream<pb::StreamFramesRequest, pb::StreamFramesResponse>>
-      stream_;
+  BasicFrameStream(std::unique_ptr<typename Rpc::Service::Stub> stub, size_t max_in_flight);
+  std::unique_ptr<typename Rpc::Service::Stub> stub_;
+  std::unique_ptr<internal::OrderedStream<typename Rpc::Request, typename Rpc::Response>> stream_;
 };
 
-// StreamRecognizeObjects: frames (with intrinsics), each answered with the objects it shows.
-class ObjectStream {
- public:
-  using Answer = Result<pb::StreamRecognizeObjectsResponse>;
+extern template class BasicFrameStream<internal::PlaceStreamRpc>;
+extern template class BasicFrameStream<internal::ObjectStreamRpc>;
 
-  // Starts the stream with `config` (which objects are of interest; default: all).
-  static Result<std::unique_ptr<ObjectStream>> Open(RecognitionClient& client,
-                                                    const pb::RecognitionConfig& config = {});
-  ~ObjectStream();
-  ObjectStream(const ObjectStream&) = delete;
-  ObjectStream& operator=(const ObjectStream&) = delete;
-
-  // As FrameStream's.
-  std::future<Answer> Send(pb::Frame frame);
-  void Send(pb::Frame frame, std::function<void(Answer)> on_answer);
-  size_t in_flight() const;
-  grpc::Status Close();
-  void Cancel();
-
- private:
-  ObjectStream(std::unique_ptr<pb::ObjectRecognition::Stub> stub, size_t max_in_flight);
-  std::unique_ptr<pb::ObjectRecognition::Stub> stub_;
-  std::unique_ptr<internal::OrderedStream<pb::StreamRecognizeObjectsRequest,
-                                          pb::StreamRecognizeObjectsResponse>>
-      stream_;
-};
+using FrameStream = BasicFrameStream<internal::PlaceStreamRpc>;
+using ObjectStream = BasicFrameStream<internal::ObjectStreamRpc>;
 
 }  // namespace recog::client

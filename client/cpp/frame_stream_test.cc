@@ -48,6 +48,31 @@ TEST_F(FrameStreamTest, FiveFramesInFlightGetFiveAnswersInOrder) {
             grpc::StatusCode::FAILED_PRECONDITION);  // closed
 }
 
+TEST_F(FrameStreamTest, APreparedFrameSentTwiceIsAnsweredTwiceAndStaysIntact) {
+  auto client = Connect();
+  ASSERT_NE(client, nullptr);
+  auto stream = FrameStream::Open(*client, TourConfig("prepared"));
+  ASSERT_TRUE(stream.ok());
+  const FrameStream::PreparedFrame frame = FrameStream::Prepare(JpegFrame(CorridorJpeg(1)));
+  const std::string bytes = frame->frame().encoded_image();
+  std::mutex mutex;
+  std::vector<pb::StreamFramesResponse> answers;
+  for (int i = 0; i < 2; ++i) {
+    (*stream)->Send(frame, [&](FrameStream::Answer answer) {
+      ASSERT_TRUE(answer.ok()) << answer.status().error_message();
+      std::lock_guard lock(mutex);
+      answers.push_back(std::move(answer).value());
+    });
+  }
+  ASSERT_TRUE((*stream)->Close().ok());
+  std::lock_guard lock(mutex);
+  ASSERT_EQ(answers.size(), 2u);
+  EXPECT_EQ(answers[0].result().frame_id(), 0u);
+  EXPECT_EQ(answers[1].result().frame_id(), 1u);
+  EXPECT_EQ(frame->frame().encoded_image(), bytes);  // shared, never moved from
+  EXPECT_EQ(client->GetMap("prepared")->frames(), 2u);
+}
+
 TEST_F(FrameStreamTest, CallbacksGetEveryAnswerInOrderAndTheRevisitIsALoop) {
   auto client = Connect();
   ASSERT_NE(client, nullptr);

@@ -138,15 +138,20 @@ Result<pb::Frame> FrameFromFeatures(const std::vector<cv::KeyPoint>& keypoints,
   }
   pb::Frame frame;
   pb::Features* out = frame.mutable_features();
-  out->mutable_keypoints()->Reserve(int(keypoints.size()));
-  for (const cv::KeyPoint& k : keypoints) {
-    pb::Keypoint* p = out->add_keypoints();
-    p->set_x(k.pt.x);
-    p->set_y(k.pt.y);
-    p->set_size(k.size);
-    p->set_angle(k.angle);
-    p->set_response(k.response);
-    p->set_octave(k.octave);
+  pb::Keypoints* k = out->mutable_keypoints();
+  const int n = int(keypoints.size());
+  for (auto* array : {k->mutable_x(), k->mutable_y(), k->mutable_size(), k->mutable_angle(),
+                      k->mutable_response()}) {
+    array->Reserve(n);
+  }
+  k->mutable_octave()->Reserve(n);
+  for (const cv::KeyPoint& p : keypoints) {
+    k->add_x(p.pt.x);
+    k->add_y(p.pt.y);
+    k->add_size(p.size);
+    k->add_angle(p.angle);
+    k->add_response(p.response);
+    k->add_octave(p.octave);
   }
   std::string* bytes = out->mutable_descriptors();
   bytes->reserve(keypoints.size() * kDescriptorBytes);

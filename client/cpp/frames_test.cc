@@ -75,15 +75,23 @@ TEST(FramesTest, AFeaturesFrameCarriesEveryKeypointAndDescriptorInOrder) {
       FrameFromFeatures(features->keypoints, features->descriptors, grey.size());
   ASSERT_TRUE(frame.ok()) << frame.status().error_message();
   const pb::Features& sent = frame->features();
-  ASSERT_EQ(size_t(sent.keypoints_size()), features->keypoints.size());
+  const pb::Keypoints& k = sent.keypoints();
+  const size_t n = features->keypoints.size();
+  for (int size : {k.x_size(), k.y_size(), k.size_size(), k.angle_size(), k.response_size(),
+                   k.octave_size()}) {
+    ASSERT_EQ(size_t(size), n);
+  }
   EXPECT_EQ(sent.descriptor_bytes(), 32u);
   EXPECT_EQ(sent.image_width(), uint32_t(grey.cols));
   EXPECT_EQ(sent.image_height(), uint32_t(grey.rows));
   const cv::KeyPoint& last = features->keypoints.back();
-  const pb::Keypoint& last_sent = sent.keypoints(sent.keypoints_size() - 1);
-  EXPECT_EQ(last_sent.x(), last.pt.x);
-  EXPECT_EQ(last_sent.y(), last.pt.y);
-  EXPECT_EQ(last_sent.octave(), last.octave);
+  const int i = int(n) - 1;
+  EXPECT_EQ(k.x(i), last.pt.x);
+  EXPECT_EQ(k.y(i), last.pt.y);
+  EXPECT_EQ(k.size(i), last.size);
+  EXPECT_EQ(k.angle(i), last.angle);
+  EXPECT_EQ(k.response(i), last.response);
+  EXPECT_EQ(k.octave(i), last.octave);
   ASSERT_EQ(sent.descriptors().size(), features->keypoints.size() * 32);
   EXPECT_EQ(
       std::memcmp(sent.descriptors().data(), features->descriptors.data, sent.descriptors().size()),

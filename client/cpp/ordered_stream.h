@@ -35,6 +35,8 @@ template <class Request, class Response>
 class OrderedStream final : public grpc::ClientBidiReactor<Request, Response> {
  public:
   using Callback = std::function<void(Result<Response>)>;
+  // Requests are shared, not copied: a caller may send one request many times.
+  using RequestPtr = std::shared_ptr<const Request>;
   // Starts the RPC on `context` with this reactor (the stub's async() method).
   using StartRpc =
       std::function<void(grpc::ClientContext*, grpc::ClientBidiReactor<Request, Response>*)>;
@@ -52,7 +54,7 @@ class OrderedStream final : public grpc::ClientBidiReactor<Request, Response> {
   grpc::ClientContext& context() { return context_; }
 
   // Starts the call with `config` as its first message. Once only.
-  void Start(const StartRpc& start_rpc, Request config) {
+  void Start(const StartRpc& start_rpc, RequestPtr config) {
     start_rpc(&context_, this);
     {
       std::lock_guard lock(mutex_);
@@ -60,12 +62,12 @@ class OrderedStream final : public grpc::ClientBidiReactor<Request, Response> {
       writing_ = true;
     }
     this->AddHold();
-    this->StartWrite(&writes_.front());
+    this->StartWrite(writes_.front().get());
     this->StartRead(&response_);
     this->StartCall();
   }
 
-  void Send(Request request, Callback callback) {
+  void Send(RequestPtr request, Callback callback) {
     grpc::Status refusal;
     const Request* write = nullptr;
     {
@@ -88,7 +90,7 @@ class OrderedStream final : public grpc::ClientBidiReactor<Request, Response> {
           writes_.push_back(std::move(request));
           if (!writing_) {
             writing_ = true;
-            write = &writes_.front();
+            write = writes_.front().get();
           }
         }
       }
@@ -100,7 +102,7 @@ class OrderedStream final : public grpc::ClientBidiReactor<Request, Response> {
     }
   }
 
-  std::future<Result<Response>> Send(Request request) {
+  std::future<Result<Response>> Send(RequestPtr request) {
     auto promise = std::make_shared<std::promise<Result<Response>>>();
     std::future<Result<Response>> answer = promise->get_future();
     Send(std::move(request),
@@ -165,7 +167,7 @@ class OrderedStream final : public grpc::ClientBidiReactor<Request, Response> {
         writes_.clear();
       }
       if (!writes_.empty()) {
-        next = &writes_.front();
+        next = writes_.front().get();
       } else {
         writing_ = false;
         writes_done = CloseWriteSideLocked();
@@ -235,14 +237,14 @@ class OrderedStream final : public grpc::ClientBidiReactor<Request, Response> {
 
   mutable std::mutex mutex_;  // guards everything below
   std::condition_variable done_changed_;
-  std::deque<Request> writes_;    // the front one is being written
-  std::deque<Callback> pending_;  // of the frames sent and not answered, oldest first
-  bool writing_ = false;          // a StartWrite is outstanding
-  bool closing_ = false;          // Close() was called: no more frames
-  bool writes_done_ = false;      // StartWritesDone was called
-  bool broken_ = false;           // a write failed: the call is over
-  bool read_closed_ = false;      // the read side ended: the call is over
-  bool hold_released_ = false;    // RemoveHold was called (or is about to be)
+  std::deque<RequestPtr> writes_;  // the front one is being written
+  std::deque<Callback> pending_;   // of the frames sent and not answered, oldest first
+  bool writing_ = false;           // a StartWrite is outstanding
+  bool closing_ = false;           // Close() was called: no more frames
+  bool writes_done_ = false;       // StartWritesDone was called
+  bool broken_ = false;            // a write failed: the call is over
+  bool read_closed_ = false;       // the read side ended: the call is over
+  bool hold_released_ = false;     // RemoveHold was called (or is about to be)
   bool unexpected_answer_ = false;
   bool finished_ = false;  // OnDone ran: Send refuses with final_status_
   bool done_ = false;      // OnDone delivered every unanswered callback

@@ -145,8 +145,8 @@ class RecognitionClient {
       std::function<void(const pb::WatchModelsResponse&)> on_change);
 
  private:
-  friend class FrameStream;
-  friend class ObjectStream;
+  template <class Rpc>
+  friend class BasicFrameStream;
   using Deadline = std::chrono::system_clock::time_point;
   using Attempt = std::function<grpc::Status(grpc::ClientContext&)>;
 

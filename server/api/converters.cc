@@ -81,7 +81,20 @@ StatusOr<FeatureSet> DecodeFeatures(const pb::Features& features, const Descript
         "; the server's vocabulary uses " + std::to_string(format.size_bytes) + "-byte " +
         format.ToString() + " descriptors");
   }
-  const size_t n = size_t(features.keypoints_size());
+  const pb::Keypoints& k = features.keypoints();
+  const size_t n = size_t(k.x_size());
+  const std::pair<const char*, int> arrays[] = {{"y", k.y_size()},
+                                                {"size", k.size_size()},
+                                                {"angle", k.angle_size()},
+                                                {"response", k.response_size()},
+                                                {"octave", k.octave_size()}};
+  for (const auto& [name, size] : arrays) {
+    if (size_t(size) != n) {
+      return Status::InvalidArgument("frame.features.keypoints." + std::string(name) + " has " +
+                                     std::to_string(size) + " values for " + std::to_string(n) +
+                                     " keypoints (x); every array needs one per keypoint");
+    }
+  }
   if (n > kMaxClientFeatures) {
     return Status::InvalidArgument("frame.features has " + std::to_string(n) +
                                    " keypoints; at most " + std::to_string(kMaxClientFeatures));
@@ -95,13 +108,13 @@ StatusOr<FeatureSet> DecodeFeatures(const pb::Features& features, const Descript
   FeatureSet out;
   out.keypoints.reserve(n);
   for (size_t i = 0; i < n; ++i) {
-    const pb::Keypoint& k = features.keypoints(int(i));
-    if (!Finite(k.x()) || !Finite(k.y()) || !Finite(k.size()) || !Finite(k.angle()) ||
-        !Finite(k.response())) {
-      return Status::InvalidArgument("frame.features.keypoints[" + std::to_string(i) +
-                                     "] has a non-finite value");
+    const int j = int(i);
+    if (!Finite(k.x(j)) || !Finite(k.y(j)) || !Finite(k.size(j)) || !Finite(k.angle(j)) ||
+        !Finite(k.response(j))) {
+      return Status::InvalidArgument(
+          "frame.features.keypoints has a non-finite value at keypoint " + std::to_string(i));
     }
-    out.keypoints.emplace_back(k.x(), k.y(), k.size(), k.angle(), k.response(), k.octave());
+    out.keypoints.emplace_back(k.x(j), k.y(j), k.size(j), k.angle(j), k.response(j), k.octave(j));
   }
   out.descriptors.create(int(n), format.cols(), format.cv_type());
   if (n > 0)

@@ -1,10 +1,12 @@
 // Loopback tests of the PlaceRecognition service: maps, frames, streams and bad input.
 #include <atomic>
+#include <cmath>
 #include <condition_variable>
 #include <mutex>
 
 #include <opencv2/imgcodecs.hpp>
 
+#include "client/cpp/frames.h"
 #include "core/features/feature_extractor.h"
 #include "tests/server/server_fixture.h"
 
@@ -19,20 +21,10 @@ pb::Frame FeaturesFrame(const std::string& jpeg) {
   auto extractor = CreateFeatureExtractor(FeatureOptions{});
   FeatureSet features;
   EXPECT_TRUE(extractor.value()->Extract(image, &features).ok());
-  pb::Frame frame;
-  pb::Features* out = frame.mutable_features();
-  for (const cv::KeyPoint& k : features.keypoints) {
-    pb::Keypoint* p = out->add_keypoints();
-    p->set_x(k.pt.x);
-    p->set_y(k.pt.y);
-    p->set_size(k.size);
-    p->set_angle(k.angle);
-    p->set_response(k.response);
-    p->set_octave(k.octave);
-  }
-  out->set_descriptors(features.descriptors.data, features.descriptors.total());
-  out->set_descriptor_bytes(32);
-  return frame;
+  client::Result<pb::Frame> frame =
+      client::FrameFromFeatures(features.keypoints, features.descriptors, image.size());
+  EXPECT_TRUE(frame.ok());
+  return std::move(frame).value();
 }
 
 TEST_F(PlaceServiceTest, MapsAreCreatedDescribedListedAndDeleted) {
@@ -196,6 +188,12 @@ TEST_F(PlaceServiceTest, BadFramesAreAnsweredWithTheirErrorAndTheStreamGoesOn) {
   pb::Frame garbage_descriptors = FeaturesFrame(CorridorJpeg(1));
   garbage_descriptors.mutable_features()->set_descriptors("garbage");
   frames.push_back(garbage_descriptors);
+  pb::Frame short_array = FeaturesFrame(CorridorJpeg(1));
+  short_array.mutable_features()->mutable_keypoints()->mutable_octave()->RemoveLast();
+  frames.push_back(short_array);  // one keypoint has no octave
+  pb::Frame not_finite = FeaturesFrame(CorridorJpeg(1));
+  not_finite.mutable_features()->mutable_keypoints()->set_x(3, std::nanf(""));
+  frames.push_back(not_finite);
   frames.push_back(pb::Frame());  // no content at all
   frames.push_back(JpegFrame(CorridorJpeg(1)));
   pb::StreamConfig config;
@@ -209,6 +207,10 @@ TEST_F(PlaceServiceTest, BadFramesAreAnsweredWithTheirErrorAndTheStreamGoesOn) {
     EXPECT_EQ(answers[i].error().code(), int(grpc::StatusCode::INVALID_ARGUMENT)) << i;
     EXPECT_FALSE(answers[i].error().message().empty());
   }
+  EXPECT_NE(answers[5].error().message().find("keypoints.octave"), std::string::npos)
+      << answers[5].error().message();
+  EXPECT_NE(answers[6].error().message().find("non-finite value at keypoint 3"), std::string::npos)
+      << answers[6].error().message();
   ASSERT_TRUE(answers.back().has_result());
   EXPECT_EQ(answers.back().result().frame_id(), 0u);  // the failed frames added nothing
 }

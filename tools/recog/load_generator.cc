@@ -406,7 +406,7 @@ class Robot {
     if (object_frame_ != nullptr) {
       frame = *object_frame_;
     } else {
-      frame = sequence_.frames[size_t(k % sequence_.frames.size())];
+      frame = sequence_.frames[size_t(k % sequence_.frames.size())]->frame();
       SetIntrinsics(*options_.camera, &frame);
     }
     const Clock::time_point sent = Clock::now();
@@ -554,7 +554,7 @@ StatusOr<LoadGenerator> LoadGenerator::Prepare(const LoadOptions& options) {
     RECOG_ASSIGN_OR_RETURN(sequence.files, ListImages(sequence.folder));
     for (const std::string& file : sequence.files) {
       RECOG_ASSIGN_OR_RETURN(pb::Frame frame, PrepareFrame(file, options.features_on_client));
-      sequence.frames.push_back(std::move(frame));
+      sequence.frames.push_back(client::FrameStream::Prepare(std::move(frame)));
     }
   }
   if (!options.object_image.empty()) {

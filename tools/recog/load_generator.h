@@ -49,6 +49,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "client/cpp/frame_stream.h"
 #include "client/cpp/recognition_client.h"
 #include "core/common/status.h"
 #include "core/object/object_model.h"
@@ -187,9 +188,9 @@ class LoadGenerator {
 
   // One sequence, ready to send.
   struct Sequence {
-    std::string folder;              // of the images
-    std::vector<std::string> files;  // in natural order
-    std::vector<pb::Frame> frames;   // one per file
+    std::string folder;                                      // of the images
+    std::vector<std::string> files;                          // in natural order
+    std::vector<client::FrameStream::PreparedFrame> frames;  // one per file
   };
 
  private:
