@@ -9,8 +9,11 @@
 //    RESOURCE_EXHAUSTED errors (a message over the size limit, a model over 256 MiB) are final.
 //  - Retried, for calls that change nothing or can be repeated without harm (GetMap, ListMaps,
 //    QueryPlace without add_frame, RecognizeObjects, ListModels, DownloadModel): UNAVAILABLE.
+//    UploadModel is one of them: a retry first asks the server what it holds of the file
+//    (GetUploadStatus) and sends only the rest, or returns the version stored by an attempt
+//    whose answer was lost.
 //  - Retried, for calls that change the server (CreateMap, DeleteMap, AddFrame, QueryPlace with
-//    add_frame, UploadModel, DeleteModel): UNAVAILABLE only when nothing was sent. Before sending
+//    add_frame, DeleteModel): UNAVAILABLE only when nothing was sent. Before sending
 //    such a call the client waits for the channel to be connected; when it cannot connect, the
 //    attempt fails without sending anything and is retried. An UNAVAILABLE after the request left
 //    (the connection broke, the server was draining) is returned to the caller: the server may

@@ -122,6 +122,28 @@ std::unique_ptr<ModelWatch> RecognitionClient::WatchModels(
 
 // --- Uploads ---
 
+namespace {
+
+// Sends `header` (with `offset`) and the file from that byte in chunks on one PutModel call.
+grpc::Status SendUpload(pb::ObjectRepository::Stub& models, grpc::ClientContext& context,
+                        std::string_view file_bytes, pb::PutModelRequest header, uint64_t offset,
+                        pb::PutModelResponse* response) {
+  response->Clear();
+  header.mutable_header()->set_offset(offset);
+  std::unique_ptr<grpc::ClientWriter<pb::PutModelRequest>> writer =
+      models.PutModel(&context, response);
+  bool open = writer->Write(header);
+  pb::PutModelRequest chunk;
+  for (size_t at = size_t(offset); open && at < file_bytes.size(); at += kChunkBytes) {
+    chunk.set_chunk(file_bytes.data() + at, std::min(kChunkBytes, file_bytes.size() - at));
+    open = writer->Write(chunk);
+  }
+  if (open) writer->WritesDone();
+  return writer->Finish();
+}
+
+}  // namespace
+
 Result<pb::ModelInfo> RecognitionClient::UploadModel(std::string_view file_bytes,
                                                      const std::string& name,
                                                      const std::vector<std::string>& tags) {
@@ -133,23 +155,40 @@ Result<pb::ModelInfo> RecognitionClient::UploadModel(std::string_view file_bytes
   for (const std::string& tag : tags) header.mutable_header()->add_tags(tag);
   header.mutable_header()->set_sha256(Sha256Hex(file_bytes));
   header.mutable_header()->set_size_bytes(file_bytes.size());
+  const Deadline deadline = std::chrono::system_clock::now() + options_.transfer_deadline;
   pb::PutModelResponse response;
+  int attempts = 0;
+  // Each attempt first asks the server what it holds of this file: the bytes of an interrupted
+  // upload (an earlier attempt's, or another process's) are not sent again, and an earlier attempt
+  // of this call that completed but lost its answer is not stored twice. So the call is
+  // repeatable; a first attempt does not take a completed upload for its own (uploading a file
+  // again creates a new version).
   const grpc::Status status =
-      Run(CallKind::kChanging, std::chrono::system_clock::now() + options_.transfer_deadline,
-          [&](grpc::ClientContext& context) {
-            response.Clear();
-            std::unique_ptr<grpc::ClientWriter<pb::PutModelRequest>> writer =
-                models_->PutModel(&context, &response);
-            bool open = writer->Write(header);
-            pb::PutModelRequest chunk;
-            for (size_t offset = 0; open && offset < file_bytes.size(); offset += kChunkBytes) {
-              chunk.set_chunk(file_bytes.data() + offset,
-                              std::min(kChunkBytes, file_bytes.size() - offset));
-              open = writer->Write(chunk);
-            }
-            if (open) writer->WritesDone();
-            return writer->Finish();
-          });
+      Run(CallKind::kRepeatable, deadline, [&](grpc::ClientContext& context) {
+        const bool retry = attempts++ > 0;
+        pb::GetUploadStatusRequest request;
+        request.set_sha256(header.header().sha256());
+        request.set_size_bytes(header.header().size_bytes());
+        pb::GetUploadStatusResponse progress;
+        grpc::ClientContext status_context;
+        PrepareContext(status_context, &deadline);
+        const grpc::Status asked = models_->GetUploadStatus(&status_context, request, &progress);
+        if (!asked.ok()) return asked;
+        if (retry && progress.has_stored() && (name.empty() || progress.stored().name() == name)) {
+          response.Clear();
+          *response.mutable_model() = progress.stored();
+          return grpc::Status::OK;
+        }
+        const uint64_t offset = progress.received_bytes();
+        grpc::Status sent = SendUpload(*models_, context, file_bytes, header, offset, &response);
+        if (sent.error_code() == grpc::StatusCode::FAILED_PRECONDITION && offset > 0) {
+          // The kept bytes went in the meantime (expired, or resumed by another client).
+          grpc::ClientContext again;
+          PrepareContext(again, &deadline);
+          sent = SendUpload(*models_, again, file_bytes, header, 0, &response);
+        }
+        return sent;
+      });
   if (!status.ok()) return status;
   return std::move(*response.mutable_model());
 }

@@ -1,5 +1,6 @@
 // Loopback tests of RecognitionClient's model repository calls against an in-process recogd:
-// upload and byte-exact download, resumption from a partial file, listings, deletion, watching,
+// upload and byte-exact download, an upload resumed after its connection broke, resumption of a
+// download from a partial file, listings, deletion, watching,
 // and recognition of an uploaded model by unary calls and an ObjectStream.
 #include <filesystem>
 #include <fstream>
@@ -14,6 +15,7 @@
 #include "core/object/model_builder.h"
 #include "core/object/model_file.h"
 #include "proto/sha256.h"
+#include "tests/testing/tcp_proxy.h"
 #include "tests/testing/vocabularies.h"
 
 namespace recog::client::testing {
@@ -118,6 +120,37 @@ TEST_F(ModelRepositoryTest, AnUploadedModelDownloadsByteForByte) {
   EXPECT_EQ(client_->UploadModel("").status().error_code(), grpc::StatusCode::INVALID_ARGUMENT);
   EXPECT_EQ(client_->UploadModel("not a model file").status().error_code(),
             grpc::StatusCode::INVALID_ARGUMENT);  // refused by the server
+}
+
+TEST_F(ModelRepositoryTest, AnUploadCutOffMidFileIsResumedAndStoredOnce) {
+  const std::string file = BoxModelFile();
+  // The connection breaks once the first 256 KiB chunk and part of the second have left; the
+  // retry reconnects through the proxy.
+  const uint64_t cut = (256u << 10) + 32768;
+  ASSERT_GT(file.size(), cut + 65536);
+  recog::testing::TcpProxy proxy(server_->port(), /*cut_first_after=*/cut);
+  ClientOptions options = Options();
+  options.target = "127.0.0.1:" + std::to_string(proxy.port());
+  std::unique_ptr<RecognitionClient> client = Connect(options);
+  ASSERT_NE(client, nullptr);
+  Result<pb::ModelInfo> uploaded = client->UploadModel(file, "crate");
+  ASSERT_TRUE(uploaded.ok()) << uploaded.status().error_message();
+  EXPECT_EQ(uploaded->version(), 1u);
+  EXPECT_EQ(uploaded->sha256(), Sha256Hex(file));
+
+  const std::vector<uint64_t> sent = proxy.upstream_bytes();
+  ASSERT_GE(sent.size(), 2u);  // the connection that broke, and the retry's
+  EXPECT_EQ(sent[0], cut);
+  uint64_t after_the_cut = 0;
+  for (size_t i = 1; i < sent.size(); ++i) after_the_cut += sent[i];
+  EXPECT_LT(after_the_cut, file.size());  // the rest of the file, not all of it again
+  Result<std::vector<pb::ModelInfo>> models = client_->ListModels();
+  ASSERT_TRUE(models.ok());
+  ASSERT_EQ(models->size(), 1u);
+  EXPECT_EQ(models->front().version(), 1u);  // stored once
+  const std::string path = Download("crate");
+  ASSERT_TRUE(client_->DownloadModel("crate", 1, path).ok());
+  EXPECT_EQ(ReadFileBytes(path), file);
 }
 
 TEST_F(ModelRepositoryTest, ADownloadContinuesFromThePartialFileOfABrokenOne) {

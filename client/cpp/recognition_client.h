@@ -13,7 +13,10 @@
 // Frame streams are separate objects (FrameStream, ObjectStream in frame_stream.h), opened on a
 // client; they and ModelWatch handles may outlive it.
 //
-// Model files travel in 256 KiB chunks. UploadModel computes the SHA-256 the server checks.
+// Model files travel in 256 KiB chunks. UploadModel computes the SHA-256 the server checks; when
+// the connection breaks mid-file, its retries resume the upload from the bytes the server kept
+// (GetUploadStatus, PutModelHeader.offset) and, when the upload had completed but its answer was
+// lost, return the version it created instead of storing the file twice.
 // DownloadModel writes to `<path>.part`, verifies the size and SHA-256 the server announced, and
 // renames the file into place; when the connection breaks mid-file it asks for the rest from the
 // byte it has, and a `<path>.part` left by an earlier broken download is continued the same way

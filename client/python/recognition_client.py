@@ -241,16 +241,21 @@ class RecognitionClient:
         """Uploads a ``.robj`` model file (bytes or path) as a new version; returns its info.
 
         ``name`` empty keeps the name inside the file. The file is sent in chunks after a header
-        with its size and SHA-256, which the server checks before storing anything.
+        with its size and SHA-256, which the server checks before storing anything. When the
+        server holds the first bytes of this file from an upload that broke off (this client's
+        or another's), only the rest is sent; call again after a broken upload to resume it.
         """
         data = read_bytes(model)
-        header = repository_pb2.PutModelHeader(name=name, tags=tags,
-                                               sha256=hashlib.sha256(data).hexdigest(),
-                                               size_bytes=len(data))
+        sha256 = hashlib.sha256(data).hexdigest()
+        held = self._call(self._repository.GetUploadStatus,
+                          repository_pb2.GetUploadStatusRequest(sha256=sha256,
+                                                                size_bytes=len(data)))
+        header = repository_pb2.PutModelHeader(name=name, tags=tags, sha256=sha256,
+                                               size_bytes=len(data), offset=held.received_bytes)
 
         def requests():
             yield repository_pb2.PutModelRequest(header=header)
-            for offset in range(0, len(data), UPLOAD_CHUNK_BYTES):
+            for offset in range(header.offset, len(data), UPLOAD_CHUNK_BYTES):
                 yield repository_pb2.PutModelRequest(
                     chunk=data[offset:offset + UPLOAD_CHUNK_BYTES])
 

@@ -24,9 +24,9 @@ bool IsSha256Hex(const std::string& s) {
 // PutModel: a header, then the file's chunks; checked and stored once the client is done.
 class ModelUpload final : public grpc::ServerReadReactor<pb::PutModelRequest> {
  public:
-  ModelUpload(ServerState& state, grpc::CallbackServerContext* context,
-              pb::PutModelResponse* response)
-      : state_(state), context_(context), response_(response) {
+  ModelUpload(ServerState& state, PartialUploads& partial_uploads,
+              grpc::CallbackServerContext* context, pb::PutModelResponse* response)
+      : state_(state), partial_uploads_(partial_uploads), context_(context), response_(response) {
     const grpc::Status status =
         BeginCall(state_, context_, Method("PutModel"), Right::kWrite, &call_);
     if (!status.ok()) {
@@ -38,6 +38,13 @@ class ModelUpload final : public grpc::ServerReadReactor<pb::PutModelRequest> {
 
  private:
   void OnReadDone(bool ok) override {
+    if (!ok && context_->IsCancelled()) {  // the call broke off: keep what came for a resume
+      const uint64_t received = bytes_.size();
+      if (has_header_) partial_uploads_.KeepInterrupted(Key(), std::move(bytes_));
+      End({grpc::StatusCode::CANCELLED, "the upload broke off after " + std::to_string(received) +
+                                            " bytes (kept for a resumed upload)"});
+      return;
+    }
     if (!ok) {  // the client sent everything
       if (!has_header_) {
         End({grpc::StatusCode::FAILED_PRECONDITION, "PutModel needs a PutModelHeader first"});
@@ -74,10 +81,30 @@ class ModelUpload final : public grpc::ServerReadReactor<pb::PutModelRequest> {
       return {grpc::StatusCode::INVALID_ARGUMENT,
               "header.sha256 must be 64 lowercase hex digits (SHA-256 of the file)"};
     }
+    if (header_.offset() >= header_.size_bytes()) {
+      return {grpc::StatusCode::INVALID_ARGUMENT,
+              "header.offset must be below header.size_bytes (" +
+                  std::to_string(header_.size_bytes()) + ")"};
+    }
+    if (header_.offset() > 0) {
+      std::optional<std::string> kept = partial_uploads_.TakeInterrupted(Key());
+      const uint64_t held = kept.has_value() ? kept->size() : 0;
+      if (held < header_.offset()) {
+        if (kept.has_value()) partial_uploads_.KeepInterrupted(Key(), std::move(*kept));
+        return {grpc::StatusCode::FAILED_PRECONDITION,
+                "cannot resume at byte " + std::to_string(header_.offset()) +
+                    ": the server holds " + std::to_string(held) +
+                    " bytes of this upload (GetUploadStatus)"};
+      }
+      bytes_ = std::move(*kept);
+      bytes_.resize(size_t(header_.offset()));
+    }
     bytes_.reserve(size_t(header_.size_bytes()));
     has_header_ = true;
     return grpc::Status::OK;
   }
+
+  PartialUploads::Key Key() const { return {header_.sha256(), header_.size_bytes()}; }
 
   grpc::Status TakeChunk() {
     if (!request_.has_chunk()) {
@@ -106,6 +133,8 @@ class ModelUpload final : public grpc::ServerReadReactor<pb::PutModelRequest> {
         state_.repository->Put(bytes_, header_.name(), std::move(tags));
     if (!stored.ok()) return ToGrpcStatus(stored.status(), call_.request_id);
     call_.map = stored.value().metadata.name;
+    partial_uploads_.RecordStored(Key(),
+                                  {stored.value().metadata.name, stored.value().metadata.version});
     ToProto(stored.value(), response_->mutable_model());
     state_.metrics.SetObjects(state_.objects->size());
     return grpc::Status::OK;
@@ -118,6 +147,7 @@ class ModelUpload final : public grpc::ServerReadReactor<pb::PutModelRequest> {
   void OnDone() override { delete this; }
 
   ServerState& state_;
+  PartialUploads& partial_uploads_;
   grpc::CallbackServerContext* const context_;
   pb::PutModelResponse* const response_;
   CallInfo call_;
@@ -307,7 +337,29 @@ class ModelWatch final : public grpc::ServerWriteReactor<pb::WatchModelsResponse
 
 grpc::ServerReadReactor<pb::PutModelRequest>* RepositoryService::PutModel(
     grpc::CallbackServerContext* context, pb::PutModelResponse* response) {
-  return new ModelUpload(state_, context, response);
+  return new ModelUpload(state_, partial_uploads_, context, response);
+}
+
+grpc::ServerUnaryReactor* RepositoryService::GetUploadStatus(
+    grpc::CallbackServerContext* context, const pb::GetUploadStatusRequest* request,
+    pb::GetUploadStatusResponse* response) {
+  return RunUnary(state_, context, Method("GetUploadStatus"), Right::kWrite, [=, this](CallInfo&) {
+    if (!IsSha256Hex(request->sha256())) {
+      return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
+                          "sha256 must be 64 lowercase hex digits (SHA-256 of the file)");
+    }
+    const PartialUploads::Progress progress =
+        partial_uploads_.ProgressOf({request->sha256(), request->size_bytes()});
+    response->set_received_bytes(progress.received_bytes);
+    if (progress.stored.has_value()) {
+      for (const ModelVersionInfo& info : state_.repository->Versions(progress.stored->name)) {
+        if (info.metadata.version == progress.stored->version) {
+          ToProto(info, response->mutable_stored());
+        }
+      }
+    }
+    return grpc::Status::OK;
+  });
 }
 
 grpc::ServerWriteReactor<pb::GetModelResponse>* RepositoryService::GetModel(

@@ -1,5 +1,7 @@
 // Loopback tests of the ObjectRepository and ObjectRecognition services: versioned uploads and
 // downloads, watching, recognition of what was uploaded, bad uploads and bad frames.
+#include <chrono>
+#include <string_view>
 #include <thread>
 
 #include <opencv2/imgcodecs.hpp>
@@ -33,18 +35,72 @@ class RepositoryServiceTest : public ServerFixture {
   grpc::Status Put(const std::string& bytes, const std::string& name,
                    std::vector<std::string> tags = {}, pb::ModelInfo* info = nullptr,
                    std::string sha256 = {}, uint64_t size = 0) {
+    pb::PutModelHeader header;
+    header.set_name(name);
+    for (const std::string& tag : tags) header.add_tags(tag);
+    header.set_sha256(sha256.empty() ? Sha256Hex(bytes) : sha256);
+    header.set_size_bytes(size == 0 ? bytes.size() : size);
+    return Upload(header, bytes, info);
+  }
+
+  // Resumes the upload of `bytes` at `offset`: sends the rest.
+  grpc::Status Resume(const std::string& bytes, uint64_t offset, pb::ModelInfo* info = nullptr) {
+    return Upload(HeaderOf(bytes, offset), std::string_view(bytes).substr(offset), info);
+  }
+
+  // Starts uploading `bytes`, sends the first `sent` of them, then cancels the call (as a lost
+  // connection would end it) once the server has had time to read them.
+  void Interrupt(const std::string& bytes, size_t sent) {
     auto context = Context();
     pb::PutModelResponse response;
     auto writer = models_->PutModel(context.get(), &response);
     pb::PutModelRequest request;
-    pb::PutModelHeader* header = request.mutable_header();
-    header->set_name(name);
-    for (const std::string& tag : tags) header->add_tags(tag);
-    header->set_sha256(sha256.empty() ? Sha256Hex(bytes) : sha256);
-    header->set_size_bytes(size == 0 ? bytes.size() : size);
+    *request.mutable_header() = HeaderOf(bytes, 0);
+    writer->Write(request);
+    for (size_t offset = 0; offset < sent; offset += 4096) {
+      request.set_chunk(bytes.substr(offset, std::min<size_t>(4096, sent - offset)));
+      ASSERT_TRUE(writer->Write(request));
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    context->TryCancel();
+    EXPECT_EQ(writer->Finish().error_code(), grpc::StatusCode::CANCELLED);
+  }
+
+  // GetUploadStatus of the upload of `bytes`, waiting up to 5 s for received bytes when
+  // `wait_for_bytes` (the server keeps them once it has seen the cancellation).
+  pb::GetUploadStatusResponse UploadStatus(const std::string& bytes, bool wait_for_bytes = false) {
+    pb::GetUploadStatusRequest request;
+    request.set_sha256(Sha256Hex(bytes));
+    request.set_size_bytes(bytes.size());
+    pb::GetUploadStatusResponse response;
+    for (int i = 0; i < 50; ++i) {
+      const grpc::Status status = models_->GetUploadStatus(Context().get(), request, &response);
+      EXPECT_TRUE(status.ok()) << status.error_message();
+      if (!wait_for_bytes || response.received_bytes() > 0) break;
+      std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    }
+    return response;
+  }
+
+  static pb::PutModelHeader HeaderOf(const std::string& bytes, uint64_t offset) {
+    pb::PutModelHeader header;
+    header.set_sha256(Sha256Hex(bytes));
+    header.set_size_bytes(bytes.size());
+    header.set_offset(offset);
+    return header;
+  }
+
+  // One PutModel call: `header`, then `bytes` in 64 KiB chunks.
+  grpc::Status Upload(const pb::PutModelHeader& header, std::string_view bytes,
+                      pb::ModelInfo* info) {
+    auto context = Context();
+    pb::PutModelResponse response;
+    auto writer = models_->PutModel(context.get(), &response);
+    pb::PutModelRequest request;
+    *request.mutable_header() = header;
     writer->Write(request);
     for (size_t offset = 0; offset < bytes.size(); offset += 65536) {
-      request.set_chunk(bytes.substr(offset, 65536));
+      request.set_chunk(std::string(bytes.substr(offset, 65536)));
       if (!writer->Write(request)) break;
     }
     writer->WritesDone();
@@ -91,6 +147,47 @@ class RepositoryServiceTest : public ServerFixture {
     return frame;
   }
 };
+
+TEST_F(RepositoryServiceTest, AnInterruptedUploadIsResumedFromTheBytesTheServerKept) {
+  const std::string file = PosterModelFile("poster", 1, "poster");
+  ASSERT_GT(file.size(), 20000u);
+  EXPECT_EQ(UploadStatus(file).received_bytes(), 0u);
+  Interrupt(file, 16384);
+  const uint64_t kept = UploadStatus(file, /*wait_for_bytes=*/true).received_bytes();
+  ASSERT_GT(kept, 0u);
+  EXPECT_LE(kept, 16384u);
+
+  // Resuming beyond what the server holds is refused, and what it holds stays.
+  const grpc::Status beyond = Resume(file, kept + 1);
+  EXPECT_EQ(beyond.error_code(), grpc::StatusCode::FAILED_PRECONDITION);
+  EXPECT_NE(beyond.error_message().find("holds " + std::to_string(kept) + " bytes"),
+            std::string::npos)
+      << beyond.error_message();
+  EXPECT_EQ(UploadStatus(file).received_bytes(), kept);
+  EXPECT_EQ(Resume(file, file.size()).error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+
+  pb::ModelInfo info;
+  const grpc::Status resumed = Resume(file, kept, &info);
+  ASSERT_TRUE(resumed.ok()) << resumed.error_message();
+  EXPECT_EQ(info.version(), 1u);
+  std::string stored;
+  pb::ModelInfo got;
+  ASSERT_TRUE(Get("poster", 1, &got, &stored).ok());
+  EXPECT_EQ(stored, file);  // the kept bytes and the rest, in order
+
+  // The server now remembers the upload as stored, not its bytes.
+  const pb::GetUploadStatusResponse done = UploadStatus(file);
+  EXPECT_EQ(done.received_bytes(), 0u);
+  EXPECT_EQ(done.stored().name(), "poster");
+  EXPECT_EQ(done.stored().version(), 1u);
+  EXPECT_EQ(Resume(file, kept).error_code(), grpc::StatusCode::FAILED_PRECONDITION);
+
+  pb::GetUploadStatusRequest bad;
+  bad.set_sha256("not hex");
+  pb::GetUploadStatusResponse ignored;
+  EXPECT_EQ(models_->GetUploadStatus(Context().get(), bad, &ignored).error_code(),
+            grpc::StatusCode::INVALID_ARGUMENT);
+}
 
 TEST_F(RepositoryServiceTest, EveryUploadIsANewVersionAndTheLatestIsRecognisedAtOnce) {
   const std::string v1 = PosterModelFile("poster", 1, "poster");

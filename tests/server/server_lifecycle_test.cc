@@ -146,6 +146,13 @@ TEST_F(ServerLifecycleTest, TokensDecideWhoMayReadAndWhoMayWrite) {
             grpc::StatusCode::PERMISSION_DENIED);
   EXPECT_EQ(models_->DeleteModel(Context(kOperatorToken).get(), remove, &removed).error_code(),
             grpc::StatusCode::NOT_FOUND);
+  pb::GetUploadStatusRequest upload;  // part of an upload: the write right
+  upload.set_sha256(std::string(64, 'a'));
+  upload.set_size_bytes(10);
+  pb::GetUploadStatusResponse progress;
+  EXPECT_EQ(models_->GetUploadStatus(Context(kRobotToken).get(), upload, &progress).error_code(),
+            grpc::StatusCode::PERMISSION_DENIED);
+  EXPECT_TRUE(models_->GetUploadStatus(Context(kOperatorToken).get(), upload, &progress).ok());
 }
 
 TEST_F(ServerLifecycleTest, MutualTlsAdmitsOnlyClientsWithACertificateFromTheCa) {

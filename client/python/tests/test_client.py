@@ -6,6 +6,7 @@ PYTHONPATH (ctest sets all three: ``ctest -R python``). Exits with 77 (skipped) 
 grpc or protobuf modules are missing.
 """
 
+import hashlib
 import os
 import signal
 import socket
@@ -16,10 +17,11 @@ import threading
 import time
 import unittest
 from pathlib import Path
+from typing import Sequence
 
 try:
     import grpc
-    from recognition.v1 import place_pb2
+    from recognition.v1 import place_pb2, repository_pb2
     from recognition_client import RecognitionClient
 except ModuleNotFoundError as missing:
     if missing.name.split(".")[0] not in ("grpc", "google"):
@@ -29,6 +31,7 @@ except ModuleNotFoundError as missing:
     sys.exit(77)
 
 CORRIDOR = Path(os.environ.get("RECOG_SOURCE_DIR", ".")) / "tests" / "data" / "corridor"
+TLS = Path(os.environ.get("RECOG_SOURCE_DIR", ".")) / "tests" / "data" / "tls"
 EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "stream_folder.py"
 STARTUP_SECONDS = 30
 SHUTDOWN_SECONDS = 30
@@ -46,60 +49,73 @@ def free_port() -> int:
         return probe.getsockname()[1]
 
 
+class Recogd:
+    """A recogd process on a free loopback port with a fresh data directory and ``args``."""
+
+    def __init__(self, args: Sequence[str] = ()):
+        recogd = os.environ.get("RECOGD")
+        if not recogd:
+            raise RuntimeError("set RECOGD to the path of the recogd binary")
+        self.data_dir = tempfile.TemporaryDirectory(prefix="recog-python-test-")
+        self.target = f"127.0.0.1:{free_port()}"  # the test certificate names 127.0.0.1
+        self.process = subprocess.Popen([recogd, "--listen", self.target, "--data-dir",
+                                         self.data_dir.name, "--metrics-listen", "",
+                                         "--log-level", "warn", *args])
+
+    def wait_until_serving(self, **client_options) -> None:
+        """Polls list_maps until it stops answering UNAVAILABLE (at most STARTUP_SECONDS), each
+        time from a new client with ``client_options`` (a channel that failed to connect waits
+        out a growing backoff); stops the server and raises when it does not come up."""
+        deadline = time.monotonic() + STARTUP_SECONDS
+        try:
+            while True:
+                if self.process.poll() is not None:
+                    raise RuntimeError(f"recogd exited with {self.process.returncode} at start-up")
+                try:
+                    with RecognitionClient(self.target, **client_options) as probe:
+                        probe.list_maps()
+                    return
+                except grpc.RpcError as error:
+                    if error.code() != grpc.StatusCode.UNAVAILABLE or time.monotonic() > deadline:
+                        raise
+                time.sleep(0.1)
+        except BaseException:
+            self.process.kill()
+            self.process.wait()
+            self.data_dir.cleanup()
+            raise
+
+    def stop(self) -> None:
+        """Stops recogd with SIGTERM and checks that it exits with 0."""
+        self.process.send_signal(signal.SIGTERM)
+        try:
+            code = self.process.wait(timeout=SHUTDOWN_SECONDS)
+        except subprocess.TimeoutExpired:
+            self.process.kill()
+            self.process.wait()
+            raise AssertionError(f"recogd did not stop within {SHUTDOWN_SECONDS} s of SIGTERM")
+        finally:
+            self.data_dir.cleanup()
+        if code != 0:
+            raise AssertionError(f"recogd exited with {code} after SIGTERM")
+
+
 class RecognitionClientTest(unittest.TestCase):
-    """One recogd for the whole class, on a free loopback port and a fresh data directory."""
+    """One plaintext recogd without tokens for the whole class."""
 
     @classmethod
     def setUpClass(cls):
         """Starts recogd and waits until it serves."""
-        recogd = os.environ.get("RECOGD")
-        if not recogd:
-            raise RuntimeError("set RECOGD to the path of the recogd binary")
-        cls.data_dir = tempfile.TemporaryDirectory(prefix="recog-python-test-")
-        cls.target = f"127.0.0.1:{free_port()}"
-        cls.server = subprocess.Popen([recogd, "--listen", cls.target, "--data-dir",
-                                       cls.data_dir.name, "--metrics-listen", "",
-                                       "--log-level", "warn"])
+        cls.server = Recogd()
+        cls.target = cls.server.target
+        cls.server.wait_until_serving()
         cls.client = RecognitionClient(cls.target)
-        try:
-            cls.wait_until_serving()
-        except BaseException:
-            cls.client.close()
-            cls.server.kill()
-            cls.server.wait()
-            cls.data_dir.cleanup()
-            raise
-
-    @classmethod
-    def wait_until_serving(cls):
-        """Polls list_maps until it stops answering UNAVAILABLE (at most STARTUP_SECONDS)."""
-        deadline = time.monotonic() + STARTUP_SECONDS
-        while True:
-            if cls.server.poll() is not None:
-                raise RuntimeError(f"recogd exited with {cls.server.returncode} at start-up")
-            try:
-                cls.client.list_maps()
-                return
-            except grpc.RpcError as error:
-                if error.code() != grpc.StatusCode.UNAVAILABLE or time.monotonic() > deadline:
-                    raise
-            time.sleep(0.1)
 
     @classmethod
     def tearDownClass(cls):
-        """Stops recogd with SIGTERM and checks that it exits with 0."""
+        """Stops recogd and checks that it exits with 0."""
         cls.client.close()
-        cls.server.send_signal(signal.SIGTERM)
-        try:
-            code = cls.server.wait(timeout=SHUTDOWN_SECONDS)
-        except subprocess.TimeoutExpired:
-            cls.server.kill()
-            cls.server.wait()
-            raise AssertionError(f"recogd did not stop within {SHUTDOWN_SECONDS} s of SIGTERM")
-        finally:
-            cls.data_dir.cleanup()
-        if code != 0:
-            raise AssertionError(f"recogd exited with {code} after SIGTERM")
+        cls.server.stop()
 
     def assert_code(self, code: grpc.StatusCode, call, *args):
         """Checks that ``call(*args)`` raises grpc.RpcError with ``code``."""
@@ -179,6 +195,39 @@ class RecognitionClientTest(unittest.TestCase):
         self.assertNotIn("bytes; the header said", raised.exception.details())
         self.assertEqual(self.client.list_models(), [])
 
+    def test_an_upload_that_broke_off_is_resumed_from_the_bytes_the_server_kept(self):
+        data = os.urandom(3 << 18)  # three 256 KiB chunks of bytes that are not a model
+        request = repository_pb2.GetUploadStatusRequest(
+            sha256=hashlib.sha256(data).hexdigest(), size_bytes=len(data))
+        sent_first_chunk = threading.Event()
+
+        def first_chunk_then_wait():
+            header = repository_pb2.PutModelHeader(sha256=request.sha256, size_bytes=len(data))
+            yield repository_pb2.PutModelRequest(header=header)
+            yield repository_pb2.PutModelRequest(chunk=data[:1 << 18])
+            sent_first_chunk.set()
+            time.sleep(30)  # until the call is cancelled
+
+        stub = self.client._repository
+        broken = stub.PutModel.future(first_chunk_then_wait(), timeout=60)
+        self.assertTrue(sent_first_chunk.wait(timeout=10))
+        held = 0
+        for _ in range(50):  # the server keeps the bytes once it sees the call end
+            time.sleep(0.1)
+            if held == 0 and not broken.done():
+                broken.cancel()
+            held = stub.GetUploadStatus(request, timeout=10).received_bytes
+            if held > 0:
+                break
+        self.assertEqual(held, 1 << 18)
+        # The client sends the rest only: the server has the whole file (size and SHA-256 pass)
+        # and refuses its contents; the kept bytes were used.
+        with self.assertRaises(grpc.RpcError) as raised:
+            self.client.upload_model(data, name="noise")
+        self.assertEqual(raised.exception.code(), grpc.StatusCode.INVALID_ARGUMENT)
+        self.assertNotIn("SHA-256", raised.exception.details())
+        self.assertEqual(stub.GetUploadStatus(request, timeout=10).received_bytes, 0)
+
     def test_a_watch_ends_when_cancelled(self):
         watch = self.client.watch_models("noise")
         outcome = []
@@ -205,6 +254,66 @@ class RecognitionClientTest(unittest.TestCase):
         self.assertIn("streamed 4 images into map 'example'", run.stdout)
         self.assertEqual(self.client.get_map("example").frames, 4)
 
+
+class SecuredServerTest(unittest.TestCase):
+    """A recogd with TLS (tests/data/tls) and bearer tokens with read and write rights."""
+
+    READER = "robot-token-0123456789"
+    WRITER = "operator-token-0123456789"
+
+    @classmethod
+    def setUpClass(cls):
+        """Writes the token file, starts recogd and waits until it serves."""
+        tokens = tempfile.NamedTemporaryFile("w", suffix=".yaml", delete=False)
+        tokens.write("tokens:\n"
+                     f"  - {{name: robot-7, token: \"{cls.READER}\", rights: [read]}}\n"
+                     f"  - {{name: operator, token: \"{cls.WRITER}\", rights: [read, write]}}\n")
+        tokens.close()
+        cls.token_file = tokens.name
+        cls.ca = (TLS / "ca.crt").read_bytes()
+        cls.server = Recogd(args=["--tls-cert", str(TLS / "server.crt"), "--tls-key",
+                                          str(TLS / "server.key"), "--token-file", tokens.name])
+        try:
+            cls.server.wait_until_serving(token=cls.READER, root_certificates=cls.ca)
+        except BaseException:
+            os.unlink(cls.token_file)
+            raise
+
+    @classmethod
+    def tearDownClass(cls):
+        """Stops recogd and checks that it exits with 0."""
+        os.unlink(cls.token_file)
+        cls.server.stop()
+
+    def client(self, token: str | None, tls: bool = True) -> RecognitionClient:
+        """A client of the server with ``token``, over TLS trusting the test CA or in plaintext."""
+        client = RecognitionClient(self.server.target, token=token,
+                                   root_certificates=self.ca if tls else None, timeout=5.0)
+        self.addCleanup(client.close)
+        return client
+
+    def assert_code(self, code: grpc.StatusCode, call, *args):
+        """Checks that ``call(*args)`` raises grpc.RpcError with ``code``."""
+        with self.assertRaises(grpc.RpcError) as raised:
+            call(*args)
+        self.assertEqual(raised.exception.code(), code, raised.exception.details())
+
+    def test_the_write_token_creates_and_the_read_token_only_reads(self):
+        writer = self.client(self.WRITER)
+        self.assertEqual(writer.create_map("secured").name, "secured")
+        reader = self.client(self.READER)
+        self.assertIn("secured", [m.name for m in reader.list_maps()])
+        self.assert_code(grpc.StatusCode.PERMISSION_DENIED, reader.create_map, "other")
+        self.assert_code(grpc.StatusCode.PERMISSION_DENIED, reader.delete_map, "secured")
+        self.assertEqual(writer.delete_map("secured"), 0)
+
+    def test_calls_without_a_known_token_are_unauthenticated(self):
+        self.assert_code(grpc.StatusCode.UNAUTHENTICATED, self.client(None).list_maps)
+        self.assert_code(grpc.StatusCode.UNAUTHENTICATED,
+                         self.client("unknown-token-0123456789").list_maps)
+
+    def test_a_plaintext_client_cannot_talk_to_the_tls_server(self):
+        self.assert_code(grpc.StatusCode.UNAVAILABLE, self.client(self.WRITER, tls=False).list_maps)
 
 if __name__ == "__main__":
     unittest.main(verbosity=2)
