@@ -1,11 +1,14 @@
 #include "tools/recog/place_evaluation.h"
 
 #include <algorithm>
+#include <charconv>
 #include <chrono>
 #include <filesystem>
 #include <fstream>
 #include <numeric>
+#include <string_view>
 
+#include <opencv2/core/utils/logger.hpp>
 #include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
 
@@ -16,11 +19,33 @@ namespace recog::cli {
 
 namespace fs = std::filesystem;
 
+constexpr std::string_view kCameraPrefix = "camera:";
+
 StatusOr<FrameSource> FrameSource::Open(const std::string& spec) {
   FrameSource source;
   std::error_code ec;
   if (fs::is_directory(spec, ec)) {
     RECOG_ASSIGN_OR_RETURN(source.files_, ListImages(spec));
+    return source;
+  }
+  if (spec.rfind(kCameraPrefix, 0) == 0) {
+    const std::string_view digits = std::string_view(spec).substr(kCameraPrefix.size());
+    int index = -1;
+    const auto [end, error] = std::from_chars(digits.data(), digits.data() + digits.size(), index);
+    if (digits.empty() || error != std::errc() || end != digits.data() + digits.size() || index < 0) {
+      return Status::InvalidArgument("'" + spec + "': a camera is camera:N, N >= 0 (/dev/videoN)");
+    }
+    // A missing device is reported below, once, not also by OpenCV's own warning.
+    const auto log_level = cv::utils::logging::setLogLevel(cv::utils::logging::LOG_LEVEL_ERROR);
+    auto camera = std::make_shared<cv::VideoCapture>(index, cv::CAP_V4L2);
+    cv::utils::logging::setLogLevel(log_level);
+    if (!camera->isOpened()) {
+      return Status::NotFound("camera " + std::to_string(index) + " (/dev/video" +
+                              std::to_string(index) + ") cannot be opened: missing or busy");
+    }
+    source.video_ = std::move(camera);
+    source.video_name_ = spec;
+    source.live_ = true;
     return source;
   }
   if (!fs::exists(spec, ec)) return Status::NotFound("'" + spec + "' does not exist");
@@ -69,6 +94,7 @@ StatusOr<bool> FrameSource::Next(cv::Mat* gray, std::string* name) {
 
 size_t FrameSource::size() const {
   if (!video_) return files_.size();
+  if (live_) return 0;
   const double count = video_->get(cv::CAP_PROP_FRAME_COUNT);
   return count > 0 ? size_t(count) : 0;
 }

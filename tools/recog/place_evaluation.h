@@ -16,24 +16,27 @@
 namespace recog::cli {
 
 // The frames of a sequence: a folder of images (natural order of names), a text file listing one
-// image path per line (relative paths are relative to the list), or a video file.
+// image path per line (relative paths are relative to the list), a video file, or a live camera,
+// "camera:N" (the Video4Linux device /dev/videoN, read until the caller stops).
 class FrameSource {
  public:
   static StatusOr<FrameSource> Open(const std::string& spec);
   // The next frame as 8-bit grey; false at the end. Undecodable images are INVALID_ARGUMENT
   // (the next call goes on with the following image). `name` is the image's path, or
-  // "<video file name>#<frame number from 1>".
+  // "<video file name>#<frame number from 1>" ("camera:N#<frame number>" for a camera).
   StatusOr<bool> Next(cv::Mat* gray, std::string* name);
-  // True for a video, whose frames have no file of their own.
+  // True for a video or a camera, whose frames have no file of their own.
   bool is_video() const { return video_ != nullptr; }
-  // Frames in the sequence: exact for images, the container's count for a video (0: unknown).
+  // Frames in the sequence: exact for images, the container's count for a video (0: unknown, and
+  // for a camera).
   size_t size() const;
 
  private:
   std::vector<std::string> files_;
   size_t next_ = 0;
-  std::shared_ptr<cv::VideoCapture> video_;
+  std::shared_ptr<cv::VideoCapture> video_;  // a video file or a camera
   std::string video_name_;
+  bool live_ = false;  // a camera
 };
 
 struct SequenceFeatures {

@@ -119,6 +119,11 @@ TEST(PlaceEvaluationTest, FrameSourcesReadListsAndRefuseWhatTheyCannotRead) {
   EXPECT_EQ(FrameSource::Open((dir / "garbage.avi").string()).status().code(),
             StatusCode::kInvalidArgument);
   EXPECT_EQ(FrameSource::Open((dir / "nope").string()).status().code(), StatusCode::kNotFound);
+  // Cameras are camera:N; this machine has no /dev/video99.
+  EXPECT_EQ(FrameSource::Open("camera:99").status().code(), StatusCode::kNotFound);
+  for (const char* bad : {"camera:", "camera:x", "camera:-1", "camera:1x"}) {
+    EXPECT_EQ(FrameSource::Open(bad).status().code(), StatusCode::kInvalidArgument) << bad;
+  }
   auto bad = FrameSource::Open((dir / "bad.txt").string());
   ASSERT_TRUE(bad.ok());
   EXPECT_EQ(ExtractSequence(*bad, FeatureOptions{}, false).status().code(), StatusCode::kNotFound);

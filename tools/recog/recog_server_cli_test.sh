@@ -110,6 +110,20 @@ assert e[-1]['event']=='summary' and e[-1]['frames']==4 and e[-1]['errors']==0, 
   && pass || fail "stream --json ends with the summary"
 expect_ok "maps stats after streaming" "$recog" maps stats corridor --json "${server[@]}"
 json_check "the map has the 9 frames" "assert d['frames']==9 and d['next_frame_id']==9, d"
+expect_ok "stream the first 2 frames only" "$recog" stream --map corridor --images "$images" \
+  --frames 2 -q "${server[@]}"
+grep -q "^2 frames, " "$tmp/out" && pass || fail "stream --frames 2: $(cat "$tmp/out")"
+expect_error "stream from a camera that is not there" "NOT_FOUND.*camera 99" "$recog" stream \
+  --map corridor --images camera:99 -q "${server[@]}"
+# Ctrl-C ends a stream (a camera's way to end) cleanly: answers taken, summary printed, exit 0.
+"$recog" stream --map corridor --images "$images" --rate 1 -q "${server[@]}" >"$tmp/out" 2>&1 &
+streamer=$!
+sleep 1.5
+kill -INT "$streamer"
+wait "$streamer"
+code=$?
+if [ "$code" -eq 0 ] && grep -qE "^[1-3] frames, .* 0 errors" "$tmp/out"; then pass
+else fail "SIGINT ends the stream: exit $code, $(cat "$tmp/out")"; fi
 expect_error "query of an unknown map" "NOT_FOUND" "$recog" query --map nowhere "$images/41.jpg" "${server[@]}"
 expect_error "query of a missing image" "NOT_FOUND" "$recog" query --map corridor "$tmp/none.jpg" "${server[@]}"
 

@@ -9,6 +9,7 @@
 //   models   push | pull | list | delete | watch: the object model repository
 #include <algorithm>
 #include <cctype>
+#include <csignal>
 #include <chrono>
 #include <condition_variable>
 #include <cstdio>
@@ -171,8 +172,14 @@ struct StreamArgs {
   ServerFlags server;
   std::string map, images, draw;
   double rate = 0;
+  uint64_t frames = 0;  // 0: every frame of the sequence
   bool features_on_client = false, create = false, timestamps = false, quiet = false;
 };
+
+// Set by SIGINT/SIGTERM while `recog stream` runs: stop reading frames, take the answers of those
+// sent, close the stream and print the summary.
+volatile std::sig_atomic_t stop_streaming = 0;
+void StopStreaming(int) { stop_streaming = 1; }
 
 // Frames sent ahead of their answers: enough to keep the server busy while a frame travels.
 constexpr size_t kFramesInFlight = 4;
@@ -310,7 +317,10 @@ int RunStream(const StreamArgs& args, RecognitionClient& client) {
     progress.Finish();
     Fail("stream", status);
   };
-  while (streaming) {
+  stop_streaming = 0;
+  const auto previous_int = std::signal(SIGINT, StopStreaming);
+  const auto previous_term = std::signal(SIGTERM, StopStreaming);
+  while (streaming && !stop_streaming && (args.frames == 0 || sent.names.size() < args.frames)) {
     cv::Mat gray;
     std::string name;
     StatusOr<bool> more = source->Next(&gray, &name);
@@ -342,6 +352,8 @@ int RunStream(const StreamArgs& args, RecognitionClient& client) {
     answers_until(std::chrono::steady_clock::now());  // those that have come
     while (streaming && pending.size() > kFramesInFlight) take_oldest();
   }
+  std::signal(SIGINT, previous_int);
+  std::signal(SIGTERM, previous_term);
   while (streaming && !pending.empty()) take_oldest();
   const grpc::Status end = (*stream)->Close();
   progress.Finish();
@@ -611,10 +623,16 @@ void AddServerCommands(CLI::App& app, int* exit_code) {
       "as raw grey pixels. Frames are numbered as the map numbers them, from 0. --json prints one "
       "object per line: {\"event\": \"loop\", ...} per loop, then {\"event\": \"summary\", ...}. "
       "A frame that fails on its own is reported and the stream goes on; the exit status is then "
-      "1.");
+      "1. Ctrl-C (SIGINT) or SIGTERM stops reading frames: the answers of those sent are taken, "
+      "the stream is closed and the summary printed (how a camera stream ends).");
   stream->add_option("--map", stream_args->map, "Map name")->required();
-  stream->add_option("--images", stream_args->images, "Folder of frames, a list file, or a video")
+  stream
+      ->add_option("--images", stream_args->images,
+                   "Folder of frames, a list file, a video, or camera:N for the live camera "
+                   "/dev/videoN")
       ->required();
+  stream->add_option("--frames", stream_args->frames, "Stop after this many frames (0: all)")
+      ->capture_default_str();
   stream
       ->add_option("--rate", stream_args->rate,
                    "Frames per second to send (0: as fast as the "
