@@ -15,6 +15,7 @@ namespace recog::client::testing {
 
 using recog::server::testing::CorridorJpeg;
 using recog::server::testing::JpegFrame;
+using recog::server::testing::PosterView;
 using recog::server::testing::ReadFileBytes;
 
 class ClientFixture : public recog::server::testing::ServerFixture {

@@ -12,53 +12,18 @@
 #include "client/cpp/client_test_fixture.h"
 #include "client/cpp/frame_stream.h"
 #include "client/cpp/sha256.h"
-#include "core/object/model_builder.h"
-#include "core/object/model_file.h"
 #include "proto/sha256.h"
+#include "tests/testing/model_files.h"
 #include "tests/testing/tcp_proxy.h"
-#include "tests/testing/vocabularies.h"
 
 namespace recog::client::testing {
 namespace {
 
-// An object model file (.robj) built as in tests/server/repository_service_test.cc: a planar
-// poster (0.64 x 0.48 m) of corridor image `images[0]`, or, with more images, a box whose front,
-// back, left and right faces show them.
-std::string ModelFile(const std::string& name, const std::vector<int>& images,
-                      const std::string& object_class) {
-  ModelBuilder builder(recog::testing::BundledObjectVocabulary());
-  std::vector<FaceImage> faces;
-  const BoxSide sides[] = {BoxSide::kFront, BoxSide::kBack, BoxSide::kLeft, BoxSide::kRight};
-  for (size_t i = 0; i < images.size() && i < 4; ++i) {
-    faces.push_back({sides[i], cv::imread(recog::testing::ProjectTestData(
-                                              "corridor/" + std::to_string(images[i]) + ".jpg"),
-                                          cv::IMREAD_GRAYSCALE)});
-  }
-  auto model = builder.FromFaceImages(name, faces, 0.64, 0.48, images.size() > 1 ? 0.64 : 0.0);
-  EXPECT_TRUE(model.ok()) << model.status().ToString();
-  model.value().metadata.object_class = object_class;
-  auto bytes = EncodeObjectModel(model.value());
-  EXPECT_TRUE(bytes.ok());
-  return bytes.value();
-}
-
-std::string PosterModelFile(const std::string& name, int n, const std::string& object_class) {
-  return ModelFile(name, {n}, object_class);
-}
+using recog::testing::ModelFile;
+using recog::testing::PosterModelFile;
 
 // A model file of several 256 KiB chunks.
 std::string BoxModelFile() { return ModelFile("crate", {1, 20, 41, 60}, "box"); }
-
-// Corridor image `n` seen straight on, with intrinsics.
-pb::Frame PosterView(int n) {
-  pb::Frame frame = JpegFrame(CorridorJpeg(n));
-  pb::CameraIntrinsics* k = frame.mutable_intrinsics();
-  k->set_fx(500);
-  k->set_fy(500);
-  k->set_cx(256);
-  k->set_cy(192);
-  return frame;
-}
 
 void WriteFile(const std::string& path, const std::string& bytes) {
   std::ofstream(path, std::ios::binary) << bytes;

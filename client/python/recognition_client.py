@@ -135,6 +135,16 @@ class RecognitionClient:
         """Runs a unary call with the client's deadline and credentials."""
         return method(request, timeout=self._timeout, metadata=self._metadata)
 
+    def _all_pages(self, method, request, field: str) -> list:
+        """Runs a paged listing call until its last page; returns the items of ``field``."""
+        items = []
+        while True:
+            response = self._call(method, request)
+            items.extend(getattr(response, field))
+            if not response.next_page_token:
+                return items
+            request.page_token = response.next_page_token
+
     # Place recognition.
 
     def create_map(self, name: str, settings: place_pb2.MapSettings | Mapping | None = None
@@ -154,14 +164,8 @@ class RecognitionClient:
 
     def list_maps(self, page_size: int = 0) -> list[place_pb2.MapInfo]:
         """Returns every map, by name, reading all pages (``page_size`` 0: the server's)."""
-        maps = []
         request = place_pb2.ListMapsRequest(page_size=page_size)
-        while True:
-            response = self._call(self._places.ListMaps, request)
-            maps.extend(response.maps)
-            if not response.next_page_token:
-                return maps
-            request.page_token = response.next_page_token
+        return self._all_pages(self._places.ListMaps, request, "maps")
 
     def delete_map(self, name: str) -> int:
         """Deletes a map and its frames; returns how many frames it had."""
@@ -286,15 +290,9 @@ class RecognitionClient:
     def list_models(self, name_prefix: str = "", object_class: str = "", tag: str = ""
                     ) -> list[repository_pb2.ModelInfo]:
         """Returns the latest version of every model passing the filters (empty: any), by name."""
-        models = []
         request = repository_pb2.ListModelsRequest(name_prefix=name_prefix,
                                                    object_class=object_class, tag=tag)
-        while True:
-            response = self._call(self._repository.ListModels, request)
-            models.extend(response.models)
-            if not response.next_page_token:
-                return models
-            request.page_token = response.next_page_token
+        return self._all_pages(self._repository.ListModels, request, "models")
 
     def delete_model(self, name: str) -> int:
         """Deletes every version of a model; returns how many there were."""

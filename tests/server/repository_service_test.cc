@@ -6,28 +6,14 @@
 
 #include <opencv2/imgcodecs.hpp>
 
-#include "core/object/model_builder.h"
-#include "core/object/model_file.h"
 #include "proto/sha256.h"
 #include "tests/server/server_fixture.h"
-#include "tests/testing/vocabularies.h"
+#include "tests/testing/model_files.h"
 
 namespace recog::server::testing {
 namespace {
 
-// A planar poster model (0.64 x 0.48 m) of corridor image `n`, as a .robj file.
-std::string PosterModelFile(const std::string& name, int n, const std::string& object_class) {
-  ModelBuilder builder(recog::testing::BundledObjectVocabulary());
-  const cv::Mat image =
-      cv::imread(recog::testing::ProjectTestData("corridor/" + std::to_string(n) + ".jpg"),
-                 cv::IMREAD_GRAYSCALE);
-  auto model = builder.FromFaceImages(name, {{BoxSide::kFront, image}}, 0.64, 0.48);
-  EXPECT_TRUE(model.ok()) << model.status().ToString();
-  model.value().metadata.object_class = object_class;
-  auto bytes = EncodeObjectModel(model.value());
-  EXPECT_TRUE(bytes.ok());
-  return bytes.value();
-}
+using recog::testing::PosterModelFile;
 
 class RepositoryServiceTest : public ServerFixture {
  protected:
@@ -134,17 +120,6 @@ class RepositoryServiceTest : public ServerFixture {
     *request.mutable_frame() = frame;
     *request.mutable_filter() = filter;
     return objects_->RecognizeObjects(Context().get(), request, response);
-  }
-
-  // Corridor image `n` seen straight on, with intrinsics.
-  static pb::Frame PosterView(int n) {
-    pb::Frame frame = JpegFrame(CorridorJpeg(n));
-    pb::CameraIntrinsics* k = frame.mutable_intrinsics();
-    k->set_fx(500);
-    k->set_fy(500);
-    k->set_cx(256);
-    k->set_cy(192);
-    return frame;
   }
 };
 

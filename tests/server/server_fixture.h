@@ -42,6 +42,17 @@ inline pb::Frame JpegFrame(const std::string& jpeg, double timestamp = 0) {
   return frame;
 }
 
+// Corridor image `n` seen straight on, with intrinsics (for object recognition).
+inline pb::Frame PosterView(int n) {
+  pb::Frame frame = JpegFrame(CorridorJpeg(n));
+  pb::CameraIntrinsics* k = frame.mutable_intrinsics();
+  k->set_fx(500);
+  k->set_fy(500);
+  k->set_cx(256);
+  k->set_cy(192);
+  return frame;
+}
+
 class ServerFixture : public ::testing::Test {
  protected:
   ServerFixture() : data_dir_("server") {

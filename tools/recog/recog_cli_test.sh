@@ -6,25 +6,8 @@ recog=$1
 project=$2
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
-failures=0
-checks=0
-
-pass() { checks=$((checks + 1)); }
-fail() { checks=$((checks + 1)); failures=$((failures + 1)); echo "FAIL: $*"; }
-
-# expect_ok DESCRIPTION CMD...: the command exits 0.
-expect_ok() {
-  local what=$1; shift
-  if "$@" >"$tmp/out" 2>"$tmp/err"; then pass; else fail "$what (exit $?): $(cat "$tmp/err")"; fi
-}
-# expect_error DESCRIPTION PATTERN CMD...: exits non-zero with exactly one stderr line matching.
-expect_error() {
-  local what=$1 pattern=$2; shift 2
-  if "$@" >"$tmp/out" 2>"$tmp/err"; then fail "$what: exited 0"; return; fi
-  local lines; lines=$(wc -l <"$tmp/err")
-  if [ "$lines" -ne 1 ]; then fail "$what: expected one error line, got $lines: $(cat "$tmp/err")"; return; fi
-  if grep -q -- "$pattern" "$tmp/err"; then pass; else fail "$what: '$(cat "$tmp/err")' lacks '$pattern'"; fi
-}
+# shellcheck source=cli_test_lib.sh
+source "$(dirname "$0")/cli_test_lib.sh"
 
 images=$project/tests/data/corridor
 
@@ -33,8 +16,8 @@ for sub in "vocab train" "vocab info" "vocab convert" "bow" "demo"; do
   # shellcheck disable=SC2086
   expect_ok "help of $sub" "$recog" $sub --help
 done
-expect_error "unknown subcommand" "recog" "$recog" frobnicate
-expect_error "train without images" "images" "$recog" vocab train -o "$tmp/v.rvoc"
+expect_usage_error "unknown subcommand" "recog" "$recog" frobnicate
+expect_usage_error "train without images" "images" "$recog" vocab train -o "$tmp/v.rvoc"
 expect_error "train on a missing folder" "NOT_FOUND" "$recog" vocab train --images "$tmp/none" -o "$tmp/v.rvoc"
 expect_error "train with k=1" "INVALID_ARGUMENT" "$recog" vocab train --images "$images" --k 1 -o "$tmp/v.rvoc"
 
@@ -199,5 +182,4 @@ expect_error "load without --frames or --duration" "INVALID_ARGUMENT" "$recog" l
 expect_error "load of a missing folder" "NOT_FOUND" "$recog" load --sequences "$tmp/none" \
   --robots 1 --frames 1
 
-echo "$((checks - failures)) passed, $failures failed"
-[ "$failures" -eq 0 ]
+report_and_exit

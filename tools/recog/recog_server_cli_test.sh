@@ -16,40 +16,8 @@ cleanup() {
   rm -rf "$tmp"
 }
 trap cleanup EXIT
-failures=0
-checks=0
-
-pass() { checks=$((checks + 1)); }
-fail() { checks=$((checks + 1)); failures=$((failures + 1)); echo "FAIL: $*"; }
-
-# expect_ok DESCRIPTION CMD...: the command exits 0.
-expect_ok() {
-  local what=$1; shift
-  if "$@" >"$tmp/out" 2>"$tmp/err"; then pass; else fail "$what (exit $?): $(cat "$tmp/err")"; fi
-}
-# expect_error DESCRIPTION PATTERN CMD...: exits 1 with exactly one stderr line matching.
-expect_error() {
-  local what=$1 pattern=$2; shift 2
-  "$@" >"$tmp/out" 2>"$tmp/err"
-  local code=$?
-  if [ "$code" -ne 1 ]; then fail "$what: exit $code, expected 1"; return; fi
-  local lines; lines=$(wc -l <"$tmp/err")
-  if [ "$lines" -ne 1 ]; then fail "$what: expected one error line, got $lines: $(cat "$tmp/err")"; return; fi
-  if grep -q -- "$pattern" "$tmp/err"; then pass; else fail "$what: '$(cat "$tmp/err")' lacks '$pattern'"; fi
-}
-# expect_usage_error DESCRIPTION PATTERN CMD...: refused by the command line parser: a non-zero
-# exit (CLI11's code) and one stderr line matching.
-expect_usage_error() {
-  local what=$1 pattern=$2; shift 2
-  if "$@" >"$tmp/out" 2>"$tmp/err"; then fail "$what: exited 0"; return; fi
-  local lines; lines=$(wc -l <"$tmp/err")
-  if [ "$lines" -ne 1 ]; then fail "$what: expected one error line, got $lines: $(cat "$tmp/err")"; return; fi
-  if grep -q -- "$pattern" "$tmp/err"; then pass; else fail "$what: '$(cat "$tmp/err")' lacks '$pattern'"; fi
-}
-# json_check DESCRIPTION PYTHON: runs PYTHON with `d`, the JSON document in $tmp/out.
-json_check() {
-  /usr/bin/python3 -c "import json; d=json.load(open('$tmp/out')); $2" && pass || fail "$1"
-}
+# shellcheck source=cli_test_lib.sh
+source "$(dirname "$0")/cli_test_lib.sh"
 
 images=$project/tests/data/corridor
 port=$(/usr/bin/python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])')
@@ -198,5 +166,4 @@ code=$?
 server_pid=
 [ "$code" -eq 0 ] && pass || fail "recogd exits 0 on SIGTERM (exit $code): $(tail -5 "$tmp/recogd.log")"
 
-echo "$((checks - failures)) passed, $failures failed"
-[ "$failures" -eq 0 ]
+report_and_exit

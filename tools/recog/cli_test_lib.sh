@@ -1,0 +1,48 @@
+# Checks shared by the shell tests of the recog binary (recog_cli_test.sh,
+# recog_server_cli_test.sh); sourced, not run. The test sets `tmp` (a scratch folder) first; each
+# check writes the command's stdout to $tmp/out and its stderr to $tmp/err, and counts itself in
+# `checks` and, when it fails, in `failures`. report_and_exit prints the counts and exits 1 when a
+# check failed.
+failures=0
+checks=0
+
+pass() { checks=$((checks + 1)); }
+fail() { checks=$((checks + 1)); failures=$((failures + 1)); echo "FAIL: $*"; }
+
+# expect_ok DESCRIPTION CMD...: the command exits 0.
+expect_ok() {
+  local what=$1; shift
+  if "$@" >"$tmp/out" 2>"$tmp/err"; then pass; else fail "$what (exit $?): $(cat "$tmp/err")"; fi
+}
+# expect_error DESCRIPTION PATTERN CMD...: refused by the command itself: exit status 1 and
+# exactly one stderr line, matching PATTERN.
+expect_error() {
+  local what=$1 pattern=$2; shift 2
+  "$@" >"$tmp/out" 2>"$tmp/err"
+  local code=$?
+  if [ "$code" -ne 1 ]; then fail "$what: exit $code, expected 1"; return; fi
+  one_error_line "$what" "$pattern"
+}
+# expect_usage_error DESCRIPTION PATTERN CMD...: refused by the command line parser: a non-zero
+# exit (CLI11's code) and exactly one stderr line, matching PATTERN.
+expect_usage_error() {
+  local what=$1 pattern=$2; shift 2
+  if "$@" >"$tmp/out" 2>"$tmp/err"; then fail "$what: exited 0"; return; fi
+  one_error_line "$what" "$pattern"
+}
+one_error_line() {
+  local what=$1 pattern=$2
+  local lines; lines=$(wc -l <"$tmp/err")
+  if [ "$lines" -ne 1 ]; then fail "$what: expected one error line, got $lines: $(cat "$tmp/err")"; return; fi
+  if grep -q -- "$pattern" "$tmp/err"; then pass; else fail "$what: '$(cat "$tmp/err")' lacks '$pattern'"; fi
+}
+# json_check DESCRIPTION PYTHON: runs PYTHON with `d`, the JSON document in $tmp/out.
+json_check() {
+  /usr/bin/python3 -c "import json; d=json.load(open('$tmp/out')); $2" && pass || fail "$1"
+}
+
+report_and_exit() {
+  echo "$((checks - failures)) passed, $failures failed"
+  [ "$failures" -eq 0 ]
+  exit
+}
