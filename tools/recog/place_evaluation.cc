@@ -32,7 +32,8 @@ StatusOr<FrameSource> FrameSource::Open(const std::string& spec) {
     const std::string_view digits = std::string_view(spec).substr(kCameraPrefix.size());
     int index = -1;
     const auto [end, error] = std::from_chars(digits.data(), digits.data() + digits.size(), index);
-    if (digits.empty() || error != std::errc() || end != digits.data() + digits.size() || index < 0) {
+    if (digits.empty() || error != std::errc() || end != digits.data() + digits.size() ||
+        index < 0) {
       return Status::InvalidArgument("'" + spec + "': a camera is camera:N, N >= 0 (/dev/videoN)");
     }
     // A missing device is reported below, once, not also by OpenCV's own warning.
