@@ -6,6 +6,5 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/install_deps.sh
-cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE=Release
-cmake --build build -j"$(nproc)"
+RECOG_CMAKE_ARGS="-DCMAKE_BUILD_TYPE=Release" bash scripts/build.sh
 exec build/bin/recogd "$@"

@@ -10,7 +10,6 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 build_dir=${RECOG_BUILD_DIR:-build}
 bash scripts/install_deps.sh
-# shellcheck disable=SC2086
-cmake -S . -B "$build_dir" -G Ninja -DRECOG_WERROR=ON ${RECOG_CMAKE_ARGS:-}
-cmake --build "$build_dir" -j"$(nproc)"
+RECOG_BUILD_DIR=$build_dir RECOG_CMAKE_ARGS="-DRECOG_WERROR=ON ${RECOG_CMAKE_ARGS:-}" \
+  bash scripts/build.sh
 ctest --test-dir "$build_dir" --output-on-failure -j"$(nproc)" --timeout 600

@@ -7,6 +7,7 @@
 #include <mutex>
 #include <sstream>
 
+#include "client/cpp/file_errors.h"
 #include "client/cpp/recognition_client.h"
 #include "client/cpp/retry.h"
 #include "client/cpp/sha256.h"
@@ -16,13 +17,9 @@ namespace recog::client {
 namespace {
 
 using internal::CallKind;
+using internal::CannotWrite;
 
 constexpr size_t kChunkBytes = 256u << 10;
-
-grpc::Status CannotWrite(const std::string& path, const std::string& why = {}) {
-  return {grpc::StatusCode::FAILED_PRECONDITION,
-          "cannot write '" + path + "'" + (why.empty() ? "" : ": " + why)};
-}
 
 // OK when the file at `path` has the size and SHA-256 of `info`; DATA_LOSS otherwise.
 grpc::Status Verify(const std::string& path, const pb::ModelInfo& info) {

@@ -113,7 +113,9 @@ RecognitionClient::RecognitionClient(const ClientOptions& options, std::string t
       channel_(std::move(channel)),
       places_(pb::PlaceRecognition::NewStub(channel_)),
       objects_(pb::ObjectRecognition::NewStub(channel_)),
-      models_(pb::ObjectRepository::NewStub(channel_)) {}
+      models_(pb::ObjectRepository::NewStub(channel_)),
+      admin_(pb::Admin::NewStub(channel_)),
+      health_(grpc::health::v1::Health::NewStub(channel_)) {}
 
 RecognitionClient::~RecognitionClient() = default;
 

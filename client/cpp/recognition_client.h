@@ -10,6 +10,8 @@
 // retries as ClientOptions describes. Errors are grpc::Status values with canonical codes (see
 // result.h); nothing throws.
 //
+// CheckHealth and DownloadCheckpoint serve operators (recog admin).
+//
 // Frame streams are separate objects (FrameStream, ObjectStream in frame_stream.h), opened on a
 // client; they and ModelWatch handles may outlive it.
 //
@@ -37,6 +39,8 @@
 
 #include "client/cpp/client_options.h"
 #include "client/cpp/result.h"
+#include "grpc/health/v1/health.grpc.pb.h"
+#include "recognition/v1/admin.grpc.pb.h"
 #include "recognition/v1/object.grpc.pb.h"
 #include "recognition/v1/place.grpc.pb.h"
 #include "recognition/v1/repository.grpc.pb.h"
@@ -147,6 +151,21 @@ class RecognitionClient {
       const std::string& name_prefix,
       std::function<void(const pb::WatchModelsResponse&)> on_change);
 
+  // --- Operation ---
+
+  // The server's health (grpc.health.v1 Check of the whole server): SERVING once its store is
+  // open, NOT_SERVING while it opens or drains. One attempt, the unary deadline, no retries
+  // (a probe); UNAVAILABLE when nothing answers.
+  Result<grpc::health::v1::HealthCheckResponse::ServingStatus> CheckHealth();
+  // An online checkpoint of the server's whole store (Admin.Checkpoint), written to the new
+  // directory `directory` (ALREADY_EXISTS when it exists): the files arrive in `<directory>.part`,
+  // are checked against the manifest's sizes, synced, and the folder is renamed into place, so
+  // `directory` is either a whole checkpoint or absent. `progress(bytes, total)` (optional) is
+  // called as bytes arrive. Returns the manifest. Retried from the start on UNAVAILABLE; the
+  // transfer deadline applies.
+  Result<pb::CheckpointManifest> DownloadCheckpoint(
+      const std::string& directory, const std::function<void(uint64_t, uint64_t)>& progress = {});
+
  private:
   template <class Rpc>
   friend class BasicFrameStream;
@@ -175,6 +194,8 @@ class RecognitionClient {
   const std::unique_ptr<pb::PlaceRecognition::Stub> places_;
   const std::unique_ptr<pb::ObjectRecognition::Stub> objects_;
   const std::unique_ptr<pb::ObjectRepository::Stub> models_;
+  const std::unique_ptr<pb::Admin::Stub> admin_;
+  const std::unique_ptr<grpc::health::v1::Health::Stub> health_;
 };
 
 }  // namespace recog::client

@@ -10,6 +10,7 @@
 
 #include "core/vocabulary/vocabulary_io.h"
 #include "proto/sha256.h"
+#include "server/services/admin_service.h"
 #include "server/services/object_service.h"
 #include "server/services/place_service.h"
 #include "server/services/repository_service.h"
@@ -76,6 +77,7 @@ StatusOr<std::unique_ptr<RecognitionServer>> RecognitionServer::Start(const Serv
   server->place_service_ = std::make_unique<PlaceService>(&state);
   server->object_service_ = std::make_unique<ObjectService>(&state);
   server->repository_service_ = std::make_unique<RepositoryService>(&state);
+  server->admin_service_ = std::make_unique<AdminService>(&state);
 
   grpc::EnableDefaultHealthCheckService(true);
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();
@@ -93,6 +95,7 @@ StatusOr<std::unique_ptr<RecognitionServer>> RecognitionServer::Start(const Serv
   builder.RegisterService(server->place_service_.get());
   builder.RegisterService(server->object_service_.get());
   builder.RegisterService(server->repository_service_.get());
+  builder.RegisterService(server->admin_service_.get());
   server->server_ = builder.BuildAndStart();
   if (server->server_ == nullptr || server->port_ == 0) {
     server->server_.reset();
@@ -119,6 +122,8 @@ Status RecognitionServer::Open() {
     return Status::FailedPrecondition("cannot create the data directory '" + config.data_dir +
                                       "': " + error.message());
   }
+  // Checkpoints left by a server that died while streaming one (AdminService) are of no use.
+  std::filesystem::remove_all(std::filesystem::path(config.data_dir) / "checkpoints", error);
   RocksDbStoreOptions store_options;
   store_options.sync =
       config.store.sync == StoreSync::kEveryWrite ? SyncPolicy::kEveryWrite : SyncPolicy::kGrouped;

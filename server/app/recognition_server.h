@@ -29,6 +29,7 @@ struct ServerState;
 class PlaceService;
 class ObjectService;
 class RepositoryService;
+class AdminService;
 
 class RecognitionServer {
  public:
@@ -55,6 +56,7 @@ class RecognitionServer {
   std::unique_ptr<PlaceService> place_service_;
   std::unique_ptr<ObjectService> object_service_;
   std::unique_ptr<RepositoryService> repository_service_;
+  std::unique_ptr<AdminService> admin_service_;
   std::unique_ptr<grpc::Server> server_;
   int port_ = 0;
   std::once_flag shutdown_once_;

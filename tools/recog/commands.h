@@ -16,7 +16,7 @@ void AddObjectCommands(CLI::App& app, int* exit_code);  // model build|info, rec
 // model export; call after AddObjectCommands, which adds "model".
 void AddModelExportCommand(CLI::App& app, int* exit_code);
 void AddEvalObjectsCommand(CLI::App& eval, int* exit_code);
-void AddServerCommands(CLI::App& app, int* exit_code);  // stream, query, maps, models
+void AddServerCommands(CLI::App& app, int* exit_code);  // stream, query, maps, models, admin
 void AddLoadCommand(CLI::App& app, int* exit_code);     // load (load_generator.h)
 
 }  // namespace recog::cli

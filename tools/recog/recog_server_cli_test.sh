@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# End-to-end test of the recog subcommands that use recogd (stream, query, maps, models,
+# End-to-end test of the recog subcommands that use recogd (stream, query, maps, models, admin,
 # recognize --server) against a real recogd on a free port with a temporary data directory: their
 # results, their one-line errors and exit statuses, and the server's clean exit on SIGTERM. With
 # the shared data ($RECOG_SHARED_DATA/places/corridor), `recog stream` must find exactly the loops
@@ -11,8 +11,10 @@ recogd=$2
 project=$3
 tmp=$(mktemp -d)
 server_pid=
+restored_pid=
 cleanup() {
   [ -n "$server_pid" ] && kill -KILL "$server_pid" 2>/dev/null
+  [ -n "$restored_pid" ] && kill -KILL "$restored_pid" 2>/dev/null
   rm -rf "$tmp"
 }
 trap cleanup EXIT
@@ -156,6 +158,41 @@ assert events[-1]['frames'] == 84 and evaluated and streamed == evaluated, (stre
 else
   echo "skipping the shared corridor: $shared/places/corridor/images not found (set RECOG_SHARED_DATA)"
 fi
+
+# Operation: health, and an online checkpoint restored into a second server.
+expect_ok "admin health" "$recog" admin health "${server[@]}"
+grep -q "^SERVING" "$tmp/out" && pass || fail "admin health prints SERVING: $(cat "$tmp/out")"
+"$recog" maps list --json "${server[@]}" >"$tmp/maps.json"
+"$recog" models list --json "${server[@]}" >"$tmp/models.json"
+expect_ok "admin checkpoint" "$recog" admin checkpoint --to "$tmp/backup" -q --json "${server[@]}"
+json_check "admin checkpoint reports the maps and models" "assert d['maps']>=1 and d['models']>=1 and d['bytes']>0, d"
+expect_error "admin checkpoint to an existing folder" "ALREADY_EXISTS" "$recog" admin checkpoint \
+  --to "$tmp/backup" -q "${server[@]}"
+expect_ok "admin restore" "$recog" admin restore --from "$tmp/backup" --data-dir "$tmp/restored"
+expect_error "admin restore over a store" "ALREADY_EXISTS" "$recog" admin restore \
+  --from "$tmp/backup" --data-dir "$tmp/restored"
+expect_error "admin restore of a missing checkpoint" "NOT_FOUND" "$recog" admin restore \
+  --from "$tmp/none" --data-dir "$tmp/other"
+port2=$(/usr/bin/python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])')
+"$recogd" --listen "127.0.0.1:$port2" --data-dir "$tmp/restored" --metrics-listen "" --workers 2 \
+  >"$tmp/restored.log" 2>&1 &
+restored_pid=$!
+for _ in $(seq 100); do
+  "$recog" admin health --server "127.0.0.1:$port2" >/dev/null 2>&1 && break
+  sleep 0.1
+done
+"$recog" maps list --json --server "127.0.0.1:$port2" >"$tmp/maps2.json"
+"$recog" models list --json --server "127.0.0.1:$port2" >"$tmp/models2.json"
+/usr/bin/python3 -c "
+import json
+def load(p): return json.load(open(p))
+assert load('$tmp/maps.json') == load('$tmp/maps2.json'), 'maps differ'
+assert load('$tmp/models.json') == load('$tmp/models2.json'), 'models differ'
+assert load('$tmp/maps.json') and load('$tmp/models.json')" \
+  && pass || fail "the restored server has every map and model: $(cat "$tmp/restored.log" | tail -3)"
+kill -TERM "$restored_pid"
+wait "$restored_pid" && pass || fail "the restored server exits 0 on SIGTERM"
+restored_pid=
 
 # A server that is not there, then the server's exit on SIGTERM.
 closed=$(/usr/bin/python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])')

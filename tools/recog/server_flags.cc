@@ -21,6 +21,7 @@ client::Result<std::unique_ptr<client::RecognitionClient>> ServerFlags::Connect(
   options.tls.ca_file = tls_ca;
   options.tls.cert_file = tls_cert;
   options.tls.key_file = tls_key;
+  if (timeout_ms > 0) options.deadline = std::chrono::milliseconds(timeout_ms);
   return client::RecognitionClient::Connect(options);
 }
 

@@ -22,6 +22,9 @@ struct ServerFlags {
   std::string token_file;
   std::string tls_ca, tls_cert, tls_key;
   bool json = false;
+  // Default 0: the client's deadline of unary calls (ClientOptions::deadline). Not a flag of
+  // every command (recog admin health adds --timeout-ms).
+  uint32_t timeout_ms = 0;
 
   // Adds the flags above to `command`, bound to this object (which must outlive it).
   void AddTo(CLI::App* command);

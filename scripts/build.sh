@@ -1,0 +1,15 @@
+#!/usr/bin/env bash
+# Configures and builds the project with CMake and Ninja: the one build command of scripts/run.sh,
+# scripts/test.sh (and so CI) and deploy/docker/Dockerfile. Expects the dependencies to be
+# installed (scripts/install_deps.sh).
+#
+# Environment:
+#   RECOG_BUILD_DIR   build folder (default: build)
+#   RECOG_CMAKE_ARGS  extra CMake arguments (default: none)
+#   RECOG_JOBS        parallel compile jobs (default: the number of processors)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+build_dir=${RECOG_BUILD_DIR:-build}
+# shellcheck disable=SC2086
+cmake -S . -B "$build_dir" -G Ninja ${RECOG_CMAKE_ARGS:-}
+cmake --build "$build_dir" -j"${RECOG_JOBS:-$(nproc)}"
