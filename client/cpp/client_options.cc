@@ -1,6 +1,7 @@
 #include "client/cpp/client_options.h"
 
 #include <algorithm>
+#include <cctype>
 
 namespace recog::client {
 namespace {
@@ -64,6 +65,10 @@ grpc::Status ClientOptions::Validate() const {
   if (!VisibleAscii(token)) {
     return Invalid("token must consist of visible ASCII characters (no spaces)");
   }
+  const bool shard_ok = shard.size() <= 64 && std::all_of(shard.begin(), shard.end(), [](char c) {
+                          return std::isalnum(static_cast<unsigned char>(c)) || c == '_';
+                        });
+  if (!shard_ok) return Invalid("shard must have at most 64 characters of [A-Za-z0-9_]");
   if (deadline.count() < 1) {
     return Invalid("deadline must be at least 1 ms, got " + std::to_string(deadline.count()));
   }

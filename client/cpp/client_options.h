@@ -87,6 +87,10 @@ struct ClientOptions {
   // further Send is answered at once with RESOURCE_EXHAUSTED (the frame is not sent), so that a
   // camera faster than the server drops frames instead of queueing them. 1 to 1024.
   uint32_t max_frames_in_flight = 32;
+  // Default "": behind a router of sharded servers (deploy/nginx/), the shard that calls without
+  // a place map go to (ListMaps); sent as the `x-recog-shard` header. Calls about a map are
+  // routed by their map (`x-recog-map`, always sent). 1 to 64 characters of [A-Za-z0-9_].
+  std::string shard;
 
   // INVALID_ARGUMENT naming the first bad field. Does not read any file.
   grpc::Status Validate() const;

@@ -52,6 +52,7 @@ TEST(ClientOptionsTest, EachBadFieldIsRefusedByName) {
       {"retry.jitter", [](ClientOptions& o) { o.retry.jitter = 1.5; }},
       {"max_message_bytes", [](ClientOptions& o) { o.max_message_bytes = 1000; }},
       {"max_frames_in_flight", [](ClientOptions& o) { o.max_frames_in_flight = 0; }},
+      {"shard", [](ClientOptions& o) { o.shard = "shard-a"; }},
   };
   for (const auto& [field, spoil] : cases) {
     ClientOptions options;

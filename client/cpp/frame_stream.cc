@@ -3,6 +3,7 @@
 #include <type_traits>
 
 #include "client/cpp/ordered_stream.h"
+#include "proto/routing.h"
 
 namespace recog::client {
 namespace {
@@ -42,6 +43,9 @@ Result<std::unique_ptr<BasicFrameStream<Rpc>>> BasicFrameStream<Rpc>::Open(
   std::unique_ptr<BasicFrameStream> stream(new BasicFrameStream(
       Rpc::Service::NewStub(client.channel_), client.options_.max_frames_in_flight));
   client.PrepareContext(stream->stream_->context(), nullptr);
+  if constexpr (std::is_same_v<Rpc, internal::PlaceStreamRpc>) {
+    stream->stream_->context().AddMetadata(kMapHeader, config.map());
+  }
   auto first = std::make_shared<typename Rpc::Request>();
   *first->mutable_config() = config;
   typename Rpc::Service::Stub* stub = stream->stub_.get();

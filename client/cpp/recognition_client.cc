@@ -9,6 +9,7 @@
 #include <spdlog/spdlog.h>
 
 #include "client/cpp/retry.h"
+#include "proto/routing.h"
 
 namespace recog::client {
 namespace {
@@ -76,6 +77,15 @@ std::function<grpc::Status(grpc::ClientContext&)> UnaryAttempt(
   };
 }
 
+// The attempt of a call about place map `map`: the routing header first (proto/routing.h).
+std::function<grpc::Status(grpc::ClientContext&)> ForMap(
+    const std::string& map, std::function<grpc::Status(grpc::ClientContext&)> attempt) {
+  return [map, attempt = std::move(attempt)](grpc::ClientContext& context) {
+    context.AddMetadata(kMapHeader, map);
+    return attempt(context);
+  };
+}
+
 }  // namespace
 
 Result<std::unique_ptr<RecognitionClient>> RecognitionClient::Connect(
@@ -123,6 +133,7 @@ void RecognitionClient::PrepareContext(grpc::ClientContext& context,
                                        const Deadline* deadline) const {
   if (deadline != nullptr) context.set_deadline(*deadline);
   if (!token_.empty()) context.AddMetadata("authorization", "Bearer " + token_);
+  if (!options_.shard.empty()) context.AddMetadata(kShardHeader, options_.shard);
 }
 
 RecognitionClient::Deadline RecognitionClient::UnaryDeadline() const {
@@ -197,7 +208,8 @@ Result<pb::MapInfo> RecognitionClient::CreateMap(const std::string& name,
   pb::CreateMapResponse response;
   const grpc::Status status =
       Run(CallKind::kChanging, UnaryDeadline(),
-          UnaryAttempt(places_.get(), &pb::PlaceRecognition::Stub::CreateMap, request, &response));
+          ForMap(request.name(), UnaryAttempt(places_.get(), &pb::PlaceRecognition::Stub::CreateMap,
+                                              request, &response)));
   if (!status.ok()) return status;
   return std::move(*response.mutable_map());
 }
@@ -206,9 +218,10 @@ Result<pb::MapInfo> RecognitionClient::GetMap(const std::string& name) {
   pb::GetMapRequest request;
   request.set_name(name);
   pb::GetMapResponse response;
-  const grpc::Status status =
-      Run(CallKind::kRepeatable, UnaryDeadline(),
-          UnaryAttempt(places_.get(), &pb::PlaceRecognition::Stub::GetMap, request, &response));
+  const grpc::Status status = Run(
+      CallKind::kRepeatable, UnaryDeadline(),
+      ForMap(request.name(),
+             UnaryAttempt(places_.get(), &pb::PlaceRecognition::Stub::GetMap, request, &response)));
   if (!status.ok()) return status;
   return std::move(*response.mutable_map());
 }
@@ -234,7 +247,8 @@ Result<uint64_t> RecognitionClient::DeleteMap(const std::string& name) {
   pb::DeleteMapResponse response;
   const grpc::Status status =
       Run(CallKind::kChanging, UnaryDeadline(),
-          UnaryAttempt(places_.get(), &pb::PlaceRecognition::Stub::DeleteMap, request, &response));
+          ForMap(request.name(), UnaryAttempt(places_.get(), &pb::PlaceRecognition::Stub::DeleteMap,
+                                              request, &response)));
   if (!status.ok()) return status;
   return response.frames_deleted();
 }
@@ -247,7 +261,8 @@ Result<pb::AddFrameResponse> RecognitionClient::AddFrame(const std::string& map,
   pb::AddFrameResponse response;
   const grpc::Status status =
       Run(CallKind::kChanging, UnaryDeadline(),
-          UnaryAttempt(places_.get(), &pb::PlaceRecognition::Stub::AddFrame, request, &response));
+          ForMap(request.map(), UnaryAttempt(places_.get(), &pb::PlaceRecognition::Stub::AddFrame,
+                                             request, &response)));
   if (!status.ok()) return status;
   return response;
 }
@@ -263,7 +278,8 @@ Result<pb::QueryPlaceResponse> RecognitionClient::QueryPlace(
   pb::QueryPlaceResponse response;
   const grpc::Status status = Run(
       mode == QueryMode::kAddFrame ? CallKind::kChanging : CallKind::kRepeatable, UnaryDeadline(),
-      UnaryAttempt(places_.get(), &pb::PlaceRecognition::Stub::QueryPlace, request, &response));
+      ForMap(request.map(), UnaryAttempt(places_.get(), &pb::PlaceRecognition::Stub::QueryPlace,
+                                         request, &response)));
   if (!status.ok()) return status;
   return response;
 }

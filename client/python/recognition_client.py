@@ -34,6 +34,8 @@ from recognition.v1 import (common_pb2, object_pb2, object_pb2_grpc, place_pb2, 
 
 #: Size of the chunks :meth:`RecognitionClient.upload_model` sends.
 UPLOAD_CHUNK_BYTES = 1 << 20
+#: The metadata header that names a call's place map for a router of shards (proto/routing.h).
+MAP_HEADER = "x-recog-map"
 
 Image = bytes | str | os.PathLike | common_pb2.Frame
 
@@ -131,9 +133,14 @@ class RecognitionClient:
         """Closes the client."""
         self.close()
 
-    def _call(self, method, request):
-        """Runs a unary call with the client's deadline and credentials."""
-        return method(request, timeout=self._timeout, metadata=self._metadata)
+    def _call(self, method, request, map_name: str | None = None):
+        """Runs a unary call with the client's deadline and credentials; a call about a place map
+        also carries the map in ``x-recog-map``, by which a router of shards places it."""
+        return method(request, timeout=self._timeout, metadata=self._with_map(map_name))
+
+    def _with_map(self, map_name: str | None) -> tuple:
+        """The call metadata: credentials, and the routing header of a call about a map."""
+        return self._metadata + ((MAP_HEADER, map_name),) if map_name else self._metadata
 
     def _all_pages(self, method, request, field: str) -> list:
         """Runs a paged listing call until its last page; returns the items of ``field``."""
@@ -156,11 +163,11 @@ class RecognitionClient:
         defaults. ``ALREADY_EXISTS`` when the name is taken.
         """
         request = place_pb2.CreateMapRequest(name=name, settings=_map_settings(settings))
-        return self._call(self._places.CreateMap, request).map
+        return self._call(self._places.CreateMap, request, name).map
 
     def get_map(self, name: str) -> place_pb2.MapInfo:
         """Returns the description of a map (``NOT_FOUND`` when there is none)."""
-        return self._call(self._places.GetMap, place_pb2.GetMapRequest(name=name)).map
+        return self._call(self._places.GetMap, place_pb2.GetMapRequest(name=name), name).map
 
     def list_maps(self, page_size: int = 0) -> list[place_pb2.MapInfo]:
         """Returns every map, by name, reading all pages (``page_size`` 0: the server's)."""
@@ -169,7 +176,8 @@ class RecognitionClient:
 
     def delete_map(self, name: str) -> int:
         """Deletes a map and its frames; returns how many frames it had."""
-        response = self._call(self._places.DeleteMap, place_pb2.DeleteMapRequest(name=name))
+        response = self._call(self._places.DeleteMap, place_pb2.DeleteMapRequest(name=name),
+                              name)
         return response.frames_deleted
 
     def add_frame(self, map_name: str, image: Image, timestamp: float = 0.0
@@ -179,7 +187,7 @@ class RecognitionClient:
         ``timestamp`` (seconds, 0 = unknown) is used when ``image`` is not already a Frame.
         """
         request = place_pb2.AddFrameRequest(map=map_name, frame=_as_frame(image, timestamp))
-        return self._call(self._places.AddFrame, request)
+        return self._call(self._places.AddFrame, request, map_name)
 
     def query_place(self, map_name: str, image: Image, add_frame: bool = False
                     ) -> place_pb2.QueryPlaceResponse:
@@ -190,7 +198,7 @@ class RecognitionClient:
         """
         request = place_pb2.QueryPlaceRequest(map=map_name, frame=_as_frame(image),
                                               add_frame=add_frame)
-        return self._call(self._places.QueryPlace, request)
+        return self._call(self._places.QueryPlace, request, map_name)
 
     def stream_frames(self, map_name: str, frames: Iterable[Image], create_if_missing: bool = True,
                       settings: place_pb2.MapSettings | Mapping | None = None,
@@ -217,7 +225,7 @@ class RecognitionClient:
             for image in frames:
                 yield place_pb2.StreamFramesRequest(frame=_as_frame(image))
 
-        return self._places.StreamFrames(requests(), metadata=self._metadata)
+        return self._places.StreamFrames(requests(), metadata=self._with_map(map_name))
 
     # Object recognition.
 

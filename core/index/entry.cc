@@ -2,7 +2,7 @@
 
 namespace recog {
 
-Status MapConfig::Validate() const {
+Status ValidateMapName(const std::string& name) {
   if (name.empty() || name.size() > 128) {
     return Status::InvalidArgument("map name must have 1 to 128 characters");
   }
@@ -14,6 +14,11 @@ Status MapConfig::Validate() const {
                                      "' may only use letters, digits, '.', '_' and '-'");
     }
   }
+  return Status::Ok();
+}
+
+Status MapConfig::Validate() const {
+  RECOG_RETURN_IF_ERROR(ValidateMapName(name));
   if (vocabulary_checksum == 0 || vocabulary_words == 0 || vocabulary_nodes < vocabulary_words) {
     return Status::InvalidArgument("map '" + name + "' needs its vocabulary's checksum and size");
   }

@@ -52,6 +52,10 @@ struct EntryRecord {
   std::vector<cv::Point3f> points;  // one per keypoint (object entries) or empty (place frames)
 };
 
+// INVALID_ARGUMENT unless `name` has 1 to 128 characters of [A-Za-z0-9._-] (the rule for map
+// names everywhere: stores, the server's placement table).
+Status ValidateMapName(const std::string& name);
+
 // Fixed when a map is created.
 struct MapConfig {
   std::string name;  // 1..128 characters of [A-Za-z0-9._-]

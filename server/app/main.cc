@@ -22,12 +22,13 @@ int main(int argc, char** argv) {
   spdlog::set_level(spdlog::level::from_str(config.log_level));
   spdlog::set_pattern("%Y-%m-%dT%H:%M:%S.%e%z %^%l%$ %v");
 
-  // SIGTERM and SIGINT are taken by this thread with sigwait; every thread started from here on
-  // (gRPC's, the workers) inherits the blocked mask.
+  // SIGTERM, SIGINT and SIGHUP are taken by this thread with sigwait; every thread started from
+  // here on (gRPC's, the workers) inherits the blocked mask.
   sigset_t signals;
   sigemptyset(&signals);
   sigaddset(&signals, SIGTERM);
   sigaddset(&signals, SIGINT);
+  sigaddset(&signals, SIGHUP);
   pthread_sigmask(SIG_BLOCK, &signals, nullptr);
 
   auto server = RecognitionServer::Start(config);
@@ -36,7 +37,12 @@ int main(int argc, char** argv) {
     return 1;
   }
   int signal = 0;
-  sigwait(&signals, &signal);
+  // SIGHUP re-reads the placement table of a sharded server (a bad file keeps the old one).
+  while (sigwait(&signals, &signal) == 0 && signal == SIGHUP) {
+    if (const recog::Status reloaded = server.value()->ReloadPlacement(); !reloaded.ok()) {
+      spdlog::error("recogd: SIGHUP: {}; the placement table in use is kept", reloaded.ToString());
+    }
+  }
   spdlog::info("recogd: {} received, shutting down", signal == SIGTERM ? "SIGTERM" : "SIGINT");
   server.value()->Shutdown(std::chrono::milliseconds(config.shutdown_grace_ms));
   return 0;

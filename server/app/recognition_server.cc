@@ -74,6 +74,7 @@ StatusOr<std::unique_ptr<RecognitionServer>> RecognitionServer::Start(const Serv
   if (!config.metrics_listen.empty()) {
     RECOG_RETURN_IF_ERROR(state.metrics.StartHttp(config.metrics_listen));
   }
+  RECOG_RETURN_IF_ERROR(server->ReloadPlacement());
   server->place_service_ = std::make_unique<PlaceService>(&state);
   server->object_service_ = std::make_unique<ObjectService>(&state);
   server->repository_service_ = std::make_unique<RepositoryService>(&state);
@@ -177,6 +178,16 @@ void RecognitionServer::Shutdown(std::chrono::milliseconds grace) {
     state.store.reset();
     if (server_ != nullptr) spdlog::info("recogd stopped");
   });
+}
+
+Status RecognitionServer::ReloadPlacement() {
+  const ShardConfig& shard = state_->config.shard;
+  if (shard.placement_file.empty()) return Status::Ok();
+  RECOG_ASSIGN_OR_RETURN(PlacementTable table, PlacementTable::Load(shard.placement_file));
+  spdlog::info("recogd: shard '{}', placement table '{}': {} maps", shard.name,
+               shard.placement_file, table.size());
+  state_->set_placement(std::make_shared<const PlacementTable>(std::move(table)));
+  return Status::Ok();
 }
 
 }  // namespace recog::server

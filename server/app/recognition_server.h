@@ -10,6 +10,10 @@
 // are cancelled; the workers stop, the store is flushed (every acknowledged write made durable)
 // and closed. The destructor shuts down with no grace if Shutdown was not called.
 //
+// With a shard configuration, place-map calls for maps the placement table does not give to this
+// shard are refused (FAILED_PRECONDITION naming the owner); the table is read at Start (a bad one
+// fails it) and again by ReloadPlacement (recogd: SIGHUP).
+//
 // Also serving: grpc.health.v1.Health, server reflection, and Prometheus metrics over HTTP on
 // `metrics_listen` (unless empty).
 #pragma once
@@ -44,6 +48,10 @@ class RecognitionServer {
   int port() const { return port_; }
   // The metrics port, 0 when metrics are off.
   int metrics_port() const;
+
+  // Re-reads the placement table (ServerConfig::shard) and serves by it from the next call; OK
+  // and nothing done without a shard configuration. On error the table in use is kept.
+  Status ReloadPlacement();
 
   // Graceful shutdown (see the header comment). Idempotent; thread-safe.
   void Shutdown(std::chrono::milliseconds grace);

@@ -11,6 +11,7 @@
 #include <spdlog/common.h>
 
 #include "core/common/file_io.h"
+#include "server/config/placement_table.h"
 
 namespace recog::server {
 namespace {
@@ -144,6 +145,11 @@ Status ReadConfig(const YAML::Node& root, ServerConfig* config) {
   RECOG_RETURN_IF_ERROR(tls.Read("client_ca", &config->tls.client_ca));
   RECOG_RETURN_IF_ERROR(tls.RejectUnknownKeys());
 
+  RECOG_ASSIGN_OR_RETURN(YamlSection shard, top.Section("shard"));
+  RECOG_RETURN_IF_ERROR(shard.Read("name", &config->shard.name));
+  RECOG_RETURN_IF_ERROR(shard.Read("placement_file", &config->shard.placement_file));
+  RECOG_RETURN_IF_ERROR(shard.RejectUnknownKeys());
+
   RECOG_ASSIGN_OR_RETURN(YamlSection store, top.Section("store"));
   RECOG_RETURN_IF_ERROR(store.ReadParsed("sync", &config->store.sync, ParseStoreSync));
   RECOG_RETURN_IF_ERROR(
@@ -252,6 +258,13 @@ Status ServerConfig::Validate() const {
     return Status::InvalidArgument(
         "tls.client_ca (mutual TLS) needs the server's own tls.cert and tls.key");
   }
+  if (shard.name.empty() != shard.placement_file.empty()) {
+    return Status::InvalidArgument("shard.name and shard.placement_file go together");
+  }
+  if (!shard.name.empty() && !PlacementTable::IsShardName(shard.name)) {
+    return Status::InvalidArgument("shard.name '" + shard.name +
+                                   "' must have 1 to 64 characters of [A-Za-z0-9_]");
+  }
   // Two ":0" addresses are not a clash: each picks its own free port (tests do this).
   const bool picks_free_port = listen.ends_with(":0");
   if (!metrics_listen.empty() && metrics_listen == listen && !picks_free_port) {
@@ -318,6 +331,10 @@ void AddFlags(CLI::App& app, ServerConfig* config) {
       ->capture_default_str();
   app.add_option("--log-level", config->log_level, "trace, debug, info, warn, err, critical or off")
       ->capture_default_str();
+  app.add_option("--shard-name", config->shard.name,
+                 "This server's shard in the placement table (default: owns every map)");
+  app.add_option("--placement-file", config->shard.placement_file,
+                 "Placement table of sharded maps (map -> shard, nginx map syntax)");
 }
 
 StatusOr<CommandLine> ParseCommandLine(int argc, const char* const* argv) {

@@ -69,6 +69,14 @@ struct StoreConfig {
   uint64_t block_cache_mb = 64;
 };
 
+// Sharding place maps across servers (placement_table.h, docs/scaling.md). Both empty (the
+// default): this server owns every map. Both set: it serves only the maps the placement table
+// gives to `name`, and refuses the others with FAILED_PRECONDITION naming their owner.
+struct ShardConfig {
+  std::string name;            // default "": this server's shard ([A-Za-z0-9_], 1..64)
+  std::string placement_file;  // default "": the placement table (re-read on SIGHUP)
+};
+
 struct ServerConfig {
   // Default "127.0.0.1:50051": the gRPC address (host:port, [v6]:port or unix:path).
   std::string listen = "127.0.0.1:50051";
@@ -96,6 +104,7 @@ struct ServerConfig {
   // none.
   std::string metrics_listen = "127.0.0.1:9464";
   StoreConfig store;  // YAML section "store"
+  ShardConfig shard;  // YAML section "shard"
   // Default 10000: on SIGTERM/SIGINT, calls in flight get this long to finish before they are
   // cancelled.
   uint32_t shutdown_grace_ms = 10000;
@@ -123,8 +132,9 @@ struct ServerConfig {
 // Adds one flag per commonly changed field (--listen, --data-dir, --place-vocabulary,
 // --object-vocabulary, --workers, --queue-capacity, --max-message-bytes, --token-file,
 // --tls-cert, --tls-key, --tls-client-ca, --metrics-listen, --sync, --shutdown-grace-ms,
-// --log-level), bound to `config`: parsing `app` overwrites exactly the fields whose flags were
-// given. The help shows the values `config` holds now as defaults. `config` must outlive `app`.
+// --log-level, --shard-name, --placement-file), bound to `config`: parsing `app` overwrites exactly
+// the fields whose flags were given. The help shows the values `config` holds now as defaults.
+// `config` must outlive `app`.
 void AddFlags(CLI::App& app, ServerConfig* config);
 
 // The result of ParseCommandLine.

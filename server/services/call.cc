@@ -115,4 +115,21 @@ grpc::ServerUnaryReactor* RunUnary(ServerState& state, grpc::CallbackServerConte
   return reactor;
 }
 
+grpc::Status CheckMapOwner(const ServerState& state, const std::string& map) {
+  const std::shared_ptr<const PlacementTable> placement = state.placement();
+  if (placement == nullptr) return grpc::Status::OK;
+  const std::optional<std::string> owner = placement->OwnerOf(map);
+  const std::string& self = state.config.shard.name;
+  if (owner == self) return grpc::Status::OK;
+  if (!owner.has_value()) {
+    return {grpc::StatusCode::FAILED_PRECONDITION,
+            "map '" + map + "' is not in the placement table (" +
+                state.config.shard.placement_file +
+                "): add it to a shard, then reload nginx and the servers"};
+  }
+  return {grpc::StatusCode::FAILED_PRECONDITION, "map '" + map + "' belongs to shard '" + *owner +
+                                                     "', not to this server (shard '" + self +
+                                                     "')"};
+}
+
 }  // namespace recog::server

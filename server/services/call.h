@@ -44,6 +44,11 @@ grpc::Status CheckStillWanted(grpc::CallbackServerContext* context);
 // RESOURCE_EXHAUSTED with the retry hint added to the call's trailing metadata.
 grpc::Status Busy(ServerState& state, grpc::CallbackServerContext* context);
 
+// OK when this server serves place map `map`: always without a shard configuration; with one,
+// when the placement table gives the map to this shard. FAILED_PRECONDITION naming the owner (or
+// saying that the table does not list the map) otherwise.
+grpc::Status CheckMapOwner(const ServerState& state, const std::string& map);
+
 using UnaryWork = std::function<grpc::Status(CallInfo&)>;
 grpc::ServerUnaryReactor* RunUnary(ServerState& state, grpc::CallbackServerContext* context,
                                    std::string_view method, Right right, UnaryWork work);

@@ -140,6 +140,7 @@ class PlaceFrameStream final
     }
     const pb::StreamConfig& config = first.config();
     call_.map = config.map();
+    if (grpc::Status owned = CheckMapOwner(state_, call_.map); !owned.ok()) return owned;
     mode_ = config.query_only() ? FrameMode::kQuery : FrameMode::kDetect;
     if (!config.query_only()) {
       const Status allowed = TokenAuthenticator::Check(call_.caller, Right::kWrite);
@@ -179,6 +180,7 @@ grpc::ServerUnaryReactor* PlaceService::CreateMap(grpc::CallbackServerContext* c
                                                   pb::CreateMapResponse* response) {
   return RunUnary(state_, context, Method("CreateMap"), Right::kWrite, [=, this](CallInfo& call) {
     call.map = request->name();
+    if (grpc::Status owned = CheckMapOwner(state_, call.map); !owned.ok()) return owned;
     LoopDetectorParams params = state_.config.place;
     RECOG_RETURN_IF_ERROR_AS_GRPC(ApplyMapSettings(request->settings(), &params), call.request_id);
     StatusOr<std::shared_ptr<PlaceMap>> map = state_.maps->Create(request->name(), params);
@@ -194,6 +196,7 @@ grpc::ServerUnaryReactor* PlaceService::GetMap(grpc::CallbackServerContext* cont
                                                pb::GetMapResponse* response) {
   return RunUnary(state_, context, Method("GetMap"), Right::kRead, [=, this](CallInfo& call) {
     call.map = request->name();
+    if (grpc::Status owned = CheckMapOwner(state_, call.map); !owned.ok()) return owned;
     StatusOr<std::shared_ptr<PlaceMap>> map = state_.maps->Get(request->name());
     if (!map.ok()) return ToGrpcStatus(map.status(), call.request_id);
     FillMapInfo(*map.value(), response->mutable_map());
@@ -227,6 +230,7 @@ grpc::ServerUnaryReactor* PlaceService::DeleteMap(grpc::CallbackServerContext* c
                                                   pb::DeleteMapResponse* response) {
   return RunUnary(state_, context, Method("DeleteMap"), Right::kWrite, [=, this](CallInfo& call) {
     call.map = request->name();
+    if (grpc::Status owned = CheckMapOwner(state_, call.map); !owned.ok()) return owned;
     StatusOr<size_t> frames = state_.maps->Delete(request->name());
     if (!frames.ok()) return ToGrpcStatus(frames.status(), call.request_id);
     response->set_frames_deleted(frames.value());
@@ -240,6 +244,7 @@ grpc::ServerUnaryReactor* PlaceService::AddFrame(grpc::CallbackServerContext* co
                                                  pb::AddFrameResponse* response) {
   return RunUnary(state_, context, Method("AddFrame"), Right::kWrite, [=, this](CallInfo& call) {
     call.map = request->map();
+    if (grpc::Status owned = CheckMapOwner(state_, call.map); !owned.ok()) return owned;
     StatusOr<std::shared_ptr<PlaceMap>> map = state_.maps->Get(request->map());
     if (!map.ok()) return ToGrpcStatus(map.status(), call.request_id);
     pb::LoopResult added;
@@ -262,6 +267,7 @@ grpc::ServerUnaryReactor* PlaceService::QueryPlace(grpc::CallbackServerContext* 
   const Right right = request->add_frame() ? Right::kWrite : Right::kRead;
   return RunUnary(state_, context, Method("QueryPlace"), right, [=, this](CallInfo& call) {
     call.map = request->map();
+    if (grpc::Status owned = CheckMapOwner(state_, call.map); !owned.ok()) return owned;
     StatusOr<std::shared_ptr<PlaceMap>> map = state_.maps->Get(request->map());
     if (!map.ok()) return ToGrpcStatus(map.status(), call.request_id);
     const FrameMode mode = request->add_frame() ? FrameMode::kDetect : FrameMode::kQuery;

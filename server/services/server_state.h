@@ -9,6 +9,7 @@
 
 #include <atomic>
 #include <memory>
+#include <mutex>
 
 #include "core/features/feature_extractor.h"
 #include "core/index/index_store.h"
@@ -17,6 +18,7 @@
 #include "core/object/object_recognizer.h"
 #include "core/place/map_registry.h"
 #include "server/auth/token_auth.h"
+#include "server/config/placement_table.h"
 #include "server/config/server_config.h"
 #include "server/metrics/metrics.h"
 #include "server/runtime/worker_pool.h"
@@ -41,6 +43,21 @@ struct ServerState {
   std::unique_ptr<ModelRepository> repository;
   FeatureOptions place_features;   // how frames sent as images are described for place maps
   RecognitionOptions recognition;  // object recognition settings
+
+  // With config.shard set: the placement table, replaced whole by a reload (SIGHUP). Null when
+  // this server owns every map.
+  std::shared_ptr<const PlacementTable> placement() const {
+    std::lock_guard lock(placement_mutex_);
+    return placement_;
+  }
+  void set_placement(std::shared_ptr<const PlacementTable> table) {
+    std::lock_guard lock(placement_mutex_);
+    placement_ = std::move(table);
+  }
+
+ private:
+  mutable std::mutex placement_mutex_;
+  std::shared_ptr<const PlacementTable> placement_;
 };
 
 }  // namespace recog::server

@@ -342,3 +342,52 @@ TEST_F(PlaceServiceTest, AFullQueueAnswersResourceExhaustedWithARetryHint) {
 
 }  // namespace
 }  // namespace recog::server::testing
+
+namespace recog::server::testing {
+namespace {
+
+// A server of shard "shard_a" serves the maps the placement table gives it, refuses the others
+// naming their owner, and follows the table when it is reloaded.
+TEST_F(PlaceServiceTest, AShardServesOnlyTheMapsThePlacementTableGivesIt) {
+  const std::string table = data_dir_.Sub("placement.map");
+  std::ofstream(table) << "mine   shard_a;\ntheirs shard_b;\n";
+  StopServer();
+  config().shard = {"shard_a", table};
+  StartServer();
+  EXPECT_TRUE(CreateMap("mine").ok());
+  const grpc::Status theirs = CreateMap("theirs");
+  EXPECT_EQ(theirs.error_code(), grpc::StatusCode::FAILED_PRECONDITION);
+  EXPECT_NE(theirs.error_message().find("belongs to shard 'shard_b'"), std::string::npos)
+      << theirs.error_message();
+  const grpc::Status unlisted = CreateMap("unlisted");
+  EXPECT_EQ(unlisted.error_code(), grpc::StatusCode::FAILED_PRECONDITION);
+  EXPECT_NE(unlisted.error_message().find("not in the placement table"), std::string::npos);
+  pb::AddFrameResponse added;
+  EXPECT_EQ(AddFrame("theirs", JpegFrame(CorridorJpeg(1)), &added).error_code(),
+            grpc::StatusCode::FAILED_PRECONDITION);
+  pb::StreamConfig config;
+  config.set_map("theirs");
+  config.set_create_if_missing(true);
+  grpc::Status streamed;
+  Stream(*places_, config, {JpegFrame(CorridorJpeg(1))}, &streamed);
+  EXPECT_EQ(streamed.error_code(), grpc::StatusCode::FAILED_PRECONDITION);
+
+  // The map moves to this shard: after a reload it is served; a broken table keeps the old one.
+  std::ofstream(table) << "mine   shard_a;\ntheirs shard_a;\n";
+  ASSERT_TRUE(server_->ReloadPlacement().ok());
+  EXPECT_TRUE(CreateMap("theirs").ok());
+  std::ofstream(table) << "mine shard_a\n";  // no semicolon
+  EXPECT_EQ(server_->ReloadPlacement().code(), StatusCode::kInvalidArgument);
+  EXPECT_TRUE(GetMap("theirs").ok());
+}
+
+TEST_F(PlaceServiceTest, AShardWithABrokenPlacementTableDoesNotStart) {
+  StopServer();
+  const std::string table = data_dir_.Sub("placement.map");
+  std::ofstream(table) << "default shard_a;\n";
+  config().shard = {"shard_a", table};
+  EXPECT_EQ(RecognitionServer::Start(config()).status().code(), StatusCode::kInvalidArgument);
+}
+
+}  // namespace
+}  // namespace recog::server::testing

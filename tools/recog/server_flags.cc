@@ -10,6 +10,8 @@ void ServerFlags::AddTo(CLI::App* command) {
   command->add_option("--tls-ca", tls_ca, "CA certificate (PEM) to trust; turns TLS on");
   command->add_option("--tls-cert", tls_cert, "client certificate (PEM) for mutual TLS");
   command->add_option("--tls-key", tls_key, "client key (PEM) for mutual TLS");
+  command->add_option("--shard", shard,
+                      "behind a router of shards: the shard of calls without a map");
   command->add_flag("--json", json, "print JSON");
 }
 
@@ -21,6 +23,7 @@ client::Result<std::unique_ptr<client::RecognitionClient>> ServerFlags::Connect(
   options.tls.ca_file = tls_ca;
   options.tls.cert_file = tls_cert;
   options.tls.key_file = tls_key;
+  options.shard = shard;
   if (timeout_ms > 0) options.deadline = std::chrono::milliseconds(timeout_ms);
   return client::RecognitionClient::Connect(options);
 }

@@ -4,6 +4,7 @@
 //   --token-file FILE    a file holding the bearer token (default: none)
 //   --tls-ca FILE        trust this CA and use TLS (default: plaintext)
 //   --tls-cert/--tls-key client certificate and key for mutual TLS (default: none)
+//   --shard NAME         behind a router of shards: the shard of calls without a map (maps list)
 //   --json               print machine-readable JSON instead of text
 // Connect() turns them into a RecognitionClient; a failure is one line for the caller to print.
 #pragma once
@@ -21,6 +22,7 @@ struct ServerFlags {
   std::string server = "127.0.0.1:50051";
   std::string token_file;
   std::string tls_ca, tls_cert, tls_key;
+  std::string shard;
   bool json = false;
   // Default 0: the client's deadline of unary calls (ClientOptions::deadline). Not a flag of
   // every command (recog admin health adds --timeout-ms).
