@@ -25,9 +25,6 @@ trap cleanup EXIT
 # shellcheck source=../../tools/recog/cli_test_lib.sh
 source "$project/tools/recog/cli_test_lib.sh"
 
-free_port() {
-  /usr/bin/python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])'
-}
 # start_shard NAME PORT: a recogd for shard NAME on PORT with its own data directory.
 start_shard() {
   "$recogd" --listen "127.0.0.1:$2" --data-dir "$tmp/$1" --metrics-listen "" --workers 2 \

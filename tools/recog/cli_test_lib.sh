@@ -41,6 +41,11 @@ json_check() {
   /usr/bin/python3 -c "import json; d=json.load(open('$tmp/out')); $2" && pass || fail "$1"
 }
 
+# free_port: a free loopback TCP port (bound, read, released: another process may take it, rarely).
+free_port() {
+  /usr/bin/python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])'
+}
+
 report_and_exit() {
   echo "$((checks - failures)) passed, $failures failed"
   [ "$failures" -eq 0 ]

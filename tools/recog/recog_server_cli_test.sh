@@ -22,7 +22,7 @@ trap cleanup EXIT
 source "$(dirname "$0")/cli_test_lib.sh"
 
 images=$project/tests/data/corridor
-port=$(/usr/bin/python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])')
+port=$(free_port)
 server=(--server "127.0.0.1:$port")
 "$recogd" --listen "127.0.0.1:$port" --data-dir "$tmp/data" --metrics-listen "" --workers 2 \
   >"$tmp/recogd.log" 2>&1 &
@@ -173,7 +173,7 @@ expect_error "admin restore over a store" "ALREADY_EXISTS" "$recog" admin restor
   --from "$tmp/backup" --data-dir "$tmp/restored"
 expect_error "admin restore of a missing checkpoint" "NOT_FOUND" "$recog" admin restore \
   --from "$tmp/none" --data-dir "$tmp/other"
-port2=$(/usr/bin/python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])')
+port2=$(free_port)
 "$recogd" --listen "127.0.0.1:$port2" --data-dir "$tmp/restored" --metrics-listen "" --workers 2 \
   >"$tmp/restored.log" 2>&1 &
 restored_pid=$!
@@ -195,7 +195,7 @@ wait "$restored_pid" && pass || fail "the restored server exits 0 on SIGTERM"
 restored_pid=
 
 # A server that is not there, then the server's exit on SIGTERM.
-closed=$(/usr/bin/python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])')
+closed=$(free_port)
 expect_error "maps list of a closed port" "UNAVAILABLE" "$recog" maps list --server "127.0.0.1:$closed"
 kill -TERM "$server_pid"
 wait "$server_pid"
