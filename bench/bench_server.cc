@@ -85,18 +85,6 @@ double MsBetween(Clock::time_point from, Clock::time_point to) {
   return std::chrono::duration<double, std::milli>(to - from).count();
 }
 
-// Nearest-rank percentile of `sorted` (ascending), 0 when empty.
-double Percentile(const std::vector<double>& sorted, double p) {
-  if (sorted.empty()) return 0;
-  const size_t rank = size_t(std::ceil(p / 100 * double(sorted.size())));
-  return sorted[std::clamp<size_t>(rank, 1, sorted.size()) - 1];
-}
-
-double Median(std::vector<double> values) {
-  std::sort(values.begin(), values.end());
-  return Percentile(values, 50);
-}
-
 // VmRSS of this process in MiB (client and server together), 0 when unreadable.
 double CurrentRssMiB() {
   std::ifstream status("/proc/self/status");

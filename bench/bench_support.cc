@@ -3,6 +3,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -134,6 +135,17 @@ std::string TempPath(const std::string& name) {
   return (std::filesystem::temp_directory_path() /
           ("recog_bench_" + std::to_string(::getpid()) + "_" + name))
       .string();
+}
+
+double Percentile(const std::vector<double>& sorted, double p) {
+  if (sorted.empty()) return 0;
+  const size_t rank = size_t(std::ceil(p / 100 * double(sorted.size())));
+  return sorted[std::clamp<size_t>(rank, 1, sorted.size()) - 1];
+}
+
+double Median(std::vector<double> values) {
+  std::sort(values.begin(), values.end());
+  return Percentile(values, 50);
 }
 
 }  // namespace recog::bench

@@ -88,7 +88,8 @@ struct ClientOptions {
   // camera faster than the server drops frames instead of queueing them. 1 to 1024.
   uint32_t max_frames_in_flight = 32;
   // Default "": behind a router of sharded servers (deploy/nginx/), the shard that calls without
-  // a place map go to (ListMaps); sent as the `x-recog-shard` header. Calls about a map are
+  // a place map go to (ListMaps, Admin calls; recognition and model reads, else any server that
+  // holds the models); sent as the `x-recog-shard` header. Calls about a map are
   // routed by their map (`x-recog-map`, always sent). 1 to 64 characters of [A-Za-z0-9_].
   std::string shard;
 

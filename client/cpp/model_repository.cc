@@ -52,8 +52,11 @@ namespace internal {
 class WatchReactor final : public grpc::ClientReadReactor<pb::WatchModelsResponse> {
  public:
   WatchReactor(std::shared_ptr<grpc::Channel> channel,
-               std::function<void(const pb::WatchModelsResponse&)> on_change)
-      : channel_(std::move(channel)), on_change_(std::move(on_change)) {}
+               std::function<void(const pb::WatchModelsResponse&)> on_change,
+               std::function<void(const grpc::Status&)> on_end)
+      : channel_(std::move(channel)),
+        on_change_(std::move(on_change)),
+        on_end_(std::move(on_end)) {}
 
   grpc::ClientContext& context() { return context_; }
   pb::WatchModelsRequest& request() { return request_; }
@@ -76,6 +79,7 @@ class WatchReactor final : public grpc::ClientReadReactor<pb::WatchModelsRespons
     StartRead(&event_);
   }
   void OnDone(const grpc::Status& status) override {
+    if (on_end_) on_end_(status);  // before Wait() returns: the handle may go right after
     std::lock_guard lock(mutex_);
     status_ = status;
     done_ = true;
@@ -84,6 +88,7 @@ class WatchReactor final : public grpc::ClientReadReactor<pb::WatchModelsRespons
 
   const std::shared_ptr<grpc::Channel> channel_;
   const std::function<void(const pb::WatchModelsResponse&)> on_change_;
+  const std::function<void(const grpc::Status&)> on_end_;
   grpc::ClientContext context_;
   pb::WatchModelsRequest request_;
   pb::WatchModelsResponse event_;
@@ -108,10 +113,13 @@ void ModelWatch::Cancel() { reactor_->Cancel(); }
 grpc::Status ModelWatch::Wait() { return reactor_->Wait(); }
 
 std::unique_ptr<ModelWatch> RecognitionClient::WatchModels(
-    const std::string& name_prefix, std::function<void(const pb::WatchModelsResponse&)> on_change) {
-  auto reactor = std::make_unique<internal::WatchReactor>(channel_, std::move(on_change));
+    const std::string& name_prefix, std::function<void(const pb::WatchModelsResponse&)> on_change,
+    bool include_existing, std::function<void(const grpc::Status&)> on_end) {
+  auto reactor =
+      std::make_unique<internal::WatchReactor>(channel_, std::move(on_change), std::move(on_end));
   PrepareContext(reactor->context(), nullptr);
   reactor->request().set_name_prefix(name_prefix);
+  reactor->request().set_include_existing(include_existing);
   models_->async()->WatchModels(&reactor->context(), &reactor->request(), reactor.get());
   reactor->Start();
   return std::unique_ptr<ModelWatch>(new ModelWatch(std::move(reactor)));

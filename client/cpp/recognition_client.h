@@ -146,10 +146,14 @@ class RecognitionClient {
   Result<uint32_t> DeleteModel(const std::string& name);
   // Streams every change to the models whose names start with `name_prefix` ("" = all) from now
   // on: `on_change` gets each upload and deletion, in order. The server registers the watcher
-  // shortly after the call starts; changes before that are not reported.
+  // shortly after the call starts; changes before that are not reported, unless
+  // `include_existing`: then every version stored at that moment comes first (as
+  // MODEL_CHANGE_PUT), then MODEL_CHANGE_SYNCED, then the changes since, none missed or repeated.
+  // `on_end`, when given, is called once with the stream's final status (as Wait() returns it)
+  // on a gRPC thread, after the last `on_change`.
   std::unique_ptr<ModelWatch> WatchModels(
-      const std::string& name_prefix,
-      std::function<void(const pb::WatchModelsResponse&)> on_change);
+      const std::string& name_prefix, std::function<void(const pb::WatchModelsResponse&)> on_change,
+      bool include_existing = false, std::function<void(const grpc::Status&)> on_end = {});
 
   // --- Operation ---
 

@@ -308,13 +308,19 @@ class RecognitionClient:
                               repository_pb2.DeleteModelRequest(name=name))
         return response.versions_deleted
 
-    def watch_models(self, prefix: str = "") -> Iterator[repository_pb2.WatchModelsResponse]:
+    def watch_models(
+        self, prefix: str = "", include_existing: bool = False
+    ) -> Iterator[repository_pb2.WatchModelsResponse]:
         """Returns the endless iterator of changes to the models whose name starts with ``prefix``.
 
-        Every upload and deletion from now on, in order. The returned object is also the
-        ``grpc.Call``: ``cancel()`` (from any thread) stops watching, after which the iteration
-        raises ``grpc.RpcError`` with ``CANCELLED``. A watcher that falls too far behind is ended
-        with ``RESOURCE_EXHAUSTED`` and should list the models again before watching anew.
+        Every upload and deletion from now on, in order; with ``include_existing``, first every
+        version already stored (``MODEL_CHANGE_PUT``), then one ``MODEL_CHANGE_SYNCED``, with no
+        change missed or repeated in between. The returned object is also the ``grpc.Call``:
+        ``cancel()`` (from any thread) stops watching, after which the iteration raises
+        ``grpc.RpcError`` with ``CANCELLED``. A watcher that falls too far behind is ended with
+        ``RESOURCE_EXHAUSTED`` and should watch anew with ``include_existing``.
         """
-        request = repository_pb2.WatchModelsRequest(name_prefix=prefix)
+        request = repository_pb2.WatchModelsRequest(
+            name_prefix=prefix, include_existing=include_existing
+        )
         return self._repository.WatchModels(request, metadata=self._metadata)

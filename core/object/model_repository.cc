@@ -240,7 +240,7 @@ Status ModelRepository::Reconcile() {
   return Status::Ok();
 }
 
-ModelVersionInfo ModelRepository::Describe(const ObjectModel& model, const std::string& file,
+ModelVersionInfo ModelRepository::Describe(const ObjectModel& model, std::string_view file,
                                            std::vector<std::string> tags) const {
   ModelVersionInfo info;
   info.metadata = model.metadata;
@@ -253,10 +253,8 @@ ModelVersionInfo ModelRepository::Describe(const ObjectModel& model, const std::
   return info;
 }
 
-StatusOr<ModelVersionInfo> ModelRepository::Put(std::string_view model_file,
-                                                const std::string& name,
-                                                std::vector<std::string> tags) {
-  RECOG_RETURN_IF_ERROR(NormaliseTags(&tags));
+StatusOr<ObjectModel> ModelRepository::DecodeForDatabase(std::string_view model_file,
+                                                         const std::string& name) const {
   StatusOr<ObjectModel> decoded = DecodeObjectModel(model_file, "uploaded model file");
   if (decoded.status().code() == StatusCode::kDataLoss) {
     // Damaged input, not damaged storage.
@@ -277,21 +275,67 @@ StatusOr<ModelVersionInfo> ModelRepository::Put(std::string_view model_file,
   if (model.num_features() == 0) {
     return Status::InvalidArgument("model '" + model.metadata.name + "' has no features");
   }
+  return model;
+}
+
+uint32_t ModelRepository::LatestVersion(const std::string& name) const {
+  std::shared_lock lock(catalog_mutex_);
+  const auto known = catalog_.find(name);
+  return known == catalog_.end() ? 0 : known->second.back().metadata.version;
+}
+
+StatusOr<ModelVersionInfo> ModelRepository::Put(std::string_view model_file,
+                                                const std::string& name,
+                                                std::vector<std::string> tags) {
+  RECOG_RETURN_IF_ERROR(NormaliseTags(&tags));
+  RECOG_ASSIGN_OR_RETURN(ObjectModel model, DecodeForDatabase(model_file, name));
 
   std::lock_guard write_lock(write_mutex_);
-  uint32_t latest = 0;
-  {
-    std::shared_lock lock(catalog_mutex_);
-    const auto known = catalog_.find(model.metadata.name);
-    if (known != catalog_.end()) latest = known->second.back().metadata.version;
-  }
+  const uint32_t latest = LatestVersion(model.metadata.name);
   if (latest == UINT32_MAX) {
     return Status::ResourceExhausted("model '" + model.metadata.name + "' has no versions left");
   }
   model.metadata.version = latest + 1;
   RECOG_ASSIGN_OR_RETURN(const std::string file, EncodeObjectModel(model));
-  ModelVersionInfo info = Describe(model, file, std::move(tags));
-  const std::string key = VersionKey(model.metadata.name, model.metadata.version);
+  const ModelVersionInfo info = Describe(model, file, std::move(tags));
+  RECOG_RETURN_IF_ERROR(StoreLocked(model, file, info));
+  return info;
+}
+
+StatusOr<ModelVersionInfo> ModelRepository::PutCopy(const ModelVersionInfo& info,
+                                                    std::string_view stored_file) {
+  const std::string& name = info.metadata.name;
+  const uint32_t version = info.metadata.version;
+  std::vector<std::string> tags = info.tags;
+  RECOG_RETURN_IF_ERROR(NormaliseTags(&tags));
+  RECOG_ASSIGN_OR_RETURN(const ObjectModel model, DecodeForDatabase(stored_file, ""));
+  if (model.metadata.name != name || model.metadata.version != version) {
+    return Status::InvalidArgument(
+        "the file holds version " + std::to_string(model.metadata.version) + " of model '" +
+        model.metadata.name + "', not version " + std::to_string(version) + " of '" + name + "'");
+  }
+  ModelVersionInfo copy = Describe(model, stored_file, std::move(tags));
+  if (copy.size_bytes != info.size_bytes || copy.sha256 != info.sha256) {
+    return Status::InvalidArgument("the file of version " + std::to_string(version) +
+                                   " of model '" + name +
+                                   "' differs from its description (size or SHA-256)");
+  }
+  copy.created_unix_ms = info.created_unix_ms;
+
+  std::lock_guard write_lock(write_mutex_);
+  const uint32_t latest = LatestVersion(name);
+  if (latest >= version) {
+    return Status::FailedPrecondition("model '" + name + "' already has version " +
+                                      std::to_string(latest) + "; a copy of version " +
+                                      std::to_string(version) + " must be newer");
+  }
+  RECOG_RETURN_IF_ERROR(StoreLocked(model, stored_file, copy));
+  return copy;
+}
+
+Status ModelRepository::StoreLocked(const ObjectModel& model, std::string_view file,
+                                    const ModelVersionInfo& info) {
+  const std::string key = VersionKey(info.metadata.name, info.metadata.version);
   RECOG_RETURN_IF_ERROR(store_->PutBlob(key, EncodeVersionRecord(info, file)));
 
   const StatusOr<ObjectMetadata> indexed = objects_->Put(model);
@@ -304,17 +348,17 @@ StatusOr<ModelVersionInfo> ModelRepository::Put(std::string_view model_file,
     return indexed.status();
   }
   if (indexed->version != info.metadata.version) {
-    return Status::Internal("the object database gave model '" + model.metadata.name +
-                            "' version " + std::to_string(indexed->version) + " instead of " +
+    return Status::Internal("the object database gave model '" + info.metadata.name + "' version " +
+                            std::to_string(indexed->version) + " instead of " +
                             std::to_string(info.metadata.version) +
                             ": is something else writing it?");
   }
   {
     std::unique_lock lock(catalog_mutex_);
-    catalog_[model.metadata.name].push_back(info);
+    catalog_[info.metadata.name].push_back(info);
   }
   Notify(ModelEvent::Kind::kPut, info);
-  return info;
+  return Status::Ok();
 }
 
 StatusOr<std::pair<ModelVersionInfo, std::string>> ModelRepository::Get(const std::string& name,
@@ -418,7 +462,19 @@ void ModelRepository::Notify(ModelEvent::Kind kind, const ModelVersionInfo& info
   for (const auto& [id, listener] : listeners_) listener(event);
 }
 
-uint64_t ModelRepository::Watch(std::function<void(const ModelEvent&)> listener) {
+uint64_t ModelRepository::Watch(std::function<void(const ModelEvent&)> listener,
+                                std::vector<ModelVersionInfo>* existing) {
+  // Put, PutCopy and Remove notify under write_mutex_: holding it keeps the catalog and the
+  // registration together.
+  std::unique_lock<std::mutex> write_lock;
+  if (existing != nullptr) {
+    write_lock = std::unique_lock(write_mutex_);
+    existing->clear();
+    std::shared_lock catalog_lock(catalog_mutex_);
+    for (const auto& [name, versions] : catalog_) {
+      existing->insert(existing->end(), versions.begin(), versions.end());
+    }
+  }
   std::lock_guard lock(listeners_mutex_);
   const uint64_t id = next_listener_id_++;
   listeners_.emplace(id, std::move(listener));

@@ -107,6 +107,14 @@ class ModelRepository {
   // is that of the stored, re-encoded file.
   StatusOr<ModelVersionInfo> Put(std::string_view model_file, const std::string& name,
                                  std::vector<std::string> tags);
+  // Stores a version exactly as another repository stored it: `stored_file` is the file that
+  // repository's Get returned with `info`. A replica following its primary uses it to keep the
+  // primary's names, version numbers, tags, creation times and bytes. The version must be newer
+  // than every version held of that model (a replica copies versions oldest first).
+  // INVALID_ARGUMENT when the file is not a valid model file for the database, holds another name
+  // or version than `info`, or has another size or SHA-256; FAILED_PRECONDITION when the model
+  // already has this version or a newer one. Watchers are told as for Put.
+  StatusOr<ModelVersionInfo> PutCopy(const ModelVersionInfo& info, std::string_view stored_file);
   // Version `version` of model `name` (0: the latest) and its file bytes exactly as stored.
   // NOT_FOUND for an unknown name or version; DATA_LOSS when the stored version is damaged.
   StatusOr<std::pair<ModelVersionInfo, std::string>> Get(const std::string& name,
@@ -124,10 +132,13 @@ class ModelRepository {
   // store's error says so (the model is gone; Open deletes what is left).
   Status Remove(const std::string& name);
 
-  // Calls `listener` for every Put and Remove that succeeds, synchronously, once the change is
-  // durable, in the order of the changes and never concurrently with itself. Listeners must be
-  // quick and must not call the repository. Returns the id that Unwatch takes.
-  uint64_t Watch(std::function<void(const ModelEvent&)> listener);
+  // Calls `listener` for every Put, PutCopy and Remove that succeeds, synchronously, once the
+  // change is durable, in the order of the changes and never concurrently with itself. Listeners
+  // must be quick and must not call the repository. When `existing` is not null it receives every
+  // version stored when the listener is registered (by name, oldest first), so that no change
+  // falls between the two nor is told twice. Returns the id that Unwatch takes.
+  uint64_t Watch(std::function<void(const ModelEvent&)> listener,
+                 std::vector<ModelVersionInfo>* existing = nullptr);
   // Stops calling a listener: once Unwatch has returned it is not called again. Unknown ids are
   // ignored.
   void Unwatch(uint64_t id);
@@ -137,9 +148,18 @@ class ModelRepository {
                   HashFunction sha256_hex);
   // Brings the blobs in line with the ObjectDatabase and loads the catalog; called by Open.
   Status Reconcile();
+  // Decodes a model file given to Put or PutCopy and checks that the database can index it
+  // (after renaming it to `name` unless empty).
+  StatusOr<ObjectModel> DecodeForDatabase(std::string_view model_file,
+                                          const std::string& name) const;
   // The catalog entry of a model file (computes the hash of `file`).
-  ModelVersionInfo Describe(const ObjectModel& model, const std::string& file,
+  ModelVersionInfo Describe(const ObjectModel& model, std::string_view file,
                             std::vector<std::string> tags) const;
+  // The latest version of model `name`, 0 when there is none.
+  uint32_t LatestVersion(const std::string& name) const;
+  // Stores `file`, the encoding of `model`, as the version `info` describes: the blob, then the
+  // ObjectDatabase, then the catalog and the watchers. Requires write_mutex_.
+  Status StoreLocked(const ObjectModel& model, std::string_view file, const ModelVersionInfo& info);
   // Tells every listener about a change; requires write_mutex_.
   void Notify(ModelEvent::Kind kind, const ModelVersionInfo& info);
 

@@ -1,5 +1,6 @@
 // ModelRepository: versioned uploads over an ObjectDatabase, downloads of every version, listing
-// with filters and pages, removal, change notifications, and the reconciliation of an interrupted
+// with filters and pages, removal, change notifications (with the versions already stored),
+// copies of another repository's versions (replicas), and the reconciliation of an interrupted
 // upload or removal (or an object put into the database directly) when the repository opens.
 #include "core/object/model_repository.h"
 
@@ -372,6 +373,129 @@ TEST_F(ModelRepositoryTest, WatchersSeeEveryChangeInOrderAndNothingAfterUnwatch)
   EXPECT_EQ(first.back().info.metadata.name, "cup");
   EXPECT_EQ(first.back().sequence, 5u);
   EXPECT_EQ(second.size(), 4u);
+}
+
+TEST_F(ModelRepositoryTest, WatchingWithTheExistingVersionsListsThemFirstByNameOldestFirst) {
+  const ModelVersionInfo mug1 = MustPut(TestModel("mug", 1));
+  const ModelVersionInfo mug2 = MustPut(TestModel("mug", 2));
+  const ModelVersionInfo box1 = MustPut(TestModel("box", 3));
+  std::vector<ModelVersionInfo> existing = {mug1};  // replaced, not appended to
+  std::vector<ModelEvent> events;
+  repository_->Watch([&](const ModelEvent& e) { events.push_back(e); }, &existing);
+  EXPECT_EQ(existing, (std::vector<ModelVersionInfo>{box1, mug1, mug2}));
+  EXPECT_TRUE(events.empty());
+  const ModelVersionInfo cup1 = MustPut(TestModel("cup", 4));
+  ASSERT_EQ(events.size(), 1u);
+  EXPECT_EQ(events[0].info, cup1);
+}
+
+TEST_F(ModelRepositoryTest, AWatchStartedDuringPutsGetsEachVersionOnceAsExistingOrAsAnEvent) {
+  constexpr uint32_t kVersions = 40;
+  std::atomic<uint32_t> stored{0};
+  std::thread writer([&] {
+    for (uint32_t i = 1; i <= kVersions; ++i) {
+      MustPut(TestModel("mug", i));
+      stored = i;
+    }
+  });
+  while (stored < kVersions / 4) std::this_thread::yield();
+  std::vector<ModelVersionInfo> existing;
+  std::vector<uint32_t> told;  // written by the writer thread, read after join
+  repository_->Watch([&](const ModelEvent& e) { told.push_back(e.info.metadata.version); },
+                     &existing);
+  writer.join();
+  std::vector<uint32_t> seen = VersionNumbers(existing);
+  EXPECT_GE(seen.size(), kVersions / 4);
+  seen.insert(seen.end(), told.begin(), told.end());
+  std::vector<uint32_t> all(kVersions);
+  for (uint32_t i = 0; i < kVersions; ++i) all[i] = i + 1;
+  EXPECT_EQ(seen, all);
+}
+
+// A second repository over its own store, as on a replica.
+struct ReplicaRepository {
+  ReplicaRepository() {
+    auto opened = ObjectDatabase::Open(&store, testing::BundledObjectVocabulary());
+    EXPECT_TRUE(opened.ok()) << opened.status().ToString();
+    if (opened.ok()) objects = std::move(*opened);
+    auto repository = ModelRepository::Open(&store, objects, FakeSha256);
+    EXPECT_TRUE(repository.ok()) << repository.status().ToString();
+    if (repository.ok()) models = std::move(*repository);
+  }
+  MemoryIndexStore store;
+  std::shared_ptr<ObjectDatabase> objects;
+  std::unique_ptr<ModelRepository> models;
+};
+
+TEST_F(ModelRepositoryTest, ACopyKeepsTheOriginalsVersionTagsCreationTimeAndBytes) {
+  MustPut(TestModel("mug", 1));
+  const ModelVersionInfo mug2 = MustPut(TestModel("mug", 2), {"kitchen", "blue"});
+  const ModelVersionInfo mug3 = MustPut(TestModel("mug", 3));
+  ReplicaRepository replica;
+  ASSERT_NE(replica.models, nullptr);
+  std::vector<ModelEvent> events;
+  replica.models->Watch([&](const ModelEvent& e) { events.push_back(e); });
+
+  // Versions 2 and 3 only: a replica keeps the primary's numbers even when it starts later.
+  for (const ModelVersionInfo& info : {mug2, mug3}) {
+    auto copied = replica.models->PutCopy(info, StoredFile("mug", info.metadata.version));
+    ASSERT_TRUE(copied.ok()) << copied.status().ToString();
+    EXPECT_EQ(*copied, info);
+  }
+  EXPECT_EQ(replica.models->Versions("mug"), (std::vector<ModelVersionInfo>{mug2, mug3}));
+  auto file = replica.models->Get("mug", 2);
+  ASSERT_TRUE(file.ok()) << file.status().ToString();
+  EXPECT_EQ(file->second, StoredFile("mug", 2));
+  ASSERT_EQ(replica.objects->List().size(), 1u);
+  EXPECT_EQ(replica.objects->List()[0].version, 3u);  // the one recognised
+  ASSERT_EQ(events.size(), 2u);
+  EXPECT_EQ(events[1].kind, ModelEvent::Kind::kPut);
+  EXPECT_EQ(events[1].info, mug3);
+  // An upload to the replica itself continues after the copied versions.
+  auto own = replica.models->Put(File(TestModel("mug", 9)), "", {});
+  ASSERT_TRUE(own.ok()) << own.status().ToString();
+  EXPECT_EQ(own->metadata.version, 4u);
+}
+
+TEST_F(ModelRepositoryTest, ACopyUnlikeItsDescriptionOrNotNewerIsRefusedAndStoresNothing) {
+  const ModelVersionInfo mug1 = MustPut(TestModel("mug", 1));
+  const ModelVersionInfo mug2 = MustPut(TestModel("mug", 2));
+  const std::string file1 = StoredFile("mug", 1);
+  ReplicaRepository replica;
+  ASSERT_NE(replica.models, nullptr);
+  ASSERT_TRUE(replica.models->PutCopy(mug2, StoredFile("mug", 2)).ok());
+  const std::vector<std::string> keys = *replica.store.ListBlobKeys("");
+
+  ModelVersionInfo wrong_hash = mug1;
+  wrong_hash.sha256 = "fake:0:0";
+  ModelVersionInfo wrong_size = mug1;
+  wrong_size.size_bytes += 1;
+  ModelVersionInfo wrong_version = mug1;
+  wrong_version.metadata.version = 3;  // the file says 1
+  ModelVersionInfo wrong_name = mug1;
+  wrong_name.metadata.name = "cup";
+  const struct {
+    const char* what;
+    ModelVersionInfo info;
+    std::string file;
+    StatusCode code;
+  } cases[] = {
+      {"another SHA-256", wrong_hash, file1, StatusCode::kInvalidArgument},
+      {"another size", wrong_size, file1, StatusCode::kInvalidArgument},
+      {"another version in the file", wrong_version, file1, StatusCode::kInvalidArgument},
+      {"another name in the file", wrong_name, file1, StatusCode::kInvalidArgument},
+      {"no model file", mug1, "garbage", StatusCode::kInvalidArgument},
+      {"an older version", mug1, file1, StatusCode::kFailedPrecondition},
+      {"the same version again", mug2, StoredFile("mug", 2), StatusCode::kFailedPrecondition},
+  };
+  for (const auto& c : cases) {
+    SCOPED_TRACE(c.what);
+    auto copied = replica.models->PutCopy(c.info, c.file);
+    EXPECT_EQ(copied.status().code(), c.code) << copied.status().ToString();
+  }
+  EXPECT_EQ(replica.models->Versions("mug"), (std::vector<ModelVersionInfo>{mug2}));
+  EXPECT_TRUE(replica.models->Versions("cup").empty());
+  EXPECT_EQ(*replica.store.ListBlobKeys(""), keys);
 }
 
 TEST_F(ModelRepositoryTest, ReopeningKeepsEveryVersion) {

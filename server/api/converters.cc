@@ -1,5 +1,6 @@
 #include "server/api/converters.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 
@@ -314,6 +315,26 @@ void ToProto(const ModelVersionInfo& info, pb::ModelInfo* out) {
   out->set_created_unix_ms(info.created_unix_ms);
   out->set_num_points(info.num_points);
   out->set_num_descriptors(info.num_descriptors);
+}
+
+ModelVersionInfo FromProto(const pb::ModelInfo& info) {
+  ModelVersionInfo out;
+  ObjectMetadata& m = out.metadata;
+  m.name = info.name();
+  m.version = info.version();
+  m.object_class = info.object_class();
+  m.type = info.type() == pb::OBJECT_TYPE_PLANAR ? ObjectType::kPlanar : ObjectType::k3D;
+  for (int i = 0; i < std::min(3, info.dimensions_size()); ++i)
+    m.dimensions[i] = info.dimensions(i);
+  m.units = info.units();
+  m.source = info.source();
+  out.tags.assign(info.tags().begin(), info.tags().end());
+  out.sha256 = info.sha256();
+  out.size_bytes = info.size_bytes();
+  out.created_unix_ms = info.created_unix_ms();
+  out.num_points = info.num_points();
+  out.num_descriptors = info.num_descriptors();
+  return out;
 }
 
 }  // namespace recog::server

@@ -60,5 +60,7 @@ void ToProto(const Detection& detection, const ObjectMetadata& object, pb::Detec
 pb::ObjectType ToProto(ObjectType type);
 
 void ToProto(const ModelVersionInfo& info, pb::ModelInfo* out);
+// The inverse of ToProto (a replica copying its primary's versions); missing dimensions are 0.
+ModelVersionInfo FromProto(const pb::ModelInfo& info);
 
 }  // namespace recog::server

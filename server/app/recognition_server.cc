@@ -10,6 +10,7 @@
 
 #include "core/vocabulary/vocabulary_io.h"
 #include "proto/sha256.h"
+#include "server/replication/repository_follower.h"
 #include "server/services/admin_service.h"
 #include "server/services/object_service.h"
 #include "server/services/place_service.h"
@@ -107,6 +108,7 @@ StatusOr<std::unique_ptr<RecognitionServer>> RecognitionServer::Start(const Serv
   spdlog::info("recogd listening on port {} ({}), opening {}", server->port_,
                config.tls.cert.empty() ? "plaintext" : "TLS", config.data_dir);
   RECOG_RETURN_IF_ERROR(server->Open());
+  RECOG_RETURN_IF_ERROR(server->StartFollowing());
   server->server_->GetHealthCheckService()->SetServingStatus(true);
   spdlog::info("recogd ready: {} place maps, {} objects, {} workers, metrics on {}",
                state.maps->List().size(), state.objects->size(), state.pool->threads(),
@@ -155,9 +157,24 @@ Status RecognitionServer::Open() {
   return Status::Ok();
 }
 
+Status RecognitionServer::StartFollowing() {
+  const RepositoryConfig& repository = state_->config.repository;
+  if (repository.primary.empty()) return Status::Ok();
+  RepositoryFollower::Options options;
+  options.primary.target = repository.primary;
+  options.primary.token_file = repository.token_file;
+  options.primary.tls.enabled = !repository.tls_ca.empty();
+  options.primary.tls.ca_file = repository.tls_ca;
+  options.primary.max_message_bytes = state_->config.max_message_bytes;
+  options.staging_dir = (std::filesystem::path(state_->config.data_dir) / "replication").string();
+  RECOG_ASSIGN_OR_RETURN(follower_, RepositoryFollower::Start(std::move(options), state_.get()));
+  return Status::Ok();
+}
+
 void RecognitionServer::Shutdown(std::chrono::milliseconds grace) {
   std::call_once(shutdown_once_, [&] {
     if (state_ == nullptr) return;
+    follower_.reset();  // it writes into the repository
     ServerState& state = *state_;
     state.draining = true;
     if (server_ != nullptr) {

@@ -10,6 +10,11 @@
 // are cancelled; the workers stop, the store is flushed (every acknowledged write made durable)
 // and closed. The destructor shuts down with no grace if Shutdown was not called.
 //
+// With repository.primary set, the server is a read-only replica of that server's model
+// repository: a RepositoryFollower (server/replication/) started once the store is open copies
+// the primary's models, and uploads and deletions are refused (FAILED_PRECONDITION naming the
+// primary). Shutdown stops the follower first.
+//
 // With a shard configuration, place-map calls for maps the placement table does not give to this
 // shard are refused (FAILED_PRECONDITION naming the owner); the table is read at Start (a bad one
 // fails it) and again by ReloadPlacement (recogd: SIGHUP).
@@ -34,6 +39,7 @@ class PlaceService;
 class ObjectService;
 class RepositoryService;
 class AdminService;
+class RepositoryFollower;
 
 class RecognitionServer {
  public:
@@ -58,7 +64,8 @@ class RecognitionServer {
 
  private:
   RecognitionServer();
-  Status Open();  // the store and everything in it; sets ready
+  Status Open();            // the store and everything in it; sets ready
+  Status StartFollowing();  // the repository follower of a replica; nothing on a primary
 
   std::unique_ptr<ServerState> state_;
   std::unique_ptr<PlaceService> place_service_;
@@ -66,6 +73,7 @@ class RecognitionServer {
   std::unique_ptr<RepositoryService> repository_service_;
   std::unique_ptr<AdminService> admin_service_;
   std::unique_ptr<grpc::Server> server_;
+  std::unique_ptr<RepositoryFollower> follower_;  // on a replica, once ready
   int port_ = 0;
   std::once_flag shutdown_once_;
 };

@@ -150,6 +150,12 @@ Status ReadConfig(const YAML::Node& root, ServerConfig* config) {
   RECOG_RETURN_IF_ERROR(shard.Read("placement_file", &config->shard.placement_file));
   RECOG_RETURN_IF_ERROR(shard.RejectUnknownKeys());
 
+  RECOG_ASSIGN_OR_RETURN(YamlSection repository, top.Section("repository"));
+  RECOG_RETURN_IF_ERROR(repository.Read("primary", &config->repository.primary));
+  RECOG_RETURN_IF_ERROR(repository.Read("token_file", &config->repository.token_file));
+  RECOG_RETURN_IF_ERROR(repository.Read("tls_ca", &config->repository.tls_ca));
+  RECOG_RETURN_IF_ERROR(repository.RejectUnknownKeys());
+
   RECOG_ASSIGN_OR_RETURN(YamlSection store, top.Section("store"));
   RECOG_RETURN_IF_ERROR(store.ReadParsed("sync", &config->store.sync, ParseStoreSync));
   RECOG_RETURN_IF_ERROR(
@@ -265,6 +271,14 @@ Status ServerConfig::Validate() const {
     return Status::InvalidArgument("shard.name '" + shard.name +
                                    "' must have 1 to 64 characters of [A-Za-z0-9_]");
   }
+  if (repository.primary.empty() && !(repository.token_file.empty() && repository.tls_ca.empty())) {
+    return Status::InvalidArgument(
+        "repository.token_file and repository.tls_ca need repository.primary");
+  }
+  if (!repository.primary.empty() && repository.primary == listen) {
+    return Status::InvalidArgument("repository.primary is this server's own address ('" + listen +
+                                   "'); a primary follows nobody");
+  }
   // Two ":0" addresses are not a clash: each picks its own free port (tests do this).
   const bool picks_free_port = listen.ends_with(":0");
   if (!metrics_listen.empty() && metrics_listen == listen && !picks_free_port) {
@@ -335,6 +349,12 @@ void AddFlags(CLI::App& app, ServerConfig* config) {
                  "This server's shard in the placement table (default: owns every map)");
   app.add_option("--placement-file", config->shard.placement_file,
                  "Placement table of sharded maps (map -> shard, nginx map syntax)");
+  app.add_option("--repository-primary", config->repository.primary,
+                 "Follow the model repository of this recogd (host:port) as a read-only replica");
+  app.add_option("--repository-token-file", config->repository.token_file,
+                 "File of the bearer token sent to the repository primary");
+  app.add_option("--repository-tls-ca", config->repository.tls_ca,
+                 "PEM CA of the repository primary's certificate (default: plaintext)");
 }
 
 StatusOr<CommandLine> ParseCommandLine(int argc, const char* const* argv) {

@@ -77,6 +77,18 @@ struct ShardConfig {
   std::string placement_file;  // default "": the placement table (re-read on SIGHUP)
 };
 
+// Replicating the object model repository (docs/scaling.md). `primary` empty (the default): this
+// server's repository takes uploads and deletions. Set: this server is a read-only replica of the
+// repository of the recogd at `primary`. It follows that repository (its versions, tags and
+// deletions, with the same version numbers; see server/replication/repository_follower.h),
+// refuses uploads and deletions with FAILED_PRECONDITION naming the primary, and goes on
+// serving what it holds while the primary is unreachable.
+struct RepositoryConfig {
+  std::string primary;     // default "": address of the primary recogd (host:port)
+  std::string token_file;  // default "": file of the bearer token sent to the primary; "" = none
+  std::string tls_ca;      // default "": PEM CA of the primary's certificate; "" = plaintext
+};
+
 struct ServerConfig {
   // Default "127.0.0.1:50051": the gRPC address (host:port, [v6]:port or unix:path).
   std::string listen = "127.0.0.1:50051";
@@ -103,8 +115,9 @@ struct ServerConfig {
   // Default "127.0.0.1:9464": the Prometheus endpoint (host:port, serves /metrics); empty means
   // none.
   std::string metrics_listen = "127.0.0.1:9464";
-  StoreConfig store;  // YAML section "store"
-  ShardConfig shard;  // YAML section "shard"
+  StoreConfig store;            // YAML section "store"
+  ShardConfig shard;            // YAML section "shard"
+  RepositoryConfig repository;  // YAML section "repository"
   // Default 10000: on SIGTERM/SIGINT, calls in flight get this long to finish before they are
   // cancelled.
   uint32_t shutdown_grace_ms = 10000;
@@ -132,7 +145,8 @@ struct ServerConfig {
 // Adds one flag per commonly changed field (--listen, --data-dir, --place-vocabulary,
 // --object-vocabulary, --workers, --queue-capacity, --max-message-bytes, --token-file,
 // --tls-cert, --tls-key, --tls-client-ca, --metrics-listen, --sync, --shutdown-grace-ms,
-// --log-level, --shard-name, --placement-file), bound to `config`: parsing `app` overwrites exactly
+// --log-level, --shard-name, --placement-file, --repository-primary, --repository-token-file,
+// --repository-tls-ca), bound to `config`: parsing `app` overwrites exactly
 // the fields whose flags were given. The help shows the values `config` holds now as defaults.
 // `config` must outlive `app`.
 void AddFlags(CLI::App& app, ServerConfig* config);

@@ -71,6 +71,11 @@ TEST_F(ServerConfigTest, DefaultsAreValidAndAsDocumented) {
   EXPECT_EQ(config.store.sync, StoreSync::kGrouped);
   EXPECT_EQ(config.store.group_sync_interval_ms, 50u);
   EXPECT_EQ(config.store.block_cache_mb, 64u);
+  EXPECT_EQ(config.shard.name, "");
+  EXPECT_EQ(config.shard.placement_file, "");
+  EXPECT_EQ(config.repository.primary, "");
+  EXPECT_EQ(config.repository.token_file, "");
+  EXPECT_EQ(config.repository.tls_ca, "");
   EXPECT_EQ(config.shutdown_grace_ms, 10000u);
   EXPECT_EQ(config.log_level, "info");
   EXPECT_DOUBLE_EQ(config.place.alpha, 0.3);
@@ -122,6 +127,13 @@ store:
   sync: every_write
   group_sync_interval_ms: 200
   block_cache_mb: 0
+shard:
+  name: shard_a
+  placement_file: /etc/recogd/router/placement.map
+repository:
+  primary: "10.0.0.10:50051"
+  token_file: primary.token
+  tls_ca: primary-ca.crt
 shutdown_grace_ms: 500
 log_level: debug
 place:
@@ -153,6 +165,11 @@ place:
   EXPECT_EQ(config->store.sync, StoreSync::kEveryWrite);
   EXPECT_EQ(config->store.group_sync_interval_ms, 200u);
   EXPECT_EQ(config->store.block_cache_mb, 0u);
+  EXPECT_EQ(config->shard.name, "shard_a");
+  EXPECT_EQ(config->shard.placement_file, "/etc/recogd/router/placement.map");
+  EXPECT_EQ(config->repository.primary, "10.0.0.10:50051");
+  EXPECT_EQ(config->repository.token_file, "primary.token");
+  EXPECT_EQ(config->repository.tls_ca, "primary-ca.crt");
   EXPECT_EQ(config->shutdown_grace_ms, 500u);
   EXPECT_EQ(config->log_level, "debug");
   EXPECT_DOUBLE_EQ(config->place.alpha, 0.25);
@@ -257,6 +274,14 @@ TEST_F(ServerConfigTest, ValidateNamesTheBadField) {
        "store.group_sync_interval_ms"},
       {[](ServerConfig& c) { c.store.block_cache_mb = uint64_t{1} << 30; }, "store.block_cache_mb"},
       {[](ServerConfig& c) { c.log_level = "verbose"; }, "log_level"},
+      {[](ServerConfig& c) { c.shard.name = "a"; }, "shard.name and shard.placement_file"},
+      {[](ServerConfig& c) {
+         c.shard = {"a-b", "p.map"};
+       },
+       "shard.name 'a-b'"},
+      {[](ServerConfig& c) { c.repository.token_file = "t"; }, "need repository.primary"},
+      {[](ServerConfig& c) { c.repository.tls_ca = "ca.pem"; }, "need repository.primary"},
+      {[](ServerConfig& c) { c.repository.primary = c.listen; }, "repository.primary is this"},
       {[](ServerConfig& c) { c.place.alpha = -1; }, "place: alpha"},
       {[](ServerConfig& c) { c.place.epipolar.min_inliers = 3; }, "place: RANSAC"},
   };
@@ -336,7 +361,17 @@ TEST_F(ServerConfigTest, EveryFlagSetsItsField) {
                                         "--shutdown-grace-ms",
                                         "0",
                                         "--log-level",
-                                        "warn"});
+                                        "warn",
+                                        "--shard-name",
+                                        "shard_b",
+                                        "--placement-file",
+                                        "p.map",
+                                        "--repository-primary",
+                                        "primary:50051",
+                                        "--repository-token-file",
+                                        "primary.token",
+                                        "--repository-tls-ca",
+                                        "primary-ca.pem"});
   ASSERT_TRUE(parsed.ok()) << parsed.status().ToString();
   const ServerConfig& c = parsed->config;
   EXPECT_EQ(parsed->config_file, "");
@@ -355,6 +390,11 @@ TEST_F(ServerConfigTest, EveryFlagSetsItsField) {
   EXPECT_EQ(c.store.sync, StoreSync::kEveryWrite);
   EXPECT_EQ(c.shutdown_grace_ms, 0u);
   EXPECT_EQ(c.log_level, "warn");
+  EXPECT_EQ(c.shard.name, "shard_b");
+  EXPECT_EQ(c.shard.placement_file, "p.map");
+  EXPECT_EQ(c.repository.primary, "primary:50051");
+  EXPECT_EQ(c.repository.token_file, "primary.token");
+  EXPECT_EQ(c.repository.tls_ca, "primary-ca.pem");
 }
 
 TEST_F(ServerConfigTest, HelpIsReturnedNotPrintedAndSkipsTheFile) {

@@ -55,6 +55,12 @@ ServerMetrics::ServerMetrics() : registry_(std::make_shared<prometheus::Registry
            .Add({});
   stream_active_ =
       &Register(prometheus::BuildGauge(), r, "recog_stream_active", "Open streaming calls per RPC");
+  replica_synced_ = &Register(prometheus::BuildGauge(), r, "recog_replica_synced",
+                              "1 while this repository replica follows its primary live")
+                         .Add({});
+  replica_changes_ = &Register(prometheus::BuildCounter(), r, "recog_replica_changes_total",
+                               "Model changes this repository replica copied from its primary")
+                          .Add({});
 }
 
 // The exposer stops serving before the registry goes away.
@@ -120,6 +126,12 @@ void ServerMetrics::RemoveMap(std::string_view map) {
 }
 
 void ServerMetrics::SetObjects(uint64_t objects) { objects_->Set(static_cast<double>(objects)); }
+
+void ServerMetrics::SetReplicaSynced(bool synced) { replica_synced_->Set(synced ? 1.0 : 0.0); }
+
+void ServerMetrics::AddReplicaChanges(uint64_t count) {
+  replica_changes_->Increment(static_cast<double>(count));
+}
 
 void ServerMetrics::StreamOpened(std::string_view rpc) {
   stream_active_->Add({{"rpc", std::string(rpc)}}).Increment();

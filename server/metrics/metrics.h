@@ -10,6 +10,9 @@
 //   recog_map_entries{map}                     gauge: entries of each place map
 //   recog_objects                              gauge: object models in the database
 //   recog_stream_active{rpc}                   gauge: open streaming calls per RPC
+//   recog_replica_synced                       gauge: 1 while a repository replica follows its
+//                                              primary live, 0 otherwise (and on a primary)
+//   recog_replica_changes_total                counter: model changes a replica copied
 // StartHttp serves them as text on http://<listen_address>/metrics; Serialize returns the same
 // text. Every method is thread-safe; ObserveRpc, on every call's path, takes a shared lock and
 // allocates nothing once a (method, code) pair has been seen. No method throws.
@@ -66,6 +69,11 @@ class ServerMetrics {
   void RemoveMap(std::string_view map);
   void SetObjects(uint64_t objects);
 
+  // A repository replica (server/replication/) is or is no longer synced with its primary;
+  // it applied `count` changes (copied versions, deletions).
+  void SetReplicaSynced(bool synced);
+  void AddReplicaChanges(uint64_t count = 1);
+
   // A streaming call of `rpc` (e.g. "StreamFrames") opened or closed.
   void StreamOpened(std::string_view rpc);
   void StreamClosed(std::string_view rpc);
@@ -104,6 +112,8 @@ class ServerMetrics {
   prometheus::Gauge* queue_depth_;
   prometheus::Gauge* busy_workers_;
   prometheus::Gauge* objects_;
+  prometheus::Gauge* replica_synced_;
+  prometheus::Counter* replica_changes_;
 
   // rpc_duration_'s histograms by method, then code; the registry owns them.
   mutable std::shared_mutex rpc_mutex_;

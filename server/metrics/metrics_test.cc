@@ -109,12 +109,15 @@ TEST(ServerMetricsTest, CountersAccumulate) {
   metrics.AddFrames(FrameKind::kObject, 2);
   metrics.AddLoopDetections();
   metrics.AddObjectDetections(3);
+  metrics.AddReplicaChanges();
+  metrics.AddReplicaChanges(2);
   const std::string text = metrics.Serialize();
   EXPECT_THAT(text, HasSubstr("# TYPE recog_frames_total counter"));
   EXPECT_THAT(Sample(text, "recog_frames_total{kind=\"place\"}"), Optional(5.0));
   EXPECT_THAT(Sample(text, "recog_frames_total{kind=\"object\"}"), Optional(2.0));
   EXPECT_THAT(Sample(text, "recog_loop_detections_total"), Optional(1.0));
   EXPECT_THAT(Sample(text, "recog_object_detections_total"), Optional(3.0));
+  EXPECT_THAT(Sample(text, "recog_replica_changes_total"), Optional(3.0));
 }
 
 TEST(ServerMetricsTest, GaugesHoldTheLastValue) {
@@ -123,11 +126,14 @@ TEST(ServerMetricsTest, GaugesHoldTheLastValue) {
   metrics.SetWorkerQueueDepth(3);
   metrics.SetBusyWorkers(2);
   metrics.SetObjects(11);
+  EXPECT_THAT(Sample(metrics.Serialize(), "recog_replica_synced"), Optional(0.0));
+  metrics.SetReplicaSynced(true);
   const std::string text = metrics.Serialize();
   EXPECT_THAT(text, HasSubstr("# TYPE recog_worker_queue_depth gauge"));
   EXPECT_THAT(Sample(text, "recog_worker_queue_depth"), Optional(3.0));
   EXPECT_THAT(Sample(text, "recog_worker_busy"), Optional(2.0));
   EXPECT_THAT(Sample(text, "recog_objects"), Optional(11.0));
+  EXPECT_THAT(Sample(text, "recog_replica_synced"), Optional(1.0));
 }
 
 TEST(ServerMetricsTest, MapEntriesHaveOneSeriesPerMapUntilTheMapIsRemoved) {

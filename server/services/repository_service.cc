@@ -15,6 +15,16 @@ constexpr char kService[] = "/recognition.v1.ObjectRepository/";
 constexpr size_t kDefaultChunkBytes = 1u << 20, kMaxChunkBytes = 2u << 20;
 std::string Method(const char* name) { return std::string(kService) + name; }
 
+// A replica's repository follows its primary (RepositoryFollower) and takes no writes of its own.
+grpc::Status RefuseOnReplica(const ServerState& state) {
+  const std::string& primary = state.config.repository.primary;
+  if (primary.empty()) return grpc::Status::OK;
+  return {grpc::StatusCode::FAILED_PRECONDITION,
+          "this server holds a read-only replica of the model repository; send uploads and "
+          "deletions to its primary, " +
+              primary};
+}
+
 bool IsSha256Hex(const std::string& s) {
   return s.size() == 64 && std::all_of(s.begin(), s.end(), [](char c) {
            return (c >= '0' && c <= '9') || (c >= 'a' && c <= 'f');
@@ -27,8 +37,8 @@ class ModelUpload final : public grpc::ServerReadReactor<pb::PutModelRequest> {
   ModelUpload(ServerState& state, PartialUploads& partial_uploads,
               grpc::CallbackServerContext* context, pb::PutModelResponse* response)
       : state_(state), partial_uploads_(partial_uploads), context_(context), response_(response) {
-    const grpc::Status status =
-        BeginCall(state_, context_, Method("PutModel"), Right::kWrite, &call_);
+    grpc::Status status = BeginCall(state_, context_, Method("PutModel"), Right::kWrite, &call_);
+    if (status.ok()) status = RefuseOnReplica(state_);
     if (!status.ok()) {
       End(status);
       return;
@@ -228,12 +238,17 @@ class ModelDownload final : public grpc::ServerWriteReactor<pb::GetModelResponse
 
 }  // namespace
 
-// WatchModels: the repository's events, filtered by name prefix, through a bounded queue.
+// WatchModels: the repository's events, filtered by name prefix, through a bounded queue; with
+// include_existing, the versions stored when the watch began go first (not counted in the bound),
+// then MODEL_CHANGE_SYNCED.
 class ModelWatch final : public grpc::ServerWriteReactor<pb::WatchModelsResponse> {
  public:
   ModelWatch(RepositoryService& service, grpc::CallbackServerContext* context,
              const pb::WatchModelsRequest& request)
-      : service_(service), state_(service.state_), prefix_(request.name_prefix()) {
+      : service_(service),
+        state_(service.state_),
+        prefix_(request.name_prefix()),
+        synced_to_send_(request.include_existing()) {
     state_.metrics.StreamOpened("WatchModels");
     const grpc::Status status =
         BeginCall(state_, context, Method("WatchModels"), Right::kRead, &call_);
@@ -246,8 +261,11 @@ class ModelWatch final : public grpc::ServerWriteReactor<pb::WatchModelsResponse
       std::lock_guard watches(service_.watches_mutex_);
       service_.watches_.insert(this);
     }
-    watch_id_ = state_.repository->Watch([this](const ModelEvent& event) { OnEvent(event); });
+    watch_id_ = state_.repository->Watch([this](const ModelEvent& event) { OnEvent(event); },
+                                         synced_to_send_ ? &existing_ : nullptr);
     watching_ = true;
+    std::erase_if(existing_, [this](const ModelVersionInfo& info) { return !Watched(info); });
+    if (synced_to_send_) WriteNextLocked();
   }
 
   void Close() {
@@ -256,8 +274,13 @@ class ModelWatch final : public grpc::ServerWriteReactor<pb::WatchModelsResponse
   }
 
  private:
+  bool Watched(const ModelVersionInfo& info) const {
+    return info.metadata.name.starts_with(prefix_);
+  }
+  bool HasNextLocked() const { return synced_to_send_ || !pending_.empty(); }
+
   void OnEvent(const ModelEvent& event) {
-    if (event.info.metadata.name.compare(0, prefix_.size(), prefix_) != 0) return;
+    if (!Watched(event.info)) return;
     std::lock_guard lock(mutex_);
     if (finished_) return;
     if (pending_.size() >= RepositoryService::kMaxPendingEvents) {
@@ -275,9 +298,21 @@ class ModelWatch final : public grpc::ServerWriteReactor<pb::WatchModelsResponse
     if (!writing_) WriteNextLocked();
   }
 
+  // Writes the next existing version, else SYNCED once, else the oldest pending change.
   void WriteNextLocked() {
-    response_ = std::move(pending_.front());
-    pending_.pop_front();
+    if (next_existing_ < existing_.size()) {
+      response_.Clear();
+      response_.set_change(pb::MODEL_CHANGE_PUT);
+      ToProto(existing_[next_existing_++], response_.mutable_model());
+    } else if (synced_to_send_) {
+      response_.Clear();
+      response_.set_change(pb::MODEL_CHANGE_SYNCED);
+      synced_to_send_ = false;
+      existing_ = {};
+    } else {
+      response_ = std::move(pending_.front());
+      pending_.pop_front();
+    }
     writing_ = true;
     StartWrite(&response_);
   }
@@ -289,7 +324,7 @@ class ModelWatch final : public grpc::ServerWriteReactor<pb::WatchModelsResponse
       FinishLocked({grpc::StatusCode::CANCELLED, "the client went away"});
     } else if (finish_pending_) {
       FinishLocked(final_status_);
-    } else if (!pending_.empty() && !finished_) {
+    } else if (HasNextLocked() && !finished_) {
       WriteNextLocked();
     }
   }
@@ -328,9 +363,12 @@ class ModelWatch final : public grpc::ServerWriteReactor<pb::WatchModelsResponse
   CallInfo call_;
   uint64_t watch_id_ = 0;
   bool watching_ = false;
-  std::mutex mutex_;  // guards everything below
-  std::deque<pb::WatchModelsResponse> pending_;
-  pb::WatchModelsResponse response_;  // being written
+  std::mutex mutex_;                        // guards everything below
+  std::vector<ModelVersionInfo> existing_;  // with include_existing: sent before anything else
+  size_t next_existing_ = 0;
+  bool synced_to_send_;                          // MODEL_CHANGE_SYNCED is still to be written
+  std::deque<pb::WatchModelsResponse> pending_;  // changes, at most kMaxPendingEvents
+  pb::WatchModelsResponse response_;             // being written
   bool writing_ = false, finished_ = false, finish_pending_ = false;
   grpc::Status final_status_;
 };
@@ -344,6 +382,7 @@ grpc::ServerUnaryReactor* RepositoryService::GetUploadStatus(
     grpc::CallbackServerContext* context, const pb::GetUploadStatusRequest* request,
     pb::GetUploadStatusResponse* response) {
   return RunUnary(state_, context, Method("GetUploadStatus"), Right::kWrite, [=, this](CallInfo&) {
+    if (grpc::Status refused = RefuseOnReplica(state_); !refused.ok()) return refused;
     if (!IsSha256Hex(request->sha256())) {
       return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
                           "sha256 must be 64 lowercase hex digits (SHA-256 of the file)");
@@ -386,6 +425,7 @@ grpc::ServerUnaryReactor* RepositoryService::DeleteModel(grpc::CallbackServerCon
                                                          pb::DeleteModelResponse* response) {
   return RunUnary(state_, context, Method("DeleteModel"), Right::kWrite, [=, this](CallInfo& call) {
     call.map = request->name();
+    if (grpc::Status refused = RefuseOnReplica(state_); !refused.ok()) return refused;
     const size_t versions = state_.repository->Versions(request->name()).size();
     RECOG_RETURN_IF_ERROR_AS_GRPC(state_.repository->Remove(request->name()), call.request_id);
     response->set_versions_deleted(uint32_t(versions));

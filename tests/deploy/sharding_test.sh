@@ -1,10 +1,12 @@
 #!/usr/bin/env bash
-# Sharded place maps on one machine: two recogd shards behind nginx with the shipped router
-# configuration (deploy/nginx/recogd-router.conf), the placement table read by nginx and by both
-# servers. Checks that maps streamed through nginx give the results of a single server, that a
-# shard refuses a map it does not own (naming the owner), that nginx refuses an unplaced map,
-# that a killed shard's maps get UNAVAILABLE while the other shard's keep working, and that the
-# restarted shard has every acknowledged frame.
+# Several servers on one machine: two recogd shards, which are also replicas of the model
+# repository, and a repository primary, behind nginx with the shipped router configuration
+# (deploy/nginx/recogd-router.conf), the placement table read by nginx and by both shards.
+# Checks that maps streamed through nginx give the results of a single server, that a shard
+# refuses a map it does not own (naming the owner), that nginx refuses an unplaced map, that a
+# killed shard's maps get UNAVAILABLE while the other shard's keep working, that the restarted
+# shard has every acknowledged frame, and that a model uploaded through nginx (to the primary,
+# while a shard is down) is recognised through every shard, and deleted from every shard.
 # Usage: sharding_test.sh RECOG RECOGD PROJECT_DIR. Exits 77 (skipped) without nginx.
 set -u
 recog=$1
@@ -25,10 +27,12 @@ trap cleanup EXIT
 # shellcheck source=../../tools/recog/cli_test_lib.sh
 source "$project/tools/recog/cli_test_lib.sh"
 
-# start_shard NAME PORT: a recogd for shard NAME on PORT with its own data directory.
+# start_shard NAME PORT: a recogd for shard NAME on PORT with its own data directory, following
+# the repository primary.
 start_shard() {
   "$recogd" --listen "127.0.0.1:$2" --data-dir "$tmp/$1" --metrics-listen "" --workers 2 \
-    --shard-name "$1" --placement-file "$tmp/router/placement.map" >>"$tmp/$1.log" 2>&1 &
+    --shard-name "$1" --placement-file "$tmp/router/placement.map" \
+    --repository-primary "127.0.0.1:$port_primary" >>"$tmp/$1.log" 2>&1 &
   pids+=($!)
   eval "pid_$1=$!"
   wait_serving "127.0.0.1:$2" || fail "shard $1 did not come up: $(tail -3 "$tmp/$1.log")"
@@ -43,6 +47,7 @@ wait_serving() {
 
 images=$project/tests/data/corridor
 port_a=$(free_port); port_b=$(free_port); port_single=$(free_port); port_router=$(free_port)
+port_primary=$(free_port)
 mkdir -p "$tmp/router"
 cat >"$tmp/router/placement.map" <<MAP
 # test placement
@@ -53,8 +58,10 @@ printf 'shard_a shard_a;\nshard_b shard_b;\n' >"$tmp/router/shards.map"
 cat >"$tmp/router/upstreams.conf" <<UPSTREAMS
 upstream shard_a { server 127.0.0.1:$port_a; }
 upstream shard_b { server 127.0.0.1:$port_b; }
-upstream models_primary { server 127.0.0.1:$port_a; }
-upstream models_any { server 127.0.0.1:$port_a; server 127.0.0.1:$port_b; }
+upstream models_primary { server 127.0.0.1:$port_primary; }
+upstream models_any {
+  server 127.0.0.1:$port_primary; server 127.0.0.1:$port_a; server 127.0.0.1:$port_b;
+}
 UPSTREAMS
 # The shipped router configuration, with its files and port moved here.
 sed -e "s|/etc/recogd/router/|$tmp/router/|g" -e "s|listen 50050 http2;|listen 127.0.0.1:$port_router http2;|" \
@@ -80,6 +87,10 @@ CONF
 "$nginx_bin" -t -p "$tmp/nginx" -c "$tmp/nginx.conf" >"$tmp/nginx-t.log" 2>&1 \
   && pass || fail "nginx accepts the router configuration: $(cat "$tmp/nginx-t.log")"
 
+"$recogd" --listen "127.0.0.1:$port_primary" --data-dir "$tmp/primary" --metrics-listen "" \
+  --workers 2 >"$tmp/primary.log" 2>&1 &
+pids+=($!)
+wait_serving "127.0.0.1:$port_primary" || fail "the repository primary did not come up"
 start_shard shard_a "$port_a"
 start_shard shard_b "$port_b"
 "$nginx_bin" -p "$tmp/nginx" -c "$tmp/nginx.conf" >"$tmp/nginx/stdout.log" 2>&1 &
@@ -126,8 +137,44 @@ expect_error "corridor-b while shard_b is down" "UNAVAILABLE" \
 expect_ok "corridor-a while shard_b is down" "$recog" query --map corridor-a "$images/41.jpg" \
   --json "${router[@]}"
 json_check "corridor-a still finds its places" "assert d['status']=='loop_detected' and d['match']==2, d"
+
+# A model pushed through nginx while shard_b is down goes to the repository primary; shard_a
+# follows it at once, shard_b once it is back.
+expect_ok "model build" "$recog" model build --planar "$images/1.jpg" --width 0.64 --height 0.48 \
+  --name poster -o "$tmp/poster.robj"
+expect_ok "models push through nginx" "$recog" models push "$tmp/poster.robj" --json "${router[@]}"
+json_check "the primary stored version 1" "assert d[0]['name']=='poster' and d[0]['version']==1, d"
+# recognised_through SHARD PYTHON: recognition through nginx on SHARD, until PYTHON holds of the
+# detected (name, version) pairs `found` (20 s at most).
+recognised_through() {
+  for _ in $(seq 200); do
+    "$recog" recognize --image "$images/1.jpg" --camera 500,500,256,192 --json --shard "$1" \
+      "${router[@]}" >"$tmp/out" 2>"$tmp/err" &&
+      /usr/bin/python3 -c "import json; d=json.load(open('$tmp/out'));
+found=[(x['name'], x['version']) for x in d['detections']]; assert $2" 2>/dev/null && return 0
+    sleep 0.1
+  done
+  return 1
+}
+recognised_through shard_a "('poster', 1) in found" && pass \
+  || fail "shard_a recognises the pushed poster: $(cat "$tmp/out" "$tmp/err")"
+expect_error "a shard refuses an upload, naming the primary" \
+  "FAILED_PRECONDITION.*read-only replica.*127.0.0.1:$port_primary" \
+  "$recog" models push "$tmp/poster.robj" --server "127.0.0.1:$port_a"
+
 start_shard shard_b "$port_b"
 expect_ok "corridor-b after the restart" "$recog" maps stats corridor-b --json "${router[@]}"
 json_check "corridor-b kept its 4 acknowledged frames" "assert d['frames']==4, d"
+recognised_through shard_b "('poster', 1) in found" && pass \
+  || fail "shard_b, restarted, recognises the poster pushed while it was down: $(cat "$tmp/out" "$tmp/err")"
+expect_ok "models pull from shard_b through nginx" "$recog" models pull poster -o "$tmp/pulled.robj" \
+  --shard shard_b "${router[@]}"
+cmp -s "$tmp/poster.robj" "$tmp/pulled.robj" && pass || fail "shard_b holds the pushed file"
+
+expect_ok "models delete through nginx" "$recog" models delete poster "${router[@]}"
+for shard in shard_a shard_b; do
+  recognised_through "$shard" "'poster' not in [n for n, v in found]" && pass \
+    || fail "$shard forgets the deleted poster: $(cat "$tmp/out")"
+done
 
 report_and_exit

@@ -1,5 +1,6 @@
 // Loopback tests of the ObjectRepository and ObjectRecognition services: versioned uploads and
-// downloads, watching, recognition of what was uploaded, bad uploads and bad frames.
+// downloads, watching (also with the stored versions first), recognition of what was uploaded,
+// bad uploads and bad frames.
 #include <chrono>
 #include <string_view>
 #include <thread>
@@ -323,6 +324,47 @@ TEST_F(RepositoryServiceTest, WatchersSeeEveryChangeInOrder) {
   EXPECT_LT(events[1].sequence(), events[2].sequence());
   EXPECT_EQ(models_->DeleteModel(Context().get(), remove, &removed).error_code(),
             grpc::StatusCode::NOT_FOUND);
+}
+
+TEST_F(RepositoryServiceTest, WatchingWithTheExistingVersionsSendsThemThenSyncedThenChanges) {
+  const std::string file = PosterModelFile("x", 1, "");
+  ASSERT_TRUE(Put(file, "watched-1").ok());
+  ASSERT_TRUE(Put(file, "other").ok());  // filtered out by the prefix
+  ASSERT_TRUE(Put(file, "watched-1").ok());
+  ASSERT_TRUE(Put(file, "watched-0").ok());
+  grpc::ClientContext context;
+  pb::WatchModelsRequest request;
+  request.set_name_prefix("watched");
+  request.set_include_existing(true);
+  auto reader = models_->WatchModels(&context, request);
+  std::vector<pb::WatchModelsResponse> events;
+  pb::WatchModelsResponse event;
+  while (events.size() < 4 && reader->Read(&event)) events.push_back(event);
+  // The state needs no waiting for the watch to register: a change now comes after SYNCED.
+  pb::ModelInfo put;
+  ASSERT_TRUE(Put(file, "watched-0", {}, &put).ok());
+  if (reader->Read(&event)) events.push_back(event);
+  context.TryCancel();
+  reader->Finish();
+
+  ASSERT_EQ(events.size(), 5u);
+  const std::vector<std::pair<std::string, uint32_t>> existing = {
+      {"watched-0", 1}, {"watched-1", 1}, {"watched-1", 2}};
+  for (size_t i = 0; i < existing.size(); ++i) {
+    SCOPED_TRACE(i);
+    EXPECT_EQ(events[i].change(), pb::MODEL_CHANGE_PUT);
+    EXPECT_EQ(events[i].model().name(), existing[i].first);
+    EXPECT_EQ(events[i].model().version(), existing[i].second);
+    EXPECT_EQ(events[i].model().sha256().size(), 64u);
+    EXPECT_EQ(events[i].sequence(), 0u);
+  }
+  EXPECT_EQ(events[3].change(), pb::MODEL_CHANGE_SYNCED);
+  EXPECT_FALSE(events[3].has_model());
+  EXPECT_EQ(events[4].change(), pb::MODEL_CHANGE_PUT);
+  EXPECT_EQ(events[4].model().name(), "watched-0");
+  EXPECT_EQ(events[4].model().version(), 2u);
+  EXPECT_EQ(events[4].model().sha256(), put.sha256());
+  EXPECT_GT(events[4].sequence(), 0u);
 }
 
 TEST_F(RepositoryServiceTest, RecognitionFiltersAndRefusesFramesItCannotUse) {

@@ -246,6 +246,13 @@ class RecognitionClientTest(unittest.TestCase):
         self.assertFalse(consumer.is_alive())
         self.assertEqual(outcome, [grpc.StatusCode.CANCELLED])
 
+    def test_a_watch_with_the_existing_models_says_when_it_has_sent_them(self):
+        watch = self.client.watch_models("nothing-", include_existing=True)
+        first = next(iter(watch))  # no model has this prefix: the state is empty
+        watch.cancel()
+        self.assertEqual(first.change, repository_pb2.MODEL_CHANGE_SYNCED)
+        self.assertFalse(first.HasField("model"))
+
     def test_the_example_streams_a_folder(self):
         run = subprocess.run([sys.executable, str(EXAMPLE), "--server", self.target,
                               "--map", "example", str(CORRIDOR)],
