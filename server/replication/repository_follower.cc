@@ -189,6 +189,7 @@ Status RepositoryFollower::Sync(const std::vector<pb::ModelInfo>& primary_versio
       local.clear();
     }
     for (size_t i = local.size(); i < versions.size(); ++i) {
+      if (Stopping()) return Status::Unavailable("the server is stopping");
       RECOG_RETURN_IF_ERROR(Copy(versions[i]));
       ++copied;
     }
@@ -251,6 +252,11 @@ Status RepositoryFollower::RemoveLocal(const std::string& name) {
   state_.metrics.SetObjects(state_.objects->size());
   spdlog::info("repository: removed model '{}' as the primary did", name);
   return Status::Ok();
+}
+
+bool RepositoryFollower::Stopping() {
+  std::lock_guard lock(mutex_);
+  return stopping_;
 }
 
 void RepositoryFollower::SetSynced(bool synced) {

@@ -55,7 +55,7 @@ class RepositoryFollower {
   // FAILED_PRECONDITION when staging_dir cannot be created.
   static StatusOr<std::unique_ptr<RepositoryFollower>> Start(Options options, ServerState* state);
   // Stops: ends the watch, lets a copy in progress finish (a download may take up to the
-  // client's transfer deadline), joins the thread.
+  // client's transfer deadline; a sync stops between copies), joins the thread.
   ~RepositoryFollower();
   RepositoryFollower(const RepositoryFollower&) = delete;
   RepositoryFollower& operator=(const RepositoryFollower&) = delete;
@@ -82,6 +82,7 @@ class RepositoryFollower {
   // deleted meanwhile is skipped: its deletion comes next on the stream.
   Status Copy(const ::recognition::v1::ModelInfo& version);
   Status RemoveLocal(const std::string& name);
+  bool Stopping();
   void SetSynced(bool synced);
 
   const Options options_;
