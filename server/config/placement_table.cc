@@ -1,9 +1,9 @@
 #include "server/config/placement_table.h"
 
-#include <fstream>
 #include <sstream>
 #include <vector>
 
+#include "core/common/file_io.h"
 #include "core/index/entry.h"
 
 namespace recog::server {
@@ -19,11 +19,9 @@ bool PlacementTable::IsShardName(const std::string& name) {
 }
 
 StatusOr<PlacementTable> PlacementTable::Load(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) return Status::NotFound("cannot read the placement table '" + path + "'");
-  std::ostringstream text;
-  text << in.rdbuf();
-  return Parse(text.str(), path);
+  RECOG_ASSIGN_OR_RETURN(const std::string text,
+                         ReadWholeFile(path, "the placement table '" + path + "'"));
+  return Parse(text, path);
 }
 
 StatusOr<PlacementTable> PlacementTable::Parse(const std::string& text, const std::string& source) {

@@ -27,8 +27,8 @@ namespace recog::server {
 
 class PlacementTable {
  public:
-  // NOT_FOUND when the file cannot be read; INVALID_ARGUMENT naming the line of the first bad
-  // entry (syntax, name, duplicate map).
+  // NOT_FOUND when the file is missing or cannot be opened, DATA_LOSS when it cannot be read in
+  // full; INVALID_ARGUMENT naming the line of the first bad entry (syntax, name, duplicate map).
   static StatusOr<PlacementTable> Load(const std::string& path);
   static StatusOr<PlacementTable> Parse(const std::string& text, const std::string& source);
 

@@ -2,13 +2,12 @@
 
 #include <algorithm>
 #include <filesystem>
-#include <fstream>
-#include <iterator>
 #include <map>
 #include <set>
 
 #include <spdlog/spdlog.h>
 
+#include "core/common/file_io.h"
 #include "proto/grpc_code_names.h"
 #include "server/api/converters.h"
 
@@ -21,13 +20,6 @@ namespace pb = ::recognition::v1;
 Status PrimaryError(const std::string& what, const grpc::Status& status) {
   return Status::Unavailable(what + ": " + std::string(GrpcCodeName(status.error_code())) + ": " +
                              status.error_message());
-}
-
-StatusOr<std::string> ReadWholeFile(const std::filesystem::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  if (!in.good() && !in.eof()) return Status::Internal("cannot read " + path.string());
-  return bytes;
 }
 
 // True when `local` (oldest first) is the first local.size() versions of `primary`.
@@ -59,7 +51,7 @@ StatusOr<std::unique_ptr<RepositoryFollower>> RepositoryFollower::Start(Options 
   client::Result<std::unique_ptr<client::RecognitionClient>> primary =
       client::RecognitionClient::Connect(options.primary);
   if (!primary.ok()) {
-    return Status::InvalidArgument("repository.primary '" + options.primary.target +
+    return Status::InvalidArgument("repository: cannot follow '" + options.primary.target +
                                    "': " + primary.status().error_message());
   }
   return std::unique_ptr<RepositoryFollower>(
@@ -234,7 +226,8 @@ Status RepositoryFollower::Copy(const pb::ModelInfo& version) {
         "downloading version " + std::to_string(version.version()) + " of '" + version.name() + "'",
         downloaded.status());
   }
-  StatusOr<std::string> file = ReadWholeFile(path);
+  StatusOr<std::string> file =
+      ReadWholeFile(path.string(), "downloaded model '" + path.string() + "'");
   std::error_code error;
   std::filesystem::remove(path, error);
   RECOG_RETURN_IF_ERROR(file.status());

@@ -1,8 +1,9 @@
 // Repository replicas over loopback TCP: a primary recogd and a replica following it
 // (repository.primary), both in this process. The replica copies every version as the primary
 // stores it (numbers, tags, creation times, bytes) and recognises the models; it follows uploads
-// and deletions, refuses writes naming its primary, keeps serving while the primary is away,
-// catches up when either side comes back, and reconciles what changed while it was down.
+// and deletions, refuses writes naming its primary, keeps serving while the primary is away (or
+// was never reached), catches up when either side comes back, and reconciles what changed while
+// it was down; settings it cannot use stop it from starting.
 #include <chrono>
 #include <functional>
 #include <thread>
@@ -60,16 +61,22 @@ class ReplicationTest : public ServerFixture {
     ServerFixture::TearDown();
   }
 
-  void StartReplica() {
+  // The configuration of a replica of the fixture's server.
+  ServerConfig ReplicaConfig() {
     ServerConfig replica_config = config();
     replica_config.listen = "127.0.0.1:0";
     replica_config.data_dir = replica_dir_.path().string();
     replica_config.repository.primary = config().listen;
+    return replica_config;
+  }
+
+  void StartReplica(const ServerConfig& replica_config) {
     auto started = RecognitionServer::Start(replica_config);
     ASSERT_TRUE(started.ok()) << started.status().ToString();
     replica_server_ = std::move(*started);
     replica_ = ClientOf("127.0.0.1:" + std::to_string(replica_server_->port()));
   }
+  void StartReplica() { StartReplica(ReplicaConfig()); }
 
   void StopReplica() {
     replica_.reset();
@@ -222,6 +229,30 @@ TEST_F(ReplicationTest, AReplicaThatWasDownReconcilesWhatChangedMeanwhile) {
   std::string bytes;
   EXPECT_EQ(Fetch(*replica_, "poster", 2, &info, &bytes).error_code(), grpc::StatusCode::NOT_FOUND);
   EXPECT_EQ(Latest(*replica_), Latest(*primary_));
+}
+
+TEST_F(ReplicationTest, AReplicaWhosePrimaryTokenFileCannotBeReadDoesNotStartAndSaysWhy) {
+  ServerConfig replica_config = ReplicaConfig();
+  replica_config.repository.token_file = "/nonexistent/primary.token";
+  auto started = RecognitionServer::Start(replica_config);
+  ASSERT_FALSE(started.ok());
+  EXPECT_EQ(started.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(started.status().message().find("/nonexistent/primary.token"), std::string::npos)
+      << started.status().ToString();
+}
+
+TEST_F(ReplicationTest, AReplicaWhosePrimaryIsUnreachableStartsServesAndStillRefusesWrites) {
+  ServerConfig replica_config = ReplicaConfig();
+  replica_config.repository.primary = "127.0.0.1:" + std::to_string(recog::testing::FreePort());
+  StartReplica(replica_config);
+  ASSERT_NE(replica_, nullptr);
+  EXPECT_TRUE(Latest(*replica_).empty());
+  EXPECT_TRUE(Recognised(*replica_).empty());
+  auto upload = replica_->UploadModel(PosterModelFile("poster", 1, "poster"), "poster");
+  EXPECT_EQ(upload.status().error_code(), grpc::StatusCode::FAILED_PRECONDITION);
+  EXPECT_NE(upload.status().error_message().find(replica_config.repository.primary),
+            std::string::npos)
+      << upload.status().error_message();
 }
 
 }  // namespace

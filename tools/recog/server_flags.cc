@@ -11,7 +11,8 @@ void ServerFlags::AddTo(CLI::App* command) {
   command->add_option("--tls-cert", tls_cert, "client certificate (PEM) for mutual TLS");
   command->add_option("--tls-key", tls_key, "client key (PEM) for mutual TLS");
   command->add_option("--shard", shard,
-                      "behind a router of shards: the shard of calls without a map");
+                      "behind a router of shards: the shard of calls without a map (maps list, "
+                      "admin, recognition, model reads)");
   command->add_flag("--json", json, "print JSON");
 }
 
