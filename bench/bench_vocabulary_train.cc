@@ -8,7 +8,7 @@
 #include <chrono>
 #include <filesystem>
 
-#include "core/vocabulary/training_images.h"
+#include "core/features/training_images.h"
 #include "core/vocabulary/vocabulary_trainer.h"
 #include "tests/testing/data_paths.h"
 #include "tools/recog/cli_support.h"

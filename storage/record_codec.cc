@@ -217,7 +217,7 @@ Status DecodeMapInfo(std::string_view name, std::string_view bytes, MapInfo* out
   c.scoring = ScoringType(scoring);
   if (info.id == 0) return Status::DataLoss(what + ": map id 0");
   const Status valid = c.Validate();
-  if (!valid.ok()) return Status::DataLoss(what + ": " + valid.message());
+  if (!valid.ok()) return valid.WithContext(what, StatusCode::kDataLoss);
   *out = std::move(info);
   return Status::Ok();
 }

@@ -3,7 +3,7 @@
 #include <type_traits>
 
 #include "client/cpp/ordered_stream.h"
-#include "proto/routing.h"
+#include "wire/routing.h"
 
 namespace recog::client {
 namespace {

@@ -12,9 +12,9 @@
 #include "client/cpp/client_test_fixture.h"
 #include "client/cpp/frame_stream.h"
 #include "client/cpp/sha256.h"
-#include "proto/sha256.h"
 #include "tests/testing/model_files.h"
 #include "tests/testing/tcp_proxy.h"
+#include "wire/sha256.h"
 
 namespace recog::client::testing {
 namespace {

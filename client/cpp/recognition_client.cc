@@ -9,7 +9,7 @@
 #include <spdlog/spdlog.h>
 
 #include "client/cpp/retry.h"
-#include "proto/routing.h"
+#include "wire/routing.h"
 
 namespace recog::client {
 namespace {
@@ -77,7 +77,7 @@ std::function<grpc::Status(grpc::ClientContext&)> UnaryAttempt(
   };
 }
 
-// The attempt of a call about place map `map`: the routing header first (proto/routing.h).
+// The attempt of a call about place map `map`: the routing header first (wire/routing.h).
 std::function<grpc::Status(grpc::ClientContext&)> ForMap(
     const std::string& map, std::function<grpc::Status(grpc::ClientContext&)> attempt) {
   return [map, attempt = std::move(attempt)](grpc::ClientContext& context) {

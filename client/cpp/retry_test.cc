@@ -20,8 +20,8 @@
 #include "client/cpp/recognition_client.h"
 #include "client/cpp/retry.h"
 #include "client/cpp/sha256.h"
-#include "proto/sha256.h"
 #include "tests/testing/free_port.h"
+#include "wire/sha256.h"
 
 namespace recog::client {
 namespace {

@@ -3,7 +3,7 @@
 #include <array>
 #include <fstream>
 
-#include "proto/sha256.h"
+#include "wire/sha256.h"
 
 namespace recog::client::internal {
 

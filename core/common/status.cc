@@ -38,4 +38,11 @@ std::string Status::ToString() const {
   return out;
 }
 
+Status Status::WithContext(std::string_view context) const { return WithContext(context, code_); }
+
+Status Status::WithContext(std::string_view context, StatusCode code) const {
+  if (ok()) return *this;
+  return Status(code, std::string(context) + ": " + message_);
+}
+
 }  // namespace recog

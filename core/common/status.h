@@ -66,6 +66,12 @@ class [[nodiscard]] Status {
   // "INVALID_ARGUMENT: <message>", or "OK".
   std::string ToString() const;
 
+  // The same failure with `context` before its message, "context: message" (e.g. the file or the
+  // map it happened in); the second form also gives it another code (a parse error found in a
+  // stored file is DATA_LOSS). An OK status stays OK.
+  Status WithContext(std::string_view context) const;
+  Status WithContext(std::string_view context, StatusCode code) const;
+
  private:
   StatusCode code_ = StatusCode::kOk;
   std::string message_;

@@ -1,6 +1,10 @@
 #include "core/common/status.h"
 
+#include <string>
+
 #include <gtest/gtest.h>
+
+#include "core/common/names.h"
 
 namespace recog {
 namespace {
@@ -51,6 +55,40 @@ TEST(StatusTest, AssignOrReturnPropagatesErrorsAndUnwrapsValues) {
   Status s = Doubled(0, &out);
   EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
   EXPECT_EQ(out, 8);
+}
+
+TEST(StatusTest, WithContextPrefixesTheMessageAndKeepsOrReplacesTheCode) {
+  const Status parse = Status::InvalidArgument("line 3: expected a number");
+  const Status located = parse.WithContext("vocabulary 'a.txt'");
+  EXPECT_EQ(located.code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(located.message(), "vocabulary 'a.txt': line 3: expected a number");
+  const Status stored = parse.WithContext("stored map 'm'", StatusCode::kDataLoss);
+  EXPECT_EQ(stored.code(), StatusCode::kDataLoss);
+  EXPECT_EQ(stored.message(), "stored map 'm': line 3: expected a number");
+}
+
+TEST(StatusTest, WithContextLeavesOkAlone) {
+  EXPECT_TRUE(Status::Ok().WithContext("anything").ok());
+  EXPECT_TRUE(Status::Ok().WithContext("anything", StatusCode::kDataLoss).ok());
+  EXPECT_EQ(Status::Ok().WithContext("anything").message(), "");
+}
+
+TEST(NamesTest, AcceptsLettersDigitsDotsUnderscoresAndDashesUpTo128Characters) {
+  EXPECT_TRUE(ValidateName("map", "corridor-2024_01.a").ok());
+  EXPECT_TRUE(ValidateName("map", std::string(128, 'x')).ok());
+}
+
+TEST(NamesTest, RefusesEmptyLongAndOddNamesSayingWhatKindOfName) {
+  const Status empty = ValidateName("map", "");
+  EXPECT_EQ(empty.code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(empty.message(), "map name must have 1 to 128 characters");
+  EXPECT_EQ(ValidateName("object", std::string(129, 'x')).code(), StatusCode::kInvalidArgument);
+  for (const char* bad : {"a b", "a/b", "caf\xc3\xa9", "a:b", "..\\x"}) {
+    const Status status = ValidateName("object", bad);
+    EXPECT_EQ(status.code(), StatusCode::kInvalidArgument) << bad;
+    EXPECT_EQ(status.message(), "object name '" + std::string(bad) +
+                                    "' may only use letters, digits, '.', '_' and '-'");
+  }
 }
 
 }  // namespace

@@ -22,17 +22,11 @@
 
 #include <opencv2/core.hpp>
 
+#include "core/common/descriptor.h"
+#include "core/common/feature_set.h"
 #include "core/common/status.h"
-#include "core/vocabulary/descriptor.h"
 
 namespace recog {
-
-struct FeatureSet {
-  std::vector<cv::KeyPoint> keypoints;
-  cv::Mat descriptors;  // one row per keypoint, in the extractor's DescriptorFormat
-
-  size_t size() const { return keypoints.size(); }
-};
 
 enum class FeatureType { kOrb, kFastBrief, kSift };
 std::string_view FeatureTypeName(FeatureType type);  // "orb", "brief", "sift"

@@ -18,7 +18,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include "core/vocabulary/descriptor.h"
+#include "core/common/descriptor.h"
 #include "tests/testing/test_data.h"
 
 namespace recog {

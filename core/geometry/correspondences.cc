@@ -5,7 +5,7 @@
 
 #include <opencv2/calib3d.hpp>
 
-#include "core/vocabulary/descriptor.h"
+#include "core/common/descriptor.h"
 
 namespace recog {
 namespace {

@@ -27,8 +27,8 @@
 #include <string>
 #include <vector>
 
+#include "core/common/feature_set.h"
 #include "core/common/status.h"
-#include "core/features/feature_extractor.h"
 #include "core/index/entry.h"
 #include "core/index/index_store.h"
 #include "core/vocabulary/vocabulary.h"

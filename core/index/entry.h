@@ -17,7 +17,7 @@
 #include "core/bow/bow_vector.h"
 #include "core/bow/feature_vector.h"
 #include "core/bow/scoring.h"
-#include "core/vocabulary/descriptor.h"
+#include "core/common/descriptor.h"
 
 namespace recog {
 
@@ -51,10 +51,6 @@ struct EntryRecord {
   cv::Mat descriptors;              // one row per keypoint, in the map's descriptor format
   std::vector<cv::Point3f> points;  // one per keypoint (object entries) or empty (place frames)
 };
-
-// INVALID_ARGUMENT unless `name` has 1 to 128 characters of [A-Za-z0-9._-] (the rule for map
-// names everywhere: stores, the server's placement table).
-Status ValidateMapName(const std::string& name);
 
 // Fixed when a map is created.
 struct MapConfig {

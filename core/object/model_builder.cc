@@ -11,6 +11,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "core/common/names.h"
 #include "core/object/roboearth.h"
 
 namespace recog {
@@ -287,7 +288,7 @@ StatusOr<ObjectModel> ModelBuilder::FromFaceImages(const std::string& name,
   model.metadata.type = ObjectType::kPlanar;
   model.metadata.dimensions = {width, height, depth};
   model.metadata.source = faces.size() == 1 ? "planar" : "box";
-  RECOG_RETURN_IF_ERROR(ValidateObjectName(name));
+  RECOG_RETURN_IF_ERROR(ValidateName("object", name));
   Accumulator accumulator;
   FeatureSet features;
   for (const FaceImage& face_image : faces) {
@@ -318,7 +319,7 @@ StatusOr<ObjectModel> ModelBuilder::FromFaceImages(const std::string& name,
 StatusOr<ObjectModel> ModelBuilder::FromPosedPolygons(const std::string& name,
                                                       const std::vector<FacePolygon>& polygons,
                                                       const std::vector<PosedImage>& views) {
-  RECOG_RETURN_IF_ERROR(ValidateObjectName(name));
+  RECOG_RETURN_IF_ERROR(ValidateName("object", name));
   if (polygons.empty() || views.empty()) {
     return Status::InvalidArgument("a model from posed images needs faces and views");
   }
@@ -384,7 +385,7 @@ StatusOr<ObjectModel> ModelBuilder::FromPosedPolygons(const std::string& name,
 
 StatusOr<ObjectModel> ModelBuilder::FromRgbd(const std::string& name,
                                              const std::vector<RgbdView>& views) {
-  RECOG_RETURN_IF_ERROR(ValidateObjectName(name));
+  RECOG_RETURN_IF_ERROR(ValidateName("object", name));
   if (views.empty()) return Status::InvalidArgument("an RGB-D model needs views");
   ObjectModel model;
   model.metadata.name = name;
@@ -453,7 +454,7 @@ StatusOr<ObjectModel> ModelBuilder::FromRoboEarth(const std::string& dir) {
   model.metadata.source = "roboearth:" + std::filesystem::path(dir).filename().string();
   model.metadata.units = folder.meta.type == ObjectType::kPlanar ? "m" : "sfm";
   model.metadata.dimensions = {folder.meta.width, folder.meta.height, folder.meta.depth};
-  RECOG_RETURN_IF_ERROR(ValidateObjectName(model.metadata.name));
+  RECOG_RETURN_IF_ERROR(ValidateName("object", model.metadata.name));
 
   // 3D models: one cloud for every view (the dense one, else the union of the views' clouds).
   PointCloud cloud;

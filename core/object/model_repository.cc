@@ -21,6 +21,7 @@
 #include <spdlog/spdlog.h>
 
 #include "core/common/byte_codec.h"
+#include "core/common/names.h"
 #include "core/object/model_file.h"
 
 namespace recog {
@@ -52,7 +53,7 @@ bool ParseVersionKey(std::string_view key, std::string* name, uint32_t* version)
   }
   const std::from_chars_result parsed =
       std::from_chars(digits.data(), digits.data() + digits.size(), *version);
-  return parsed.ec == std::errc() && *version > 0 && ValidateObjectName(*name).ok();
+  return parsed.ec == std::errc() && *version > 0 && ValidateName("object", *name).ok();
 }
 
 int64_t NowUnixMs() {
@@ -263,7 +264,7 @@ StatusOr<ObjectModel> ModelRepository::DecodeForDatabase(std::string_view model_
   RECOG_RETURN_IF_ERROR(decoded.status());
   ObjectModel model = std::move(*decoded);
   if (!name.empty()) {
-    RECOG_RETURN_IF_ERROR(ValidateObjectName(name));
+    RECOG_RETURN_IF_ERROR(ValidateName("object", name));
     model.metadata.name = name;
   }
   const DescriptorFormat& format = objects_->index().info().config.descriptor;
@@ -401,7 +402,7 @@ StatusOr<ModelPage> ModelRepository::List(const ModelFilter& filter, size_t page
   std::string after;  // the last name of the previous page
   if (!page_token.empty()) {
     after = page_token.substr(std::min(page_token.size(), std::strlen(kPageTokenPrefix)));
-    if (!page_token.starts_with(kPageTokenPrefix) || !ValidateObjectName(after).ok()) {
+    if (!page_token.starts_with(kPageTokenPrefix) || !ValidateName("object", after).ok()) {
       return Status::InvalidArgument("'" + page_token + "' is not a page token of this listing");
     }
   }
@@ -445,10 +446,9 @@ Status ModelRepository::Remove(const std::string& name) {
   }
   Notify(ModelEvent::Kind::kDelete, versions.back());
   if (!deleted.ok()) {
-    return Status(deleted.code(), "model '" + name +
-                                      "' is removed, but some of its stored versions stay until "
-                                      "the next open: " +
-                                      deleted.message());
+    return deleted.WithContext("model '" + name +
+                               "' is removed, but some of its stored versions stay until the "
+                               "next open");
   }
   return Status::Ok();
 }

@@ -1,5 +1,7 @@
 #include "core/object/object_model.h"
 
+#include "core/common/names.h"
+
 #include <cmath>
 
 namespace recog {
@@ -78,23 +80,8 @@ bool ProjectPoint(const CameraIntrinsics& camera, const RigidTransform& camera_f
   return true;
 }
 
-Status ValidateObjectName(const std::string& name) {
-  if (name.empty() || name.size() > 128) {
-    return Status::InvalidArgument("object name must have 1..128 characters");
-  }
-  for (char c : name) {
-    const bool ok = (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') ||
-                    c == '.' || c == '_' || c == '-';
-    if (!ok) {
-      return Status::InvalidArgument("object name '" + name +
-                                     "' may only use letters, digits, '.', '_' and '-'");
-    }
-  }
-  return Status::Ok();
-}
-
 Status ObjectModel::Validate() const {
-  RECOG_RETURN_IF_ERROR(ValidateObjectName(metadata.name));
+  RECOG_RETURN_IF_ERROR(ValidateName("object", metadata.name));
   const std::string where = "object model '" + metadata.name + "': ";
   if (descriptor.type != DescriptorType::kBinary) {
     return Status::InvalidArgument(where + "only binary descriptors are supported");

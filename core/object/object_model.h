@@ -22,8 +22,8 @@
 
 #include <opencv2/core.hpp>
 
+#include "core/common/descriptor.h"
 #include "core/common/status.h"
-#include "core/vocabulary/descriptor.h"
 
 namespace recog {
 
@@ -99,8 +99,5 @@ struct ObjectModel {
   // OK when sizes agree, indices are in range, points are finite and the metadata is valid.
   Status Validate() const;
 };
-
-// Checks an object name: 1..128 characters of [A-Za-z0-9._-].
-Status ValidateObjectName(const std::string& name);
 
 }  // namespace recog

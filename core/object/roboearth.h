@@ -22,20 +22,9 @@
 
 #include "core/common/status.h"
 #include "core/object/object_model.h"
+#include "core/object/ply_file.h"  // the point clouds of a folder
 
 namespace recog {
-
-// A PLY point cloud: positions, and normals when the file has them (else empty).
-struct PointCloud {
-  std::vector<cv::Point3f> points;
-  std::vector<cv::Vec3f> normals;  // empty, or one per point
-};
-
-// Reads an ASCII or binary_little_endian PLY file's vertex element (x y z, optional nx ny nz;
-// other properties are skipped).
-StatusOr<PointCloud> ReadPly(const std::string& path);
-// Writes an ASCII PLY (with normals when cloud.normals is not empty), atomically.
-Status WritePly(const std::string& path, const PointCloud& cloud);
 
 // A Bundler camera as RoboEarth stores it.
 struct BundleCamera {

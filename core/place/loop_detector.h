@@ -45,7 +45,7 @@
 #include <string_view>
 #include <vector>
 
-#include "core/features/feature_extractor.h"
+#include "core/common/feature_set.h"
 #include "core/geometry/correspondences.h"
 #include "core/index/database.h"
 

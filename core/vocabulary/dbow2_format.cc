@@ -169,7 +169,7 @@ VocabularyInfo MakeInfo(uint32_t k, uint32_t depth, uint32_t scoring, uint32_t w
 StatusOr<Vocabulary> BuildVocabulary(const std::string& path, const VocabularyInfo& info,
                                      const TreeNodeTable& table) {
   StatusOr<Vocabulary> vocabulary = Vocabulary::FromTrees(info, std::span(&table, 1));
-  if (!vocabulary.ok()) return Status::DataLoss(path + ": " + vocabulary.status().message());
+  if (!vocabulary.ok()) return vocabulary.status().WithContext(path, StatusCode::kDataLoss);
   return vocabulary;
 }
 
@@ -201,7 +201,7 @@ StatusOr<Vocabulary> ParseDbow2Yaml(const std::string& path, const std::string& 
   const uint32_t depth_limit = uint32_t(header[1]);
   if (Status s = CheckHeaderValues(k, depth_limit, uint32_t(header[2]), uint32_t(header[3]));
       !s.ok()) {
-    return Status::DataLoss(path + ": " + s.message());
+    return s.WithContext(path, StatusCode::kDataLoss);
   }
 
   // Nodes, indexed by their position in the file (+1; 0 is the root) so that children keep

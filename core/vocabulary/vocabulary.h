@@ -30,8 +30,8 @@
 #include "core/bow/bow_vector.h"
 #include "core/bow/feature_vector.h"
 #include "core/bow/scoring.h"
+#include "core/common/descriptor.h"
 #include "core/common/status.h"
-#include "core/vocabulary/descriptor.h"
 #include "core/vocabulary/layout_buffer.h"
 
 namespace recog {

@@ -122,7 +122,7 @@ StatusOr<Vocabulary> LoadVocabulary(const std::string& path) {
   const uint64_t body_size = Get<uint64_t>(header.data(), 48);
   const uint64_t checksum = Get<uint64_t>(header.data(), 56);
   if (Status s = info.descriptor.Validate(); !s.ok())
-    return Status::DataLoss(where + ": " + s.message());
+    return s.WithContext(where, StatusCode::kDataLoss);
   if (num_words == 0 || num_words > num_nodes ||
       body_size != Vocabulary::BufferSize(info, num_nodes, num_words)) {
     return Status::DataLoss(where + " has inconsistent node/word counts in its header");
@@ -138,7 +138,7 @@ StatusOr<Vocabulary> LoadVocabulary(const std::string& path) {
   // The body is mapped, not read: no copy, and the pages come straight from the page cache.
   RECOG_ASSIGN_OR_RETURN(LayoutBuffer body, LayoutBuffer::MapFile(path, kHeaderSize, body_size));
   auto vocabulary = Vocabulary::FromLayout(info, num_nodes, num_words, std::move(body));
-  if (!vocabulary.ok()) return Status::DataLoss(where + ": " + vocabulary.status().message());
+  if (!vocabulary.ok()) return vocabulary.status().WithContext(where, StatusCode::kDataLoss);
   if (vocabulary->checksum() != checksum) {
     return Status::DataLoss(where + " is corrupt (body checksum mismatch)");
   }

@@ -10,7 +10,7 @@
 #include <grpcpp/support/status.h>
 
 #include "core/common/status.h"
-#include "proto/grpc_code_names.h"  // GrpcCodeName
+#include "wire/grpc_code_names.h"  // GrpcCodeName
 
 namespace recog::server {
 

@@ -9,7 +9,6 @@
 #include <spdlog/spdlog.h>
 
 #include "core/vocabulary/vocabulary_io.h"
-#include "proto/sha256.h"
 #include "server/replication/repository_follower.h"
 #include "server/services/admin_service.h"
 #include "server/services/object_service.h"
@@ -17,6 +16,7 @@
 #include "server/services/repository_service.h"
 #include "server/services/server_state.h"
 #include "storage/rocksdb_index_store.h"
+#include "wire/sha256.h"
 
 namespace recog::server {
 namespace {

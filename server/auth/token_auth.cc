@@ -7,7 +7,7 @@
 #include <utility>
 
 #include "core/common/file_io.h"
-#include "proto/sha256.h"
+#include "wire/sha256.h"
 
 namespace recog::server {
 namespace {
@@ -131,7 +131,7 @@ StatusOr<TokenAuthenticator> TokenAuthenticator::Load(const std::string& path) {
       Caller caller;
       std::string token;
       const Status status = ReadEntry(entry, where, &caller, &token);
-      if (!status.ok()) return Status::InvalidArgument(what + ": " + status.message());
+      if (!status.ok()) return status.WithContext(what, StatusCode::kInvalidArgument);
       std::string digest = Sha256Hex(token);
       const std::string named = where + " ('" + caller.name + "')";
       auto [it, inserted] = entry_of_digest.emplace(digest, named);

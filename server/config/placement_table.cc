@@ -4,6 +4,7 @@
 #include <vector>
 
 #include "core/common/file_io.h"
+#include "core/common/names.h"
 #include "core/index/entry.h"
 
 namespace recog::server {
@@ -50,7 +51,7 @@ StatusOr<PlacementTable> PlacementTable::Parse(const std::string& text, const st
     if (map == "default" || map == "hostnames" || map == "include" || map == "volatile") {
       return bad("'" + map + "' is an nginx map keyword: list every map explicitly");
     }
-    if (Status valid = ValidateMapName(map); !valid.ok()) return bad(valid.message());
+    if (Status valid = ValidateName("map", map); !valid.ok()) return bad(valid.message());
     if (!IsShardName(shard)) {
       return bad("shard name '" + shard + "' must have 1 to 64 characters of [A-Za-z0-9_]");
     }

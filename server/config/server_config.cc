@@ -65,7 +65,7 @@ class YamlSection {
     RECOG_RETURN_IF_ERROR(Read(key, &text));
     StatusOr<T> parsed = parse(text);
     if (!parsed.ok()) {
-      return Status::InvalidArgument("key '" + Name(key) + "': " + parsed.status().message());
+      return parsed.status().WithContext("key '" + Name(key) + "'", StatusCode::kInvalidArgument);
     }
     *value = *parsed;
     return Status::Ok();
@@ -229,7 +229,7 @@ StatusOr<ServerConfig> ServerConfig::LoadYaml(const std::string& path) {
       return Status::InvalidArgument(what + " must be a mapping of keys to values");
     }
     const Status status = ReadConfig(root, &config);
-    if (!status.ok()) return Status::InvalidArgument(what + ": " + status.message());
+    if (!status.ok()) return status.WithContext(what, StatusCode::kInvalidArgument);
   } catch (const YAML::Exception& e) {
     return Status::InvalidArgument(what + " is not valid YAML: " + e.what());
   }
@@ -298,7 +298,7 @@ Status ServerConfig::Validate() const {
         "'");
   }
   const Status place_status = place.Validate();
-  if (!place_status.ok()) return Status::InvalidArgument("place: " + place_status.message());
+  if (!place_status.ok()) return place_status.WithContext("place", StatusCode::kInvalidArgument);
   return Status::Ok();
 }
 

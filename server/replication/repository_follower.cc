@@ -8,8 +8,8 @@
 #include <spdlog/spdlog.h>
 
 #include "core/common/file_io.h"
-#include "proto/grpc_code_names.h"
 #include "server/api/converters.h"
+#include "wire/grpc_code_names.h"
 
 namespace recog::server {
 namespace {

@@ -3,10 +3,10 @@
 #include <algorithm>
 #include <deque>
 
-#include "proto/sha256.h"
 #include "server/api/converters.h"
 #include "server/api/status_mapping.h"
 #include "server/services/call.h"
+#include "wire/sha256.h"
 
 namespace recog::server {
 namespace {

@@ -7,9 +7,9 @@
 
 #include <opencv2/imgcodecs.hpp>
 
-#include "proto/sha256.h"
 #include "tests/server/server_fixture.h"
 #include "tests/testing/model_files.h"
+#include "wire/sha256.h"
 
 namespace recog::server::testing {
 namespace {

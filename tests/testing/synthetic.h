@@ -7,7 +7,7 @@
 
 #include <opencv2/core.hpp>
 
-#include "core/vocabulary/descriptor.h"
+#include "core/common/descriptor.h"
 #include "core/vocabulary/vocabulary_trainer.h"
 
 namespace recog::testing {

@@ -11,12 +11,12 @@
 
 #include <nlohmann/json.hpp>
 
-#include "proto/grpc_code_names.h"
 #include "tools/recog/cli_support.h"
 #include "tools/recog/commands.h"
 #include "tools/recog/load_generator.h"
 #include "tools/recog/object_evaluation.h"
 #include "tools/recog/server_flags.h"
+#include "wire/grpc_code_names.h"
 
 namespace recog::cli {
 namespace {

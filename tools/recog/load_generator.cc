@@ -21,12 +21,12 @@
 #include "client/cpp/frames.h"
 #include "core/features/feature_extractor.h"
 #include "core/vocabulary/vocabulary_io.h"
-#include "proto/grpc_code_names.h"
 #include "tools/recog/cli_support.h"
 #include "tools/recog/place_evaluation.h"
 #include "tools/recog/plot.h"
 #include "tools/recog/remote_support.h"
 #include "tools/recog/server_flags.h"
+#include "wire/grpc_code_names.h"
 
 namespace recog::cli {
 namespace {

@@ -36,7 +36,6 @@
 #include "core/features/feature_extractor.h"
 #include "core/object/model_builder.h"
 #include "core/object/model_file.h"
-#include "proto/grpc_code_names.h"
 #include "storage/rocksdb_index_store.h"
 #include "tools/recog/cli_support.h"
 #include "tools/recog/commands.h"
@@ -44,6 +43,7 @@
 #include "tools/recog/place_evaluation.h"
 #include "tools/recog/remote_support.h"
 #include "tools/recog/server_flags.h"
+#include "wire/grpc_code_names.h"
 
 namespace recog::cli {
 namespace {

@@ -1,6 +1,6 @@
 #include "tools/recog/server_flags.h"
 
-#include "proto/grpc_code_names.h"
+#include "wire/grpc_code_names.h"
 
 namespace recog::cli {
 

@@ -10,8 +10,8 @@
 #include <nlohmann/json.hpp>
 
 #include "core/features/feature_extractor.h"
+#include "core/features/training_images.h"
 #include "core/vocabulary/dbow2_format.h"
-#include "core/vocabulary/training_images.h"
 #include "core/vocabulary/vocabulary_io.h"
 #include "core/vocabulary/vocabulary_trainer.h"
 #include "tools/recog/cli_support.h"

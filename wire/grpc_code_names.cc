@@ -1,4 +1,4 @@
-#include "proto/grpc_code_names.h"
+#include "wire/grpc_code_names.h"
 
 namespace recog {
 

@@ -1,4 +1,4 @@
-#include "core/vocabulary/training_images.h"
+#include "core/features/training_images.h"
 
 #include <atomic>
 #include <mutex>

@@ -1,4 +1,4 @@
-#include "proto/sha256.h"
+#include "wire/sha256.h"
 
 #include <openssl/evp.h>
 

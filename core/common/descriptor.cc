@@ -1,4 +1,4 @@
-#include "core/vocabulary/descriptor.h"
+#include "core/common/descriptor.h"
 
 #include <opencv2/core.hpp>
 

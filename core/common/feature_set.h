@@ -1,0 +1,23 @@
+// FeatureSet: the local features of one image, the unit every core module passes around.
+//
+// Keypoints and descriptors are parallel: row i of `descriptors` describes keypoints[i], in one
+// DescriptorFormat (core/common/descriptor.h). Extractors (core/features/) fill it; the
+// vocabulary, the index, the loop detector and the object recogniser only read it, so this type
+// lives in core's bottom layer and none of them needs the extractors' header.
+#pragma once
+
+#include <cstddef>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+namespace recog {
+
+struct FeatureSet {
+  std::vector<cv::KeyPoint> keypoints;
+  cv::Mat descriptors;  // one row per keypoint, in the extractor's DescriptorFormat
+
+  size_t size() const { return keypoints.size(); }
+};
+
+}  // namespace recog
