@@ -68,7 +68,11 @@ inline bool ParseNumber(std::string_view token, T* out) {
 
 // A token for an error message, shortened when long.
 inline std::string Quote(std::string_view token) {
-  return "'" + std::string(token.substr(0, 24)) + (token.size() > 24 ? "...'" : "'");
+  constexpr size_t kShown = 24;
+  std::string quoted = "'";
+  quoted.append(token.substr(0, kShown));
+  quoted.append(token.size() > kShown ? "...'" : "'");
+  return quoted;
 }
 
 // The shortest text that reads back as exactly `value`.

@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 #include <opencv2/imgproc.hpp>
 
+#include "core/features/feature_extractor.h"
 #include "core/index/memory_index_store.h"
 #include "core/vocabulary/vocabulary_trainer.h"
 #include "tests/testing/data_paths.h"

@@ -10,6 +10,7 @@
 
 #include <opencv2/videoio.hpp>
 
+#include "core/features/feature_extractor.h"
 #include "core/place/loop_detector.h"
 #include "tools/recog/ground_truth.h"
 
