@@ -3,7 +3,9 @@
 # (nor generated protobuf code), only storage/ includes RocksDB, and in server/ only the api/
 # converters and the services (the RPC handlers) see generated protobuf types; the server's
 # infrastructure (config, auth, metrics, runtime) does not; the client library (client/) sees the
-# generated API only, never core/, storage/ or server/ (its tests may, to start a server).
+# generated API only, never core/, storage/ or server/ (its tests may, to start a server). The RPC
+# handlers and converters stay thin: they never reach into a place map's lock, deleted flag or
+# loop detector (PlaceMap's Add/Detect/Query own that).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 status=0
@@ -22,6 +24,11 @@ fi
 if git grep -n -E '#include\s*"(core|storage|server|tools|tests)/' -- 'client/' ':!*_test.cc' \
     ':!*_test_fixture.h'; then
   echo "check_boundaries: the client library must not include core/, storage/ or server/ headers" >&2
+  status=1
+fi
+if git grep -n -E '(\.|->)(mutex|deleted|detector)\b' -- 'server/services/' 'server/api/'; then
+  echo "check_boundaries: server/services and server/api must not take a map's lock, read its" \
+    "deleted flag or drive its detector: call PlaceMap instead" >&2
   status=1
 fi
 [ $status -eq 0 ] && echo "check_boundaries: ok"
