@@ -42,8 +42,9 @@ struct PlaceResultOptions {
   std::optional<cv::Matx33d> camera_matrix;  // K of the query frame; the relative pose needs it
 };
 
-// The rotation and translation (unit length: F fixes it up to scale) from the query camera to the
-// matched frame's camera, as RelativePoseFromFundamental gives them.
+// The pose of the matched frame's camera relative to the query's, as RelativePoseFromFundamental
+// gives it (a = the query frame, b = the match): X_match = R * X_query + t, with |t| = 1 (two views
+// fix the translation only up to scale).
 struct RelativePose {
   cv::Matx33d R = cv::Matx33d::eye();
   cv::Vec3d t = {0, 0, 0};
