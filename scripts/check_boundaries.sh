@@ -4,7 +4,9 @@
 # converters and the services (the RPC handlers) see generated protobuf types; the server's
 # infrastructure (config, auth, metrics, runtime) does not; the client library (client/) sees the
 # generated API only, never core/, storage/ or server/ (its tests may, to start a server); core's
-# modules include only the layers below them (no cycles).
+# modules include only the layers below them (no cycles). The RPC handlers and converters stay
+# thin: they never reach into a place map's lock, deleted flag or loop detector (PlaceMap's
+# Add/Detect/Query own that).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 status=0
@@ -53,5 +55,10 @@ for dir in core/*/; do
     fi
   done < <(git grep -n -E '#include\s*"core/' -- "core/$module/" ':!*_test.cc')
 done
+if git grep -n -E '(\.|->)(mutex|deleted|detector)\b' -- 'server/services/' 'server/api/'; then
+  echo "check_boundaries: server/services and server/api must not take a map's lock, read its" \
+    "deleted flag or drive its detector: call PlaceMap instead" >&2
+  status=1
+fi
 [ $status -eq 0 ] && echo "check_boundaries: ok"
 exit $status

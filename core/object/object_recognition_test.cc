@@ -128,6 +128,62 @@ TEST_F(ObjectRecognitionTest, SameInputGivesTheSameOutput) {
   EXPECT_EQ(first[0].camera_from_object.t, second[0].camera_from_object.t);
 }
 
+TEST_F(ObjectRecognitionTest, DetectionsCarryTheirModelsMetadata) {
+  poster_.metadata.object_class = "poster-class";
+  poster_.metadata.units = "cm";
+  ASSERT_TRUE(database_->Put(poster_).ok());
+  ObjectRecognizer recognizer(database_);
+  std::vector<Detection> detections;
+  const cv::Mat view = RenderPoster(Poster(), poster_, camera_, PoseAt(10, 0, {0, 0, 1.0}));
+  ASSERT_TRUE(recognizer.Recognize(view, camera_, &detections).ok());
+  ASSERT_EQ(detections.size(), 1u);
+  EXPECT_EQ(detections[0].name, "poster");
+  EXPECT_EQ(detections[0].object_class, "poster-class");
+  EXPECT_EQ(detections[0].units, "cm");
+  EXPECT_EQ(detections[0].type, ObjectType::kPlanar);
+}
+
+TEST_F(ObjectRecognitionTest, AFilterDropsCandidatesBeforeVerification) {
+  poster_.metadata.object_class = "print";
+  ASSERT_TRUE(database_->Put(poster_).ok());
+  ObjectRecognizer recognizer(database_);
+  const cv::Mat view = RenderPoster(Poster(), poster_, camera_, PoseAt(10, 0, {0, 0, 1.0}));
+  std::vector<Detection> detections;
+  RecognitionTiming timing;
+
+  ASSERT_TRUE(recognizer.Recognize(view, camera_, &detections, &timing).ok());  // no filter
+  ASSERT_EQ(detections.size(), 1u);
+  EXPECT_GE(timing.verified, 1u);
+
+  // A filter naming another object: the poster is a candidate but is never verified.
+  const ObjectFilter other{{"lion"}, {"toy"}};
+  ASSERT_TRUE(recognizer.Recognize(view, camera_, &detections, &timing, other).ok());
+  EXPECT_TRUE(detections.empty());
+  EXPECT_EQ(timing.verified, 0u);
+  EXPECT_GE(timing.regions, 1u);  // the image was still searched
+
+  // The poster's class, or its name, lets it through.
+  for (const ObjectFilter& filter : {ObjectFilter{{}, {"print"}}, ObjectFilter{{"poster"}, {}},
+                                     ObjectFilter{{"lion"}, {"print"}}}) {
+    ASSERT_TRUE(recognizer.Recognize(view, camera_, &detections, &timing, filter).ok());
+    ASSERT_EQ(detections.size(), 1u);
+    EXPECT_EQ(detections[0].name, "poster");
+    EXPECT_GE(timing.verified, 1u);
+  }
+}
+
+TEST(ObjectFilterTest, EmptyPassesEverythingOtherwiseNameOrClass) {
+  ObjectMetadata lion;
+  lion.name = "lion";
+  lion.object_class = "toy";
+  EXPECT_TRUE(ObjectFilter{}.Passes(lion));
+  EXPECT_TRUE((ObjectFilter{{"lion"}, {}}.Passes(lion)));
+  EXPECT_TRUE((ObjectFilter{{}, {"toy"}}.Passes(lion)));
+  EXPECT_FALSE((ObjectFilter{{"poster"}, {}}.Passes(lion)));
+  EXPECT_FALSE((ObjectFilter{{}, {"box"}}.Passes(lion)));
+  EXPECT_FALSE((ObjectFilter{{"toy"}, {"lion"}}.Passes(lion)));  // names and classes are apart
+}
+
 TEST_F(ObjectRecognitionTest, AnUnrelatedImageRecognisesNothing) {
   ASSERT_TRUE(database_->Put(poster_).ok());
   ObjectRecognizer recognizer(database_);

@@ -175,12 +175,19 @@ bool HomographyPose(const cv::Matx33d& K, const IndexedObject& object,
 
 }  // namespace
 
+bool ObjectFilter::Passes(const ObjectMetadata& object) const {
+  if (names.empty() && classes.empty()) return true;
+  return std::find(names.begin(), names.end(), object.name) != names.end() ||
+         std::find(classes.begin(), classes.end(), object.object_class) != classes.end();
+}
+
 ObjectRecognizer::ObjectRecognizer(std::shared_ptr<const ObjectDatabase> database,
                                    RecognitionOptions options)
     : database_(std::move(database)), options_(std::move(options)), clusterer_(options_.roi) {}
 
 Status ObjectRecognizer::Recognize(const cv::Mat& image, const CameraIntrinsics& camera,
-                                   std::vector<Detection>* detections, RecognitionTiming* timing) {
+                                   std::vector<Detection>* detections, RecognitionTiming* timing,
+                                   const ObjectFilter& filter) {
   const auto start = Clock::now();
   detections->clear();
   RECOG_RETURN_IF_ERROR(camera.Validate());
@@ -194,7 +201,7 @@ Status ObjectRecognizer::Recognize(const cv::Mat& image, const CameraIntrinsics&
   RecognitionTiming* t = timing != nullptr ? timing : &local;
   *t = RecognitionTiming();
   t->orb = MillisecondsSince(start);
-  RECOG_RETURN_IF_ERROR(Run(features_, camera, detections, t));
+  RECOG_RETURN_IF_ERROR(Run(features_, camera, filter, detections, t));
   t->total = MillisecondsSince(start);
   return Status::Ok();
 }
@@ -202,7 +209,7 @@ Status ObjectRecognizer::Recognize(const cv::Mat& image, const CameraIntrinsics&
 Status ObjectRecognizer::RecognizeFeatures(const FeatureSet& features,
                                            const CameraIntrinsics& camera,
                                            std::vector<Detection>* detections,
-                                           RecognitionTiming* timing) {
+                                           RecognitionTiming* timing, const ObjectFilter& filter) {
   const auto start = Clock::now();
   detections->clear();
   RECOG_RETURN_IF_ERROR(camera.Validate());
@@ -217,13 +224,14 @@ Status ObjectRecognizer::RecognizeFeatures(const FeatureSet& features,
   RecognitionTiming local;
   RecognitionTiming* t = timing != nullptr ? timing : &local;
   *t = RecognitionTiming();
-  RECOG_RETURN_IF_ERROR(Run(features, camera, detections, t));
+  RECOG_RETURN_IF_ERROR(Run(features, camera, filter, detections, t));
   t->total = MillisecondsSince(start);
   return Status::Ok();
 }
 
 Status ObjectRecognizer::Run(const FeatureSet& features, const CameraIntrinsics& camera,
-                             std::vector<Detection>* detections, RecognitionTiming* t) {
+                             const ObjectFilter& filter, std::vector<Detection>* detections,
+                             RecognitionTiming* t) {
   const Vocabulary& vocabulary = database_->vocabulary();
   // Pixel positions without lens distortion: every later step assumes a pinhole camera.
   auto phase = Clock::now();
@@ -278,6 +286,8 @@ Status ObjectRecognizer::Run(const FeatureSet& features, const CameraIntrinsics&
       if (found_already && !options_.report_duplicates) continue;
       const std::shared_ptr<const IndexedObject> object = database_->Find(candidate.id);
       if (!object) continue;  // removed meanwhile
+      if (!filter.Passes(object->metadata)) continue;
+      ++t->verified;
       Detection detection;
       if (Verify(*object, features, region, camera, t, &detection)) {
         detection.score = candidate.chi_square;
@@ -300,6 +310,7 @@ Status ObjectRecognizer::Run(const FeatureSet& features, const CameraIntrinsics&
                     [](const Detection& a, const Detection& b) { return a.id == b.id; }),
         detections->end());
   }
+  // Best first (the documented order), whether or not duplicates were merged.
   std::stable_sort(detections->begin(), detections->end(),
                    [](const Detection& a, const Detection& b) { return a.inliers > b.inliers; });
   return Status::Ok();
@@ -353,6 +364,8 @@ bool ObjectRecognizer::Verify(const IndexedObject& object, const FeatureSet& fea
   detection->name = object.metadata.name;
   detection->version = object.metadata.version;
   detection->type = object.metadata.type;
+  detection->object_class = object.metadata.object_class;
+  detection->units = object.metadata.units;
   detection->camera_from_object = pose;
   detection->inliers = inliers.size();
   detection->correspondences = matches.size();

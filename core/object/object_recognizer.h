@@ -14,7 +14,13 @@
 //     a RANSAC homography on the face with most correspondences, the pose following from it
 //     (IPPE on the inliers). A detection needs at least `min_inliers` inliers (3D objects) or
 //     `min_planar_inliers` (planar ones).
-// Each object is reported once (its best detection) unless `report_duplicates` is set.
+// Each object is reported once (its best detection) unless `report_duplicates` is set; detections
+// come best first: most inliers first, ties in the order they were found.
+//
+// A call may name the objects it wants (ObjectFilter, by name or class): candidates the filter
+// leaves out are dropped before verification, so they cost no correspondences and no RANSAC. The
+// filter is a parameter of each call, not of the recogniser, because it belongs to a request (or
+// a stream) while a recogniser is reused across requests (one per worker thread in recogd).
 //
 // Not thread-safe (it reuses scratch memory): use one recogniser per thread; they can share one
 // ObjectDatabase.
@@ -58,11 +64,22 @@ struct RecognitionOptions {
   }
 };
 
+// Which objects a call is interested in: those whose name is in `names` or whose class is in
+// `classes`. Both empty (the default) = every object.
+struct ObjectFilter {
+  std::vector<std::string> names;
+  std::vector<std::string> classes;
+  bool Passes(const ObjectMetadata& object) const;
+};
+
 struct Detection {
   EntryId id = kInvalidEntryId;
+  // The recognised model's metadata (name, version, type, class, units).
   std::string name;
   uint32_t version = 0;
   ObjectType type = ObjectType::k3D;
+  std::string object_class;
+  std::string units;                  // of camera_from_object's translation
   RigidTransform camera_from_object;  // X_camera = R X_object + t, in the model's units
   size_t inliers = 0;
   size_t correspondences = 0;
@@ -78,24 +95,28 @@ struct RecognitionTiming {
   double orb = 0, clustering = 0, conversion = 0, query = 0, correspondences = 0, ransac = 0,
          total = 0;
   size_t regions = 0;
+  size_t verified = 0;  // candidate objects that went to geometric verification
 };
 
 class ObjectRecognizer {
  public:
   ObjectRecognizer(std::shared_ptr<const ObjectDatabase> database, RecognitionOptions options = {});
 
-  // INVALID_ARGUMENT for an empty or non-8-bit image, or invalid intrinsics.
+  // The objects of `filter` found in the image, best first. INVALID_ARGUMENT for an empty or
+  // non-8-bit image, or invalid intrinsics.
   Status Recognize(const cv::Mat& image, const CameraIntrinsics& camera,
-                   std::vector<Detection>* detections, RecognitionTiming* timing = nullptr);
+                   std::vector<Detection>* detections, RecognitionTiming* timing = nullptr,
+                   const ObjectFilter& filter = {});
   // The same from features already extracted (with the database's descriptor format).
   Status RecognizeFeatures(const FeatureSet& features, const CameraIntrinsics& camera,
-                           std::vector<Detection>* detections, RecognitionTiming* timing = nullptr);
+                           std::vector<Detection>* detections, RecognitionTiming* timing = nullptr,
+                           const ObjectFilter& filter = {});
 
   const RecognitionOptions& options() const { return options_; }
 
  private:
   // The pipeline after feature extraction; fills every field of *timing but orb and total.
-  Status Run(const FeatureSet& features, const CameraIntrinsics& camera,
+  Status Run(const FeatureSet& features, const CameraIntrinsics& camera, const ObjectFilter& filter,
              std::vector<Detection>* detections, RecognitionTiming* timing);
   // Verifies one candidate object against a region; true and *detection filled when it passes.
   bool Verify(const IndexedObject& object, const FeatureSet& features,

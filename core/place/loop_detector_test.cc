@@ -9,58 +9,21 @@
 
 #include "core/features/feature_extractor.h"
 #include "core/index/memory_index_store.h"
-#include "core/vocabulary/vocabulary_trainer.h"
-#include "tests/testing/data_paths.h"
+#include "core/place/place_test_frames.h"
 
 namespace recog {
 namespace {
 
-// Four places cut from the bundled corridor frames: the textured halves of frames 20 and 1, and
-// frame 20's right half upside down (ORB descriptors are not invariant to a mirror image).
-std::vector<cv::Mat> Places() {
-  auto frame1 = ReadGrayImage(testing::ProjectTestData("corridor/1.jpg"));
-  auto frame20 = ReadGrayImage(testing::ProjectTestData("corridor/20.jpg"));
-  EXPECT_TRUE(frame1.ok() && frame20.ok());
-  const cv::Rect left(0, 0, 256, 384), right(256, 0, 256, 384);
-  cv::Mat flipped;
-  cv::flip((*frame20)(right), flipped, 0);
-  return {(*frame20)(right).clone(), (*frame1)(right).clone(), (*frame20)(left).clone(), flipped};
-}
-
-// One visit of a place: `frames` views, each shifted 3 more pixels.
-std::vector<cv::Mat> Visit(const cv::Mat& place, int frames, int first_shift = 0) {
-  std::vector<cv::Mat> views;
-  for (int f = 0; f < frames; ++f) {
-    const double shift = first_shift + 3.0 * f;
-    cv::Mat warped;
-    const cv::Matx23d m(1, 0, shift, 0, 1, shift / 2);
-    cv::warpAffine(place, warped, m, place.size(), cv::INTER_LINEAR, cv::BORDER_REFLECT);
-    views.push_back(warped);
-  }
-  return views;
-}
+using testing::Extract;
+using testing::Places;
+using testing::TourWithRevisits;
+using testing::Visit;
 
 class LoopDetectorTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    // A small vocabulary trained on the places themselves: enough to tell them apart.
-    auto extractor = CreateFeatureExtractor(FeatureOptions{});
-    TrainingSet set;
-    for (const cv::Mat& place : Places()) {
-      for (const cv::Mat& view : Visit(place, 3)) {
-        FeatureSet f;
-        ASSERT_TRUE((*extractor)->Extract(view, &f).ok());
-        ASSERT_TRUE(set.AddImage(f.descriptors).ok());
-      }
-    }
-    TrainingOptions options;
-    options.branching = 8;
-    options.depth = 4;
-    options.threads = 1;
-    auto v = TrainVocabulary(std::move(set), options);
-    ASSERT_TRUE(v.ok());
-    vocabulary_ = new std::shared_ptr<const Vocabulary>(
-        std::make_shared<const Vocabulary>(std::move(v).value()));
+    vocabulary_ = new std::shared_ptr<const Vocabulary>(testing::TrainPlacesVocabulary());
+    ASSERT_NE(*vocabulary_, nullptr);
   }
   static void TearDownTestSuite() { delete vocabulary_; }
 
@@ -88,15 +51,6 @@ class LoopDetectorTest : public ::testing::Test {
     return results;
   }
 
-  static std::vector<FeatureSet> Extract(const std::vector<cv::Mat>& frames) {
-    auto extractor = CreateFeatureExtractor(FeatureOptions{});
-    std::vector<FeatureSet> features(frames.size());
-    for (size_t i = 0; i < frames.size(); ++i) {
-      EXPECT_TRUE((*extractor)->Extract(frames[i], &features[i]).ok());
-    }
-    return features;
-  }
-
   // Every field but the timings.
   static void ExpectSameResult(const LoopResult& a, const LoopResult& b, const std::string& where) {
     EXPECT_EQ(a.status, b.status) << where;
@@ -112,18 +66,6 @@ class LoopDetectorTest : public ::testing::Test {
     EXPECT_EQ(a.correspondences, b.correspondences) << where;
     EXPECT_EQ(a.inliers, b.inliers) << where;
     EXPECT_EQ(a.fundamental, b.fundamental) << where;
-  }
-
-  // Places 0 1 2 3, then places 0 1 again: 4 frames a visit.
-  static std::vector<cv::Mat> TourWithRevisits() {
-    const std::vector<cv::Mat> places = Places();
-    std::vector<cv::Mat> frames;
-    for (int p : {0, 1, 2, 3, 0, 1}) {
-      for (const cv::Mat& v : Visit(places[size_t(p)], 4, p >= 0 && frames.size() >= 16 ? 2 : 0)) {
-        frames.push_back(v);
-      }
-    }
-    return frames;
   }
 
   static std::shared_ptr<const Vocabulary>* vocabulary_;

@@ -74,7 +74,8 @@ StatusOr<std::unique_ptr<MapRegistry>> MapRegistry::Open(
     if (!params.ok()) {
       return Status(params.status().code(), "map '" + name + "': " + params.status().message());
     }
-    StatusOr<std::shared_ptr<PlaceMap>> map = registry->Load(name, params.value());
+    StatusOr<std::shared_ptr<PlaceMap>> map =
+        PlaceMap::Open(store, name, params.value(), registry->vocabulary_);
     if (map.status().code() == StatusCode::kNotFound) {
       // Settings left behind by a deletion that was interrupted: finish it.
       RECOG_RETURN_IF_ERROR(store->DeleteBlob(key));
@@ -86,18 +87,6 @@ StatusOr<std::unique_ptr<MapRegistry>> MapRegistry::Open(
     if (progress) progress(++done, keys.size());
   }
   return registry;
-}
-
-StatusOr<std::shared_ptr<PlaceMap>> MapRegistry::Load(const std::string& name,
-                                                      const LoopDetectorParams& params) {
-  auto map = std::make_shared<PlaceMap>();
-  map->name = name;
-  map->params = params;
-  RECOG_ASSIGN_OR_RETURN(map->database, Database::Open(store_, name, vocabulary_));
-  StatusOr<LoopDetector> detector = LoopDetector::Create(map->database.get(), params);
-  if (!detector.ok()) return detector.status();
-  map->detector = std::make_unique<LoopDetector>(std::move(detector).value());
-  return map;
 }
 
 StatusOr<std::shared_ptr<PlaceMap>> MapRegistry::Create(const std::string& name,
@@ -120,7 +109,8 @@ StatusOr<std::shared_ptr<PlaceMap>> MapRegistry::Create(const std::string& name,
     }
     return created.status();
   }
-  RECOG_ASSIGN_OR_RETURN(std::shared_ptr<PlaceMap> map, Load(name, params));
+  RECOG_ASSIGN_OR_RETURN(std::shared_ptr<PlaceMap> map,
+                         PlaceMap::Open(store_, name, params, vocabulary_));
   std::unique_lock lock(maps_mutex_);
   maps_[name] = map;
   return map;
@@ -144,13 +134,7 @@ std::vector<std::shared_ptr<PlaceMap>> MapRegistry::List() const {
 StatusOr<size_t> MapRegistry::Delete(const std::string& name) {
   std::lock_guard write(write_mutex_);
   RECOG_ASSIGN_OR_RETURN(std::shared_ptr<PlaceMap> map, Get(name));
-  size_t frames = 0;
-  {
-    std::lock_guard lock(map->mutex);  // waits for the frame being added, then stops the others
-    frames = map->database->size();
-    RECOG_RETURN_IF_ERROR(store_->DeleteMap(name));
-    map->deleted = true;
-  }
+  RECOG_ASSIGN_OR_RETURN(const size_t frames, map->DeleteFrames());
   {
     std::unique_lock lock(maps_mutex_);
     maps_.erase(name);

@@ -1,16 +1,15 @@
-// MapRegistry: the place maps of one store, each with its database and its loop detector.
+// MapRegistry: the place maps of one store (PlaceMap, place_map.h: a map's frames and its loop
+// detector).
 //
-// A place map is one robot session's sequence of frames (a Database in the store) together with
-// the loop detector that runs on it and the detector's parameters. The registry opens every map
-// of the store at start-up (rebuilding the in-memory inverted indexes), creates and deletes maps,
-// and persists each map's parameters beside it in the store (a blob "place-settings/<name>"), so
-// that a restarted server runs every map as before. Maps other than place maps (the object map)
-// are not touched: the registry only opens maps that have settings.
+// The registry opens every map of the store at start-up (rebuilding the in-memory inverted
+// indexes), creates and deletes maps, and persists each map's detector parameters beside it in the
+// store (a blob "place-settings/<name>"), so that a restarted server runs every map as before.
+// Maps other than place maps (the object map) are not touched: the registry only opens maps that
+// have settings.
 //
-// Thread safety: every method may be called from any thread. A PlaceMap's detector is guarded by
-// its `mutex`: hold it for LoopDetector::Process and Add (frames of one map are processed one at a
-// time), not for LoopDetector::Query, which may run concurrently. Deleting a map while it is in
-// use is safe: holders of the PlaceMap see `deleted` (under its mutex) and must stop writing.
+// Thread safety: every method may be called from any thread. Deleting a map while it is in use is
+// safe: it waits for the frame being added to the map, and the map's holders then get NOT_FOUND
+// for every write (see PlaceMap).
 #pragma once
 
 #include <functional>
@@ -25,17 +24,9 @@
 #include "core/index/database.h"
 #include "core/index/index_store.h"
 #include "core/place/loop_detector.h"
+#include "core/place/place_map.h"
 
 namespace recog {
-
-struct PlaceMap {
-  std::string name;
-  LoopDetectorParams params;
-  std::unique_ptr<Database> database;
-  std::mutex mutex;                        // guards detector (Process/Add) and deleted
-  std::unique_ptr<LoopDetector> detector;  // never null once the map is registered
-  bool deleted = false;
-};
 
 class MapRegistry {
  public:
@@ -53,7 +44,8 @@ class MapRegistry {
   StatusOr<std::shared_ptr<PlaceMap>> Get(const std::string& name) const;
   // Every map, by name.
   std::vector<std::shared_ptr<PlaceMap>> List() const;
-  // Deletes a map and its frames; returns how many frames it had. NOT_FOUND when unknown.
+  // Deletes a map and its frames, and marks the map deleted for its holders; returns how many
+  // frames it had. NOT_FOUND when unknown.
   StatusOr<size_t> Delete(const std::string& name);
 
   const Vocabulary& vocabulary() const { return *vocabulary_; }
@@ -61,8 +53,6 @@ class MapRegistry {
  private:
   MapRegistry(IndexStore* store, std::shared_ptr<const Vocabulary> vocabulary)
       : store_(store), vocabulary_(std::move(vocabulary)) {}
-  StatusOr<std::shared_ptr<PlaceMap>> Load(const std::string& name,
-                                           const LoopDetectorParams& params);
 
   IndexStore* store_;
   std::shared_ptr<const Vocabulary> vocabulary_;

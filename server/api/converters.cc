@@ -254,7 +254,15 @@ pb::LoopStatus ToProto(LoopStatus status) {
   return pb::LOOP_STATUS_UNSPECIFIED;
 }
 
-void ToProto(const LoopResult& result, pb::LoopResult* out) {
+void ToProto(const cv::Matx33d& R, const cv::Vec3d& t, pb::Pose* out) {
+  out->clear_rotation();
+  out->clear_translation();
+  for (int i = 0; i < 9; ++i) out->add_rotation(R.val[i]);
+  for (int i = 0; i < 3; ++i) out->add_translation(t[i]);
+}
+
+void ToProto(const PlaceFrameResult& frame, pb::LoopResult* out) {
+  const LoopResult& result = frame.loop;
   out->set_status(ToProto(result.status));
   if (result.entry != kInvalidEntryId) out->set_frame_id(result.entry);
   if (result.match != kInvalidEntryId) out->set_match_frame_id(result.match);
@@ -269,26 +277,35 @@ void ToProto(const LoopResult& result, pb::LoopResult* out) {
   out->set_consistent_queries(result.consistent_queries);
   out->set_correspondences(result.correspondences);
   out->set_inliers(uint32_t(result.inliers.size()));
+  if (frame.match_timestamp.has_value()) out->set_match_timestamp(*frame.match_timestamp);
+  if (frame.fundamental.has_value()) {
+    for (int i = 0; i < 9; ++i) out->add_fundamental(frame.fundamental->val[i]);
+  }
+  if (frame.relative_pose.has_value()) {
+    ToProto(frame.relative_pose->R, frame.relative_pose->t, out->mutable_relative_pose());
+  }
 }
 
-void ToProto(const cv::Matx33d& R, const cv::Vec3d& t, pb::Pose* out) {
-  out->clear_rotation();
-  out->clear_translation();
-  for (int i = 0; i < 9; ++i) out->add_rotation(R.val[i]);
-  for (int i = 0; i < 3; ++i) out->add_translation(t[i]);
+PlaceResultOptions FromProto(const pb::ResultOptions& options,
+                             const std::optional<CameraIntrinsics>& intrinsics) {
+  PlaceResultOptions out;
+  out.include_fundamental = options.include_fundamental();
+  out.include_relative_pose = options.include_relative_pose();
+  if (intrinsics.has_value()) out.camera_matrix = intrinsics->K();
+  return out;
 }
 
 pb::ObjectType ToProto(ObjectType type) {
   return type == ObjectType::kPlanar ? pb::OBJECT_TYPE_PLANAR : pb::OBJECT_TYPE_3D;
 }
 
-void ToProto(const Detection& detection, const ObjectMetadata& object, pb::DetectedObject* out) {
+void ToProto(const Detection& detection, pb::DetectedObject* out) {
   out->set_name(detection.name);
   out->set_version(detection.version);
-  out->set_object_class(object.object_class);
+  out->set_object_class(detection.object_class);
   out->set_type(ToProto(detection.type));
   ToProto(detection.camera_from_object.R, detection.camera_from_object.t, out->mutable_pose());
-  out->set_units(object.units);
+  out->set_units(detection.units);
   out->set_inliers(uint32_t(detection.inliers));
   out->set_correspondences(uint32_t(detection.correspondences));
   out->set_reprojection_error_px(detection.reprojection_error_px);
@@ -298,6 +315,11 @@ void ToProto(const Detection& detection, const ObjectMetadata& object, pb::Detec
     q->set_x(p.x);
     q->set_y(p.y);
   }
+}
+
+ObjectFilter FromProto(const pb::ObjectFilter& filter) {
+  return {{filter.names().begin(), filter.names().end()},
+          {filter.classes().begin(), filter.classes().end()}};
 }
 
 void ToProto(const ModelVersionInfo& info, pb::ModelInfo* out) {

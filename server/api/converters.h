@@ -16,6 +16,7 @@
 #include "core/object/model_repository.h"
 #include "core/object/object_recognizer.h"
 #include "core/place/loop_detector.h"
+#include "core/place/place_map.h"
 #include "recognition/v1/object.pb.h"
 #include "recognition/v1/place.pb.h"
 #include "recognition/v1/repository.pb.h"
@@ -50,14 +51,18 @@ Status ApplyMapSettings(const pb::MapSettings& settings, LoopDetectorParams* par
 void ToProto(const LoopDetectorParams& params, pb::MapSettings* out);
 
 pb::LoopStatus ToProto(LoopStatus status);
-// The loop result without the match's timestamp/camera id and the optional matrices (the caller
-// adds them: they need the map's stored frames).
-void ToProto(const LoopResult& result, pb::LoopResult* out);
+// What a frame did to a place map: the loop result with the match's timestamp and the extras
+// that came with it. `frame_id` is the id the frame got when it was added.
+void ToProto(const PlaceFrameResult& result, pb::LoopResult* out);
 void ToProto(const cv::Matx33d& R, const cv::Vec3d& t, pb::Pose* out);
+// The extras a request asks for; the relative pose uses the frame's intrinsics when it has them.
+PlaceResultOptions FromProto(const pb::ResultOptions& options,
+                             const std::optional<CameraIntrinsics>& intrinsics);
 
-// One detection; `object` supplies class and units.
-void ToProto(const Detection& detection, const ObjectMetadata& object, pb::DetectedObject* out);
+// One detection (the detection carries its model's class and units).
+void ToProto(const Detection& detection, pb::DetectedObject* out);
 pb::ObjectType ToProto(ObjectType type);
+ObjectFilter FromProto(const pb::ObjectFilter& filter);
 
 void ToProto(const ModelVersionInfo& info, pb::ModelInfo* out);
 // The inverse of ToProto (a replica copying its primary's versions); missing dimensions are 0.

@@ -71,7 +71,9 @@ StatusOr<std::unique_ptr<RecognitionServer>> RecognitionServer::Start(const Serv
   std::unique_ptr<RecognitionServer> server(new RecognitionServer());
   server->state_ = std::make_unique<ServerState>(config, std::move(auth).value());
   ServerState& state = *server->state_;
-  state.pool = std::make_unique<WorkerPool>(config.WorkerCount(), config.queue_capacity);
+  state.pool = std::make_unique<WorkerPool<WorkerContext>>(
+      config.WorkerCount(), config.queue_capacity,
+      [&state] { return std::make_unique<WorkerContext>(state); });
   if (!config.metrics_listen.empty()) {
     RECOG_RETURN_IF_ERROR(state.metrics.StartHttp(config.metrics_listen));
   }
@@ -150,7 +152,7 @@ Status RecognitionServer::Open() {
   RECOG_ASSIGN_OR_RETURN(state.repository,
                          ModelRepository::Open(state.store.get(), state.objects, Sha256Hex));
   for (const std::shared_ptr<PlaceMap>& map : state.maps->List()) {
-    state.metrics.SetMapEntries(map->name, map->database->size());
+    state.metrics.SetMapEntries(map->name(), map->frames());
   }
   state.metrics.SetObjects(state.objects->size());
   state.ready = true;

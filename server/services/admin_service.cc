@@ -31,7 +31,7 @@ class CheckpointDownload final : public grpc::ServerWriteReactor<pb::CheckpointR
                        : std::min<size_t>(request.chunk_bytes(), kMaxChunkBytes);
     grpc::Status status = BeginCall(state_, context_, kMethod, Right::kWrite, &call_);
     if (status.ok()) {
-      if (state_.pool->TrySubmit([this] { Prepare(); })) return;
+      if (state_.pool->TrySubmit([this](WorkerContext&) { Prepare(); })) return;
       status = Busy(state_, context_);
     }
     End(status);

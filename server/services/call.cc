@@ -98,15 +98,16 @@ grpc::ServerUnaryReactor* RunUnary(ServerState& state, grpc::CallbackServerConte
   auto call = std::make_shared<CallInfo>();
   grpc::Status status = BeginCall(state, context, method, right, call.get());
   if (status.ok()) {
-    const bool queued = state.pool->TrySubmit([&state, context, reactor, call, work] {
-      call->queue_ms =
-          std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - call->start)
-              .count();
-      grpc::Status result = CheckStillWanted(context);
-      if (result.ok()) result = work(*call);
-      EndCall(state, *call, result);
-      reactor->Finish(result);
-    });
+    const bool queued =
+        state.pool->TrySubmit([&state, context, reactor, call, work](WorkerContext& worker) {
+          call->queue_ms = std::chrono::duration<double, std::milli>(
+                               std::chrono::steady_clock::now() - call->start)
+                               .count();
+          grpc::Status result = CheckStillWanted(context);
+          if (result.ok()) result = work(*call, worker);
+          EndCall(state, *call, result);
+          reactor->Finish(result);
+        });
     if (queued) return reactor;
     status = Busy(state, context);
   }

@@ -49,7 +49,8 @@ grpc::Status Busy(ServerState& state, grpc::CallbackServerContext* context);
 // saying that the table does not list the map) otherwise.
 grpc::Status CheckMapOwner(const ServerState& state, const std::string& map);
 
-using UnaryWork = std::function<grpc::Status(CallInfo&)>;
+// The work of a unary call, on a worker, with that worker's context.
+using UnaryWork = std::function<grpc::Status(CallInfo&, WorkerContext&)>;
 grpc::ServerUnaryReactor* RunUnary(ServerState& state, grpc::CallbackServerContext* context,
                                    std::string_view method, Right right, UnaryWork work);
 

@@ -51,9 +51,9 @@ class FrameStream : public grpc::ServerBidiReactor<Request, Response> {
  protected:
   // Checks the first request (on a worker). Not OK ends the stream with that status.
   virtual grpc::Status Configure(const Request& first) = 0;
-  // Answers one frame (on a worker) into `response`, which has its sequence number and client
-  // frame id already. A failure becomes the answer's FrameError.
-  virtual Status Answer(const pb::Frame& frame, Response* response) = 0;
+  // Answers one frame (on a worker, with its context) into `response`, which has its sequence
+  // number and client frame id already. A failure becomes the answer's FrameError.
+  virtual Status Answer(const pb::Frame& frame, WorkerContext& worker, Response* response) = 0;
 
   ServerState& state_;
   grpc::CallbackServerContext* const context_;
@@ -66,7 +66,7 @@ class FrameStream : public grpc::ServerBidiReactor<Request, Response> {
       return;
     }
     const auto submitted_at = std::chrono::steady_clock::now();
-    const bool submitted = state_.pool->Submit([this, submitted_at] {
+    const bool submitted = state_.pool->Submit([this, submitted_at](WorkerContext& worker) {
       if (!configured_) {
         const grpc::Status status = Configure(request_);
         if (!status.ok()) {
@@ -84,7 +84,7 @@ class FrameStream : public grpc::ServerBidiReactor<Request, Response> {
       if (request_.has_frame()) {
         response_.set_client_frame_id(
             request_.frame().client_frame_id().substr(0, kMaxFrameIdBytes));
-        status = Answer(request_.frame(), &response_);
+        status = Answer(request_.frame(), worker, &response_);
       }
       if (!status.ok()) {
         const grpc::Status error = ToGrpcStatus(status, call_.request_id);

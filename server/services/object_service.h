@@ -1,8 +1,10 @@
 // ObjectService: the ObjectRecognition RPCs (proto/recognition/v1/object.proto).
 //
-// Each worker thread keeps its own ObjectRecognizer (recognisers reuse scratch memory and are not
-// thread-safe); all of them share the server's ObjectDatabase, so a model uploaded through the
-// repository is recognised by the next frame. The stream is a FrameStream (frame_stream.h).
+// A frame is decoded, given with the request's ObjectFilter to the ObjectRecognizer of the worker
+// that runs it (its WorkerContext: recognisers reuse scratch memory and are not thread-safe), and
+// the detections are encoded as core gives them (best first, only the filter's objects). Every
+// recogniser shares the server's ObjectDatabase, so a model uploaded through the repository is
+// recognised by the next frame. The stream is a FrameStream (frame_stream.h).
 #pragma once
 
 #include "recognition/v1/object.grpc.pb.h"

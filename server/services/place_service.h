@@ -1,9 +1,12 @@
-// PlaceService: the PlaceRecognition RPCs (proto/recognition/v1/place.proto) over MapRegistry.
+// PlaceService: the PlaceRecognition RPCs (proto/recognition/v1/place.proto) over MapRegistry and
+// PlaceMap.
 //
-// Map management and unary frames run on the worker pool through RunUnary. StreamFrames is one
-// reactor per call (FrameStream in place_service.cc) that reads a frame only after answering the
-// previous one. Frames of one map are processed under the map's mutex, in arrival order;
-// relocalisation queries (QueryPlace without add_frame, query-only streams) run without it.
+// Each RPC decodes its request, makes one core call (MapRegistry for map management; for a frame
+// PlaceMap::Add for AddFrame, Detect for QueryPlace with add_frame and writing streams, Query for
+// QueryPlace and query-only streams) and encodes the result, updating the metrics. Map management
+// and unary frames run on the worker pool through RunUnary. StreamFrames is one reactor per call
+// (FrameStream in place_service.cc) that reads a frame only after answering the previous one.
+// PlaceMap orders the frames of one map and lets queries run beside them.
 #pragma once
 
 #include "recognition/v1/place.grpc.pb.h"

@@ -58,7 +58,7 @@ class ModelUpload final : public grpc::ServerReadReactor<pb::PutModelRequest> {
     if (!ok) {  // the client sent everything
       if (!has_header_) {
         End({grpc::StatusCode::FAILED_PRECONDITION, "PutModel needs a PutModelHeader first"});
-      } else if (!state_.pool->TrySubmit([this] { End(Store()); })) {
+      } else if (!state_.pool->TrySubmit([this](WorkerContext&) { End(Store()); })) {
         End(Busy(state_, context_));
       }
       return;
@@ -181,7 +181,8 @@ class ModelDownload final : public grpc::ServerWriteReactor<pb::GetModelResponse
     if (status.ok()) {
       const std::string name = request.name();
       const uint32_t version = request.version();
-      if (state_.pool->TrySubmit([this, name, version] { Fetch(name, version); })) return;
+      if (state_.pool->TrySubmit([this, name, version](WorkerContext&) { Fetch(name, version); }))
+        return;
       status = Busy(state_, context_);
     }
     End(status);
@@ -381,24 +382,26 @@ grpc::ServerReadReactor<pb::PutModelRequest>* RepositoryService::PutModel(
 grpc::ServerUnaryReactor* RepositoryService::GetUploadStatus(
     grpc::CallbackServerContext* context, const pb::GetUploadStatusRequest* request,
     pb::GetUploadStatusResponse* response) {
-  return RunUnary(state_, context, Method("GetUploadStatus"), Right::kWrite, [=, this](CallInfo&) {
-    if (grpc::Status refused = RefuseOnReplica(state_); !refused.ok()) return refused;
-    if (!IsSha256Hex(request->sha256())) {
-      return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
-                          "sha256 must be 64 lowercase hex digits (SHA-256 of the file)");
-    }
-    const PartialUploads::Progress progress =
-        partial_uploads_.ProgressOf({request->sha256(), request->size_bytes()});
-    response->set_received_bytes(progress.received_bytes);
-    if (progress.stored.has_value()) {
-      for (const ModelVersionInfo& info : state_.repository->Versions(progress.stored->name)) {
-        if (info.metadata.version == progress.stored->version) {
-          ToProto(info, response->mutable_stored());
+  return RunUnary(
+      state_, context, Method("GetUploadStatus"), Right::kWrite,
+      [=, this](CallInfo&, WorkerContext&) {
+        if (grpc::Status refused = RefuseOnReplica(state_); !refused.ok()) return refused;
+        if (!IsSha256Hex(request->sha256())) {
+          return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
+                              "sha256 must be 64 lowercase hex digits (SHA-256 of the file)");
         }
-      }
-    }
-    return grpc::Status::OK;
-  });
+        const PartialUploads::Progress progress =
+            partial_uploads_.ProgressOf({request->sha256(), request->size_bytes()});
+        response->set_received_bytes(progress.received_bytes);
+        if (progress.stored.has_value()) {
+          for (const ModelVersionInfo& info : state_.repository->Versions(progress.stored->name)) {
+            if (info.metadata.version == progress.stored->version) {
+              ToProto(info, response->mutable_stored());
+            }
+          }
+        }
+        return grpc::Status::OK;
+      });
 }
 
 grpc::ServerWriteReactor<pb::GetModelResponse>* RepositoryService::GetModel(
@@ -409,29 +412,35 @@ grpc::ServerWriteReactor<pb::GetModelResponse>* RepositoryService::GetModel(
 grpc::ServerUnaryReactor* RepositoryService::ListModels(grpc::CallbackServerContext* context,
                                                         const pb::ListModelsRequest* request,
                                                         pb::ListModelsResponse* response) {
-  return RunUnary(state_, context, Method("ListModels"), Right::kRead, [=, this](CallInfo& call) {
-    const ModelFilter filter{request->name_prefix(), request->object_class(), request->tag()};
-    StatusOr<ModelPage> page =
-        state_.repository->List(filter, request->page_size(), request->page_token());
-    if (!page.ok()) return ToGrpcStatus(page.status(), call.request_id);
-    for (const ModelVersionInfo& info : page.value().models) ToProto(info, response->add_models());
-    response->set_next_page_token(page.value().next_page_token);
-    return grpc::Status::OK;
-  });
+  return RunUnary(
+      state_, context, Method("ListModels"), Right::kRead,
+      [=, this](CallInfo& call, WorkerContext&) {
+        const ModelFilter filter{request->name_prefix(), request->object_class(), request->tag()};
+        StatusOr<ModelPage> page =
+            state_.repository->List(filter, request->page_size(), request->page_token());
+        if (!page.ok()) return ToGrpcStatus(page.status(), call.request_id);
+        for (const ModelVersionInfo& info : page.value().models)
+          ToProto(info, response->add_models());
+        response->set_next_page_token(page.value().next_page_token);
+        return grpc::Status::OK;
+      });
 }
 
 grpc::ServerUnaryReactor* RepositoryService::DeleteModel(grpc::CallbackServerContext* context,
                                                          const pb::DeleteModelRequest* request,
                                                          pb::DeleteModelResponse* response) {
-  return RunUnary(state_, context, Method("DeleteModel"), Right::kWrite, [=, this](CallInfo& call) {
-    call.map = request->name();
-    if (grpc::Status refused = RefuseOnReplica(state_); !refused.ok()) return refused;
-    const size_t versions = state_.repository->Versions(request->name()).size();
-    RECOG_RETURN_IF_ERROR_AS_GRPC(state_.repository->Remove(request->name()), call.request_id);
-    response->set_versions_deleted(uint32_t(versions));
-    state_.metrics.SetObjects(state_.objects->size());
-    return grpc::Status::OK;
-  });
+  return RunUnary(state_, context, Method("DeleteModel"), Right::kWrite,
+                  [=, this](CallInfo& call, WorkerContext&) {
+                    call.map = request->name();
+                    if (grpc::Status refused = RefuseOnReplica(state_); !refused.ok())
+                      return refused;
+                    const size_t versions = state_.repository->Versions(request->name()).size();
+                    RECOG_RETURN_IF_ERROR_AS_GRPC(state_.repository->Remove(request->name()),
+                                                  call.request_id);
+                    response->set_versions_deleted(uint32_t(versions));
+                    state_.metrics.SetObjects(state_.objects->size());
+                    return grpc::Status::OK;
+                  });
 }
 
 grpc::ServerWriteReactor<pb::WatchModelsResponse>* RepositoryService::WatchModels(

@@ -22,6 +22,7 @@
 #include "server/config/server_config.h"
 #include "server/metrics/metrics.h"
 #include "server/runtime/worker_pool.h"
+#include "server/services/worker_context.h"
 
 namespace recog::server {
 
@@ -32,7 +33,7 @@ struct ServerState {
   const ServerConfig config;
   const TokenAuthenticator auth;
   ServerMetrics metrics;
-  std::unique_ptr<WorkerPool> pool;
+  std::unique_ptr<WorkerPool<WorkerContext>> pool;  // its contexts read this state
   std::atomic<bool> ready{false};
   std::atomic<bool> draining{false};
 

@@ -1,0 +1,114 @@
+// PlaceMap: one place map — a robot session's sequence of frames (a Database in the store) with
+// the loop detector that runs on it — and the three things a frame can do to it.
+//
+//  - Add inserts the frame without querying (LoopDetector::Add: a robot uploading keyframes);
+//  - Detect is the loop detector's step, query then add (LoopDetector::Process);
+//  - Query looks for the place of the frame and changes nothing (LoopDetector::Query,
+//    relocalisation).
+// Detect and Query also return, when there is a match whose frame is still stored, the match's
+// timestamp, and on request two extras that only a verified loop (kLoopDetected with RANSAC
+// inliers) has: the fundamental matrix, and the relative pose of the two cameras recovered from
+// it, which needs the query camera's matrix K.
+//
+// Maps are opened, created and deleted by MapRegistry (map_registry.h); holders of a map that the
+// registry deleted keep a valid object whose writes fail.
+//
+// Thread safety: every method may be called from any thread. Add and Detect take the map's lock:
+// frames of one map are added one at a time, in the order they get the lock. Query does not take
+// it and runs concurrently with them and with other queries (the detector and the database allow
+// it). Deletion (by the registry) takes the lock too, so it waits for the frame being added; after
+// it, Add and Detect return NOT_FOUND "map '<name>' was deleted". A Query racing a deletion
+// answers from what the map held, without the extras whose frame is gone.
+#pragma once
+
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+
+#include <opencv2/core.hpp>
+
+#include "core/common/status.h"
+#include "core/index/database.h"
+#include "core/index/index_store.h"
+#include "core/place/loop_detector.h"
+
+namespace recog {
+
+// What Detect and Query add to the loop result.
+struct PlaceResultOptions {
+  bool include_fundamental = false;
+  bool include_relative_pose = false;
+  std::optional<cv::Matx33d> camera_matrix;  // K of the query frame; the relative pose needs it
+};
+
+// The pose of the matched frame's camera relative to the query's, as RelativePoseFromFundamental
+// gives it (a = the query frame, b = the match): X_match = R * X_query + t, with |t| = 1 (two views
+// fix the translation only up to scale).
+struct RelativePose {
+  cv::Matx33d R = cv::Matx33d::eye();
+  cv::Vec3d t = {0, 0, 0};
+};
+
+struct PlaceFrameResult {
+  // The detector's result. Add fills only `entry` (the id the frame got); Detect fills everything
+  // with `entry` set; Query everything but `entry`.
+  LoopResult loop;
+  std::optional<double> match_timestamp;      // of loop.match, when there is one still stored
+  std::optional<cv::Matx33d> fundamental;     // asked for and verified
+  std::optional<RelativePose> relative_pose;  // asked for, verified, K given and recoverable
+};
+
+class PlaceMap {
+ public:
+  // Opens the map `name` of `store` (its database must exist) with its detector parameters.
+  // NOT_FOUND when the store has no such map, INVALID_ARGUMENT for bad parameters.
+  static StatusOr<std::shared_ptr<PlaceMap>> Open(IndexStore* store, const std::string& name,
+                                                  const LoopDetectorParams& params,
+                                                  std::shared_ptr<const Vocabulary> vocabulary);
+
+  // Adds the frame (timestamp in seconds, 0 when unknown) without querying.
+  StatusOr<PlaceFrameResult> Add(const FeatureSet& features, double timestamp);
+  // Queries the map with the frame, then adds it (loop-closure detection).
+  StatusOr<PlaceFrameResult> Detect(const FeatureSet& features, double timestamp,
+                                    const PlaceResultOptions& options = {});
+  // Looks for the frame's place; adds nothing and changes nothing.
+  StatusOr<PlaceFrameResult> Query(const FeatureSet& features, double timestamp,
+                                   const PlaceResultOptions& options = {}) const;
+
+  const std::string& name() const { return name_; }
+  const LoopDetectorParams& params() const { return params_; }
+  const MapInfo& info() const { return database_->info(); }
+  const Vocabulary& vocabulary() const { return database_->vocabulary(); }
+  size_t frames() const { return database_->size(); }
+  EntryId next_frame_id() const { return database_->next_entry_id(); }
+  bool deleted() const;
+
+ private:
+  friend class MapRegistry;
+
+  PlaceMap(IndexStore* store, std::string name, const LoopDetectorParams& params,
+           std::unique_ptr<Database> database, LoopDetector detector)
+      : store_(store),
+        name_(std::move(name)),
+        params_(params),
+        database_(std::move(database)),
+        detector_(std::move(detector)) {}
+
+  // Deletes the map's frames from the store and marks the map deleted, under the lock (for
+  // MapRegistry::Delete). Returns how many frames it had.
+  StatusOr<size_t> DeleteFrames();
+  // Fills the match timestamp and the extras `options` asks for.
+  Status AddExtras(const FeatureSet& features, const PlaceResultOptions& options,
+                   PlaceFrameResult* result) const;
+
+  IndexStore* const store_;
+  const std::string name_;
+  const LoopDetectorParams params_;
+  const std::unique_ptr<Database> database_;  // declared before the detector, which points to it
+  mutable std::mutex mutex_;                  // guards detector_'s Add/Process and deleted_
+  LoopDetector detector_;
+  bool deleted_ = false;
+};
+
+}  // namespace recog

@@ -1,0 +1,224 @@
+#include "core/place/place_map.h"
+
+#include <set>
+#include <thread>
+
+#include <gtest/gtest.h>
+
+#include "core/index/memory_index_store.h"
+#include "core/place/map_registry.h"
+#include "core/place/place_test_frames.h"
+#include "core/vocabulary/vocabulary_io.h"
+#include "tests/testing/test_data.h"
+
+namespace recog {
+namespace {
+
+class PlaceMapTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    vocabulary_ = new std::shared_ptr<const Vocabulary>(testing::TrainPlacesVocabulary());
+    tour_ = new std::vector<FeatureSet>(testing::Extract(testing::TourWithRevisits()));
+  }
+  static void TearDownTestSuite() {
+    delete vocabulary_;
+    delete tour_;
+  }
+
+  void SetUp() override {
+    ASSERT_NE(*vocabulary_, nullptr);
+    auto registry = MapRegistry::Open(&store_, *vocabulary_);
+    ASSERT_TRUE(registry.ok()) << registry.status().ToString();
+    registry_ = std::move(registry).value();
+    params_.recent_frames = 4;
+    params_.recent_seconds = 4;
+    params_.temporal_matches = 2;
+  }
+
+  std::shared_ptr<PlaceMap> Create(const std::string& name, const LoopDetectorParams& params) {
+    auto map = registry_->Create(name, params);
+    EXPECT_TRUE(map.ok()) << map.status().ToString();
+    return map.ok() ? map.value() : nullptr;
+  }
+
+  // Adds the first visits of places 0 1 2 3 (frames 0..15, timestamp = frame index).
+  static void AddFirstVisits(PlaceMap& map) {
+    for (size_t i = 0; i < 16; ++i) {
+      auto added = map.Add((*tour_)[i], double(i));
+      ASSERT_TRUE(added.ok()) << added.status().ToString();
+      EXPECT_EQ(added->loop.entry, EntryId(i));
+      EXPECT_EQ(added->loop.match, kInvalidEntryId);
+      EXPECT_FALSE(added->match_timestamp.has_value());
+    }
+  }
+
+  static std::shared_ptr<const Vocabulary>* vocabulary_;
+  static std::vector<FeatureSet>* tour_;
+  MemoryIndexStore store_;
+  std::unique_ptr<MapRegistry> registry_;
+  LoopDetectorParams params_;
+};
+std::shared_ptr<const Vocabulary>* PlaceMapTest::vocabulary_ = nullptr;
+std::vector<FeatureSet>* PlaceMapTest::tour_ = nullptr;
+
+TEST_F(PlaceMapTest, QueryFindsTheAddedPlaceAndChangesNothing) {
+  std::shared_ptr<PlaceMap> map = Create("m", params_);
+  ASSERT_NE(map, nullptr);
+  AddFirstVisits(*map);
+  const std::vector<FeatureSet>& tour = *tour_;
+  for (size_t i = 16; i < tour.size(); ++i) {
+    auto r = map->Query(tour[i], 100.0);
+    ASSERT_TRUE(r.ok()) << r.status().ToString();
+    const EntryId first_visit = i < 20 ? 0 : 4;
+    EXPECT_EQ(r->loop.status, LoopStatus::kLoopDetected) << i;
+    EXPECT_EQ(r->loop.entry, kInvalidEntryId);
+    EXPECT_GE(r->loop.match, first_visit) << i;
+    EXPECT_LT(r->loop.match, first_visit + 4) << i;
+    ASSERT_TRUE(r->match_timestamp.has_value());
+    EXPECT_EQ(*r->match_timestamp, double(r->loop.match));  // the timestamp it was added with
+    EXPECT_FALSE(r->fundamental.has_value());               // not asked for
+    EXPECT_FALSE(r->relative_pose.has_value());
+  }
+  EXPECT_EQ(map->frames(), 16u);
+  EXPECT_EQ(map->next_frame_id(), 16u);
+}
+
+TEST_F(PlaceMapTest, DetectQueriesThenAddsAsTheLoopDetectorDoes) {
+  std::shared_ptr<PlaceMap> map = Create("m", params_);
+  ASSERT_NE(map, nullptr);
+  MemoryIndexStore store;
+  auto db = Database::Create(&store, "reference", *vocabulary_);
+  ASSERT_TRUE(db.ok());
+  auto reference = LoopDetector::Create(db->get(), params_);
+  ASSERT_TRUE(reference.ok());
+  int loops = 0;
+  for (size_t i = 0; i < tour_->size(); ++i) {
+    auto r = map->Detect((*tour_)[i], double(i));
+    auto expected = reference->Process((*tour_)[i], double(i));
+    ASSERT_TRUE(r.ok() && expected.ok());
+    EXPECT_EQ(r->loop.entry, EntryId(i));
+    EXPECT_EQ(r->loop.status, expected->status) << i;
+    EXPECT_EQ(r->loop.match, expected->match) << i;
+    EXPECT_EQ(r->loop.inliers, expected->inliers) << i;
+    EXPECT_EQ(r->match_timestamp.has_value(), expected->match != kInvalidEntryId) << i;
+    if (r->loop.status == LoopStatus::kLoopDetected) ++loops;
+  }
+  EXPECT_GT(loops, 0);
+  EXPECT_EQ(map->frames(), tour_->size());
+}
+
+TEST_F(PlaceMapTest, ExtrasComeOnlyWhenAskedAndVerifiedAndThePoseNeedsTheCamera) {
+  std::shared_ptr<PlaceMap> map = Create("m", params_);
+  ASSERT_NE(map, nullptr);
+  AddFirstVisits(*map);
+  const FeatureSet& revisit = (*tour_)[17];
+
+  PlaceResultOptions fundamental_only;
+  fundamental_only.include_fundamental = true;
+  auto r = map->Query(revisit, 0, fundamental_only);
+  ASSERT_TRUE(r.ok());
+  ASSERT_EQ(r->loop.status, LoopStatus::kLoopDetected);
+  ASSERT_FALSE(r->loop.inliers.empty());
+  ASSERT_TRUE(r->fundamental.has_value());
+  EXPECT_EQ(*r->fundamental, r->loop.fundamental);
+  EXPECT_NE(cv::norm(*r->fundamental), 0.0);
+  EXPECT_FALSE(r->relative_pose.has_value());
+
+  PlaceResultOptions pose;
+  pose.include_relative_pose = true;
+  r = map->Query(revisit, 0, pose);  // no camera matrix: no pose
+  ASSERT_TRUE(r.ok());
+  EXPECT_FALSE(r->relative_pose.has_value());
+  EXPECT_FALSE(r->fundamental.has_value());
+
+  // Without geometric verification a loop has no inliers and so no extras, asked or not.
+  LoopDetectorParams unverified = params_;
+  unverified.geometry = GeometryCheck::kNone;
+  std::shared_ptr<PlaceMap> plain = Create("plain", unverified);
+  ASSERT_NE(plain, nullptr);
+  AddFirstVisits(*plain);
+  PlaceResultOptions everything = pose;
+  everything.include_fundamental = true;
+  everything.camera_matrix = cv::Matx33d(400, 0, 128, 0, 400, 192, 0, 0, 1);
+  r = plain->Query(revisit, 0, everything);
+  ASSERT_TRUE(r.ok());
+  EXPECT_EQ(r->loop.status, LoopStatus::kLoopDetected);
+  EXPECT_TRUE(r->match_timestamp.has_value());
+  EXPECT_FALSE(r->fundamental.has_value());
+  EXPECT_FALSE(r->relative_pose.has_value());
+}
+
+TEST_F(PlaceMapTest, AQueryWithTheCameraGetsTheRelativePoseOfTheNeighbouringFrame) {
+  RECOG_SKIP_WITHOUT_SHARED_DATA("places/corridor/images/11.jpg");
+  auto vocabulary = LoadVocabulary(DefaultPlaceVocabularyPath());
+  ASSERT_TRUE(vocabulary.ok()) << vocabulary.status().ToString();
+  MemoryIndexStore store;
+  auto registry =
+      MapRegistry::Open(&store, std::make_shared<const Vocabulary>(std::move(vocabulary).value()));
+  ASSERT_TRUE(registry.ok());
+  auto map = (*registry)->Create("walk", LoopDetectorParams{});
+  ASSERT_TRUE(map.ok());
+  const auto corridor = [](int n) {
+    auto image =
+        ReadGrayImage(testing::SharedData("places/corridor/images/" + std::to_string(n) + ".jpg"));
+    EXPECT_TRUE(image.ok());
+    return testing::Extract({image.value()})[0];
+  };
+  for (int n = 2; n <= 20; n += 2) ASSERT_TRUE((*map)->Add(corridor(n), 0).ok());
+  PlaceResultOptions options;
+  options.include_relative_pose = true;
+  options.camera_matrix = cv::Matx33d(400, 0, 256, 0, 400, 192, 0, 0, 1);
+  auto r = (*map)->Query(corridor(11), 0, options);
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  ASSERT_EQ(r->loop.status, LoopStatus::kLoopDetected);
+  EXPECT_TRUE(r->loop.match == 4u || r->loop.match == 5u) << r->loop.match;  // frame 10 or 12
+  ASSERT_TRUE(r->relative_pose.has_value());
+  EXPECT_NEAR(cv::norm(r->relative_pose->t), 1.0, 1e-6);  // up to scale: unit length
+  EXPECT_NEAR(cv::determinant(r->relative_pose->R), 1.0, 1e-6);
+  EXPECT_FALSE(r->fundamental.has_value());  // not asked for
+}
+
+TEST_F(PlaceMapTest, ADeletedMapRefusesWrites) {
+  std::shared_ptr<PlaceMap> map = Create("gone", params_);
+  ASSERT_NE(map, nullptr);
+  ASSERT_TRUE(map->Add((*tour_)[0], 0).ok());
+  EXPECT_FALSE(map->deleted());
+  auto frames = registry_->Delete("gone");
+  ASSERT_TRUE(frames.ok());
+  EXPECT_EQ(*frames, 1u);
+  EXPECT_TRUE(map->deleted());
+  auto added = map->Add((*tour_)[1], 1);
+  EXPECT_EQ(added.status().code(), StatusCode::kNotFound);
+  EXPECT_EQ(added.status().message(), "map 'gone' was deleted");
+  EXPECT_EQ(map->Detect((*tour_)[1], 1).status().code(), StatusCode::kNotFound);
+}
+
+TEST_F(PlaceMapTest, TwoThreadsAddingToOneMapGetDistinctConsecutiveIds) {
+  std::shared_ptr<PlaceMap> map = Create("shared", params_);
+  ASSERT_NE(map, nullptr);
+  std::vector<EntryId> ids[2];
+  std::vector<std::thread> threads;
+  for (int t = 0; t < 2; ++t) {
+    threads.emplace_back([&, t] {
+      for (size_t i = size_t(t); i < tour_->size(); i += 2) {
+        auto r = t == 0 ? map->Add((*tour_)[i], 0) : map->Detect((*tour_)[i], 0);
+        ASSERT_TRUE(r.ok()) << r.status().ToString();
+        ids[t].push_back(r->loop.entry);
+      }
+    });
+  }
+  for (std::thread& thread : threads) thread.join();
+  std::set<EntryId> all(ids[0].begin(), ids[0].end());
+  all.insert(ids[1].begin(), ids[1].end());
+  ASSERT_EQ(all.size(), tour_->size());  // no id given twice
+  EXPECT_EQ(*all.begin(), 0u);
+  EXPECT_EQ(*all.rbegin(), EntryId(tour_->size() - 1));
+  EXPECT_EQ(map->frames(), tour_->size());
+  EXPECT_EQ(map->next_frame_id(), EntryId(tour_->size()));
+  for (const auto& per_thread : ids) {  // each thread's frames got increasing ids
+    EXPECT_TRUE(std::is_sorted(per_thread.begin(), per_thread.end()));
+  }
+}
+
+}  // namespace
+}  // namespace recog
