@@ -7,7 +7,6 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
-#include <numeric>
 #include <random>
 
 #include "core/features/feature_extractor.h"
@@ -90,7 +89,7 @@ Vocabulary LoadBundledPlaceVocabulary() {
   return std::move(vocabulary).value();
 }
 
-std::vector<BowVector> RealImageBows(const Vocabulary& vocabulary, size_t count, uint64_t seed) {
+std::vector<cv::Mat> RealImageDescriptors(uint64_t seed) {
   const std::string caltech = testing::SharedData("training/caltech101");
   auto listed = cli::ListImages(
       std::filesystem::exists(caltech) ? caltech : testing::ProjectTestData("corridor"));
@@ -108,27 +107,8 @@ std::vector<BowVector> RealImageBows(const Vocabulary& vocabulary, size_t count,
     auto image = ReadGrayImage(f);
     if (!image.ok() || !(*extractor)->Extract(*image, &features).ok()) continue;
     if (features.size() >= 50) descriptors.push_back(features.descriptors.clone());
-    if (descriptors.size() >= count) break;
   }
-  std::vector<BowVector> bows;
-  bows.reserve(count);
-  std::uniform_real_distribution<double> keep(0.6, 1.0);
-  for (size_t i = 0; bows.size() < count; ++i) {
-    const cv::Mat& all = descriptors[i % descriptors.size()];
-    cv::Mat subset;
-    if (i < descriptors.size()) {
-      subset = all;
-    } else {
-      std::vector<int> rows(all.rows);
-      std::iota(rows.begin(), rows.end(), 0);
-      std::shuffle(rows.begin(), rows.end(), rng);
-      rows.resize(size_t(all.rows * keep(rng)));
-      for (int r : rows) subset.push_back(all.row(r));
-    }
-    BowVector bow;
-    if (vocabulary.Transform(subset, &bow).ok()) bows.push_back(std::move(bow));
-  }
-  return bows;
+  return descriptors;
 }
 
 std::string TempPath(const std::string& name) {

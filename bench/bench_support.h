@@ -26,11 +26,10 @@ Vocabulary RandomFullTreeVocabulary(uint32_t k, uint32_t levels, uint64_t seed);
 // binary with a message when it is missing.
 Vocabulary LoadBundledPlaceVocabulary();
 
-// Bags of words of real images: ORB features of the shared Caltech photos (or, without the shared
-// data, of the bundled corridor frames) converted with `vocabulary`, L1-normalised. Each image
-// gives `variants` vectors, each from a random 60-100 % of its features (seeded), so that a
-// database of many entries keeps the word statistics of real images.
-std::vector<BowVector> RealImageBows(const Vocabulary& vocabulary, size_t count, uint64_t seed);
+// ORB descriptors of real images, one set per distinct photo: every shared Caltech photo (or,
+// without the shared data, every bundled corridor frame) with at least 50 features, in a random
+// order drawn from `seed`.
+std::vector<cv::Mat> RealImageDescriptors(uint64_t seed);
 
 // A fresh temporary file path in the system temp folder.
 std::string TempPath(const std::string& name);

@@ -11,6 +11,12 @@
 // Both sync policies are run: SyncPolicy::kGrouped promises the same as kEveryWrite against a
 // crash of the process (only a crash of the machine can cost it the last interval's writes).
 //
+// A third test writes as the server does, through a Database (bags of words from the place
+// vocabulary), kills the writer mid-stream, reopens through Database::Open (which rebuilds the
+// index and checks every entry's parts against each other and the vocabulary) and checks that
+// every acknowledged entry is there with its features and that a query with the last one's bag of
+// words ranks it first.
+//
 // A forked child inherits RocksDB's background thread pool without its threads, so it cannot
 // flush or compact; that is fine here because each child writes far less than one memtable
 // (64 MB) and the parent, which reopens the store every round, does the flushing.
@@ -28,8 +34,11 @@
 
 #include <gtest/gtest.h>
 
+#include "core/index/database.h"
+#include "core/vocabulary/vocabulary_io.h"
 #include "storage/rocksdb_index_store.h"
 #include "storage/store_test_util.h"
+#include "tests/testing/synthetic.h"
 
 namespace recog {
 namespace {
@@ -202,6 +211,112 @@ TEST(RocksDbCrashTest, KilledWritersNeverLoseAcknowledgedEntriesNorLeaveHalfOnes
 
 TEST(RocksDbCrashTest, GroupedSyncLosesNothingWhenOnlyTheProcessCrashes) {
   RunCrashRounds(SyncPolicy::kGrouped, 12);
+}
+
+// The features of Database entry `id`: 100-400 random ORB descriptors (seeded by the id) at
+// keypoints along a line.
+FeatureSet DatabaseFeatures(EntryId id) {
+  const int n = 100 + int(id * 37 % 301);
+  FeatureSet features;
+  features.descriptors = testing::RandomDescriptors(n, kSeed + id);
+  for (int i = 0; i < n; ++i) features.keypoints.emplace_back(float(i), float(i % 480), 31.f);
+  return features;
+}
+
+std::shared_ptr<const Vocabulary> PlaceVocabulary() {
+  auto loaded =
+      LoadVocabulary(std::string(RECOG_SOURCE_DIR) + "/vocabularies/place_orb_k10_l5.rvoc");
+  if (!loaded.ok()) return nullptr;
+  return std::make_shared<const Vocabulary>(std::move(loaded).value());
+}
+
+// The child of the Database test: adds entries until it is killed. Exit codes only on failure.
+[[noreturn]] void RunDatabaseWriter(const std::string& path, int ack_fd) {
+  const auto vocabulary = PlaceVocabulary();
+  if (vocabulary == nullptr) ::_exit(2);
+  auto store = OpenRocksDbIndexStore(path, WithSync(SyncPolicy::kGrouped));
+  if (!store.ok()) ::_exit(3);
+  auto db = Database::Open(store->get(), "db", vocabulary);
+  if (!db.ok()) ::_exit(4);
+  if (::write(ack_fd, &kOpenedMarker, sizeof(kOpenedMarker)) != sizeof(kOpenedMarker)) ::_exit(6);
+  for (;;) {
+    const auto id = (*db)->Add(DatabaseFeatures((*db)->next_entry_id()));
+    if (!id.ok()) ::_exit(5);
+    if (::write(ack_fd, &*id, sizeof(*id)) != sizeof(*id)) ::_exit(6);
+  }
+}
+
+TEST(RocksDbCrashTest, ADatabaseKilledMidStreamReopensWithEveryAcknowledgedEntryFindable) {
+  RECOG_SKIP_FORK_UNDER_TSAN();
+  const auto vocabulary = PlaceVocabulary();
+  ASSERT_NE(vocabulary, nullptr);
+  TempDir dir("crash_db");
+  const std::string path = dir.Sub("store");
+  {
+    auto store = OpenRocksDbIndexStore(path, WithSync(SyncPolicy::kGrouped));
+    ASSERT_TRUE(store.ok()) << store.status().ToString();
+    ASSERT_TRUE(Database::Create(store->get(), "db", vocabulary).ok());
+  }
+  std::mt19937 rng(kSeed);
+  std::set<EntryId> acknowledged;
+  for (int round = 0; round < 6; ++round) {
+    SCOPED_TRACE("round " + std::to_string(round));
+    int acks[2];
+    ASSERT_EQ(::pipe(acks), 0);
+    std::fflush(stdout);
+    std::fflush(stderr);
+    const pid_t pid = ::fork();
+    ASSERT_GE(pid, 0);
+    if (pid == 0) {
+      ::close(acks[0]);
+      RunDatabaseWriter(path, acks[1]);
+    }
+    ::close(acks[1]);
+    EntryId id = 0;
+    // Blocks until the child has opened the database (or died: end of file).
+    if (::read(acks[0], &id, sizeof(id)) == sizeof(id)) {
+      EXPECT_EQ(id, kOpenedMarker);
+    }
+    std::this_thread::sleep_for(
+        std::chrono::milliseconds(std::uniform_int_distribution<int>(50, 200)(rng)));
+    ::kill(pid, SIGKILL);
+    EntryId last = kInvalidEntryId;
+    while (::read(acks[0], &id, sizeof(id)) == sizeof(id)) {
+      acknowledged.insert(id);
+      last = id;
+    }
+    ::close(acks[0]);
+    int status = 0;
+    ASSERT_EQ(::waitpid(pid, &status, 0), pid);
+    ASSERT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL)
+        << "the writer stopped by itself with exit code " << WEXITSTATUS(status);
+    ASSERT_NE(last, kInvalidEntryId) << "the writer was killed before its first entry";
+
+    auto store = OpenRocksDbIndexStore(path, WithSync(SyncPolicy::kGrouped));
+    ASSERT_TRUE(store.ok()) << store.status().ToString();
+    auto db = Database::Open(store->get(), "db", vocabulary);  // checks every entry
+    ASSERT_TRUE(db.ok()) << db.status().ToString();
+    EXPECT_GE((*db)->size(), acknowledged.size());
+    EXPECT_GT((*db)->next_entry_id(), last);
+    for (EntryId ack : acknowledged) {
+      ASSERT_TRUE((*db)->Contains(ack)) << "acknowledged entry " << ack << " is gone";
+    }
+    auto stored = (*db)->Get(last);
+    ASSERT_TRUE(stored.ok()) << stored.status().ToString();
+    const FeatureSet expected = DatabaseFeatures(last);
+    ASSERT_EQ(stored->descriptors.rows, expected.descriptors.rows);
+    EXPECT_EQ(cv::norm(stored->descriptors, expected.descriptors, cv::NORM_HAMMING), 0.0);
+
+    BowVector bow;
+    ASSERT_TRUE(vocabulary->Transform(expected.descriptors, &bow).ok());
+    bow.Normalize(BowNormalization::kL1);
+    std::vector<QueryResult> results;
+    ASSERT_TRUE((*db)->Query(bow, {.max_results = 3}, &results).ok());
+    ASSERT_FALSE(results.empty());
+    EXPECT_EQ(results[0].id, last);
+    EXPECT_NEAR(results[0].score, 1.0, 1e-6);
+  }
+  std::printf("%zu entries acknowledged through the database over 6 rounds\n", acknowledged.size());
 }
 
 }  // namespace

@@ -426,3 +426,46 @@ TEST(RgbdViewListTest, ReadsViewsAndRejectsMalformedLists) {
 
 }  // namespace
 }  // namespace recog
+
+namespace recog {
+namespace {
+
+// The poster twice in one image (left and right halves, 1.2 m away): reported once per image by
+// default, once per region where it is found with report_duplicates.
+TEST_F(ObjectRecognitionTest, ReportDuplicatesGivesOneDetectionPerRegion) {
+  ASSERT_TRUE(database_->Put(poster_).ok());
+  const cv::Mat left = RenderPoster(Poster(), poster_, camera_, PoseAt(0, 0, {-0.38, 0, 1.2}));
+  const cv::Mat right = RenderPoster(Poster(), poster_, camera_, PoseAt(0, 0, {0.38, 0, 1.2}));
+  cv::Mat twice = left.clone();
+  right.colRange(320, 640).copyTo(twice.colRange(320, 640));
+  const auto centre_x = [](const Detection& d) {
+    double x = 0;
+    for (const cv::Point2f& p : d.outline) x += p.x;
+    return d.outline.empty() ? -1.0 : x / double(d.outline.size());
+  };
+
+  std::vector<Detection> once;
+  ASSERT_TRUE(ObjectRecognizer(database_).Recognize(twice, camera_, &once).ok());
+  ASSERT_EQ(once.size(), 1u);
+  EXPECT_EQ(once[0].name, "poster");
+
+  RecognitionOptions options;
+  options.report_duplicates = true;
+  std::vector<Detection> every;
+  ASSERT_TRUE(ObjectRecognizer(database_, options).Recognize(twice, camera_, &every).ok());
+  ASSERT_GE(every.size(), 2u);
+  std::vector<int> regions;
+  bool seen_left = false, seen_right = false;
+  for (const Detection& d : every) {
+    EXPECT_EQ(d.name, "poster");
+    EXPECT_EQ(std::count(regions.begin(), regions.end(), d.region), 0)
+        << "region " << d.region << " reported twice";
+    regions.push_back(d.region);
+    seen_left |= centre_x(d) >= 0 && centre_x(d) < 320;
+    seen_right |= centre_x(d) >= 320;
+  }
+  EXPECT_TRUE(seen_left && seen_right) << "both copies of the poster are reported";
+}
+
+}  // namespace
+}  // namespace recog

@@ -77,10 +77,11 @@ void SampleWorkerGauges(ServerState& state) {
 }
 
 grpc::Status CheckStillWanted(grpc::CallbackServerContext* context) {
-  if (context->IsCancelled()) return {grpc::StatusCode::CANCELLED, "the client cancelled"};
+  // The deadline first: gRPC also marks a call whose deadline passed as cancelled.
   if (context->deadline() < std::chrono::system_clock::now()) {
     return {grpc::StatusCode::DEADLINE_EXCEEDED, "the deadline passed while the call waited"};
   }
+  if (context->IsCancelled()) return {grpc::StatusCode::CANCELLED, "the client cancelled"};
   return grpc::Status::OK;
 }
 

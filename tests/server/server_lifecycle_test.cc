@@ -1,18 +1,24 @@
 // Loopback tests of what surrounds the RPCs: health, authentication and TLS, metrics, draining on
 // shutdown, a kill -9 in the middle of a stream, and network results equal to the offline tools'.
 #include <arpa/inet.h>
+#include <fcntl.h>
 #include <netinet/in.h>
 #include <signal.h>
 #include <spawn.h>
 #include <sys/socket.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <atomic>
 #include <fstream>
 #include <future>
 #include <thread>
 
 #include <grpcpp/generic/generic_stub.h>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
 
 #include "core/vocabulary/vocabulary_io.h"
 #include "server/api/converters.h"
@@ -47,6 +53,59 @@ int HealthStatus(const std::shared_ptr<grpc::Channel>& channel) {
   if (!response.Dump(&slices).ok() || slices.empty() || slices[0].size() < 2) return 0;
   return slices[0].begin()[1];
 }
+
+// grpc.health.v1.Health/Watch over a generic stub: the status now, then each change.
+class HealthWatch {
+ public:
+  explicit HealthWatch(const std::shared_ptr<grpc::Channel>& channel) : stub_(channel) {
+    call_ = stub_.PrepareCall(&context_, "/grpc.health.v1.Health/Watch", &queue_);
+    call_->StartCall(Tag(1));
+    if (!Await(1)) return;
+    grpc::Slice empty("");
+    grpc::ByteBuffer request(&empty, 1);
+    call_->Write(request, Tag(2));
+    if (!Await(2)) return;
+    call_->WritesDone(Tag(3));
+    started_ = Await(3);
+  }
+  ~HealthWatch() {
+    context_.TryCancel();
+    call_->Finish(&status_, Tag(9));
+    queue_.Shutdown();
+    void* tag;
+    bool ok;
+    while (queue_.Next(&tag, &ok)) {
+    }
+  }
+
+  // The next status sent (SERVING = 1, NOT_SERVING = 2), -1 when none comes within 10 s.
+  int Next() {
+    if (!started_) return -1;
+    grpc::ByteBuffer response;
+    call_->Read(&response, Tag(4));
+    if (!Await(4)) return -1;
+    std::vector<grpc::Slice> slices;
+    if (!response.Dump(&slices).ok() || slices.empty() || slices[0].size() < 2) return 0;
+    return slices[0].begin()[1];
+  }
+
+ private:
+  static void* Tag(intptr_t n) { return reinterpret_cast<void*>(n); }
+  bool Await(intptr_t expected) {
+    void* tag = nullptr;
+    bool ok = false;
+    const auto deadline = std::chrono::system_clock::now() + std::chrono::seconds(10);
+    return queue_.AsyncNext(&tag, &ok, deadline) == grpc::CompletionQueue::GOT_EVENT && ok &&
+           tag == Tag(expected);
+  }
+
+  grpc::GenericStub stub_;
+  grpc::ClientContext context_;
+  grpc::CompletionQueue queue_;
+  std::unique_ptr<grpc::GenericClientAsyncReaderWriter> call_;
+  grpc::Status status_;
+  bool started_ = false;
+};
 
 // GET http://127.0.0.1:<port>/metrics with a plain socket.
 std::string FetchMetrics(int port) {
@@ -86,6 +145,143 @@ TEST_F(ServerLifecycleTest, HealthReportsServingAndTheMetricsEndpointCountsCalls
   EXPECT_NE(metrics.find("code=\"ALREADY_EXISTS\""), std::string::npos);
   EXPECT_NE(metrics.find("recog_frames_total{kind=\"place\"} 1"), std::string::npos);
   EXPECT_NE(metrics.find("recog_map_entries{map=\"m\"} 1"), std::string::npos);
+}
+
+// The store's CURRENT file (the name of its manifest, read by every RocksDB open) is replaced by a
+// FIFO: opening the store blocks on it until the test writes the saved content, so the server is
+// seen listening before its store is open.
+TEST_F(ServerLifecycleTest, HealthIsNotServingUntilTheStoreIsOpen) {
+  ASSERT_TRUE(CreateMap("kept").ok());
+  StopServer();
+  const std::string current = data_dir_.Sub("store/CURRENT");
+  const std::string manifest = ReadFileBytes(current);
+  ASSERT_FALSE(manifest.empty());
+  ASSERT_EQ(std::remove(current.c_str()), 0);
+  ASSERT_EQ(mkfifo(current.c_str(), 0600), 0);
+  const std::string listen = "127.0.0.1:" + std::to_string(recog::testing::FreePort());
+  config().listen = listen;
+  std::atomic<bool> started = false;
+  auto start = std::async(std::launch::async, [&] {
+    auto server = RecognitionServer::Start(config());
+    started = true;
+    return server;
+  });
+  auto channel = grpc::CreateChannel(listen, grpc::InsecureChannelCredentials());
+  ASSERT_TRUE(
+      channel->WaitForConnected(std::chrono::system_clock::now() + std::chrono::seconds(10)));
+  EXPECT_EQ(HealthStatus(channel), 2);
+  HealthWatch watch(channel);
+  EXPECT_EQ(watch.Next(), 2);
+  auto stub = pb::PlaceRecognition::NewStub(channel);
+  pb::ListMapsResponse listed;
+  EXPECT_EQ(stub->ListMaps(Context().get(), {}, &listed).error_code(),
+            grpc::StatusCode::UNAVAILABLE);
+  EXPECT_FALSE(started);
+
+  // Feed the manifest's name to every reader of the FIFO until RocksDB replaces it with a file.
+  std::thread feeder([&] {
+    while (!started) {
+      const int fd = open(current.c_str(), O_WRONLY | O_NONBLOCK);  // ENXIO while nobody reads
+      if (fd < 0) {
+        std::this_thread::sleep_for(std::chrono::milliseconds(5));
+        continue;
+      }
+      struct stat info {};
+      if (fstat(fd, &info) == 0 && S_ISFIFO(info.st_mode)) {
+        const int flags = fcntl(fd, F_GETFL);
+        fcntl(fd, F_SETFL, flags & ~O_NONBLOCK);
+        EXPECT_EQ(write(fd, manifest.data(), manifest.size()), ssize_t(manifest.size()));
+      }
+      close(fd);
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+  });
+  EXPECT_EQ(watch.Next(), 1);  // SERVING once the store is open
+  auto server = start.get();
+  feeder.join();
+  ASSERT_TRUE(server.ok()) << server.status().ToString();
+  server_ = std::move(server).value();
+  EXPECT_EQ(HealthStatus(channel), 1);
+  ASSERT_TRUE(stub->ListMaps(Context().get(), {}, &listed).ok());
+  ASSERT_EQ(listed.maps_size(), 1);
+  EXPECT_EQ(listed.maps(0).name(), "kept");
+}
+
+TEST_F(ServerLifecycleTest, DrainingAnswersNotServingAndRefusesNewCalls) {
+  ASSERT_TRUE(CreateMap("busy").ok());
+  HealthWatch watch(channel_);
+  ASSERT_EQ(watch.Next(), 1);
+  grpc::ClientContext context;
+  auto stream = places_->StreamFrames(&context);
+  pb::StreamFramesRequest request;
+  request.mutable_config()->set_map("busy");
+  ASSERT_TRUE(stream->Write(request));
+  *request.mutable_frame() = JpegFrame(CorridorJpeg(1));
+  ASSERT_TRUE(stream->Write(request));
+  pb::StreamFramesResponse response;
+  ASSERT_TRUE(stream->Read(&response));
+  // The open stream holds the drain for its whole grace period.
+  auto shutdown =
+      std::async(std::launch::async, [&] { server_->Shutdown(std::chrono::milliseconds(3000)); });
+  EXPECT_EQ(watch.Next(), 2);
+  // Once the drain is under way a new client is refused (the listener is closed), and so is a new
+  // call on a connection opened before it. (A call that arrives in the very instant gRPC begins
+  // its shutdown may be CANCELLED instead: hence the pause.)
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  pb::ListMapsResponse listed;
+  auto fresh = pb::PlaceRecognition::NewStub(grpc::CreateChannel(
+      "127.0.0.1:" + std::to_string(server_->port()), grpc::InsecureChannelCredentials()));
+  EXPECT_EQ(fresh->ListMaps(Context().get(), {}, &listed).error_code(),
+            grpc::StatusCode::UNAVAILABLE);
+  EXPECT_EQ(places_->ListMaps(Context().get(), {}, &listed).error_code(),
+            grpc::StatusCode::UNAVAILABLE);
+  EXPECT_EQ(shutdown.wait_for(std::chrono::milliseconds(0)), std::future_status::timeout)
+      << "the drain ended before the checks: they did not run during it";
+  shutdown.get();
+  EXPECT_FALSE(stream->Finish().ok());
+}
+
+// One worker kept busy by large frames (seconds of decoding and ORB); a call whose deadline passes
+// while it waits behind them ends with DEADLINE_EXCEEDED and its frame is never added.
+TEST_F(ServerLifecycleTest, ACallWhoseDeadlinePassesInTheQueueDoesNotRun) {
+  StopServer();
+  config().workers = 1;
+  config().metrics_listen = "127.0.0.1:0";
+  StartServer();
+  ASSERT_TRUE(CreateMap("queued").ok());
+  const std::string jpeg = CorridorJpeg(1);
+  const cv::Mat small =
+      cv::imdecode(std::vector<uchar>(jpeg.begin(), jpeg.end()), cv::IMREAD_COLOR);
+  ASSERT_FALSE(small.empty());
+  std::vector<uchar> big;
+  ASSERT_TRUE(cv::imencode(".jpg", cv::repeat(small, 12, 12), big));  // 6144x4608
+  const pb::Frame large = JpegFrame(std::string(big.begin(), big.end()));
+  std::vector<std::future<grpc::Status>> busy;
+  for (int i = 0; i < 3; ++i) {
+    busy.push_back(std::async(std::launch::async, [&] {
+      pb::AddFrameResponse added;
+      return AddFrame("queued", large, &added);
+    }));
+  }
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));  // the large frames are queued
+  pb::AddFrameRequest request;
+  request.set_map("queued");
+  *request.mutable_frame() = JpegFrame(CorridorJpeg(20));
+  pb::AddFrameResponse added;
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::milliseconds(100));
+  EXPECT_EQ(places_->AddFrame(&context, request, &added).error_code(),
+            grpc::StatusCode::DEADLINE_EXCEEDED);
+  for (auto& call : busy) EXPECT_TRUE(call.get().ok());
+  pb::MapInfo info;
+  ASSERT_TRUE(GetMap("queued", &info).ok());
+  EXPECT_EQ(info.frames(), 3u);  // the large frames only
+  // The server ended the queued call itself, with DEADLINE_EXCEEDED, once a worker took it.
+  const std::string metrics = FetchMetrics(server_->metrics_port());
+  EXPECT_NE(metrics.find("recog_rpc_duration_seconds_count{code=\"DEADLINE_EXCEEDED\",method=\"/"
+                         "recognition.v1.PlaceRecognition/AddFrame\"} 1"),
+            std::string::npos)
+      << metrics;
 }
 
 TEST_F(ServerLifecycleTest, TokensDecideWhoMayReadAndWhoMayWrite) {
@@ -227,6 +423,40 @@ TEST_F(ServerLifecycleTest, KillNineDuringAStreamLosesNoAcknowledgedFrame) {
     std::this_thread::sleep_for(std::chrono::milliseconds(100));
   }
   ASSERT_TRUE(ready.ok()) << ready.error_message();
+  const std::string jpegs[] = {CorridorJpeg(1), CorridorJpeg(20), CorridorJpeg(41),
+                               CorridorJpeg(60)};
+
+  // A map filled before the stream: its loop answers must be the same after the restart.
+  const auto query_loops = [&](pb::PlaceRecognition::Stub* places) {
+    std::vector<pb::LoopResult> answers;
+    for (const std::string& jpeg : jpegs) {
+      pb::QueryPlaceRequest query;
+      query.set_map("before");
+      *query.mutable_frame() = JpegFrame(jpeg);
+      pb::QueryPlaceResponse answer;
+      const grpc::Status status = places->QueryPlace(Context().get(), query, &answer);
+      EXPECT_TRUE(status.ok()) << status.error_message();
+      answers.push_back(answer.result());
+    }
+    return answers;
+  };
+  {
+    pb::CreateMapRequest create;
+    create.set_name("before");
+    pb::CreateMapResponse created;
+    ASSERT_TRUE(stub->CreateMap(Context().get(), create, &created).ok());
+    for (int i = 0; i < 8; ++i) {
+      pb::AddFrameRequest add;
+      add.set_map("before");
+      *add.mutable_frame() = JpegFrame(jpegs[i % 4]);
+      pb::AddFrameResponse added;
+      ASSERT_TRUE(stub->AddFrame(Context().get(), add, &added).ok());
+    }
+  }
+  const std::vector<pb::LoopResult> answers_before = query_loops(stub.get());
+  ASSERT_EQ(answers_before.size(), 4u);
+  EXPECT_TRUE(std::any_of(answers_before.begin(), answers_before.end(),
+                          [](const pb::LoopResult& r) { return r.has_match_frame_id(); }));
 
   grpc::ClientContext context;
   auto stream = stub->StreamFrames(&context);
@@ -234,8 +464,6 @@ TEST_F(ServerLifecycleTest, KillNineDuringAStreamLosesNoAcknowledgedFrame) {
   request.mutable_config()->set_map("crash");
   request.mutable_config()->set_create_if_missing(true);
   ASSERT_TRUE(stream->Write(request));
-  const std::string jpegs[] = {CorridorJpeg(1), CorridorJpeg(20), CorridorJpeg(41),
-                               CorridorJpeg(60)};
   // The writer keeps several frames in flight so that the kill lands mid-frame.
   std::thread writer([&] {
     for (int i = 0; i < 200; ++i) {
@@ -265,6 +493,17 @@ TEST_F(ServerLifecycleTest, KillNineDuringAStreamLosesNoAcknowledgedFrame) {
   pb::AddFrameResponse added;
   ASSERT_TRUE(AddFrame("crash", JpegFrame(jpegs[0]), &added).ok());
   EXPECT_EQ(added.frame_id(), info.frames());
+
+  const std::vector<pb::LoopResult> answers_after = query_loops(places_.get());
+  ASSERT_EQ(answers_after.size(), answers_before.size());
+  for (size_t i = 0; i < answers_before.size(); ++i) {
+    EXPECT_EQ(answers_after[i].status(), answers_before[i].status()) << "query " << i;
+    EXPECT_EQ(answers_after[i].match_frame_id(), answers_before[i].match_frame_id())
+        << "query " << i;
+    EXPECT_EQ(answers_after[i].inliers(), answers_before[i].inliers()) << "query " << i;
+    EXPECT_EQ(answers_after[i].has_match_frame_id(), answers_before[i].has_match_frame_id());
+    EXPECT_DOUBLE_EQ(answers_after[i].score(), answers_before[i].score()) << "query " << i;
+  }
 }
 
 TEST_F(ServerLifecycleTest, StreamingTheCorridorGivesTheOfflineEvaluationsResults) {
