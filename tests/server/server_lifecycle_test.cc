@@ -256,14 +256,16 @@ TEST_F(ServerLifecycleTest, ACallWhoseDeadlinePassesInTheQueueDoesNotRun) {
   std::vector<uchar> big;
   ASSERT_TRUE(cv::imencode(".jpg", cv::repeat(small, 12, 12), big));  // 6144x4608
   const pb::Frame large = JpegFrame(std::string(big.begin(), big.end()));
+  // Six of them: at least a second of work on one worker (decoding a 28-megapixel JPEG alone takes
+  // over 100 ms), far beyond the 100 ms deadline of the call queued 100 ms after them.
   std::vector<std::future<grpc::Status>> busy;
-  for (int i = 0; i < 3; ++i) {
+  for (int i = 0; i < 6; ++i) {
     busy.push_back(std::async(std::launch::async, [&] {
       pb::AddFrameResponse added;
       return AddFrame("queued", large, &added);
     }));
   }
-  std::this_thread::sleep_for(std::chrono::milliseconds(500));  // the large frames are queued
+  std::this_thread::sleep_for(std::chrono::milliseconds(100));  // the large frames are queued
   pb::AddFrameRequest request;
   request.set_map("queued");
   *request.mutable_frame() = JpegFrame(CorridorJpeg(20));
@@ -275,7 +277,7 @@ TEST_F(ServerLifecycleTest, ACallWhoseDeadlinePassesInTheQueueDoesNotRun) {
   for (auto& call : busy) EXPECT_TRUE(call.get().ok());
   pb::MapInfo info;
   ASSERT_TRUE(GetMap("queued", &info).ok());
-  EXPECT_EQ(info.frames(), 3u);  // the large frames only
+  EXPECT_EQ(info.frames(), 6u);  // the large frames only
   // The server ended the queued call itself, with DEADLINE_EXCEEDED, once a worker took it.
   const std::string metrics = FetchMetrics(server_->metrics_port());
   EXPECT_NE(metrics.find("recog_rpc_duration_seconds_count{code=\"DEADLINE_EXCEEDED\",method=\"/"
