@@ -16,7 +16,11 @@ void AddObjectCommands(CLI::App& app, int* exit_code);  // model build|info, rec
 // model export; call after AddObjectCommands, which adds "model".
 void AddModelExportCommand(CLI::App& app, int* exit_code);
 void AddEvalObjectsCommand(CLI::App& eval, int* exit_code);
-void AddServerCommands(CLI::App& app, int* exit_code);  // stream, query, maps, models, admin
+// The subcommands that use recogd (remote_support.h, server_flags.h).
+void AddStreamCommands(CLI::App& app, int* exit_code);  // stream, query
+void AddMapsCommands(CLI::App& app, int* exit_code);    // maps list|create|delete|stats
+void AddModelsCommands(CLI::App& app, int* exit_code);  // models push|pull|list|delete|watch
+void AddAdminCommands(CLI::App& app, int* exit_code);   // admin health|checkpoint|restore
 void AddLoadCommand(CLI::App& app, int* exit_code);     // load (load_generator.h)
 
 }  // namespace recog::cli

@@ -12,11 +12,11 @@
 #include <nlohmann/json.hpp>
 
 #include "proto/grpc_code_names.h"
-#include "tools/recog/cli_support.h"
+#include "tools/common/cli_support.h"
+#include "tools/common/server_flags.h"
+#include "tools/evaluation/object_evaluation.h"
+#include "tools/load/load_generator.h"
 #include "tools/recog/commands.h"
-#include "tools/recog/load_generator.h"
-#include "tools/recog/object_evaluation.h"
-#include "tools/recog/server_flags.h"
 
 namespace recog::cli {
 namespace {

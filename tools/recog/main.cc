@@ -20,7 +20,10 @@ int main(int argc, char** argv) {
   recog::cli::AddEvalCommand(app, &exit_code);
   recog::cli::AddObjectCommands(app, &exit_code);
   recog::cli::AddModelExportCommand(app, &exit_code);
-  recog::cli::AddServerCommands(app, &exit_code);
+  recog::cli::AddStreamCommands(app, &exit_code);
+  recog::cli::AddMapsCommands(app, &exit_code);
+  recog::cli::AddModelsCommands(app, &exit_code);
+  recog::cli::AddAdminCommands(app, &exit_code);
   recog::cli::AddLoadCommand(app, &exit_code);
   try {
     app.parse(argc, argv);

@@ -173,7 +173,7 @@ else
   echo "skipping the RoboEarth box checks: $shared/objects/roboearth/models/box not found (set RECOG_SHARED_DATA)"
 fi
 
-# recog load refuses bad options before it connects (its runs: tools/load_generator_test).
+# recog load refuses bad options before it connects (its runs: load/load_generator_test).
 expect_ok "help of load" "$recog" load --help
 expect_error "load with no robot" "INVALID_ARGUMENT" "$recog" load --sequences "$images" --robots 0 \
   --frames 1

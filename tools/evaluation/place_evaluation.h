@@ -11,7 +11,7 @@
 #include <opencv2/videoio.hpp>
 
 #include "core/place/loop_detector.h"
-#include "tools/recog/ground_truth.h"
+#include "tools/evaluation/ground_truth.h"
 
 namespace recog::cli {
 

@@ -1,4 +1,4 @@
-#include "tools/recog/load_generator.h"
+#include "tools/load/load_generator.h"
 
 #include <sys/resource.h>
 #include <unistd.h>
@@ -22,11 +22,11 @@
 #include "core/features/feature_extractor.h"
 #include "core/vocabulary/vocabulary_io.h"
 #include "proto/grpc_code_names.h"
-#include "tools/recog/cli_support.h"
-#include "tools/recog/place_evaluation.h"
-#include "tools/recog/plot.h"
-#include "tools/recog/remote_support.h"
-#include "tools/recog/server_flags.h"
+#include "tools/common/cli_support.h"
+#include "tools/common/remote_support.h"
+#include "tools/common/server_flags.h"
+#include "tools/evaluation/place_evaluation.h"
+#include "tools/evaluation/plot.h"
 
 namespace recog::cli {
 namespace {
