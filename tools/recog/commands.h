@@ -1,6 +1,7 @@
 // Registration of the recog subcommands. Each Add*Command attaches a subcommand (with its options
 // and --help) to the app; when the subcommand runs it stores its exit status in *exit_code:
-// 0 on success, 1 on bad input or failure (after printing one line "recog <cmd>: <reason>").
+// 0 on success, 1 on bad input or failure (after printing one line "recog <cmd>: <reason>"). The
+// command line itself (unknown flags, missing or bad values) is refused by CLI11: exit status 2.
 #pragma once
 
 #include <CLI/CLI.hpp>
