@@ -1,4 +1,4 @@
-// How fast `recog load` can generate load: the load generator (tools/recog/load_generator.h)
+// How fast `recog load` can generate load: the load generator (tools/load/load_generator.h)
 // driving a trivial PlaceRecognition server, so that the generator, not the server, is the
 // bottleneck. Not a Google Benchmark binary: one multi-robot run with its own figures.
 //
@@ -30,7 +30,7 @@
 
 #include "recognition/v1/place.grpc.pb.h"
 #include "tests/testing/data_paths.h"
-#include "tools/recog/load_generator.h"
+#include "tools/load/load_generator.h"
 
 namespace recog::bench {
 namespace {

@@ -48,8 +48,8 @@
 #include "core/object/roboearth.h"
 #include "core/vocabulary/vocabulary_io.h"
 #include "tests/testing/data_paths.h"
-#include "tools/recog/cli_support.h"
-#include "tools/recog/place_evaluation.h"
+#include "tools/common/cli_support.h"
+#include "tools/evaluation/place_evaluation.h"
 
 namespace recog::bench {
 namespace {

@@ -18,9 +18,9 @@
 #include "bench/bench_support.h"
 #include "core/index/memory_index_store.h"
 #include "tests/testing/data_paths.h"
-#include "tools/recog/cli_support.h"
-#include "tools/recog/place_evaluation.h"
-#include "tools/recog/sequence_generator.h"
+#include "tools/common/cli_support.h"
+#include "tools/evaluation/place_evaluation.h"
+#include "tools/evaluation/sequence_generator.h"
 
 namespace recog::bench {
 namespace {

@@ -57,7 +57,7 @@
 #include "recognition/v1/place.grpc.pb.h"
 #include "server/app/recognition_server.h"
 #include "tests/testing/data_paths.h"
-#include "tools/recog/cli_support.h"
+#include "tools/common/cli_support.h"
 
 namespace recog::bench {
 namespace {

@@ -12,7 +12,7 @@
 #include "core/features/feature_extractor.h"
 #include "core/vocabulary/vocabulary_io.h"
 #include "tests/testing/data_paths.h"
-#include "tools/recog/cli_support.h"
+#include "tools/common/cli_support.h"
 
 namespace recog::bench {
 

@@ -11,7 +11,7 @@
 #include "core/features/training_images.h"
 #include "core/vocabulary/vocabulary_trainer.h"
 #include "tests/testing/data_paths.h"
-#include "tools/recog/cli_support.h"
+#include "tools/common/cli_support.h"
 
 namespace recog::bench {
 namespace {

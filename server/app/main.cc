@@ -1,21 +1,39 @@
 // recogd: the recognition server. `recogd --help` lists the flags; server/README.md explains the
 // configuration, security and operations.
+//
+// Exit status: 0 after --help, --version or a clean shutdown (SIGTERM, SIGINT); 2 when the command
+// line or the configuration is refused before anything starts (an unknown flag, a bad value, a
+// --config file that cannot be read or does not validate: one line "recogd: CODE: message"); 1
+// when the server fails to start.
 #include <csignal>
 #include <cstdio>
 
 #include <spdlog/spdlog.h>
 
+#include "recog_build_info.h"
 #include "server/app/recognition_server.h"
+
+namespace {
+
+constexpr int kUsageError = 2;
+
+}  // namespace
 
 int main(int argc, char** argv) {
   using recog::server::RecognitionServer;
   auto command_line = recog::server::ParseCommandLine(argc, argv);
   if (!command_line.ok()) {
     std::fprintf(stderr, "recogd: %s\n", command_line.status().ToString().c_str());
-    return 1;
+    return kUsageError;
   }
   if (!command_line.value().help.empty()) {
     std::fputs(command_line.value().help.c_str(), stdout);
+    return 0;
+  }
+  if (command_line.value().version) {
+    // "recogd 0.1.0 (abaaf87, Release)".
+    std::printf("recogd %s (%s, %s)\n", recog::build_info::kVersion, recog::build_info::kCommit,
+                recog::build_info::kBuildType);
     return 0;
   }
   const recog::server::ServerConfig& config = command_line.value().config;

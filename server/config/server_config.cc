@@ -179,13 +179,14 @@ bool IsLogLevel(const std::string& name) {
   return name == "off" || spdlog::level::from_str(name) != spdlog::level::off;
 }
 
-// Adds --config and the flags of AddFlags, then parses. *help receives the usage text when -h or
-// --help was given.
+// Adds --config, --version and the flags of AddFlags, then parses. *help receives the usage text
+// when -h or --help was given; *version is set when --version was.
 Status ParseWith(int argc, const char* const* argv, std::string* config_file, ServerConfig* config,
-                 std::string* help) {
+                 std::string* help, bool* version) {
   CLI::App app{"recogd: place and object recognition server", "recogd"};
   app.add_option("-c,--config", *config_file,
                  "YAML configuration file; the other flags override its values");
+  app.add_flag("--version", *version, "Print the version and build, then exit");
   AddFlags(app, config);
   try {
     app.parse(argc, argv);
@@ -361,14 +362,17 @@ StatusOr<CommandLine> ParseCommandLine(int argc, const char* const* argv) {
   CommandLine result;
   // First pass: find --config, catch --help and bad flags. The flags land in a scratch copy.
   ServerConfig scratch;
-  RECOG_RETURN_IF_ERROR(ParseWith(argc, argv, &result.config_file, &scratch, &result.help));
-  if (!result.help.empty()) return result;
+  RECOG_RETURN_IF_ERROR(
+      ParseWith(argc, argv, &result.config_file, &scratch, &result.help, &result.version));
+  if (!result.help.empty() || result.version) return result;
   if (!result.config_file.empty()) {
     RECOG_ASSIGN_OR_RETURN(result.config, ServerConfig::LoadYaml(result.config_file));
   }
   // Second pass: the flags given override what the file set.
   std::string unused_help;
-  RECOG_RETURN_IF_ERROR(ParseWith(argc, argv, &result.config_file, &result.config, &unused_help));
+  bool unused_version = false;
+  RECOG_RETURN_IF_ERROR(
+      ParseWith(argc, argv, &result.config_file, &result.config, &unused_help, &unused_version));
   RECOG_RETURN_IF_ERROR(result.config.Validate());
   return result;
 }

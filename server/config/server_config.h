@@ -158,12 +158,15 @@ struct CommandLine {
   // Not empty when --help (-h) was given: the usage text, for the caller to print before it
   // exits successfully. `config` then holds the defaults and nothing else was checked.
   std::string help;
+  // True when --version was given: the caller prints its version and exits successfully. `config`
+  // then holds the defaults and nothing else was checked.
+  bool version = false;
 };
 
-// Parses recogd's command line: `--config FILE` (-c) and the flags of AddFlags. Flags override the
-// file wherever they stand relative to --config. Never prints and never exits: INVALID_ARGUMENT
-// with CLI11's message for unknown flags and bad values, the errors of LoadYaml for the file, and
-// those of Validate() for the result.
+// Parses recogd's command line: `--config FILE` (-c), --version and the flags of AddFlags. Flags
+// override the file wherever they stand relative to --config. Never prints and never exits:
+// INVALID_ARGUMENT with CLI11's message for unknown flags and bad values, the errors of LoadYaml
+// for the file, and those of Validate() for the result.
 StatusOr<CommandLine> ParseCommandLine(int argc, const char* const* argv);
 
 }  // namespace recog::server

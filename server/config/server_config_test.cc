@@ -406,6 +406,16 @@ TEST_F(ServerConfigTest, HelpIsReturnedNotPrintedAndSkipsTheFile) {
   EXPECT_EQ(parsed->config.listen, ServerConfig().listen);
 }
 
+TEST_F(ServerConfigTest, VersionIsReturnedAndSkipsTheFile) {
+  StatusOr<CommandLine> parsed = Parse({"--config", (dir_ / "absent.yaml").string(), "--version"});
+  ASSERT_TRUE(parsed.ok()) << parsed.status().ToString();
+  EXPECT_TRUE(parsed->version);
+  EXPECT_TRUE(parsed->help.empty());
+  StatusOr<CommandLine> plain = Parse({"--workers", "2"});
+  ASSERT_TRUE(plain.ok()) << plain.status().ToString();
+  EXPECT_FALSE(plain->version);
+}
+
 TEST_F(ServerConfigTest, BadFlagsAreInvalidArgumentWithCli11sMessage) {
   StatusOr<CommandLine> unknown = Parse({"--wrokers", "2"});
   ASSERT_FALSE(unknown.ok());

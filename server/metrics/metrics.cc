@@ -11,6 +11,8 @@
 #include <exception>
 #include <utility>
 
+#include "recog_build_info.h"
+
 namespace recog::server {
 namespace {
 
@@ -61,6 +63,10 @@ ServerMetrics::ServerMetrics() : registry_(std::make_shared<prometheus::Registry
   replica_changes_ = &Register(prometheus::BuildCounter(), r, "recog_replica_changes_total",
                                "Model changes this repository replica copied from its primary")
                           .Add({});
+  Register(prometheus::BuildGauge(), r, "recog_build_info",
+           "Always 1: the version and commit of this recogd")
+      .Add({{"version", build_info::kVersion}, {"commit", build_info::kCommit}})
+      .Set(1.0);
 }
 
 // The exposer stops serving before the registry goes away.

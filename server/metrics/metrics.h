@@ -13,6 +13,8 @@
 //   recog_replica_synced                       gauge: 1 while a repository replica follows its
 //                                              primary live, 0 otherwise (and on a primary)
 //   recog_replica_changes_total                counter: model changes a replica copied
+//   recog_build_info{version, commit}          gauge, always 1: the build serving (the version
+//                                              and commit `recogd --version` prints)
 // StartHttp serves them as text on http://<listen_address>/metrics; Serialize returns the same
 // text. Every method is thread-safe; ObserveRpc, on every call's path, takes a shared lock and
 // allocates nothing once a (method, code) pair has been seen. No method throws.

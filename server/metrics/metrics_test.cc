@@ -13,6 +13,8 @@
 #include <thread>
 #include <vector>
 
+#include "recog_build_info.h"
+
 namespace recog::server {
 namespace {
 
@@ -134,6 +136,18 @@ TEST(ServerMetricsTest, GaugesHoldTheLastValue) {
   EXPECT_THAT(Sample(text, "recog_worker_busy"), Optional(2.0));
   EXPECT_THAT(Sample(text, "recog_objects"), Optional(11.0));
   EXPECT_THAT(Sample(text, "recog_replica_synced"), Optional(1.0));
+}
+
+TEST(ServerMetricsTest, BuildInfoIsOneSeriesLabelledWithTheVersionAndCommit) {
+  ServerMetrics metrics;
+  const std::string text = metrics.Serialize();
+  EXPECT_THAT(text, HasSubstr("# TYPE recog_build_info gauge"));
+  // Labels are serialised in name order.
+  EXPECT_THAT(Sample(text, std::string("recog_build_info{commit=\"") + build_info::kCommit +
+                               "\",version=\"" + build_info::kVersion + "\"}"),
+              Optional(1.0));
+  EXPECT_THAT(std::string(build_info::kVersion),
+              ::testing::MatchesRegex("[0-9]+\\.[0-9]+\\.[0-9]+"));
 }
 
 TEST(ServerMetricsTest, MapEntriesHaveOneSeriesPerMapUntilTheMapIsRemoved) {

@@ -25,8 +25,8 @@
 #include "tests/server/server_fixture.h"
 #include "tests/testing/free_port.h"
 #include "tests/testing/test_data.h"
-#include "tools/recog/ground_truth.h"
-#include "tools/recog/place_evaluation.h"
+#include "tools/evaluation/ground_truth.h"
+#include "tools/evaluation/place_evaluation.h"
 
 extern char** environ;
 

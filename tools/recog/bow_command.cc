@@ -8,7 +8,7 @@
 
 #include "core/features/feature_extractor.h"
 #include "core/vocabulary/vocabulary_io.h"
-#include "tools/recog/cli_support.h"
+#include "tools/common/cli_support.h"
 #include "tools/recog/commands.h"
 
 namespace recog::cli {

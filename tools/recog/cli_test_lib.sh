@@ -23,12 +23,26 @@ expect_error() {
   if [ "$code" -ne 1 ]; then fail "$what: exit $code, expected 1"; return; fi
   one_error_line "$what" "$pattern"
 }
-# expect_usage_error DESCRIPTION PATTERN CMD...: refused by the command line parser: a non-zero
-# exit (CLI11's code) and exactly one stderr line, matching PATTERN.
+# expect_usage_error DESCRIPTION PATTERN CMD...: refused by the command line parser (unknown
+# subcommand or flag, missing or bad value): exit status 2 and exactly one stderr line, matching
+# PATTERN.
 expect_usage_error() {
   local what=$1 pattern=$2; shift 2
-  if "$@" >"$tmp/out" 2>"$tmp/err"; then fail "$what: exited 0"; return; fi
+  "$@" >"$tmp/out" 2>"$tmp/err"
+  local code=$?
+  if [ "$code" -ne 2 ]; then fail "$what: exit $code, expected 2"; return; fi
   one_error_line "$what" "$pattern"
+}
+# expect_version DESCRIPTION NAME CMD...: exit status 0 and one stdout line
+# "NAME <major.minor.patch> (<commit>, <build type>)".
+expect_version() {
+  local what=$1 name=$2; shift 2
+  if ! "$@" >"$tmp/out" 2>"$tmp/err"; then fail "$what: exit $?"; return; fi
+  if [ "$(wc -l <"$tmp/out")" -eq 1 ] && grep -Eq "^$name [0-9]+\.[0-9]+\.[0-9]+ \([^,]+, [^)]+\)\$" "$tmp/out"; then
+    pass
+  else
+    fail "$what: '$(cat "$tmp/out")'"
+  fi
 }
 one_error_line() {
   local what=$1 pattern=$2

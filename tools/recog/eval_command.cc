@@ -12,10 +12,10 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "core/vocabulary/vocabulary_io.h"
-#include "tools/recog/cli_support.h"
+#include "tools/common/cli_support.h"
+#include "tools/evaluation/place_evaluation.h"
+#include "tools/evaluation/plot.h"
 #include "tools/recog/commands.h"
-#include "tools/recog/place_evaluation.h"
-#include "tools/recog/plot.h"
 
 namespace recog::cli {
 namespace {

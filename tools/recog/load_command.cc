@@ -11,11 +11,11 @@
 
 #include <nlohmann/json.hpp>
 
-#include "tools/recog/cli_support.h"
+#include "tools/common/cli_support.h"
+#include "tools/common/server_flags.h"
+#include "tools/evaluation/object_evaluation.h"
+#include "tools/load/load_generator.h"
 #include "tools/recog/commands.h"
-#include "tools/recog/load_generator.h"
-#include "tools/recog/object_evaluation.h"
-#include "tools/recog/server_flags.h"
 #include "wire/grpc_code_names.h"
 
 namespace recog::cli {

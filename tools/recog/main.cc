@@ -1,10 +1,20 @@
 // recog: command-line tool of the recognition service. See README.md, section "The recog tool".
-#include <cstdio>
+//
+// Exit status: 0 on success (and for --help, --version), 1 when a subcommand fails (bad input
+// files, a failed call to recogd: one line "recog <cmd>: <reason>"), 2 when the command line is
+// wrong (unknown subcommand or flag, a missing required option, a bad value: CLI11's message).
 #include <string>
 
 #include <CLI/CLI.hpp>
 
+#include "recog_build_info.h"
 #include "tools/recog/commands.h"
+
+namespace {
+
+constexpr int kUsageError = 2;
+
+}  // namespace
 
 int main(int argc, char** argv) {
   CLI::App app{"recog: place and object recognition with bags of binary words"};
@@ -12,6 +22,10 @@ int main(int argc, char** argv) {
   app.failure_message([](const CLI::App* failed, const CLI::Error& e) {
     return "recog " + failed->get_name() + ": " + e.what() + " (see --help)\n";
   });
+  // "recog 0.1.0 (abaaf87, Release)".
+  app.set_version_flag("--version", std::string("recog ") + recog::build_info::kVersion + " (" +
+                                        recog::build_info::kCommit + ", " +
+                                        recog::build_info::kBuildType + ")");
   int exit_code = 0;
   recog::cli::AddVocabCommands(app, &exit_code);
   recog::cli::AddBowCommand(app, &exit_code);
@@ -20,12 +34,18 @@ int main(int argc, char** argv) {
   recog::cli::AddEvalCommand(app, &exit_code);
   recog::cli::AddObjectCommands(app, &exit_code);
   recog::cli::AddModelExportCommand(app, &exit_code);
-  recog::cli::AddServerCommands(app, &exit_code);
+  recog::cli::AddStreamCommands(app, &exit_code);
+  recog::cli::AddMapsCommands(app, &exit_code);
+  recog::cli::AddModelsCommands(app, &exit_code);
+  recog::cli::AddAdminCommands(app, &exit_code);
   recog::cli::AddLoadCommand(app, &exit_code);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    return app.exit(e);
+    // --help and --version are ParseErrors with exit code 0 (CLI11 prints them); every other one is
+    // a usage error, whatever CLI11's own code for it (105-114).
+    const int code = app.exit(e);
+    return code == 0 ? 0 : kUsageError;
   }
   return exit_code;
 }

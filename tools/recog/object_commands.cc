@@ -15,13 +15,13 @@
 #include "core/object/model_file.h"
 #include "core/object/object_recognizer.h"
 #include "core/vocabulary/vocabulary_io.h"
-#include "tools/recog/cli_support.h"
+#include "tools/common/cli_support.h"
+#include "tools/common/remote_support.h"
+#include "tools/common/server_flags.h"
+#include "tools/evaluation/object_evaluation.h"
+#include "tools/evaluation/place_evaluation.h"
+#include "tools/evaluation/visp_files.h"
 #include "tools/recog/commands.h"
-#include "tools/recog/object_evaluation.h"
-#include "tools/recog/place_evaluation.h"
-#include "tools/recog/remote_support.h"
-#include "tools/recog/server_flags.h"
-#include "tools/recog/visp_files.h"
 
 namespace recog::cli {
 namespace {

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# End-to-end test of the recog binary: every subcommand on good input, and a one-line error with
-# a non-zero exit status on bad input. Usage: recog_cli_test.sh RECOG_BINARY PROJECT_DIR
+# End-to-end test of the recog binary: every subcommand on good input, and a one-line error on bad
+# input with exit status 1 (the command refuses it) or 2 (the command line parser does).
+# Usage: recog_cli_test.sh RECOG_BINARY PROJECT_DIR
 set -u
 recog=$1
 project=$2
@@ -16,8 +17,13 @@ for sub in "vocab train" "vocab info" "vocab convert" "bow" "demo"; do
   # shellcheck disable=SC2086
   expect_ok "help of $sub" "$recog" $sub --help
 done
+expect_version "--version" recog "$recog" --version
+# Usage errors (the command line) exit 2, errors of the command on its input exit 1.
+expect_usage_error "no subcommand" "subcommand" "$recog"
 expect_usage_error "unknown subcommand" "recog" "$recog" frobnicate
+expect_usage_error "unknown flag" "--frobnicate" "$recog" vocab info --frobnicate "$tmp/v.rvoc"
 expect_usage_error "train without images" "images" "$recog" vocab train -o "$tmp/v.rvoc"
+expect_usage_error "a bad value" "--k" "$recog" vocab train --images "$images" --k many -o "$tmp/v.rvoc"
 expect_error "train on a missing folder" "NOT_FOUND" "$recog" vocab train --images "$tmp/none" -o "$tmp/v.rvoc"
 expect_error "train with k=1" "INVALID_ARGUMENT" "$recog" vocab train --images "$images" --k 1 -o "$tmp/v.rvoc"
 
@@ -173,7 +179,7 @@ else
   echo "skipping the RoboEarth box checks: $shared/objects/roboearth/models/box not found (set RECOG_SHARED_DATA)"
 fi
 
-# recog load refuses bad options before it connects (its runs: tools/load_generator_test).
+# recog load refuses bad options before it connects (its runs: load/load_generator_test).
 expect_ok "help of load" "$recog" load --help
 expect_error "load with no robot" "INVALID_ARGUMENT" "$recog" load --sequences "$images" --robots 0 \
   --frames 1

@@ -22,6 +22,14 @@ trap cleanup EXIT
 source "$(dirname "$0")/cli_test_lib.sh"
 
 images=$project/tests/data/corridor
+
+# recogd's own exit statuses: 0 for --help and --version, 2 for a command line it refuses.
+expect_ok "recogd --help" "$recogd" --help
+expect_version "recogd --version" recogd "$recogd" --version
+expect_usage_error "recogd with an unknown flag" "--frobnicate" "$recogd" --frobnicate
+expect_usage_error "recogd with a bad value" "--workers" "$recogd" --workers many
+expect_usage_error "recogd with a missing --config file" "NOT_FOUND" "$recogd" --config "$tmp/none.yaml"
+
 port=$(free_port)
 server=(--server "127.0.0.1:$port")
 "$recogd" --listen "127.0.0.1:$port" --data-dir "$tmp/data" --metrics-listen "" --workers 2 \

@@ -6,9 +6,9 @@
 
 #include <nlohmann/json.hpp>
 
-#include "tools/recog/cli_support.h"
+#include "tools/common/cli_support.h"
+#include "tools/evaluation/sequence_generator.h"
 #include "tools/recog/commands.h"
-#include "tools/recog/sequence_generator.h"
 
 namespace recog::cli {
 namespace {

@@ -14,7 +14,7 @@
 #include "core/vocabulary/dbow2_format.h"
 #include "core/vocabulary/vocabulary_io.h"
 #include "core/vocabulary/vocabulary_trainer.h"
-#include "tools/recog/cli_support.h"
+#include "tools/common/cli_support.h"
 #include "tools/recog/commands.h"
 
 namespace recog::cli {

@@ -12,7 +12,7 @@
 
 #include "core/features/feature_extractor.h"
 #include "core/place/loop_detector.h"
-#include "tools/recog/ground_truth.h"
+#include "tools/evaluation/ground_truth.h"
 
 namespace recog::cli {
 

@@ -53,7 +53,7 @@
 #include <opencv2/core.hpp>
 
 #include "core/common/status.h"
-#include "tools/recog/ground_truth.h"
+#include "tools/evaluation/ground_truth.h"
 
 namespace recog::cli {
 

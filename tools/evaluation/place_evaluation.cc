@@ -1,4 +1,4 @@
-#include "tools/recog/place_evaluation.h"
+#include "tools/evaluation/place_evaluation.h"
 
 #include <algorithm>
 #include <charconv>
@@ -13,7 +13,7 @@
 #include <opencv2/videoio.hpp>
 
 #include "core/index/memory_index_store.h"
-#include "tools/recog/cli_support.h"
+#include "tools/common/cli_support.h"
 
 namespace recog::cli {
 

@@ -1,4 +1,4 @@
-#include "tools/recog/object_evaluation.h"
+#include "tools/evaluation/object_evaluation.h"
 
 #include <algorithm>
 #include <cmath>
@@ -14,7 +14,7 @@
 #include "core/index/memory_index_store.h"
 #include "core/object/roboearth.h"
 #include "core/vocabulary/vocabulary_io.h"
-#include "tools/recog/place_evaluation.h"
+#include "tools/evaluation/place_evaluation.h"
 
 namespace recog::cli {
 namespace {

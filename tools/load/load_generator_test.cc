@@ -1,7 +1,7 @@
 // The load generator against an in-process recogd (ClientFixture): every frame answered and
 // counted, maps cleaned up, verification against the offline detector, pacing, object calls,
 // an unreachable or vanishing server, and refused options.
-#include "tools/recog/load_generator.h"
+#include "tools/load/load_generator.h"
 
 #include <chrono>
 #include <filesystem>

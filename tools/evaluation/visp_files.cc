@@ -1,4 +1,4 @@
-#include "tools/recog/visp_files.h"
+#include "tools/evaluation/visp_files.h"
 
 #include <cmath>
 #include <fstream>

@@ -1,4 +1,4 @@
-#include "tools/recog/place_evaluation.h"
+#include "tools/evaluation/place_evaluation.h"
 
 #include <filesystem>
 #include <fstream>
@@ -9,8 +9,8 @@
 
 #include "core/vocabulary/vocabulary_io.h"
 #include "tests/testing/test_data.h"
-#include "tools/recog/cli_support.h"
-#include "tools/recog/sequence_generator.h"
+#include "tools/common/cli_support.h"
+#include "tools/evaluation/sequence_generator.h"
 
 namespace recog::cli {
 namespace {

@@ -1,4 +1,4 @@
-#include "tools/recog/cli_support.h"
+#include "tools/common/cli_support.h"
 
 #include <sys/resource.h>
 #include <unistd.h>

@@ -1,4 +1,4 @@
-#include "tools/recog/sequence_generator.h"
+#include "tools/evaluation/sequence_generator.h"
 
 #include <unistd.h>
 

@@ -1,4 +1,4 @@
-#include "tools/recog/ground_truth.h"
+#include "tools/evaluation/ground_truth.h"
 
 #include <unistd.h>
 

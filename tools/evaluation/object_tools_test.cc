@@ -6,8 +6,8 @@
 #include <opencv2/calib3d.hpp>
 
 #include "tests/testing/test_data.h"
-#include "tools/recog/object_evaluation.h"
-#include "tools/recog/visp_files.h"
+#include "tools/evaluation/object_evaluation.h"
+#include "tools/evaluation/visp_files.h"
 
 namespace recog::cli {
 namespace {

@@ -1,4 +1,4 @@
-#include "tools/recog/plot.h"
+#include "tools/evaluation/plot.h"
 
 #include <cstdio>
 

@@ -1,4 +1,4 @@
-#include "tools/recog/load_generator.h"
+#include "tools/load/load_generator.h"
 
 #include <sys/resource.h>
 #include <unistd.h>
@@ -21,11 +21,11 @@
 #include "client/cpp/frames.h"
 #include "core/features/feature_extractor.h"
 #include "core/vocabulary/vocabulary_io.h"
-#include "tools/recog/cli_support.h"
-#include "tools/recog/place_evaluation.h"
-#include "tools/recog/plot.h"
-#include "tools/recog/remote_support.h"
-#include "tools/recog/server_flags.h"
+#include "tools/common/cli_support.h"
+#include "tools/common/remote_support.h"
+#include "tools/common/server_flags.h"
+#include "tools/evaluation/place_evaluation.h"
+#include "tools/evaluation/plot.h"
 #include "wire/grpc_code_names.h"
 
 namespace recog::cli {

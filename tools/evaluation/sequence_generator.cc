@@ -1,4 +1,4 @@
-#include "tools/recog/sequence_generator.h"
+#include "tools/evaluation/sequence_generator.h"
 
 #include <algorithm>
 #include <atomic>
@@ -20,7 +20,7 @@
 #include "core/index/database.h"
 #include "core/index/memory_index_store.h"
 #include "core/vocabulary/vocabulary_io.h"
-#include "tools/recog/cli_support.h"
+#include "tools/common/cli_support.h"
 
 namespace recog::cli {
 namespace {

@@ -1,4 +1,4 @@
-#include "tools/recog/server_flags.h"
+#include "tools/common/server_flags.h"
 
 #include "wire/grpc_code_names.h"
 

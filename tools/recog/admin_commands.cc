@@ -1,0 +1,121 @@
+// recog admin health | checkpoint | restore: operating recogd. health and checkpoint call the
+// server over the C++ client library (with the ServerFlags); restore works offline on a data
+// directory. A failure prints one line "recog admin <cmd>: ..." and exits 1.
+#include <cstdio>
+#include <filesystem>
+#include <memory>
+#include <string>
+
+#include <nlohmann/json.hpp>
+
+#include "client/cpp/recognition_client.h"
+#include "storage/rocksdb_index_store.h"
+#include "tools/common/cli_support.h"
+#include "tools/common/remote_support.h"
+#include "tools/common/server_flags.h"
+#include "tools/recog/commands.h"
+
+namespace recog::cli {
+namespace {
+
+namespace fs = std::filesystem;
+using client::RecognitionClient;
+using json = nlohmann::ordered_json;
+
+int RunHealth(const ServerFlags& flags, RecognitionClient& client) {
+  auto status = client.CheckHealth();
+  if (!status.ok()) return Fail("admin health", status.status());
+  const std::string name = grpc::health::v1::HealthCheckResponse::ServingStatus_Name(*status);
+  if (flags.json) {
+    std::printf("%s\n", json({{"status", name}}).dump().c_str());
+  } else {
+    std::printf("%s\n", name.c_str());
+  }
+  return *status == grpc::health::v1::HealthCheckResponse::SERVING ? 0 : 1;
+}
+
+struct CheckpointArgs {
+  ServerFlags server;
+  std::string to;
+  bool quiet = false;
+};
+
+int RunCheckpoint(const CheckpointArgs& args, RecognitionClient& client) {
+  ProgressBar progress(!args.quiet);
+  auto manifest = client.DownloadCheckpoint(
+      args.to, [&](uint64_t done, uint64_t total) { progress.Update("bytes", done, total); });
+  progress.Finish();
+  if (!manifest.ok()) return Fail("admin checkpoint", manifest.status());
+  if (args.server.json) {
+    std::printf("%s\n", json({{"directory", args.to},
+                              {"files", manifest->files_size()},
+                              {"bytes", manifest->total_bytes()},
+                              {"maps", manifest->maps()},
+                              {"models", manifest->models()},
+                              {"created", UtcTime(manifest->created_unix_ms())}})
+                            .dump()
+                            .c_str());
+  } else {
+    std::printf("checkpoint of %u maps and %u models: %d files, %llu bytes in %s\n",
+                manifest->maps(), manifest->models(), manifest->files_size(),
+                static_cast<unsigned long long>(manifest->total_bytes()), args.to.c_str());
+  }
+  return 0;
+}
+
+struct RestoreArgs {
+  std::string from, data_dir;
+};
+
+int RunRestore(const RestoreArgs& args) {
+  std::error_code ec;
+  fs::create_directories(args.data_dir, ec);
+  if (ec) {
+    return Fail("admin restore",
+                Status::InvalidArgument("cannot create '" + args.data_dir + "': " + ec.message()));
+  }
+  const std::string store = (fs::path(args.data_dir) / "store").string();
+  if (Status s = RestoreRocksDbCheckpoint(args.from, store); !s.ok()) {
+    return Fail("admin restore", s);
+  }
+  return 0;  // the store logs what it restored
+}
+
+}  // namespace
+
+void AddAdminCommands(CLI::App& app, int* exit_code) {
+  CLI::App* admin = app.add_subcommand("admin", "Operate recogd: health, backups");
+  admin->require_subcommand(1);
+  auto health_flags = std::make_shared<ServerFlags>();
+  CLI::App* health = admin->add_subcommand(
+      "health", "Ask the server's gRPC health service; exit 0 when SERVING, 1 otherwise");
+  health->add_option("--timeout-ms", health_flags->timeout_ms, "How long to wait for the answer")
+      ->capture_default_str();
+  ConnectCommand(health, health_flags.get(), exit_code, [health_flags](RecognitionClient& client) {
+    return RunHealth(*health_flags, client);
+  });
+
+  auto checkpoint_args = std::make_shared<CheckpointArgs>();
+  CLI::App* checkpoint = admin->add_subcommand(
+      "checkpoint",
+      "Copy the server's whole store (maps, frames, models) to a new folder here, "
+      "online; `recog admin restore` puts it in place for a new server");
+  checkpoint->add_option("--to", checkpoint_args->to, "The new folder")->required();
+  checkpoint->add_flag("-q,--quiet", checkpoint_args->quiet, "No progress output");
+  ConnectCommand(checkpoint, &checkpoint_args->server, exit_code,
+                 [checkpoint_args](RecognitionClient& client) {
+                   return RunCheckpoint(*checkpoint_args, client);
+                 });
+
+  auto restore_args = std::make_shared<RestoreArgs>();
+  CLI::App* restore =
+      admin->add_subcommand("restore",
+                            "Offline: make a checkpoint the store of a data directory for recogd "
+                            "(<data-dir>/store must not exist; the server must not run on it)");
+  restore->add_option("--from", restore_args->from, "A folder written by `recog admin checkpoint`")
+      ->required();
+  restore->add_option("--data-dir", restore_args->data_dir, "recogd's --data-dir")->required();
+  restore->callback([exit_code, restore_args] { *exit_code = RunRestore(*restore_args); });
+}
+
+}  // namespace recog::cli

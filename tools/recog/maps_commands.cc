@@ -1,0 +1,167 @@
+// recog maps list | create NAME [settings] | delete NAME | stats NAME: the place maps of recogd,
+// over the C++ client library. Each takes the ServerFlags; a failed call prints one line
+// "recog maps <cmd>: CODE: message" and exits 1.
+#include <algorithm>
+#include <cctype>
+#include <cstdio>
+#include <memory>
+#include <string>
+
+#include <nlohmann/json.hpp>
+
+#include "client/cpp/recognition_client.h"
+#include "tools/common/remote_support.h"
+#include "tools/common/server_flags.h"
+#include "tools/recog/commands.h"
+
+namespace recog::cli {
+namespace {
+
+using client::RecognitionClient;
+using json = nlohmann::ordered_json;
+
+// Prints an object's fields one per line ("key  value"), nested objects flattened.
+void PrintFields(const json& fields) {
+  for (const auto& [key, value] : fields.items()) {
+    if (value.is_object()) {
+      PrintFields(value);
+    } else {
+      std::printf("%-20s %s\n", key.c_str(),
+                  value.is_string() ? value.get<std::string>().c_str() : value.dump().c_str());
+    }
+  }
+}
+
+json MapJson(const pb::MapInfo& map) {
+  const pb::MapSettings& s = map.settings();
+  return {{"name", map.name()},
+          {"id", map.id()},
+          {"frames", map.frames()},
+          {"next_frame_id", map.next_frame_id()},
+          {"created", UtcTime(map.created_unix_ms())},
+          {"vocabulary_checksum", map.vocabulary_checksum()},
+          {"settings",
+           {{"alpha", s.alpha()},
+            {"temporal_matches", s.temporal_matches()},
+            {"min_inliers", s.min_inliers()},
+            {"geometry", EnumLabel(pb::GeometryCheck_Name(s.geometry()), "GEOMETRY_CHECK_")},
+            {"recent_seconds", s.recent_seconds()},
+            {"recent_frames", s.recent_frames()}}}};
+}
+
+int RunMapsList(const ServerFlags& flags, RecognitionClient& client) {
+  auto maps = client.ListMaps();
+  if (!maps.ok()) return Fail("maps list", maps.status());
+  if (flags.json) {
+    json out = json::array();
+    for (const pb::MapInfo& map : *maps) out.push_back(MapJson(map));
+    std::printf("%s\n", out.dump(2).c_str());
+    return 0;
+  }
+  std::printf("%-32s %10s  %s\n", "NAME", "FRAMES", "CREATED");
+  for (const pb::MapInfo& map : *maps) {
+    std::printf("%-32s %10llu  %s\n", map.name().c_str(), (unsigned long long)map.frames(),
+                UtcTime(map.created_unix_ms()).c_str());
+  }
+  return 0;
+}
+
+// Prints a map's description (maps create, maps stats).
+void PrintMap(const ServerFlags& flags, const pb::MapInfo& map) {
+  if (flags.json) {
+    std::printf("%s\n", MapJson(map).dump(2).c_str());
+  } else {
+    PrintFields(MapJson(map));
+  }
+}
+
+}  // namespace
+
+void AddMapsCommands(CLI::App& app, int* exit_code) {
+  CLI::App* maps = app.add_subcommand("maps", "Manage the place maps of recogd");
+  maps->require_subcommand(1);
+  auto list_flags = std::make_shared<ServerFlags>();
+  ConnectCommand(
+      maps->add_subcommand("list", "List the maps"), list_flags.get(), exit_code,
+      [list_flags](RecognitionClient& client) { return RunMapsList(*list_flags, client); });
+
+  struct CreateMapArgs {
+    ServerFlags server;
+    std::string name;
+    pb::MapSettings settings;  // only the options given are set
+  };
+  auto create_args = std::make_shared<CreateMapArgs>();
+  CLI::App* create =
+      maps->add_subcommand("create", "Create an empty map; unset settings take the server's");
+  create->add_option("name", create_args->name, "Map name (1-128 of A-Z a-z 0-9 . _ -)")
+      ->required();
+  pb::MapSettings* settings = &create_args->settings;
+  create->add_option_function<double>(
+      "--alpha", [settings](const double& v) { settings->set_alpha(v); },
+      "Minimum normalised score (server default 0.3)");
+  create->add_option_function<uint32_t>(
+      "--temporal-matches", [settings](const uint32_t& v) { settings->set_temporal_matches(v); },
+      "Consistent previous queries required (3)");
+  create->add_option_function<uint32_t>(
+      "--min-inliers", [settings](const uint32_t& v) { settings->set_min_inliers(v); },
+      "RANSAC inliers of a loop, >= 8 (12)");
+  create
+      ->add_option_function<std::string>(
+          "--geometry",
+          [settings](const std::string& v) {
+            pb::GeometryCheck geometry = pb::GEOMETRY_CHECK_UNSPECIFIED;
+            std::string name = "GEOMETRY_CHECK_" + v;
+            std::transform(name.begin(), name.end(), name.begin(),
+                           [](unsigned char c) { return char(std::toupper(c)); });
+            pb::GeometryCheck_Parse(name, &geometry);
+            settings->set_geometry(geometry);
+          },
+          "How loops are verified (direct_index)")
+      ->check(CLI::IsMember({"direct_index", "exhaustive", "none"}));
+  create->add_option_function<double>(
+      "--recent-seconds", [settings](const double& v) { settings->set_recent_seconds(v); },
+      "Recent frames left out of queries, in seconds, for timestamped frames (20)");
+  create->add_option_function<uint32_t>(
+      "--recent-frames", [settings](const uint32_t& v) { settings->set_recent_frames(v); },
+      "Recent frames left out of queries, for frames without timestamps (20)");
+  ConnectCommand(create, &create_args->server, exit_code, [create_args](RecognitionClient& client) {
+    auto map = client.CreateMap(create_args->name, create_args->settings);
+    if (!map.ok()) return Fail("maps create", map.status());
+    PrintMap(create_args->server, *map);
+    return 0;
+  });
+
+  struct NamedArgs {
+    ServerFlags server;
+    std::string name;
+  };
+  auto delete_args = std::make_shared<NamedArgs>();
+  CLI::App* delete_map = maps->add_subcommand("delete", "Delete a map and its frames");
+  delete_map->add_option("name", delete_args->name, "Map name")->required();
+  ConnectCommand(
+      delete_map, &delete_args->server, exit_code, [delete_args](RecognitionClient& client) {
+        auto frames = client.DeleteMap(delete_args->name);
+        if (!frames.ok()) return Fail("maps delete", frames.status());
+        if (delete_args->server.json) {
+          std::printf(
+              "%s\n",
+              json({{"name", delete_args->name}, {"frames_deleted", *frames}}).dump(2).c_str());
+        } else {
+          std::printf("deleted map %s (%llu frame%s)\n", delete_args->name.c_str(),
+                      (unsigned long long)*frames, *frames == 1 ? "" : "s");
+        }
+        return 0;
+      });
+
+  auto stats_args = std::make_shared<NamedArgs>();
+  CLI::App* stats = maps->add_subcommand("stats", "Describe a map: frames, settings, vocabulary");
+  stats->add_option("name", stats_args->name, "Map name")->required();
+  ConnectCommand(stats, &stats_args->server, exit_code, [stats_args](RecognitionClient& client) {
+    auto map = client.GetMap(stats_args->name);
+    if (!map.ok()) return Fail("maps stats", map.status());
+    PrintMap(stats_args->server, *map);
+    return 0;
+  });
+}
+
+}  // namespace recog::cli

@@ -1,0 +1,393 @@
+// recog stream and recog query: frames into a map of recogd, over the C++ client library. Both
+// take the ServerFlags; a failed call prints one line "recog <cmd>: CODE: message" and exits 1.
+//
+//   stream   a recorded sequence (folder, list or video) through one StreamFrames call, printing
+//            every loop closure as it is answered
+//   query    one QueryPlace: relocalisation, or the loop detector's step with --add
+#include <chrono>
+#include <csignal>
+#include <cstdio>
+#include <deque>
+#include <filesystem>
+#include <future>
+#include <map>
+#include <memory>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+#include <opencv2/features2d.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "client/cpp/frame_stream.h"
+#include "client/cpp/frames.h"
+#include "client/cpp/recognition_client.h"
+#include "core/object/object_model.h"
+#include "tools/common/cli_support.h"
+#include "tools/common/remote_support.h"
+#include "tools/common/server_flags.h"
+#include "tools/evaluation/object_evaluation.h"
+#include "tools/evaluation/place_evaluation.h"
+#include "tools/recog/commands.h"
+#include "wire/grpc_code_names.h"
+
+namespace recog::cli {
+namespace {
+
+namespace fs = std::filesystem;
+using client::RecognitionClient;
+using json = nlohmann::ordered_json;
+
+std::string StatusLabel(pb::LoopStatus status) {
+  return EnumLabel(pb::LoopStatus_Name(status), "LOOP_STATUS_");
+}
+
+json LoopJson(const pb::LoopResult& r) {
+  json out = {{"status", StatusLabel(r.status())},
+              {"score", r.score()},
+              {"normalized_score", r.normalized_score()},
+              {"previous_score", r.previous_score()},
+              {"island", {{"first", r.island_first()}, {"last", r.island_last()}}},
+              {"island_score", r.island_score()},
+              {"consistent_queries", r.consistent_queries()},
+              {"correspondences", r.correspondences()},
+              {"inliers", r.inliers()}};
+  if (r.has_frame_id()) out["frame"] = r.frame_id();
+  if (r.has_match_frame_id()) out["match"] = r.match_frame_id();
+  if (r.has_relative_pose()) {
+    const pb::Pose& pose = r.relative_pose();
+    out["relative_pose"] = {
+        {"rotation", std::vector<double>(pose.rotation().begin(), pose.rotation().end())},
+        {"translation", std::vector<double>(pose.translation().begin(), pose.translation().end())}};
+  }
+  return out;
+}
+
+json TimingJson(const pb::Timing& t) {
+  return {{"decode", t.decode_ms()},
+          {"features", t.features_ms()},
+          {"recognition", t.recognition_ms()},
+          {"queue", t.queue_ms()}};
+}
+
+// ---- recog stream ----
+
+struct StreamArgs {
+  ServerFlags server;
+  std::string map, images, draw;
+  double rate = 0;
+  uint64_t frames = 0;  // 0: every frame of the sequence
+  bool features_on_client = false, create = false, timestamps = false, quiet = false;
+};
+
+// Set by SIGINT/SIGTERM while `recog stream` runs: stop reading frames, take the answers of those
+// sent, close the stream and print the summary.
+volatile std::sig_atomic_t stop_streaming = 0;
+void StopStreaming(int) { stop_streaming = 1; }
+
+// Frames sent ahead of their answers: enough to keep the server busy while a frame travels.
+constexpr size_t kFramesInFlight = 4;
+
+// The frame of one image of the sequence (see the --help of recog stream).
+client::Result<pb::Frame> StreamFrame(const StreamArgs& args, bool from_file,
+                                      const std::string& name, const cv::Mat& gray) {
+  if (args.features_on_client) {
+    auto features = client::ExtractOrbFeatures(gray);
+    if (!features.ok()) return features.status();
+    return client::FrameFromFeatures(features->keypoints, features->descriptors, gray.size());
+  }
+  return from_file ? FrameFromImageFile(name, gray) : client::FrameFromImage(gray);
+}
+
+// What recog stream keeps of the frames it sent, to name (and draw) the loops.
+struct SentFrames {
+  std::vector<std::string> names;             // by sequence: file names
+  std::vector<cv::Mat> images;                // by sequence, with --draw
+  std::map<uint64_t, size_t> sequence_of_id;  // the map's frame id -> sequence
+
+  // "45 (45.jpg)"; "3" for a frame that an earlier session added.
+  std::string Describe(uint64_t id) const {
+    const auto found = sequence_of_id.find(id);
+    return std::to_string(id) +
+           (found == sequence_of_id.end() ? "" : " (" + names[found->second] + ")");
+  }
+};
+
+// Both frames of a loop side by side with a caption, as DIR/loop_<frame>_<match>.png.
+Status DrawLoop(const std::string& dir, const SentFrames& sent, uint64_t frame, uint64_t match,
+                uint32_t inliers) {
+  const size_t a = sent.sequence_of_id.at(frame), b = sent.sequence_of_id.at(match);
+  cv::Mat canvas;
+  const std::vector<cv::KeyPoint> none;
+  cv::drawMatches(sent.images[a], none, sent.images[b], none, std::vector<cv::DMatch>(), canvas);
+  cv::copyMakeBorder(canvas, canvas, 36, 0, 0, 0, cv::BORDER_CONSTANT, cv::Scalar(255, 255, 255));
+  const std::string caption = "frame " + sent.Describe(frame) + " closes a loop with frame " +
+                              sent.Describe(match) + ": " + std::to_string(inliers) + " inliers";
+  cv::putText(canvas, caption, {8, 25}, cv::FONT_HERSHEY_SIMPLEX, 0.6, cv::Scalar(0, 0, 0), 1,
+              cv::LINE_AA);
+  const std::string path =
+      (fs::path(dir) / ("loop_" + std::to_string(frame) + "_" + std::to_string(match) + ".png"))
+          .string();
+  if (!cv::imwrite(path, canvas)) return Status::Internal("cannot write '" + path + "'");
+  return Status::Ok();
+}
+
+int RunStream(const StreamArgs& args, RecognitionClient& client) {
+  if (!(args.rate >= 0)) return Fail("stream", Status::InvalidArgument("--rate must be >= 0"));
+  auto source = FrameSource::Open(args.images);
+  if (!source.ok()) return Fail("stream", source.status());
+  if (!args.draw.empty()) {
+    std::error_code ec;
+    fs::create_directories(args.draw, ec);
+    if (ec) {
+      return Fail("stream",
+                  Status::InvalidArgument("cannot create '" + args.draw + "': " + ec.message()));
+    }
+  }
+  pb::StreamConfig config;
+  config.set_map(args.map);
+  config.set_create_if_missing(args.create);
+  auto stream = client::FrameStream::Open(client, config);
+  if (!stream.ok()) return Fail("stream", stream.status());
+
+  ProgressBar progress(!args.quiet);
+  SentFrames sent;
+  size_t answered = 0, loops = 0, errors = 0;
+  grpc::Status failure;  // the stream's, once it failed
+  // Reports one answer, in order; false once the stream has failed.
+  const auto handle = [&](client::FrameStream::Answer answer) {
+    if (!answer.ok()) {
+      failure = answer.status();
+      return false;
+    }
+    const size_t sequence = answered++;
+    progress.Update("frames", answered, source->size());
+    if (answer->has_error()) {
+      ++errors;
+      progress.Finish();
+      const pb::FrameError& e = answer->error();
+      std::fprintf(stderr, "recog stream: frame %s: %s: %s\n", sent.names[sequence].c_str(),
+                   std::string(GrpcCodeName(grpc::StatusCode(e.code()))).c_str(),
+                   e.message().c_str());
+      return true;
+    }
+    const pb::LoopResult& r = answer->result();
+    if (r.has_frame_id()) sent.sequence_of_id[r.frame_id()] = sequence;
+    if (r.status() != pb::LOOP_STATUS_LOOP_DETECTED || !r.has_match_frame_id()) return true;
+    ++loops;
+    if (args.server.json) {
+      json loop = {{"event", "loop"}};
+      loop.update(LoopJson(r));
+      loop["frame_file"] = sent.names[sequence];
+      const auto match = sent.sequence_of_id.find(r.match_frame_id());
+      if (match != sent.sequence_of_id.end()) loop["match_file"] = sent.names[match->second];
+      std::printf("%s\n", loop.dump().c_str());
+    } else {
+      progress.Finish();
+      std::printf("frame %s closes a loop with frame %s: %u inliers\n",
+                  sent.Describe(r.frame_id()).c_str(), sent.Describe(r.match_frame_id()).c_str(),
+                  r.inliers());
+    }
+    std::fflush(stdout);
+    if (!args.draw.empty() && r.has_frame_id() &&
+        sent.sequence_of_id.contains(r.match_frame_id())) {
+      if (Status s = DrawLoop(args.draw, sent, r.frame_id(), r.match_frame_id(), r.inliers());
+          !s.ok()) {
+        ++errors;
+        Fail("stream", s);
+      }
+    }
+    return true;
+  };
+
+  const auto start = std::chrono::steady_clock::now();
+  std::deque<std::future<client::FrameStream::Answer>> pending;
+  bool streaming = true;
+  // Waits for the oldest answer and reports it.
+  const auto take_oldest = [&] {
+    streaming = handle(pending.front().get());
+    pending.pop_front();
+  };
+  // Reports the answers that come before `until`, in order.
+  const auto answers_until = [&](std::chrono::steady_clock::time_point until) {
+    while (streaming && !pending.empty() &&
+           pending.front().wait_until(until) == std::future_status::ready) {
+      take_oldest();
+    }
+  };
+  // A frame that cannot be read or sent is reported, and the stream goes on.
+  const auto skip = [&](const auto& status) {
+    ++errors;
+    progress.Finish();
+    Fail("stream", status);
+  };
+  stop_streaming = 0;
+  const auto previous_int = std::signal(SIGINT, StopStreaming);
+  const auto previous_term = std::signal(SIGTERM, StopStreaming);
+  while (streaming && !stop_streaming && (args.frames == 0 || sent.names.size() < args.frames)) {
+    cv::Mat gray;
+    std::string name;
+    StatusOr<bool> more = source->Next(&gray, &name);
+    if (!more.ok()) {
+      skip(more.status());
+      continue;
+    }
+    if (!*more) break;
+    client::Result<pb::Frame> frame = StreamFrame(args, !source->is_video(), name, gray);
+    if (!frame.ok()) {
+      skip(frame.status());
+      continue;
+    }
+    if (args.rate > 0) {
+      const auto due =
+          start + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                      std::chrono::duration<double>(double(sent.names.size()) / args.rate));
+      answers_until(due);
+      std::this_thread::sleep_until(due);
+    }
+    if (args.timestamps) {
+      frame->set_timestamp(
+          std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch())
+              .count());
+    }
+    sent.names.push_back(fs::path(name).filename().string());
+    if (!args.draw.empty()) sent.images.push_back(gray);
+    pending.push_back((*stream)->Send(std::move(*frame)));
+    answers_until(std::chrono::steady_clock::now());  // those that have come
+    while (streaming && pending.size() > kFramesInFlight) take_oldest();
+  }
+  std::signal(SIGINT, previous_int);
+  std::signal(SIGTERM, previous_term);
+  while (streaming && !pending.empty()) take_oldest();
+  const grpc::Status end = (*stream)->Close();
+  progress.Finish();
+  if (!failure.ok()) return Fail("stream", failure);
+  if (!end.ok()) return Fail("stream", end);
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  const double rate = seconds > 0 ? double(answered) / seconds : 0.0;
+  if (args.server.json) {
+    std::printf("%s\n", json({{"event", "summary"},
+                              {"map", args.map},
+                              {"frames", answered},
+                              {"loops", loops},
+                              {"errors", errors},
+                              {"seconds", seconds},
+                              {"frames_per_second", rate}})
+                            .dump()
+                            .c_str());
+  } else {
+    std::printf("%zu frames, %zu loops, %zu errors in %.2f s (%.1f frames/s)\n", answered, loops,
+                errors, seconds, rate);
+  }
+  return errors == 0 ? 0 : 1;
+}
+
+// ---- recog query ----
+
+struct QueryArgs {
+  ServerFlags server;
+  std::string map, image, camera;
+  bool add = false;
+};
+
+int RunQuery(const QueryArgs& args, RecognitionClient& client) {
+  auto gray = ReadGrayImage(args.image);
+  if (!gray.ok()) return Fail("query", gray.status());
+  auto frame = FrameFromImageFile(args.image, *gray);
+  if (!frame.ok()) return Fail("query", frame.status());
+  pb::ResultOptions options;
+  if (!args.camera.empty()) {
+    auto camera = ParseCamera(args.camera);
+    if (!camera.ok()) return Fail("query", camera.status());
+    SetIntrinsics(*camera, &*frame);
+    options.set_include_relative_pose(true);
+  }
+  auto answer = client.QueryPlace(
+      args.map, *frame, args.add ? client::QueryMode::kAddFrame : client::QueryMode::kRelocalise,
+      options);
+  if (!answer.ok()) return Fail("query", answer.status());
+  const pb::LoopResult& r = answer->result();
+  if (args.server.json) {
+    json out = LoopJson(r);
+    out["timing_ms"] = TimingJson(answer->timing());
+    std::printf("%s\n", out.dump(2).c_str());
+    return 0;
+  }
+  std::printf("status     %s\n", StatusLabel(r.status()).c_str());
+  if (r.has_frame_id()) std::printf("added as   frame %llu\n", (unsigned long long)r.frame_id());
+  if (r.has_match_frame_id()) {
+    std::printf("match      frame %llu (score %.3f, normalised %.3f)\n",
+                (unsigned long long)r.match_frame_id(), r.score(), r.normalized_score());
+    std::printf("inliers    %u of %u correspondences\n", r.inliers(), r.correspondences());
+  }
+  const pb::Pose& pose = r.relative_pose();
+  if (pose.rotation_size() == 9 && pose.translation_size() == 3) {
+    std::printf(
+        "pose       R = [%.4f %.4f %.4f; %.4f %.4f %.4f; %.4f %.4f %.4f], "
+        "t = [%.4f %.4f %.4f] (unit length)\n",
+        pose.rotation(0), pose.rotation(1), pose.rotation(2), pose.rotation(3), pose.rotation(4),
+        pose.rotation(5), pose.rotation(6), pose.rotation(7), pose.rotation(8), pose.translation(0),
+        pose.translation(1), pose.translation(2));
+  }
+  return 0;
+}
+
+}  // namespace
+
+void AddStreamCommands(CLI::App& app, int* exit_code) {
+  auto stream_args = std::make_shared<StreamArgs>();
+  CLI::App* stream = app.add_subcommand(
+      "stream", "Stream a recorded sequence into a map of recogd and print every loop closure");
+  stream->footer(
+      "JPEG and PNG files are sent as they are: the server decodes them to the grey pixels that "
+      "`recog eval place` reads, so the loops are the same. Other images and video frames are sent "
+      "as raw grey pixels. Frames are numbered as the map numbers them, from 0. --json prints one "
+      "object per line: {\"event\": \"loop\", ...} per loop, then {\"event\": \"summary\", ...}. "
+      "A frame that fails on its own is reported and the stream goes on; the exit status is then "
+      "1. Ctrl-C (SIGINT) or SIGTERM stops reading frames: the answers of those sent are taken, "
+      "the stream is closed and the summary printed (how a camera stream ends).");
+  stream->add_option("--map", stream_args->map, "Map name")->required();
+  stream
+      ->add_option("--images", stream_args->images,
+                   "Folder of frames, a list file, a video, or camera:N for the live camera "
+                   "/dev/videoN")
+      ->required();
+  stream->add_option("--frames", stream_args->frames, "Stop after this many frames (0: all)")
+      ->capture_default_str();
+  stream
+      ->add_option("--rate", stream_args->rate,
+                   "Frames per second to send (0: as fast as the "
+                   "server answers, a few frames in flight)")
+      ->capture_default_str();
+  stream->add_flag("--features-on-client", stream_args->features_on_client,
+                   "Extract the ORB features here and send them instead of the images");
+  stream->add_flag("--create", stream_args->create,
+                   "Create the map (with the server's default settings) if it does not exist");
+  stream->add_option("--draw", stream_args->draw,
+                     "Folder for a PNG per loop (loop_<frame>_<match>.png): both frames side by "
+                     "side with the inlier count");
+  stream->add_flag("--timestamps", stream_args->timestamps,
+                   "Stamp each frame with this machine's clock when it is sent (the map's "
+                   "recent_seconds then applies instead of recent_frames)");
+  stream->add_flag("-q,--quiet", stream_args->quiet, "No progress output");
+  ConnectCommand(stream, &stream_args->server, exit_code, [stream_args](RecognitionClient& client) {
+    return RunStream(*stream_args, client);
+  });
+
+  auto query_args = std::make_shared<QueryArgs>();
+  CLI::App* query = app.add_subcommand(
+      "query", "Look one image up in a map of recogd (relocalisation, unless --add)");
+  query->add_option("--map", query_args->map, "Map name")->required();
+  query->add_option("image", query_args->image, "Image file")->required();
+  query->add_flag("--add", query_args->add,
+                  "Run the map's loop detector and keep the frame, as a streamed frame");
+  query->add_option("--camera", query_args->camera,
+                    "fx,fy,cx,cy[,k1,k2,p1,p2[,k3]]: also report the relative pose of a loop");
+  ConnectCommand(query, &query_args->server, exit_code,
+                 [query_args](RecognitionClient& client) { return RunQuery(*query_args, client); });
+}
+
+}  // namespace recog::cli
