@@ -39,7 +39,9 @@ StatusOr<LoopDetectorParams> DecodePlaceSettings(std::string_view text) {
       versioned = true;
     } else if (key == "geometry") {
       StatusOr<GeometryCheck> geometry = ParseGeometryCheck(value);
-      if (!geometry.ok()) return Status::DataLoss("place settings: " + geometry.status().message());
+      if (!geometry.ok()) {
+        return geometry.status().WithContext("place settings", StatusCode::kDataLoss);
+      }
       p.geometry = geometry.value();
     } else if (!numeric) {
       return Status::DataLoss("place settings: '" + key + "' has a non-numeric value");
@@ -57,7 +59,7 @@ StatusOr<LoopDetectorParams> DecodePlaceSettings(std::string_view text) {
   }
   if (!versioned) return Status::DataLoss("place settings without a version line");
   const Status valid = p.Validate();
-  if (!valid.ok()) return Status::DataLoss("place settings: " + valid.message());
+  if (!valid.ok()) return valid.WithContext("place settings", StatusCode::kDataLoss);
   return p;
 }
 
@@ -71,16 +73,14 @@ StatusOr<std::unique_ptr<MapRegistry>> MapRegistry::Open(
     const std::string name = key.substr(sizeof(kSettingsPrefix) - 1);
     RECOG_ASSIGN_OR_RETURN(std::string text, store->GetBlob(key));
     StatusOr<LoopDetectorParams> params = DecodePlaceSettings(text);
-    if (!params.ok()) {
-      return Status(params.status().code(), "map '" + name + "': " + params.status().message());
-    }
+    if (!params.ok()) return params.status().WithContext("map '" + name + "'");
     StatusOr<std::shared_ptr<PlaceMap>> map =
         PlaceMap::Open(store, name, params.value(), registry->vocabulary_);
     if (map.status().code() == StatusCode::kNotFound) {
       // Settings left behind by a deletion that was interrupted: finish it.
       RECOG_RETURN_IF_ERROR(store->DeleteBlob(key));
     } else if (!map.ok()) {
-      return Status(map.status().code(), "map '" + name + "': " + map.status().message());
+      return map.status().WithContext("map '" + name + "'");
     } else {
       registry->maps_.emplace(name, std::move(map).value());
     }

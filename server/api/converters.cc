@@ -135,7 +135,7 @@ Status DecodeIntrinsics(const pb::CameraIntrinsics& in, CameraIntrinsics* out) {
                                    " values; OpenCV takes 4, 5, 8, 12 or 14");
   }
   const Status valid = out->Validate();
-  if (!valid.ok()) return Status::InvalidArgument("frame.intrinsics: " + valid.message());
+  if (!valid.ok()) return valid.WithContext("frame.intrinsics", StatusCode::kInvalidArgument);
   return Status::Ok();
 }
 
@@ -209,7 +209,7 @@ Status ApplyMapSettings(const pb::MapSettings& settings, LoopDetectorParams* par
     return Status::InvalidArgument("settings.min_inliers is too large");
   }
   const Status valid = params->Validate();
-  if (!valid.ok()) return Status::InvalidArgument("settings: " + valid.message());
+  if (!valid.ok()) return valid.WithContext("settings", StatusCode::kInvalidArgument);
   return Status::Ok();
 }
 

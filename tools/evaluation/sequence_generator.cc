@@ -196,8 +196,7 @@ class SceneIndex {
     const std::string path = DefaultPlaceVocabularyPath();
     auto vocabulary = LoadAnyVocabulary(path);
     if (!vocabulary.ok()) {
-      return Status(vocabulary.status().code(),
-                    "distinct places need the place vocabulary: " + vocabulary.status().message());
+      return vocabulary.status().WithContext("distinct places need the place vocabulary");
     }
     auto index = std::unique_ptr<SceneIndex>(new SceneIndex());
     index->vocabulary_ = std::make_shared<const Vocabulary>(std::move(vocabulary).value());
