@@ -26,6 +26,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <functional>
 #include <map>
 #include <random>
 #include <set>
@@ -109,6 +110,23 @@ constexpr EntryId kOpenedMarker = kInvalidEntryId;
 // the delay runs from the moment the child has its store open, so that the kill lands among the
 // commits even on a slow (sanitizer) build; every fourth round it runs from the fork, so that
 // some kills land while the store is still opening (recovering the previous round's log).
+// Forks a child that runs `writer` with the write end of a pipe (it never returns) and returns
+// the child's pid; *ack_fd is the read end, where the child's acknowledgements arrive.
+pid_t ForkWriter(const std::function<void(int)>& writer, int* ack_fd) {
+  int acks[2];
+  if (::pipe(acks) != 0) return -1;
+  std::fflush(stdout);
+  std::fflush(stderr);
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    ::close(acks[0]);
+    writer(acks[1]);
+  }
+  ::close(acks[1]);
+  *ack_fd = acks[0];
+  return pid;
+}
+
 void RunCrashRounds(SyncPolicy sync, int rounds) {
   RECOG_SKIP_FORK_UNDER_TSAN();
   TempDir dir("crash");
@@ -131,21 +149,13 @@ void RunCrashRounds(SyncPolicy sync, int rounds) {
     SCOPED_TRACE("round " + std::to_string(round));
     const int delay_ms = std::uniform_int_distribution<int>(5, 80)(rng);
     const bool early = round % 4 == 3;
-    int acks[2];
-    ASSERT_EQ(::pipe(acks), 0);
-    std::fflush(stdout);
-    std::fflush(stderr);
-    const pid_t pid = ::fork();
+    int acks = -1;
+    const pid_t pid = ForkWriter([&](int ack_fd) { RunWriter(path, sync, map, ack_fd); }, &acks);
     ASSERT_GE(pid, 0);
-    if (pid == 0) {
-      ::close(acks[0]);
-      RunWriter(path, sync, map, acks[1]);
-    }
-    ::close(acks[1]);
     EntryId id = 0;
     if (!early) {
       // Blocks until the child has opened the store (or died: end of file).
-      if (::read(acks[0], &id, sizeof(id)) == sizeof(id)) {
+      if (::read(acks, &id, sizeof(id)) == sizeof(id)) {
         EXPECT_EQ(id, kOpenedMarker);
       }
       ++late_rounds;
@@ -153,12 +163,12 @@ void RunCrashRounds(SyncPolicy sync, int rounds) {
     std::this_thread::sleep_for(std::chrono::milliseconds(delay_ms));
     ::kill(pid, SIGKILL);
     std::vector<EntryId> acked_now;
-    while (::read(acks[0], &id, sizeof(id)) == sizeof(id)) {
+    while (::read(acks, &id, sizeof(id)) == sizeof(id)) {
       if (id == kOpenedMarker) continue;
       acknowledged.insert(id);
       acked_now.push_back(id);
     }
-    ::close(acks[0]);
+    ::close(acks);
     int status = 0;
     ASSERT_EQ(::waitpid(pid, &status, 0), pid);
     ASSERT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL)
@@ -261,31 +271,23 @@ TEST(RocksDbCrashTest, ADatabaseKilledMidStreamReopensWithEveryAcknowledgedEntry
   std::set<EntryId> acknowledged;
   for (int round = 0; round < 6; ++round) {
     SCOPED_TRACE("round " + std::to_string(round));
-    int acks[2];
-    ASSERT_EQ(::pipe(acks), 0);
-    std::fflush(stdout);
-    std::fflush(stderr);
-    const pid_t pid = ::fork();
+    int acks = -1;
+    const pid_t pid = ForkWriter([&](int ack_fd) { RunDatabaseWriter(path, ack_fd); }, &acks);
     ASSERT_GE(pid, 0);
-    if (pid == 0) {
-      ::close(acks[0]);
-      RunDatabaseWriter(path, acks[1]);
-    }
-    ::close(acks[1]);
     EntryId id = 0;
     // Blocks until the child has opened the database (or died: end of file).
-    if (::read(acks[0], &id, sizeof(id)) == sizeof(id)) {
+    if (::read(acks, &id, sizeof(id)) == sizeof(id)) {
       EXPECT_EQ(id, kOpenedMarker);
     }
     std::this_thread::sleep_for(
         std::chrono::milliseconds(std::uniform_int_distribution<int>(50, 200)(rng)));
     ::kill(pid, SIGKILL);
     EntryId last = kInvalidEntryId;
-    while (::read(acks[0], &id, sizeof(id)) == sizeof(id)) {
+    while (::read(acks, &id, sizeof(id)) == sizeof(id)) {
       acknowledged.insert(id);
       last = id;
     }
-    ::close(acks[0]);
+    ::close(acks);
     int status = 0;
     ASSERT_EQ(::waitpid(pid, &status, 0), pid);
     ASSERT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL)
