@@ -31,9 +31,7 @@ int main(int argc, char** argv) {
     return 0;
   }
   if (command_line.value().version) {
-    // "recogd 0.1.0 (abaaf87, Release)".
-    std::printf("recogd %s (%s, %s)\n", recog::build_info::kVersion, recog::build_info::kCommit,
-                recog::build_info::kBuildType);
+    std::puts(recog::build_info::VersionLine("recogd").c_str());
     return 0;
   }
   const recog::server::ServerConfig& config = command_line.value().config;

@@ -3,7 +3,6 @@
 // Exit status: 0 on success (and for --help, --version), 1 when a subcommand fails (bad input
 // files, a failed call to recogd: one line "recog <cmd>: <reason>"), 2 when the command line is
 // wrong (unknown subcommand or flag, a missing required option, a bad value: CLI11's message).
-#include <string>
 
 #include <CLI/CLI.hpp>
 
@@ -22,10 +21,7 @@ int main(int argc, char** argv) {
   app.failure_message([](const CLI::App* failed, const CLI::Error& e) {
     return "recog " + failed->get_name() + ": " + e.what() + " (see --help)\n";
   });
-  // "recog 0.1.0 (abaaf87, Release)".
-  app.set_version_flag("--version", std::string("recog ") + recog::build_info::kVersion + " (" +
-                                        recog::build_info::kCommit + ", " +
-                                        recog::build_info::kBuildType + ")");
+  app.set_version_flag("--version", recog::build_info::VersionLine("recog"));
   int exit_code = 0;
   recog::cli::AddVocabCommands(app, &exit_code);
   recog::cli::AddBowCommand(app, &exit_code);
