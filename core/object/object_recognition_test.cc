@@ -8,6 +8,7 @@
 #include <memory>
 
 #include <gtest/gtest.h>
+#include <Eigen/Eigenvalues>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -465,6 +466,67 @@ TEST_F(ObjectRecognitionTest, ReportDuplicatesGivesOneDetectionPerRegion) {
     seen_right |= centre_x(d) >= 320;
   }
   EXPECT_TRUE(seen_left && seen_right) << "both copies of the poster are reported";
+}
+
+// What a SLAM inserts (thesis §5.6): the inlier 2D-3D correspondences and the pose covariance,
+// only when asked.
+TEST_F(ObjectRecognitionTest, DetectionsCarryInliersAndCovarianceWhenAsked) {
+  ASSERT_TRUE(database_->Put(poster_).ok());
+  ObjectRecognizer recognizer(database_);
+  const cv::Mat view = RenderPoster(Poster(), poster_, camera_, PoseAt(20, 10, {0, 0, 1.0}));
+  std::vector<Detection> plain, full;
+  ASSERT_TRUE(recognizer.Recognize(view, camera_, &plain).ok());
+  ASSERT_EQ(plain.size(), 1u);
+  EXPECT_TRUE(plain[0].inliers_2d3d.empty());
+  EXPECT_TRUE(plain[0].covariance.empty());
+
+  ASSERT_TRUE(
+      recognizer.Recognize(view, camera_, &full, nullptr, {}, {.include_inliers = true}).ok());
+  ASSERT_EQ(full.size(), 1u);
+  EXPECT_EQ(full[0].inliers_2d3d.size(), full[0].inliers);
+  EXPECT_TRUE(full[0].covariance.empty()) << "only the inliers were asked for";
+
+  ASSERT_TRUE(recognizer
+                  .Recognize(view, camera_, &full, nullptr, {},
+                             {.include_inliers = true, .include_covariance = true})
+                  .ok());
+  ASSERT_EQ(full.size(), 1u);
+  const Detection& d = full[0];
+  EXPECT_EQ(d.camera_from_object.t, plain[0].camera_from_object.t);  // the same detection
+  ASSERT_EQ(d.inliers_2d3d.size(), d.inliers);
+  const double bound = recognizer.options().reprojection_px;
+  for (const InlierCorrespondence& c : d.inliers_2d3d) {
+    ASSERT_LT(c.point_id, poster_.num_features());
+    const cv::Point3f& model_point = poster_.points[poster_.point_of_feature[c.point_id]];
+    EXPECT_EQ(c.point, model_point);
+    cv::Point2d projected;
+    ASSERT_TRUE(ProjectPoint(camera_, d.camera_from_object, cv::Point3d(c.point), &projected));
+    EXPECT_LE(cv::norm(projected - cv::Point2d(c.pixel)), bound) << c.point_id;
+  }
+
+  ASSERT_EQ(d.covariance.size(), 36u);
+  const Eigen::Matrix<double, 6, 6, Eigen::RowMajor> covariance(d.covariance.data());
+  EXPECT_LT((covariance - covariance.transpose()).norm(), 1e-12 * covariance.norm());
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 6, 6>> eigen(covariance);
+  EXPECT_GT(eigen.eigenvalues().minCoeff(), 0.0);
+  // Metres at 1 m: the translation is known to well under a centimetre, not exactly.
+  for (int i = 3; i < 6; ++i) {
+    EXPECT_GT(covariance(i, i), 0.0);
+    EXPECT_LT(std::sqrt(covariance(i, i)), 0.01);
+  }
+
+  // The same computation on a quarter of the inliers: a larger uncertainty.
+  std::vector<cv::Point3f> points;
+  std::vector<cv::Point2f> pixels;
+  for (size_t i = 0; i < d.inliers_2d3d.size(); i += 4) {
+    points.push_back(d.inliers_2d3d[i].point);
+    pixels.push_back(d.inliers_2d3d[i].pixel);
+  }
+  PoseCovariance6 subset;
+  ASSERT_TRUE(ComputePoseCovariance(camera_.K(), d.camera_from_object.R, d.camera_from_object.t,
+                                    points, pixels, 0.5, &subset));
+  EXPECT_GT(subset[0] + subset[7] + subset[14] + subset[21] + subset[28] + subset[35],
+            covariance.trace());
 }
 
 }  // namespace

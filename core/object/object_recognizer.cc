@@ -13,6 +13,10 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
+// Floor of the residual standard deviation in a pose covariance: keypoints are not located more
+// precisely than this, however well the inliers fit.
+constexpr double kCovarianceMinSigmaPx = 0.5;
+
 double MillisecondsSince(Clock::time_point start) {
   return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
 }
@@ -187,7 +191,7 @@ ObjectRecognizer::ObjectRecognizer(std::shared_ptr<const ObjectDatabase> databas
 
 Status ObjectRecognizer::Recognize(const cv::Mat& image, const CameraIntrinsics& camera,
                                    std::vector<Detection>* detections, RecognitionTiming* timing,
-                                   const ObjectFilter& filter) {
+                                   const ObjectFilter& filter, const DetectionOptions& extras) {
   const auto start = Clock::now();
   detections->clear();
   RECOG_RETURN_IF_ERROR(camera.Validate());
@@ -201,7 +205,7 @@ Status ObjectRecognizer::Recognize(const cv::Mat& image, const CameraIntrinsics&
   RecognitionTiming* t = timing != nullptr ? timing : &local;
   *t = RecognitionTiming();
   t->orb = MillisecondsSince(start);
-  RECOG_RETURN_IF_ERROR(Run(features_, camera, filter, detections, t));
+  RECOG_RETURN_IF_ERROR(Run(features_, camera, filter, extras, detections, t));
   t->total = MillisecondsSince(start);
   return Status::Ok();
 }
@@ -209,7 +213,8 @@ Status ObjectRecognizer::Recognize(const cv::Mat& image, const CameraIntrinsics&
 Status ObjectRecognizer::RecognizeFeatures(const FeatureSet& features,
                                            const CameraIntrinsics& camera,
                                            std::vector<Detection>* detections,
-                                           RecognitionTiming* timing, const ObjectFilter& filter) {
+                                           RecognitionTiming* timing, const ObjectFilter& filter,
+                                           const DetectionOptions& extras) {
   const auto start = Clock::now();
   detections->clear();
   RECOG_RETURN_IF_ERROR(camera.Validate());
@@ -224,14 +229,14 @@ Status ObjectRecognizer::RecognizeFeatures(const FeatureSet& features,
   RecognitionTiming local;
   RecognitionTiming* t = timing != nullptr ? timing : &local;
   *t = RecognitionTiming();
-  RECOG_RETURN_IF_ERROR(Run(features, camera, filter, detections, t));
+  RECOG_RETURN_IF_ERROR(Run(features, camera, filter, extras, detections, t));
   t->total = MillisecondsSince(start);
   return Status::Ok();
 }
 
 Status ObjectRecognizer::Run(const FeatureSet& features, const CameraIntrinsics& camera,
-                             const ObjectFilter& filter, std::vector<Detection>* detections,
-                             RecognitionTiming* t) {
+                             const ObjectFilter& filter, const DetectionOptions& extras,
+                             std::vector<Detection>* detections, RecognitionTiming* t) {
   const Vocabulary& vocabulary = database_->vocabulary();
   // Pixel positions without lens distortion: every later step assumes a pinhole camera.
   auto phase = Clock::now();
@@ -289,7 +294,7 @@ Status ObjectRecognizer::Run(const FeatureSet& features, const CameraIntrinsics&
       if (!filter.Passes(object->metadata)) continue;
       ++t->verified;
       Detection detection;
-      if (Verify(*object, features, region, camera, t, &detection)) {
+      if (Verify(*object, features, region, camera, extras, t, &detection)) {
         detection.score = candidate.chi_square;
         detection.region = int(r);
         detections->push_back(std::move(detection));
@@ -318,7 +323,8 @@ Status ObjectRecognizer::Run(const FeatureSet& features, const CameraIntrinsics&
 
 bool ObjectRecognizer::Verify(const IndexedObject& object, const FeatureSet& features,
                               const std::vector<uint32_t>& region, const CameraIntrinsics& camera,
-                              RecognitionTiming* timing, Detection* detection) {
+                              const DetectionOptions& extras, RecognitionTiming* timing,
+                              Detection* detection) {
   auto phase = Clock::now();
   const int row_bytes = features.descriptors.cols;
   cv::Mat region_descriptors(int(region.size()), row_bytes, CV_8U);
@@ -373,8 +379,20 @@ bool ObjectRecognizer::Verify(const IndexedObject& object, const FeatureSet& fea
   for (uint32_t i : inliers) {
     error += std::sqrt(SquaredError(K, pose.R, pose.t, object_points[i], image_points[i]));
     detection->inlier_pixels.push_back(features.keypoints[region[matches[i].a]].pt);
+    if (extras.include_inliers) {
+      detection->inliers_2d3d.push_back(
+          {features.keypoints[region[matches[i].a]].pt, model_features[i], object_points[i]});
+    }
   }
   detection->reprojection_error_px = error / double(inliers.size());
+  if (extras.include_covariance) {
+    // The pose was solved on the pinhole pixels, so its uncertainty is too.
+    PoseCovariance6 covariance;
+    if (ComputePoseCovariance(K, pose.R, pose.t, Select(object_points, inliers),
+                              Select(image_points, inliers), kCovarianceMinSigmaPx, &covariance)) {
+      detection->covariance.assign(covariance.begin(), covariance.end());
+    }
+  }
 
   std::vector<cv::Point3f> outline3d;
   if (object.metadata.type == ObjectType::kPlanar) {

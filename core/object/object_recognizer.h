@@ -22,6 +22,12 @@
 // filter is a parameter of each call, not of the recogniser, because it belongs to a request (or
 // a stream) while a recogniser is reused across requests (one per worker thread in recogd).
 //
+// For a SLAM that inserts detections as landmarks (thesis §5.6), a call may also ask
+// (DetectionOptions, per call for the same reason) for each detection's inlier 2D-3D
+// correspondences and the 6×6 covariance of its pose (geometry/pose_covariance.h: rotation-vector
+// perturbation first, then translation; sigma² from the inliers' residuals, floored at
+// (0.5 px)²). Both are off by default and then cost nothing.
+//
 // Not thread-safe (it reuses scratch memory): use one recogniser per thread; they can share one
 // ObjectDatabase.
 #pragma once
@@ -35,6 +41,7 @@
 #include "core/common/status.h"
 #include "core/features/feature_extractor.h"
 #include "core/geometry/correspondences.h"
+#include "core/geometry/pose_covariance.h"
 #include "core/object/object_database.h"
 #include "core/object/roi_clustering.h"
 
@@ -72,6 +79,22 @@ struct ObjectFilter {
   bool Passes(const ObjectMetadata& object) const;
 };
 
+// What a call wants in each detection beyond its pose (both off = the plain detection).
+struct DetectionOptions {
+  bool include_inliers = false;     // Detection::inliers_2d3d
+  bool include_covariance = false;  // Detection::covariance
+};
+
+// One RANSAC inlier of a detection: an image keypoint and the model point it matched.
+struct InlierCorrespondence {
+  cv::Point2f pixel;  // the keypoint in the image (as detected, lens distortion included)
+  // The model feature that matched: a row of the model's descriptors (IndexedObject::points is
+  // indexed the same way). In the model file, that feature describes point
+  // points[point_of_feature[point_id]]; the features of one point share `point`.
+  uint32_t point_id = 0;
+  cv::Point3f point;  // the feature's 3D point, object frame, the model's units
+};
+
 struct Detection {
   EntryId id = kInvalidEntryId;
   // The recognised model's metadata (name, version, type, class, units).
@@ -88,6 +111,12 @@ struct Detection {
   std::vector<cv::Point2f> outline;        // convex hull of the projected model, image pixels
   std::vector<cv::Point2f> inlier_pixels;  // the image points of the inliers
   int region = -1;                         // index of the region it was found in
+  // Only when DetectionOptions::include_inliers: every inlier, in no particular order.
+  std::vector<InlierCorrespondence> inliers_2d3d;
+  // Only when DetectionOptions::include_covariance: the 6×6 covariance of camera_from_object,
+  // row-major, rotation (rotation-vector perturbation of R, radians) first, then translation (the
+  // model's units). Empty when asked but the inliers are degenerate (e.g. all on one line).
+  std::vector<double> covariance;
 };
 
 // Milliseconds per stage for one image (thesis Table 5.6).
@@ -102,26 +131,27 @@ class ObjectRecognizer {
  public:
   ObjectRecognizer(std::shared_ptr<const ObjectDatabase> database, RecognitionOptions options = {});
 
-  // The objects of `filter` found in the image, best first. INVALID_ARGUMENT for an empty or
-  // non-8-bit image, or invalid intrinsics.
+  // The objects of `filter` found in the image, best first, with the extras `extras` asks for.
+  // INVALID_ARGUMENT for an empty or non-8-bit image, or invalid intrinsics.
   Status Recognize(const cv::Mat& image, const CameraIntrinsics& camera,
                    std::vector<Detection>* detections, RecognitionTiming* timing = nullptr,
-                   const ObjectFilter& filter = {});
+                   const ObjectFilter& filter = {}, const DetectionOptions& extras = {});
   // The same from features already extracted (with the database's descriptor format).
   Status RecognizeFeatures(const FeatureSet& features, const CameraIntrinsics& camera,
                            std::vector<Detection>* detections, RecognitionTiming* timing = nullptr,
-                           const ObjectFilter& filter = {});
+                           const ObjectFilter& filter = {}, const DetectionOptions& extras = {});
 
   const RecognitionOptions& options() const { return options_; }
 
  private:
   // The pipeline after feature extraction; fills every field of *timing but orb and total.
   Status Run(const FeatureSet& features, const CameraIntrinsics& camera, const ObjectFilter& filter,
-             std::vector<Detection>* detections, RecognitionTiming* timing);
+             const DetectionOptions& extras, std::vector<Detection>* detections,
+             RecognitionTiming* timing);
   // Verifies one candidate object against a region; true and *detection filled when it passes.
   bool Verify(const IndexedObject& object, const FeatureSet& features,
               const std::vector<uint32_t>& region, const CameraIntrinsics& camera,
-              RecognitionTiming* timing, Detection* detection);
+              const DetectionOptions& extras, RecognitionTiming* timing, Detection* detection);
 
   std::shared_ptr<const ObjectDatabase> database_;
   RecognitionOptions options_;
