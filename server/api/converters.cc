@@ -315,11 +315,25 @@ void ToProto(const Detection& detection, pb::DetectedObject* out) {
     q->set_x(p.x);
     q->set_y(p.y);
   }
+  for (const InlierCorrespondence& c : detection.inliers_2d3d) {
+    pb::InlierCorrespondence* q = out->add_inliers_2d3d();
+    q->mutable_pixel()->set_x(c.pixel.x);
+    q->mutable_pixel()->set_y(c.pixel.y);
+    q->mutable_point()->set_x(c.point.x);
+    q->mutable_point()->set_y(c.point.y);
+    q->mutable_point()->set_z(c.point.z);
+    q->set_point_id(c.point_id);
+  }
+  out->mutable_covariance()->Add(detection.covariance.begin(), detection.covariance.end());
 }
 
 ObjectFilter FromProto(const pb::ObjectFilter& filter) {
   return {{filter.names().begin(), filter.names().end()},
           {filter.classes().begin(), filter.classes().end()}};
+}
+
+DetectionOptions FromProto(const pb::DetectionOptions& options) {
+  return {options.include_inliers(), options.include_covariance()};
 }
 
 void ToProto(const ModelVersionInfo& info, pb::ModelInfo* out) {

@@ -63,6 +63,8 @@ PlaceResultOptions FromProto(const pb::ResultOptions& options,
 void ToProto(const Detection& detection, pb::DetectedObject* out);
 pb::ObjectType ToProto(ObjectType type);
 ObjectFilter FromProto(const pb::ObjectFilter& filter);
+// What a request asks each detection to carry (inliers, covariance); unset = nothing extra.
+DetectionOptions FromProto(const pb::DetectionOptions& options);
 
 void ToProto(const ModelVersionInfo& info, pb::ModelInfo* out);
 // The inverse of ToProto (a replica copying its primary's versions); missing dimensions are 0.

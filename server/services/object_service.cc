@@ -14,9 +14,9 @@ constexpr char kService[] = "/recognition.v1.ObjectRecognition/";
 std::string Method(const char* name) { return std::string(kService) + name; }
 
 // Decodes one frame, recognises the filter's objects with this worker's recogniser and encodes
-// the detections (core gives them best first).
+// the detections (core gives them best first) with the extras `extras` asks for.
 Status RunRecognition(ServerState& state, WorkerContext& worker, const pb::Frame& request,
-                      const ObjectFilter& filter,
+                      const ObjectFilter& filter, const DetectionOptions& extras,
                       google::protobuf::RepeatedPtrField<pb::DetectedObject>* out,
                       pb::Timing* timing) {
   RECOG_ASSIGN_OR_RETURN(DecodedFrame frame,
@@ -31,10 +31,10 @@ Status RunRecognition(ServerState& state, WorkerContext& worker, const pb::Frame
   RecognitionTiming stages;
   if (frame.has_image()) {
     RECOG_RETURN_IF_ERROR(
-        recognizer.Recognize(frame.image, *frame.intrinsics, &detections, &stages, filter));
+        recognizer.Recognize(frame.image, *frame.intrinsics, &detections, &stages, filter, extras));
   } else {
     RECOG_RETURN_IF_ERROR(recognizer.RecognizeFeatures(frame.features, *frame.intrinsics,
-                                                       &detections, &stages, filter));
+                                                       &detections, &stages, filter, extras));
   }
   timing->set_features_ms(stages.orb);
   timing->set_recognition_ms(stages.total - stages.orb);
@@ -57,17 +57,19 @@ class ObjectFrameStream final
               "the first message of StreamRecognizeObjects must be a RecognitionConfig"};
     }
     filter_ = FromProto(first.config().filter());
+    extras_ = FromProto(first.config().detection_options());
     return grpc::Status::OK;
   }
 
   Status Answer(const pb::Frame& frame, WorkerContext& worker,
                 pb::StreamRecognizeObjectsResponse* response) override {
     // RunRecognition adds objects only once nothing can fail any more.
-    return RunRecognition(state_, worker, frame, filter_, response->mutable_objects(),
+    return RunRecognition(state_, worker, frame, filter_, extras_, response->mutable_objects(),
                           response->mutable_timing());
   }
 
   ObjectFilter filter_;
+  DetectionOptions extras_;
 };
 
 }  // namespace
@@ -80,7 +82,8 @@ grpc::ServerUnaryReactor* ObjectService::RecognizeObjects(
       [=, this](CallInfo& call, WorkerContext& worker) {
         RECOG_RETURN_IF_ERROR_AS_GRPC(
             RunRecognition(state_, worker, request->frame(), FromProto(request->filter()),
-                           response->mutable_objects(), response->mutable_timing()),
+                           FromProto(request->detection_options()), response->mutable_objects(),
+                           response->mutable_timing()),
             call.request_id);
         response->set_client_frame_id(request->frame().client_frame_id());
         response->mutable_timing()->set_queue_ms(call.queue_ms);

@@ -116,10 +116,12 @@ class RepositoryServiceTest : public ServerFixture {
   }
 
   grpc::Status Recognize(const pb::Frame& frame, pb::RecognizeObjectsResponse* response,
-                         const pb::ObjectFilter& filter = {}) {
+                         const pb::ObjectFilter& filter = {},
+                         const pb::DetectionOptions& detection_options = {}) {
     pb::RecognizeObjectsRequest request;
     *request.mutable_frame() = frame;
     *request.mutable_filter() = filter;
+    *request.mutable_detection_options() = detection_options;
     return objects_->RecognizeObjects(Context().get(), request, response);
   }
 };
@@ -410,6 +412,49 @@ TEST_F(RepositoryServiceTest, RecognitionFiltersAndRefusesFramesItCannotUse) {
   EXPECT_EQ(answers[2].error().code(), int(grpc::StatusCode::INVALID_ARGUMENT));
   EXPECT_EQ(answers[3].objects_size(), 1);
   EXPECT_EQ(answers[3].sequence(), 3u);
+}
+
+TEST_F(RepositoryServiceTest, DetectionsCarryInliersAndCovarianceOnlyWhenAsked) {
+  ASSERT_TRUE(Put(PosterModelFile("poster", 1, "poster"), "").ok());
+  pb::RecognizeObjectsResponse plain, full;
+  ASSERT_TRUE(Recognize(PosterView(1), &plain).ok());
+  ASSERT_EQ(plain.objects_size(), 1);
+  EXPECT_EQ(plain.objects(0).inliers_2d3d_size(), 0);
+  EXPECT_EQ(plain.objects(0).covariance_size(), 0);
+
+  pb::DetectionOptions slam;
+  slam.set_include_inliers(true);
+  slam.set_include_covariance(true);
+  ASSERT_TRUE(Recognize(PosterView(1), &full, {}, slam).ok());
+  ASSERT_EQ(full.objects_size(), 1);
+  const pb::DetectedObject& object = full.objects(0);
+  EXPECT_EQ(uint32_t(object.inliers_2d3d_size()), object.inliers());
+  for (const pb::InlierCorrespondence& c : object.inliers_2d3d()) {
+    EXPECT_TRUE(c.has_pixel());
+    EXPECT_NEAR(c.point().z(), 0.0, 1e-6);  // a flat poster
+  }
+  ASSERT_EQ(object.covariance_size(), 36);
+  for (int i = 0; i < 6; ++i) {
+    EXPECT_GT(object.covariance(i * 7), 0.0);
+    for (int j = 0; j < 6; ++j)
+      EXPECT_EQ(object.covariance(i * 6 + j), object.covariance(j * 6 + i));
+  }
+
+  // A stream asks once, in its config, for every frame.
+  grpc::ClientContext context;
+  auto stream = objects_->StreamRecognizeObjects(&context);
+  pb::StreamRecognizeObjectsRequest request;
+  request.mutable_config()->mutable_detection_options()->set_include_covariance(true);
+  ASSERT_TRUE(stream->Write(request));
+  *request.mutable_frame() = PosterView(1);
+  ASSERT_TRUE(stream->Write(request));
+  pb::StreamRecognizeObjectsResponse answer;
+  ASSERT_TRUE(stream->Read(&answer));
+  stream->WritesDone();
+  EXPECT_TRUE(stream->Finish().ok());
+  ASSERT_EQ(answer.objects_size(), 1);
+  EXPECT_EQ(answer.objects(0).covariance_size(), 36);
+  EXPECT_EQ(answer.objects(0).inliers_2d3d_size(), 0);
 }
 
 TEST_F(RepositoryServiceTest, ModelsSurviveARestartAndDeletedOnesStayDeleted) {
