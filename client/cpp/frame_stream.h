@@ -51,7 +51,8 @@ struct PlaceStreamRpc {
 // StreamRecognizeObjects: frames (with intrinsics), each answered with the objects it shows.
 struct ObjectStreamRpc {
   using Service = pb::ObjectRecognition;
-  using Config = pb::RecognitionConfig;  // which objects are of interest; default: all
+  // Which objects are of interest (default: all) and what each detection carries.
+  using Config = pb::RecognitionConfig;
   using Request = pb::StreamRecognizeObjectsRequest;
   using Response = pb::StreamRecognizeObjectsResponse;
 };

@@ -287,10 +287,12 @@ Result<pb::QueryPlaceResponse> RecognitionClient::QueryPlace(
 // --- Objects ---
 
 Result<pb::RecognizeObjectsResponse> RecognitionClient::RecognizeObjects(
-    const pb::Frame& frame, const pb::ObjectFilter& filter) {
+    const pb::Frame& frame, const pb::ObjectFilter& filter,
+    const pb::DetectionOptions& detection_options) {
   pb::RecognizeObjectsRequest request;
   *request.mutable_frame() = frame;
   *request.mutable_filter() = filter;
+  *request.mutable_detection_options() = detection_options;
   pb::RecognizeObjectsResponse response;
   const grpc::Status status =
       Run(CallKind::kRepeatable, UnaryDeadline(),

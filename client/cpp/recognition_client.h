@@ -121,9 +121,12 @@ class RecognitionClient {
 
   // --- Objects ---
 
-  // The known objects a frame shows (the frame needs intrinsics), best first.
-  Result<pb::RecognizeObjectsResponse> RecognizeObjects(const pb::Frame& frame,
-                                                        const pb::ObjectFilter& filter = {});
+  // The known objects a frame shows (the frame needs intrinsics), best first. `detection_options`
+  // asks each detection for its inlier 2D-3D correspondences and its pose covariance (for a SLAM
+  // that inserts objects as landmarks); by default neither.
+  Result<pb::RecognizeObjectsResponse> RecognizeObjects(
+      const pb::Frame& frame, const pb::ObjectFilter& filter = {},
+      const pb::DetectionOptions& detection_options = {});
 
   // --- Model repository ---
 

@@ -231,19 +231,25 @@ class RecognitionClient:
 
     def recognize_objects(self, image: Image,
                           intrinsics: common_pb2.CameraIntrinsics | Sequence[float],
-                          names: Iterable[str] = (), classes: Iterable[str] = ()
+                          names: Iterable[str] = (), classes: Iterable[str] = (),
+                          include_inliers: bool = False, include_covariance: bool = False
                           ) -> object_pb2.RecognizeObjectsResponse:
         """Recognises the known objects in one image; ``response.objects`` is best first.
 
         ``intrinsics`` as in :func:`make_intrinsics` (required: poses are solved with them; they
         replace those of a given Frame). ``names`` and ``classes`` restrict the answer to those
         objects (empty: every object). Finding nothing is an empty list, not an error.
+        For a SLAM that inserts the objects as landmarks, ``include_inliers`` fills each object's
+        ``inliers_2d3d`` (pixel, model point, point id of every RANSAC inlier) and
+        ``include_covariance`` its ``covariance`` (6x6 of the pose, row-major, rotation first).
         """
         frame = common_pb2.Frame()
         frame.CopyFrom(_as_frame(image))
         frame.intrinsics.CopyFrom(make_intrinsics(intrinsics))
         request = object_pb2.RecognizeObjectsRequest(
-            frame=frame, filter=object_pb2.ObjectFilter(names=names, classes=classes))
+            frame=frame, filter=object_pb2.ObjectFilter(names=names, classes=classes),
+            detection_options=object_pb2.DetectionOptions(include_inliers=include_inliers,
+                                                          include_covariance=include_covariance))
         return self._call(self._objects.RecognizeObjects, request)
 
     # Object model repository.

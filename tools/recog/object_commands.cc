@@ -152,6 +152,7 @@ int RunModelInfo(const std::string& path, bool as_json) {
 struct RecognizeArgs {
   std::vector<std::string> models;
   std::string image, camera, draw, vocabulary;
+  DetectionOptions extras;  // --inliers, --covariance
   ServerFlags server;  // --server "" (this command's default): offline; --json belongs here too
 };
 
@@ -185,12 +186,13 @@ Status RecognizeOffline(const RecognizeArgs& args, const cv::Mat& image,
   RECOG_RETURN_IF_ERROR(LoadModels(args.models, &builder, database.get()));
   ObjectRecognizer recognizer(std::shared_ptr<const ObjectDatabase>(std::move(database)));
   RecognitionTiming stages;
-  RECOG_RETURN_IF_ERROR(recognizer.Recognize(image, camera, detections, &stages));
+  RECOG_RETURN_IF_ERROR(recognizer.Recognize(image, camera, detections, &stages, {}, args.extras));
   *timing = TimingJson(stages);
   return Status::Ok();
 }
 
-// A detection as recogd reports it (without inlier pixels, which it does not send).
+// A detection as recogd reports it (without inlier_pixels, which it does not send; with the
+// inlier correspondences and the covariance when they were asked for).
 Detection FromProto(const pb::DetectedObject& object) {
   Detection d;
   d.name = object.name();
@@ -208,6 +210,12 @@ Detection FromProto(const pb::DetectedObject& object) {
   d.reprojection_error_px = object.reprojection_error_px();
   d.score = object.score();
   for (const pb::Point2& p : object.outline()) d.outline.emplace_back(p.x(), p.y());
+  for (const pb::InlierCorrespondence& c : object.inliers_2d3d()) {
+    d.inliers_2d3d.push_back({{c.pixel().x(), c.pixel().y()},
+                              c.point_id(),
+                              {float(c.point().x()), float(c.point().y()), float(c.point().z())}});
+  }
+  d.covariance.assign(object.covariance().begin(), object.covariance().end());
   return d;
 }
 
@@ -221,7 +229,10 @@ grpc::Status RecognizeOnServer(const RecognizeArgs& args, const cv::Mat& image,
   auto frame = FrameFromImageFile(args.image, image);
   if (!frame.ok()) return frame.status();
   SetIntrinsics(camera, &*frame);
-  auto response = (*client)->RecognizeObjects(*frame);
+  pb::DetectionOptions extras;
+  extras.set_include_inliers(args.extras.include_inliers);
+  extras.set_include_covariance(args.extras.include_covariance);
+  auto response = (*client)->RecognizeObjects(*frame, {}, extras);
   if (!response.ok()) return response.status();
   for (const pb::DetectedObject& object : response->objects()) {
     detections->push_back(FromProto(object));
@@ -267,6 +278,16 @@ int RunRecognize(const RecognizeArgs& args) {
                    {"inliers", d.inliers},
                    {"reprojection_error_px", d.reprojection_error_px},
                    {"outline", outline}});
+    if (args.extras.include_inliers) {
+      json inliers = json::array();
+      for (const InlierCorrespondence& c : d.inliers_2d3d) {
+        inliers.push_back({{"pixel", {c.pixel.x, c.pixel.y}},
+                           {"point", {c.point.x, c.point.y, c.point.z}},
+                           {"point_id", c.point_id}});
+      }
+      out.back()["inliers_2d3d"] = inliers;
+    }
+    if (args.extras.include_covariance) out.back()["covariance"] = d.covariance;
   }
   if (!args.draw.empty()) {
     cv::Mat canvas;
@@ -516,6 +537,11 @@ void AddObjectCommands(CLI::App& app, int* exit_code) {
   recognize->add_option("--camera", recognize_args->camera, "fx,fy,cx,cy[,k1,k2,p1,p2[,k3]]")
       ->required();
   recognize->add_option("--draw", recognize_args->draw, "PNG with outlines and axes");
+  recognize->add_flag("--inliers", recognize_args->extras.include_inliers,
+                      "With --json: each detection's inlier 2D-3D correspondences (inliers_2d3d)");
+  recognize->add_flag("--covariance", recognize_args->extras.include_covariance,
+                      "With --json: each detection's 6x6 pose covariance (row-major, rotation "
+                      "first)");
   CLI::Option* vocabulary =
       recognize->add_option("--vocab", recognize_args->vocabulary, "Vocabulary (with --models)");
   recognize_args->server.server.clear();  // no --server: offline

@@ -137,6 +137,12 @@ expect_ok "recognize the poster in its own image" "$recog" recognize --models "$
   && pass || fail "recognize --json reports the poster"
 /usr/bin/python3 -c "assert open('$tmp/poster.png', 'rb').read(8) == b'\\x89PNG\\r\\n\\x1a\\n'" \
   && pass || fail "recognize --draw writes a PNG"
+/usr/bin/python3 -c "import json; d=json.load(open('$tmp/out')); assert all('inliers_2d3d' not in x and 'covariance' not in x for x in d['detections']), d" \
+  && pass || fail "recognize --json has no inliers or covariance unless asked"
+expect_ok "recognize --inliers --covariance" "$recog" recognize --models "$tmp/poster.robj" \
+  --image "$images/1.jpg" --camera 500,500,256,192 --json --inliers --covariance
+/usr/bin/python3 -c "import json; x=json.load(open('$tmp/out'))['detections'][0]; i=x['inliers_2d3d']; assert len(i)==x['inliers'] and all(len(c['pixel'])==2 and len(c['point'])==3 and c['point_id']>=0 for c in i) and len(x['covariance'])==36 and all(x['covariance'][k*7]>0 for k in range(6)), x" \
+  && pass || fail "recognize --json --inliers --covariance reports inliers_2d3d and covariance"
 expect_error "model build without a source" "exactly one of" "$recog" model build -o "$tmp/m.robj"
 expect_error "model build with two sources" "exactly one of" "$recog" model build --planar "$images/1.jpg" \
   --rgbd "$tmp/views.txt" --width 0.64 --height 0.48 -o "$tmp/m.robj"

@@ -126,6 +126,10 @@ json_check "recognize --server finds the poster" \
   "assert [(x['name'], x['version']) for x in d['detections']]==[('poster', 1)] and 'recognition' in d['timing_ms'], d"
 /usr/bin/python3 -c "assert open('$tmp/poster.png', 'rb').read(8) == b'\\x89PNG\\r\\n\\x1a\\n'" \
   && pass || fail "recognize --server --draw writes a PNG"
+expect_ok "recognize --server --inliers --covariance" "$recog" recognize --server "127.0.0.1:$port" \
+  --image "$images/1.jpg" --camera 500,500,256,192 --json --inliers --covariance
+json_check "recognize --server --json reports inliers_2d3d and covariance" \
+  "x=d['detections'][0]; i=x['inliers_2d3d']; assert len(i)==x['inliers'] and sorted(i[0])==['pixel', 'point', 'point_id'] and len(x['covariance'])==36, x"
 expect_usage_error "recognize with --models and --server" "excludes" "$recog" recognize --models "$tmp/poster.robj" \
   --server "127.0.0.1:$port" --image "$images/1.jpg" --camera 500,500,256,192
 expect_error "recognize with neither --models nor --server" "--models" "$recog" recognize \

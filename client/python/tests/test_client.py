@@ -1,7 +1,7 @@
 """Tests of the Python client against the real recogd.
 
-The server binary is taken from the environment variable RECOGD and the corridor images from
-RECOG_SOURCE_DIR/tests/data/corridor; the generated stubs and recognition_client.py must be on
+The server binary is taken from the environment variable RECOGD, the CLI (to build a model) from
+RECOG and the corridor images from RECOG_SOURCE_DIR/tests/data/corridor; the generated stubs and recognition_client.py must be on
 PYTHONPATH (ctest sets all three: ``ctest -R python``). Exits with 77 (skipped) when Python's
 grpc or protobuf modules are missing.
 """
@@ -184,6 +184,32 @@ class RecognitionClientTest(unittest.TestCase):
         self.assertEqual(len(response.objects), 0)
         self.assert_code(grpc.StatusCode.NOT_FOUND, self.client.download_model, "nothing")
         self.assert_code(grpc.StatusCode.NOT_FOUND, self.client.delete_model, "nothing")
+
+    def test_objects_carry_inliers_and_covariance_when_asked(self):
+        recog = os.environ.get("RECOG")
+        if not recog:
+            raise RuntimeError("set RECOG to the path of the recog binary")
+        with tempfile.TemporaryDirectory(prefix="recog-python-test-") as tmp:
+            model = Path(tmp) / "poster.robj"
+            subprocess.run([recog, "model", "build", "--planar", str(corridor(1)), "--width",
+                            "0.64", "--height", "0.48", "--name", "slam-poster", "-o",
+                            str(model)], check=True, capture_output=True)
+            self.client.upload_model(model)
+        try:
+            camera = (500.0, 500.0, 256.0, 192.0)
+            plain = self.client.recognize_objects(corridor(1), camera, names=["slam-poster"])
+            full = self.client.recognize_objects(corridor(1), camera, names=["slam-poster"],
+                                                 include_inliers=True, include_covariance=True)
+        finally:
+            self.client.delete_model("slam-poster")
+        self.assertEqual([o.name for o in plain.objects], ["slam-poster"])
+        self.assertEqual(len(plain.objects[0].inliers_2d3d), 0)
+        self.assertEqual(len(plain.objects[0].covariance), 0)
+        self.assertEqual([o.name for o in full.objects], ["slam-poster"])
+        detected = full.objects[0]
+        self.assertEqual(len(detected.inliers_2d3d), detected.inliers)
+        self.assertEqual(len(detected.covariance), 36)
+        self.assertTrue(all(detected.covariance[i * 7] > 0 for i in range(6)))
 
     def test_an_upload_passes_the_size_and_checksum_checks_before_the_file_is_refused(self):
         # Three chunks of bytes that are not a model: the server accepts the header's size and
