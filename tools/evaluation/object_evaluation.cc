@@ -2,7 +2,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
+#include <map>
 #include <memory>
 #include <sstream>
 
@@ -26,6 +28,32 @@ constexpr std::pair<std::string_view, ImageTransform> kTransformNames[] = {
     {"scale0.5", ImageTransform::kHalfScale},
     {"rot90", ImageTransform::kRotate90},
     {"rot180", ImageTransform::kRotate180}};
+
+constexpr std::pair<std::string_view, ObjectEvaluationMethod> kMethodNames[] = {
+    {"merged", ObjectEvaluationMethod::kMerged},
+    {"independent-views", ObjectEvaluationMethod::kIndependentViews}};
+
+// The database entry of one training view in the independent-view method.
+std::string ViewEntryName(const std::string& object, int view) {
+  char suffix[16];
+  std::snprintf(suffix, sizeof(suffix), ".face_%03d", view);
+  return object + suffix;
+}
+
+// The model of one training view alone: the folder's model with every other view left out.
+StatusOr<ObjectModel> BuildViewModel(std::shared_ptr<const Vocabulary> vocabulary,
+                                     const ModelBuildOptions& build, const RoboEarthFolder& folder,
+                                     const RoboEarthView& view) {
+  ModelBuildOptions only = build;
+  for (const RoboEarthView& other : folder.views) {
+    if (other.index != view.index) only.exclude_views.push_back(other.index);
+  }
+  ModelBuilder builder(std::move(vocabulary), only);
+  RECOG_ASSIGN_OR_RETURN(ObjectModel model, builder.FromRoboEarth(folder.path));
+  model.metadata.object_class = model.metadata.name;
+  model.metadata.name = ViewEntryName(model.metadata.name, view.index);
+  return model;
+}
 
 ObjectEvaluationSummary Summarise(ImageTransform transform,
                                   const std::vector<ObjectQuery>& queries) {
@@ -114,6 +142,21 @@ void TransformView(ImageTransform transform, cv::Mat* image, CameraIntrinsics* c
   }
   camera_from_object->R = turn * camera_from_object->R;
   camera_from_object->t = turn * camera_from_object->t;
+}
+
+std::string_view ObjectEvaluationMethodName(ObjectEvaluationMethod method) {
+  for (const auto& [name, value] : kMethodNames) {
+    if (value == method) return name;
+  }
+  return "merged";
+}
+
+StatusOr<ObjectEvaluationMethod> ParseObjectEvaluationMethod(std::string_view name) {
+  for (const auto& [text, value] : kMethodNames) {
+    if (name == text) return value;
+  }
+  return Status::InvalidArgument("unknown evaluation method '" + std::string(name) +
+                                 "' (merged, independent-views)");
 }
 
 double RotationErrorDeg(const cv::Matx33d& a, const cv::Matx33d& b) {
@@ -219,18 +262,43 @@ StatusOr<ObjectEvaluation> EvaluateObjects(const ObjectEvaluationOptions& option
   MemoryIndexStore store;
   RECOG_ASSIGN_OR_RETURN(std::shared_ptr<ObjectDatabase> database,
                          ObjectDatabase::Open(&store, vocabulary));
+  const bool merged = options.method == ObjectEvaluationMethod::kMerged;
   ObjectEvaluation evaluation;
-  std::vector<RoboEarthFolder> evaluated;
-  std::vector<ObjectModel> full_models;
-  for (const fs::path& folder : folders) {
-    RECOG_ASSIGN_OR_RETURN(ObjectModel model, builder.FromRoboEarth(folder.string()));
+  evaluation.method = options.method;
+  const auto put = [&](const ObjectModel& model, const std::string& object) -> Status {
     RECOG_RETURN_IF_ERROR(database->Put(model).status());
     evaluation.database.push_back(model.metadata.name);
+    evaluation.objects[model.metadata.name] = object;
+    return Status::Ok();
+  };
+  std::vector<RoboEarthFolder> evaluated;
+  // What goes back after a held-out view: the full model of each evaluated object (merged), or
+  // each evaluated view's own model (independent views), by entry name.
+  std::map<std::string, ObjectModel> held_out;
+  for (const fs::path& folder : folders) {
+    const std::string object = folder.filename().string();
     RECOG_ASSIGN_OR_RETURN(RoboEarthFolder listing, ReadRoboEarthFolder(folder.string()));
-    if (listing.meta.type == ObjectType::k3D && int(listing.views.size()) >= options.min_views) {
-      evaluated.push_back(std::move(listing));
-      full_models.push_back(std::move(model));
+    const bool evaluate =
+        listing.meta.type == ObjectType::k3D && int(listing.views.size()) >= options.min_views;
+    if (merged) {
+      RECOG_ASSIGN_OR_RETURN(ObjectModel model, builder.FromRoboEarth(folder.string()));
+      RECOG_RETURN_IF_ERROR(put(model, object));
+      if (evaluate) held_out.emplace(model.metadata.name, std::move(model));
+    } else {
+      for (const RoboEarthView& view : listing.views) {
+        StatusOr<ObjectModel> model = BuildViewModel(vocabulary, build, listing, view);
+        // A view in which no feature sees a 3D point (a small planar crop) cannot be an entry.
+        if (model.status().code() == StatusCode::kInvalidArgument) {
+          evaluation.skipped_views.push_back(
+              {ViewEntryName(object, view.index), model.status().message()});
+          continue;
+        }
+        if (!model.ok()) return model.status();
+        RECOG_RETURN_IF_ERROR(put(*model, object));
+        if (evaluate) held_out.emplace(model->metadata.name, std::move(*model));
+      }
     }
+    if (evaluate) evaluated.push_back(std::move(listing));
   }
   size_t total = 0;
   for (const RoboEarthFolder& folder : evaluated) total += folder.views.size();
@@ -239,14 +307,20 @@ StatusOr<ObjectEvaluation> EvaluateObjects(const ObjectEvaluationOptions& option
 
   ObjectRecognizer recognizer(database, options.recognition);
   std::vector<Detection> detections;
-  for (size_t o = 0; o < evaluated.size(); ++o) {
-    const RoboEarthFolder& folder = evaluated[o];
+  for (const RoboEarthFolder& folder : evaluated) {
+    const std::string object = fs::path(folder.path).filename().string();
     for (const RoboEarthView& view : folder.views) {
-      ModelBuildOptions without = build;
-      without.exclude_views.push_back(view.index);
-      ModelBuilder partial_builder(vocabulary, without);
-      RECOG_ASSIGN_OR_RETURN(ObjectModel partial, partial_builder.FromRoboEarth(folder.path));
-      RECOG_RETURN_IF_ERROR(database->Put(partial).status());
+      // Leave v out of its object.
+      const std::string entry = merged ? object : ViewEntryName(object, view.index);
+      if (merged) {
+        ModelBuildOptions without = build;
+        without.exclude_views.push_back(view.index);
+        ModelBuilder partial_builder(vocabulary, without);
+        RECOG_ASSIGN_OR_RETURN(ObjectModel partial, partial_builder.FromRoboEarth(folder.path));
+        RECOG_RETURN_IF_ERROR(database->Put(partial).status());
+      } else if (held_out.count(entry) != 0) {  // a skipped view has no entry to remove
+        RECOG_RETURN_IF_ERROR(database->Remove(entry));
+      }
       RECOG_ASSIGN_OR_RETURN(cv::Mat original, ReadGrayImage(view.image_path));
       for (ImageTransform transform : options.transforms) {
         cv::Mat image = original.clone();
@@ -257,15 +331,19 @@ StatusOr<ObjectEvaluation> EvaluateObjects(const ObjectEvaluationOptions& option
         RigidTransform truth = view.camera.camera_from_object;
         TransformView(transform, &image, &camera, &truth);
         ObjectQuery query;
-        query.object = partial.metadata.name;
+        query.object = object;
         query.view = view.index;
         query.transform = transform;
         RECOG_RETURN_IF_ERROR(recognizer.Recognize(image, camera, &detections, &query.timing));
         for (const Detection& d : detections) {
-          if (d.name != query.object) {
-            query.wrong.push_back(d.name);
+          const std::string& found = evaluation.objects.at(d.name);
+          if (found != query.object) {
+            if (std::find(query.wrong.begin(), query.wrong.end(), found) == query.wrong.end()) {
+              query.wrong.push_back(found);
+            }
           } else if (!query.detected) {
             query.detected = true;
+            query.matched = d.name;
             query.inliers = d.inliers;
             query.rotation_error_deg = RotationErrorDeg(d.camera_from_object.R, truth.R);
             query.translation_error_ratio =
@@ -277,7 +355,8 @@ StatusOr<ObjectEvaluation> EvaluateObjects(const ObjectEvaluationOptions& option
           cv::cvtColor(image, canvas, cv::COLOR_GRAY2BGR);
           for (const Detection& d : detections) {
             DrawDetection(d, camera,
-                          d.name == query.object ? cv::Scalar(0, 200, 0) : cv::Scalar(0, 0, 255),
+                          evaluation.objects.at(d.name) == query.object ? cv::Scalar(0, 200, 0)
+                                                                        : cv::Scalar(0, 0, 255),
                           &canvas);
           }
           char name[160];
@@ -288,8 +367,12 @@ StatusOr<ObjectEvaluation> EvaluateObjects(const ObjectEvaluationOptions& option
         evaluation.queries.push_back(std::move(query));
         if (options.progress) options.progress(evaluation.queries.size(), total);
       }
+      // Put v back (merged: the object's full model once all its views have been held out).
+      if (!merged && held_out.count(entry) != 0) {
+        RECOG_RETURN_IF_ERROR(database->Put(held_out.at(entry)).status());
+      }
     }
-    RECOG_RETURN_IF_ERROR(database->Put(full_models[o]).status());
+    if (merged) RECOG_RETURN_IF_ERROR(database->Put(held_out.at(object)).status());
   }
   for (ImageTransform transform : options.transforms) {
     evaluation.summaries.push_back(Summarise(transform, evaluation.queries));

@@ -2,18 +2,26 @@
 // objects`), and the pieces the object subcommands share (camera strings, model sources, the
 // object vocabulary, drawing a detection).
 //
-// Every RoboEarth folder under the root becomes a model built from all its views; those are the
-// database. Then, for every 3D object with at least `min_views` views and every view v: the
-// object's model is rebuilt without v and replaces the full one, and face_v.png is recognised
-// with v's camera, as is and through each image transform (half size, rotated 90 and 180
-// degrees, with the camera and the ground-truth pose transformed alike). The held-out camera is
-// the ground-truth pose. A query counts as detected when the held-out object is among the
-// detections; any other object detected is a wrong detection.
+// Two ways to put the RoboEarth folders under the root into the database (ObjectEvaluationMethod):
+//  - merged (thesis §5.4, the system's own): every folder becomes one model built from all its
+//    views (descriptors merged per 3D point and word, eq. 5.3);
+//  - independent views (thesis §5.3, the baseline it compares with): every training view becomes
+//    its own entry, a model built from that view alone (its ORB features and the 3D points they
+//    see), named "<folder>.face_NNN" with the folder as its class.
+// Then, for every 3D object with at least `min_views` views and every view v, v is left out of
+// its object (merged: the object's model is rebuilt without v and replaces the full one;
+// independent views: v's entry is removed), and face_v.png is recognised with v's camera, as is
+// and through each image transform (half size, rotated 90 and 180 degrees, with the camera and the
+// ground-truth pose transformed alike); then v is put back. The held-out camera is the
+// ground-truth pose. A query counts as detected when an entry of the held-out object is among the
+// detections; every other object (folder) detected is a wrong detection.
 #pragma once
 
 #include <functional>
+#include <map>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <opencv2/core.hpp>
@@ -35,8 +43,13 @@ void TransformView(ImageTransform transform, cv::Mat* image, CameraIntrinsics* c
 // Angle of R_a R_b^T in degrees.
 double RotationErrorDeg(const cv::Matx33d& a, const cv::Matx33d& b);
 
+enum class ObjectEvaluationMethod { kMerged, kIndependentViews };
+std::string_view ObjectEvaluationMethodName(ObjectEvaluationMethod method);  // "merged", ...
+StatusOr<ObjectEvaluationMethod> ParseObjectEvaluationMethod(std::string_view name);
+
 struct ObjectEvaluationOptions {
   std::string roboearth_dir;  // a folder of RoboEarth model folders
+  ObjectEvaluationMethod method = ObjectEvaluationMethod::kMerged;
   std::string vocabulary_path;
   ModelBuildOptions build;
   RecognitionOptions recognition;
@@ -53,7 +66,8 @@ struct ObjectQuery {
   int view = 0;
   ImageTransform transform = ImageTransform::kNone;
   bool detected = false;
-  std::vector<std::string> wrong;  // other objects reported
+  std::string matched;             // when detected: the entry that found it (object or view)
+  std::vector<std::string> wrong;  // other objects reported (folder names, each once)
   double rotation_error_deg = 0;   // when detected
   double translation_error_ratio = 0;
   size_t inliers = 0;
@@ -70,7 +84,12 @@ struct ObjectEvaluationSummary {
 };
 
 struct ObjectEvaluation {
-  std::vector<std::string> database;  // object names
+  ObjectEvaluationMethod method = ObjectEvaluationMethod::kMerged;
+  std::vector<std::string> database;           // entry names
+  std::map<std::string, std::string> objects;  // entry name -> its object (folder name)
+  // Independent views: the views that gave no entry (no feature with a 3D point), by entry name,
+  // with the builder's message.
+  std::vector<std::pair<std::string, std::string>> skipped_views;
   std::vector<ObjectQuery> queries;
   std::vector<ObjectEvaluationSummary> summaries;  // one per transform
 };

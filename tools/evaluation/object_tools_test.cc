@@ -1,10 +1,12 @@
 // The object evaluation's image transforms and the ViSP file readers.
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 
 #include <gtest/gtest.h>
 #include <opencv2/calib3d.hpp>
 
+#include "core/vocabulary/vocabulary_io.h"
 #include "tests/testing/test_data.h"
 #include "tools/evaluation/object_evaluation.h"
 #include "tools/evaluation/visp_files.h"
@@ -103,6 +105,105 @@ TEST(VispFilesSharedDataTest, ReadsTheVispCube) {
   auto pose = ReadVispPose(testing::SharedData("objects/visp-cube/cube.0.pos"));
   ASSERT_TRUE(pose.ok());
   EXPECT_NEAR(pose->t[2], 0.5071128378, 1e-12);
+}
+
+TEST(ObjectEvaluationTest, MethodsHaveNames) {
+  EXPECT_EQ(*ParseObjectEvaluationMethod("independent-views"),
+            ObjectEvaluationMethod::kIndependentViews);
+  EXPECT_EQ(ObjectEvaluationMethodName(ObjectEvaluationMethod::kMerged), "merged");
+  EXPECT_EQ(ParseObjectEvaluationMethod("views").status().code(), StatusCode::kInvalidArgument);
+}
+
+// Leave-one-view-out on two RoboEarth folders (bio: 3D, 5 views; bottle1: planar, 1 view), as is
+// only, with each way of filling the database.
+class ObjectEvaluationSharedDataTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    if (!testing::HasSharedData("objects/roboearth/models/bio/meta.xml")) return;
+    root_ = fs::temp_directory_path() / ("recog_eval_objects_" + std::to_string(::getpid()));
+    fs::create_directories(root_);
+    for (const char* name : {"bio", "bottle1"}) {
+      fs::create_directory_symlink(testing::SharedData("objects/roboearth/models/") + name,
+                                   root_ / name);
+    }
+  }
+  void TearDown() override {
+    if (!root_.empty()) fs::remove_all(root_);
+  }
+  StatusOr<ObjectEvaluation> Evaluate(ObjectEvaluationMethod method) const {
+    ObjectEvaluationOptions options;
+    options.roboearth_dir = root_.string();
+    options.vocabulary_path = DefaultObjectVocabularyPath();
+    options.method = method;
+    options.transforms = {ImageTransform::kNone};
+    return EvaluateObjects(options);
+  }
+  fs::path root_;
+};
+
+// What holds for either method: one query per view of bio (the only 3D object with 5 views), and
+// counts that agree with the queries.
+void ExpectConsistent(const ObjectEvaluation& e) {
+  ASSERT_EQ(e.queries.size(), 5u);
+  ASSERT_EQ(e.summaries.size(), 1u);
+  const ObjectEvaluationSummary& s = e.summaries[0];
+  EXPECT_EQ(s.queries, 5u);
+  size_t detected = 0, wrong = 0;
+  for (size_t i = 0; i < e.queries.size(); ++i) {
+    const ObjectQuery& q = e.queries[i];
+    EXPECT_EQ(q.object, "bio");
+    EXPECT_EQ(q.view, int(i));
+    detected += q.detected;
+    wrong += q.wrong.size();
+    for (const std::string& w : q.wrong) EXPECT_EQ(w, "bottle1");
+    if (q.detected) {
+      EXPECT_EQ(e.objects.at(q.matched), "bio");
+      EXPECT_GE(q.inliers, 6u);
+    } else {
+      EXPECT_TRUE(q.matched.empty());
+    }
+  }
+  EXPECT_EQ(s.detections, detected);
+  EXPECT_EQ(s.wrong_detections, wrong);
+  EXPECT_DOUBLE_EQ(s.detection_rate, double(detected) / 5.0);
+}
+
+TEST_F(ObjectEvaluationSharedDataTest, MergedModelsAreOnePerFolder) {
+  RECOG_SKIP_WITHOUT_SHARED_DATA("objects/roboearth/models/bio/meta.xml");
+  auto e = Evaluate(ObjectEvaluationMethod::kMerged);
+  ASSERT_TRUE(e.ok()) << e.status().ToString();
+  EXPECT_EQ(e->database, (std::vector<std::string>{"bio", "bottle1"}));
+  EXPECT_TRUE(e->skipped_views.empty());
+  ExpectConsistent(*e);
+  for (const ObjectQuery& q : e->queries) {
+    if (q.detected) {
+      EXPECT_EQ(q.matched, "bio");
+    }
+  }
+}
+
+TEST_F(ObjectEvaluationSharedDataTest,
+       IndependentViewsAreOneEntryPerViewAndTheHeldOutOneIsLeftOut) {
+  RECOG_SKIP_WITHOUT_SHARED_DATA("objects/roboearth/models/bio/meta.xml");
+  auto e = Evaluate(ObjectEvaluationMethod::kIndependentViews);
+  ASSERT_TRUE(e.ok()) << e.status().ToString();
+  EXPECT_EQ(e->method, ObjectEvaluationMethod::kIndependentViews);
+  EXPECT_EQ(e->database,
+            (std::vector<std::string>{"bio.face_000", "bio.face_001", "bio.face_002",
+                                      "bio.face_003", "bio.face_004", "bottle1.face_000"}));
+  EXPECT_EQ(e->objects.at("bio.face_003"), "bio");
+  EXPECT_EQ(e->objects.at("bottle1.face_000"), "bottle1");
+  ExpectConsistent(*e);
+  size_t detected = 0;
+  for (const ObjectQuery& q : e->queries) {
+    if (!q.detected) continue;
+    ++detected;
+    char held_out[32];
+    std::snprintf(held_out, sizeof(held_out), "bio.face_%03d", q.view);
+    EXPECT_NE(q.matched, held_out) << "the held-out view must not be in the database";
+  }
+  // Neighbouring views of the pack overlap: most held-out views are found through another one.
+  EXPECT_GE(detected, 3u);
 }
 
 }  // namespace

@@ -409,7 +409,7 @@ int RunEvalSequence(const EvalSequenceArgs& args) {
 // ---- recog eval objects ----
 
 struct EvalObjectsArgs {
-  std::string roboearth, vocabulary, draw;
+  std::string roboearth, vocabulary, draw, method = "merged";
   std::vector<std::string> transforms = {"none", "scale0.5", "rot90", "rot180"};
   int min_views = 5;
   bool json = false, quiet = false;
@@ -436,6 +436,9 @@ json SummaryJson(const ObjectEvaluationSummary& s) {
 int RunEvalObjects(const EvalObjectsArgs& args) {
   ObjectEvaluationOptions options;
   options.roboearth_dir = args.roboearth;
+  auto method = ParseObjectEvaluationMethod(args.method);
+  if (!method.ok()) return Fail("eval objects", method.status());
+  options.method = *method;
   options.vocabulary_path =
       args.vocabulary.empty() ? DefaultObjectVocabularyPath() : args.vocabulary;
   options.min_views = args.min_views;
@@ -454,6 +457,7 @@ int RunEvalObjects(const EvalObjectsArgs& args) {
   progress.Finish();
   if (!evaluation.ok()) return Fail("eval objects", evaluation.status());
   json out = SummaryJson(evaluation->summaries.front());
+  out["method"] = std::string(ObjectEvaluationMethodName(evaluation->method));
   out["transform"] = std::string(ImageTransformName(evaluation->summaries.front().transform));
   json by_transform;
   for (const ObjectEvaluationSummary& s : evaluation->summaries) {
@@ -461,12 +465,18 @@ int RunEvalObjects(const EvalObjectsArgs& args) {
   }
   out["by_transform"] = by_transform;
   out["database"] = evaluation->database;
+  json skipped = json::array();
+  for (const auto& [entry, reason] : evaluation->skipped_views) {
+    skipped.push_back({{"entry", entry}, {"reason", reason}});
+  }
+  out["skipped_views"] = skipped;
   json queries = json::array();
   for (const ObjectQuery& q : evaluation->queries) {
     queries.push_back({{"object", q.object},
                        {"view", q.view},
                        {"transform", std::string(ImageTransformName(q.transform))},
                        {"detected", q.detected},
+                       {"matched", q.matched},
                        {"wrong", q.wrong},
                        {"inliers", q.inliers},
                        {"rotation_error_deg", q.rotation_error_deg},
@@ -477,6 +487,12 @@ int RunEvalObjects(const EvalObjectsArgs& args) {
   if (args.json) {
     std::printf("%s\n", out.dump(2).c_str());
   } else {
+    std::printf("method %s: %zu database entries\n",
+                std::string(ObjectEvaluationMethodName(evaluation->method)).c_str(),
+                evaluation->database.size());
+    for (const auto& [entry, reason] : evaluation->skipped_views) {
+      std::printf("skipped view %s: %s\n", entry.c_str(), reason.c_str());
+    }
     std::printf("%-9s %7s %9s %6s %9s %9s %9s\n", "transform", "queries", "detected", "wrong",
                 "rot(deg)", "trans(%)", "total(ms)");
     for (const ObjectEvaluationSummary& s : evaluation->summaries) {
@@ -564,6 +580,11 @@ void AddEvalObjectsCommand(CLI::App& eval, int* exit_code) {
       "objects", "Leave-one-view-out recognition on RoboEarth models, with pose errors");
   objects->add_option("--roboearth", args->roboearth, "Folder of RoboEarth model folders")
       ->required();
+  objects
+      ->add_option("--method", args->method,
+                   "merged (a model per object from all its views) or independent-views (an "
+                   "entry per training view, thesis §5.3)")
+      ->capture_default_str();
   objects->add_option("--vocab", args->vocabulary, "Vocabulary (default: the bundled object one)");
   objects->add_option("--transforms", args->transforms, "none, scale0.5, rot90, rot180")
       ->capture_default_str();

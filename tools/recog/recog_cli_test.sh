@@ -159,6 +159,8 @@ expect_error "recognize with a malformed camera" "--camera" "$recog" recognize -
 expect_error "recognize with a missing model" "NOT_FOUND" "$recog" recognize --models "$tmp/none.robj" \
   --image "$images/1.jpg" --camera 500,500,256,192
 expect_error "eval objects on a missing folder" "NOT_FOUND" "$recog" eval objects --roboearth /nonexistent -q
+expect_error "eval objects with an unknown method" "INVALID_ARGUMENT.*independent-views" "$recog" eval objects \
+  --roboearth /nonexistent --method views -q
 # A poster's training view is a frontal camera with the principal point at the image corner.
 expect_error "model export of a camera RoboEarth cannot express" "principal point" "$recog" model export \
   "$tmp/poster.robj" --roboearth "$tmp/poster-export"
@@ -183,6 +185,75 @@ if [ -d "$shared/objects/roboearth/models/box" ]; then
     "$tmp/box.robj" --roboearth "$tmp/export/box"
 else
   echo "skipping the RoboEarth box checks: $shared/objects/roboearth/models/box not found (set RECOG_SHARED_DATA)"
+fi
+
+# The --json of recog eval objects (both methods) and recog eval sequence, on small subsets: two
+# RoboEarth folders (bio: 3D, 5 views, evaluated; bottle1: planar, a distractor) and the first 4
+# visp-cube frames.
+if [ -f "$shared/objects/roboearth/models/bio/meta.xml" ] && [ -f "$shared/objects/visp-cube/cube.cao" ]; then
+  mkdir -p "$tmp/re" "$tmp/cube"
+  ln -s "$shared/objects/roboearth/models/bio" "$shared/objects/roboearth/models/bottle1" "$tmp/re/"
+  for method in merged independent-views; do
+    expect_ok "eval objects --method $method --json" "$recog" eval objects --roboearth "$tmp/re" \
+      --method "$method" --transforms none rot90 --json -q
+    json_check "eval objects --method $method --json has the documented keys and consistent counts" "
+import re
+num = (int, float)
+stages = ['orb', 'clustering', 'conversion', 'query', 'correspondences', 'ransac', 'total']
+def summary(s):
+    assert isinstance(s['queries'], int) and isinstance(s['detections'], int), s
+    assert isinstance(s['wrong_detections'], int) and 0 <= s['detections'] <= s['queries'], s
+    assert abs(s['detection_rate'] - s['detections'] / s['queries']) < 1e-12, s
+    assert isinstance(s['median_rotation_error_deg'], num) and isinstance(s['median_translation_error_ratio'], num), s
+    assert all(isinstance(s['timing_ms'][k]['median'], num) and s['timing_ms'][k]['median'] >= 0 for k in stages), s
+assert d['method'] == '$method' and d['transform'] == 'none', d['method']
+summary(d)
+assert sorted(d['by_transform']) == ['none', 'rot90'], d['by_transform'].keys()
+for s in d['by_transform'].values(): summary(s)
+assert d['by_transform']['none']['detections'] == d['detections']
+q = d['per_query']
+assert len(q) == 10 and sum(s['queries'] for s in d['by_transform'].values()) == len(q), len(q)
+for t, s in d['by_transform'].items():
+    mine = [x for x in q if x['transform'] == t]
+    assert s['detections'] == sum(x['detected'] for x in mine), t
+    assert s['wrong_detections'] == sum(len(x['wrong']) for x in mine), t
+for x in q:
+    assert x['object'] == 'bio' and 0 <= x['view'] < 5 and isinstance(x['detected'], bool), x
+    assert isinstance(x['inliers'], int) and isinstance(x['total_ms'], num), x
+    assert isinstance(x['rotation_error_deg'], num) and isinstance(x['translation_error_ratio'], num), x
+    assert all(w == 'bottle1' for w in x['wrong']), x
+    assert (x['matched'] != '') == x['detected'] and (not x['detected'] or x['inliers'] >= 6), x
+if '$method' == 'merged':
+    assert d['database'] == ['bio', 'bottle1'] and d['skipped_views'] == [], d['database']
+    assert all(x['matched'] == 'bio' for x in q if x['detected']), q
+else:
+    assert d['database'] == ['bio.face_%03d' % v for v in range(5)] + ['bottle1.face_000'], d['database']
+    assert all(re.fullmatch('bio[.]face_00[0-4]', x['matched']) and x['matched'] != 'bio.face_%03d' % x['view']
+               for x in q if x['detected']), q
+"
+  done
+  expect_ok "model build of the visp-cube" "$recog" model build --cad "$shared/objects/visp-cube/cube.cao" \
+    --pose "$shared/objects/visp-cube/cube.0.pos" --image "$shared/objects/visp-cube/images/image0000.png" \
+    --camera 547,547,338,234 --name visp-cube -o "$tmp/cube.robj"
+  for i in 0 1 2 3; do ln -s "$shared/objects/visp-cube/images/image000$i.png" "$tmp/cube/"; done
+  expect_ok "eval sequence --json" "$recog" eval sequence --models "$tmp/cube.robj" "$tmp/re" \
+    --images "$tmp/cube" --camera 547,547,338,234 --expect visp-cube --json -q
+  json_check "eval sequence --json has the documented keys and consistent counts" "
+num = (int, float)
+f = d['per_frame']
+assert d['frames'] == 4 and len(f) == 4, d
+assert [x['frame'] for x in f] == ['image000%d.png' % i for i in range(4)], f
+assert all(isinstance(x['objects'], list) and isinstance(x['total_ms'], num) for x in f), f
+assert d['detections'] == sum('visp-cube' in x['objects'] for x in f) <= d['frames'], d
+assert d['false_positives'] == sum(o != 'visp-cube' for x in f for o in x['objects']), d
+assert abs(d['recall'] - d['detections'] / d['frames']) < 1e-12, d
+assert isinstance(d['median_inliers'], num) and isinstance(d['timing_ms']['total']['median'], num), d
+assert 'visp-cube' in f[0]['objects'], 'the model was built from frame 0'
+"
+  expect_error "eval sequence expecting an object not among the models" "not among the models" "$recog" \
+    eval sequence --models "$tmp/cube.robj" --images "$tmp/cube" --camera 547,547,338,234 --expect lion -q
+else
+  echo "skipping the eval --json checks: bio or the visp-cube not found under $shared (set RECOG_SHARED_DATA)"
 fi
 
 # recog load refuses bad options before it connects (its runs: load/load_generator_test).
