@@ -99,8 +99,8 @@ void BM_TrackVispCube(benchmark::State& state) {
   for (auto _ : state) {
     if (next == 0) tracker.Reset();
     TrackingTiming timing;
-    if (Status s = tracker.Track(recognizer, fixture.frames[next], fixture.camera, &detections,
-                                 &timing);
+    if (Status s =
+            tracker.Track(recognizer, fixture.frames[next], fixture.camera, &detections, &timing);
         !s.ok()) {
       state.SkipWithError(s.ToString().c_str());
       return;

@@ -104,8 +104,9 @@ Status ObjectTracker::Run(ObjectRecognizer& recognizer, const cv::Mat& image,
             ? recognizer.RecognizeFeatures(*features, camera, &recognized, nullptr, filter, extras)
             : recognizer.Recognize(image, camera, &recognized, nullptr, filter, extras));
     for (Detection& detection : recognized) {
-      const bool tracked = std::any_of(tracks_.begin(), tracks_.end(),
-                                       [&](const TrackedObject& k) { return k.id == detection.id; });
+      const bool tracked = std::any_of(tracks_.begin(), tracks_.end(), [&](const TrackedObject& k) {
+        return k.id == detection.id;
+      });
       if (tracked) continue;
       if (binary) tracks_.push_back({detection.id, detection.camera_from_object, {}, false});
       detections->push_back(std::move(detection));

@@ -163,9 +163,9 @@ TEST_F(ObjectTrackerTest, BadInputIsRejectedAndKeepsTheTracks) {
   ASSERT_TRUE(tracker.Track(recognizer, Render(PoseAt(0)), camera_, &detections).ok());
   EXPECT_EQ(tracker.Track(recognizer, cv::Mat(), camera_, &detections).code(),
             StatusCode::kInvalidArgument);
-  EXPECT_EQ(tracker.Track(recognizer, Render(PoseAt(1)), {0, 500, 320, 240, {}}, &detections)
-                .code(),
-            StatusCode::kInvalidArgument);
+  EXPECT_EQ(
+      tracker.Track(recognizer, Render(PoseAt(1)), {0, 500, 320, 240, {}}, &detections).code(),
+      StatusCode::kInvalidArgument);
   FeatureSet wrong_width;
   wrong_width.keypoints.resize(2);
   wrong_width.descriptors = cv::Mat(2, 16, CV_8U, cv::Scalar(0));
