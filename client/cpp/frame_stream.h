@@ -49,9 +49,11 @@ struct PlaceStreamRpc {
 };
 
 // StreamRecognizeObjects: frames (with intrinsics), each answered with the objects it shows.
+// Objects found are tracked into the next frames (DetectedObject::tracked() says which were
+// tracked, which recognised) unless the config sets disable_tracking.
 struct ObjectStreamRpc {
   using Service = pb::ObjectRecognition;
-  // Which objects are of interest (default: all) and what each detection carries.
+  // Which objects are of interest (default: all), what each detection carries, tracking on/off.
   using Config = pb::RecognitionConfig;
   using Request = pb::StreamRecognizeObjectsRequest;
   using Response = pb::StreamRecognizeObjectsResponse;

@@ -252,6 +252,38 @@ class RecognitionClient:
                                                           include_covariance=include_covariance))
         return self._call(self._objects.RecognizeObjects, request)
 
+    def stream_objects(self, frames: Iterable[Image],
+                       intrinsics: common_pb2.CameraIntrinsics | Sequence[float],
+                       names: Iterable[str] = (), classes: Iterable[str] = (),
+                       include_inliers: bool = False, include_covariance: bool = False,
+                       tracking: bool = True
+                       ) -> Iterator[object_pb2.StreamRecognizeObjectsResponse]:
+        """Streams frames of one camera; returns the iterator of their answers, in frame order.
+
+        Each answer has its ``sequence``, its ``objects`` (as in :meth:`recognize_objects`) or an
+        ``error`` (this frame failed; the stream goes on). With ``tracking`` (the default) an
+        object found once is followed into the next frames from its last pose, at frame rate;
+        each object's ``tracked`` says whether it was tracked or recognised in that frame.
+        ``tracking=False`` recognises every frame on its own. Flow control and cancelling as in
+        :meth:`stream_frames`.
+        """
+        config = object_pb2.RecognitionConfig(
+            filter=object_pb2.ObjectFilter(names=names, classes=classes),
+            detection_options=object_pb2.DetectionOptions(include_inliers=include_inliers,
+                                                          include_covariance=include_covariance),
+            disable_tracking=not tracking)
+        camera = make_intrinsics(intrinsics)
+
+        def requests():
+            yield object_pb2.StreamRecognizeObjectsRequest(config=config)
+            for image in frames:
+                frame = common_pb2.Frame()
+                frame.CopyFrom(_as_frame(image))
+                frame.intrinsics.CopyFrom(camera)
+                yield object_pb2.StreamRecognizeObjectsRequest(frame=frame)
+
+        return self._objects.StreamRecognizeObjects(requests(), metadata=self._metadata)
+
     # Object model repository.
 
     def upload_model(self, model: bytes | str | os.PathLike, name: str = "",

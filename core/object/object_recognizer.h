@@ -111,6 +111,9 @@ struct Detection {
   std::vector<cv::Point2f> outline;        // convex hull of the projected model, image pixels
   std::vector<cv::Point2f> inlier_pixels;  // the image points of the inliers
   int region = -1;                         // index of the region it was found in
+  // True when an ObjectTracker followed it from a previous frame's pose (object_tracker.h); false
+  // when it was recognised in this frame.
+  bool tracked = false;
   // Only when DetectionOptions::include_inliers: every inlier, in no particular order.
   std::vector<InlierCorrespondence> inliers_2d3d;
   // Only when DetectionOptions::include_covariance: the 6×6 covariance of camera_from_object,

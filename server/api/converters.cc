@@ -325,6 +325,7 @@ void ToProto(const Detection& detection, pb::DetectedObject* out) {
     q->set_point_id(c.point_id);
   }
   out->mutable_covariance()->Add(detection.covariance.begin(), detection.covariance.end());
+  out->set_tracked(detection.tracked);
 }
 
 ObjectFilter FromProto(const pb::ObjectFilter& filter) {

@@ -1,7 +1,9 @@
 #include "server/services/object_service.h"
 
 #include <chrono>
+#include <memory>
 
+#include "core/object/object_tracker.h"
 #include "server/api/converters.h"
 #include "server/api/status_mapping.h"
 #include "server/services/call.h"
@@ -13,10 +15,12 @@ namespace {
 constexpr char kService[] = "/recognition.v1.ObjectRecognition/";
 std::string Method(const char* name) { return std::string(kService) + name; }
 
-// Decodes one frame, recognises the filter's objects with this worker's recogniser and encodes
-// the detections (core gives them best first) with the extras `extras` asks for.
+// Decodes one frame, recognises the filter's objects with this worker's recogniser (through the
+// stream's tracker when there is one) and encodes the detections (core gives them best first)
+// with the extras `extras` asks for.
 Status RunRecognition(ServerState& state, WorkerContext& worker, const pb::Frame& request,
                       const ObjectFilter& filter, const DetectionOptions& extras,
+                      ObjectTracker* tracker,
                       google::protobuf::RepeatedPtrField<pb::DetectedObject>* out,
                       pb::Timing* timing) {
   RECOG_ASSIGN_OR_RETURN(DecodedFrame frame,
@@ -29,7 +33,16 @@ Status RunRecognition(ServerState& state, WorkerContext& worker, const pb::Frame
   ObjectRecognizer& recognizer = worker.Recognizer();
   std::vector<Detection> detections;
   RecognitionTiming stages;
-  if (frame.has_image()) {
+  if (tracker != nullptr) {
+    // The tracker extracts features only in the tracked objects' boxes: no separate ORB stage.
+    TrackingTiming tracking;
+    RECOG_RETURN_IF_ERROR(
+        frame.has_image() ? tracker->Track(recognizer, frame.image, *frame.intrinsics, &detections,
+                                           &tracking, filter, extras)
+                          : tracker->TrackFeatures(recognizer, frame.features, *frame.intrinsics,
+                                                   &detections, &tracking, filter, extras));
+    stages.total = tracking.total;
+  } else if (frame.has_image()) {
     RECOG_RETURN_IF_ERROR(
         recognizer.Recognize(frame.image, *frame.intrinsics, &detections, &stages, filter, extras));
   } else {
@@ -58,18 +71,23 @@ class ObjectFrameStream final
     }
     filter_ = FromProto(first.config().filter());
     extras_ = FromProto(first.config().detection_options());
+    // The stream owns its tracks; each frame borrows the recogniser of the worker that runs it.
+    if (!first.config().disable_tracking()) {
+      tracker_ = std::make_unique<ObjectTracker>(state_.objects);
+    }
     return grpc::Status::OK;
   }
 
   Status Answer(const pb::Frame& frame, WorkerContext& worker,
                 pb::StreamRecognizeObjectsResponse* response) override {
     // RunRecognition adds objects only once nothing can fail any more.
-    return RunRecognition(state_, worker, frame, filter_, extras_, response->mutable_objects(),
-                          response->mutable_timing());
+    return RunRecognition(state_, worker, frame, filter_, extras_, tracker_.get(),
+                          response->mutable_objects(), response->mutable_timing());
   }
 
   ObjectFilter filter_;
   DetectionOptions extras_;
+  std::unique_ptr<ObjectTracker> tracker_;  // null when the config disables tracking
 };
 
 }  // namespace
@@ -82,8 +100,8 @@ grpc::ServerUnaryReactor* ObjectService::RecognizeObjects(
       [=, this](CallInfo& call, WorkerContext& worker) {
         RECOG_RETURN_IF_ERROR_AS_GRPC(
             RunRecognition(state_, worker, request->frame(), FromProto(request->filter()),
-                           FromProto(request->detection_options()), response->mutable_objects(),
-                           response->mutable_timing()),
+                           FromProto(request->detection_options()), nullptr,
+                           response->mutable_objects(), response->mutable_timing()),
             call.request_id);
         response->set_client_frame_id(request->frame().client_frame_id());
         response->mutable_timing()->set_queue_ms(call.queue_ms);

@@ -414,6 +414,62 @@ TEST_F(RepositoryServiceTest, RecognitionFiltersAndRefusesFramesItCannotUse) {
   EXPECT_EQ(answers[3].sequence(), 3u);
 }
 
+// Streams `frames` after `config`; the answers, in order (fewer when the stream broke).
+std::vector<pb::StreamRecognizeObjectsResponse> StreamPosterViews(
+    pb::ObjectRecognition::Stub* objects, const pb::RecognitionConfig& config,
+    const std::vector<pb::Frame>& frames) {
+  grpc::ClientContext context;
+  auto stream = objects->StreamRecognizeObjects(&context);
+  pb::StreamRecognizeObjectsRequest request;
+  *request.mutable_config() = config;
+  std::vector<pb::StreamRecognizeObjectsResponse> answers;
+  if (!stream->Write(request)) return answers;
+  for (const pb::Frame& frame : frames) {
+    *request.mutable_frame() = frame;
+    pb::StreamRecognizeObjectsResponse answer;
+    if (!stream->Write(request) || !stream->Read(&answer)) break;
+    answers.push_back(answer);
+  }
+  stream->WritesDone();
+  EXPECT_TRUE(stream->Finish().ok());
+  return answers;
+}
+
+TEST_F(RepositoryServiceTest, AStreamTracksItsObjectsUnlessTrackingIsOff) {
+  ASSERT_TRUE(Put(PosterModelFile("poster", 1, "poster"), "").ok());
+  // Corridor image 60 (with the same intrinsics) does not show the poster.
+  pb::Frame other = PosterView(60);
+  const std::vector<pb::Frame> frames = {PosterView(1), PosterView(1), PosterView(1), other,
+                                         PosterView(1)};
+
+  // Tracking (the default): recognised in the first frame, tracked in the next ones; a frame
+  // without the poster loses it, and the one after recognises it again.
+  auto answers = StreamPosterViews(objects_.get(), {}, frames);
+  ASSERT_EQ(answers.size(), 5u);
+  for (size_t i : {0u, 1u, 2u, 4u}) {
+    ASSERT_EQ(answers[i].objects_size(), 1) << "frame " << i;
+    EXPECT_EQ(answers[i].objects(0).name(), "poster");
+    EXPECT_EQ(answers[i].objects(0).tracked(), i == 1 || i == 2) << "frame " << i;
+    EXPECT_GE(answers[i].objects(0).inliers(), 12u);
+  }
+  EXPECT_EQ(answers[3].objects_size(), 0);
+
+  pb::RecognitionConfig off;
+  off.set_disable_tracking(true);
+  answers = StreamPosterViews(objects_.get(), off, frames);
+  ASSERT_EQ(answers.size(), 5u);
+  for (size_t i : {0u, 1u, 2u, 4u}) {
+    ASSERT_EQ(answers[i].objects_size(), 1) << "frame " << i;
+    EXPECT_FALSE(answers[i].objects(0).tracked()) << "frame " << i;
+  }
+
+  // A unary call is never tracked.
+  pb::RecognizeObjectsResponse seen;
+  ASSERT_TRUE(Recognize(PosterView(1), &seen).ok());
+  ASSERT_EQ(seen.objects_size(), 1);
+  EXPECT_FALSE(seen.objects(0).tracked());
+}
+
 TEST_F(RepositoryServiceTest, DetectionsCarryInliersAndCovarianceOnlyWhenAsked) {
   ASSERT_TRUE(Put(PosterModelFile("poster", 1, "poster"), "").ok());
   pb::RecognizeObjectsResponse plain, full;

@@ -14,6 +14,7 @@
 #include "core/object/model_builder.h"
 #include "core/object/model_file.h"
 #include "core/object/object_recognizer.h"
+#include "core/object/object_tracker.h"
 #include "core/vocabulary/vocabulary_io.h"
 #include "tools/common/cli_support.h"
 #include "tools/common/remote_support.h"
@@ -316,10 +317,14 @@ struct EvalSequenceArgs {
   std::vector<std::string> models;
   std::string images, camera, expect, draw, vocabulary;
   bool json = false, quiet = false;
+  bool track = false;  // follow the object with an ObjectTracker, as a stream does
 };
 
 // Recognises every frame of a sequence in which one known object (--expect) is visible: recall
 // is the fraction of frames where it is found; any other object reported is a false positive.
+// With --track the frames go through an ObjectTracker (object_tracker.h) as in a stream: each
+// frame is either recognised (the full search ran) or only tracked, and the medians of both kinds
+// of frame are reported, with the tracking time per tracked object.
 int RunEvalSequence(const EvalSequenceArgs& args) {
   auto camera = ParseCamera(args.camera);
   if (!camera.ok()) return Fail("eval sequence", camera.status());
@@ -345,34 +350,49 @@ int RunEvalSequence(const EvalSequenceArgs& args) {
   }
   if (!args.draw.empty()) fs::create_directories(args.draw);
   ObjectRecognizer recognizer(database);
+  ObjectTracker tracker(database);
   ProgressBar progress(!args.quiet);
-  size_t found = 0, false_positives = 0;
-  std::vector<double> totals, inliers;
+  size_t found = 0, false_positives = 0, found_tracked = 0;
+  std::vector<double> totals, inliers, recognised_totals, tracked_totals, per_object;
   json per_frame = json::array();
   std::vector<Detection> detections;
   for (size_t i = 0; i < frames->size(); ++i) {
     auto image = ReadGrayImage((*frames)[i]);
     if (!image.ok()) return Fail("eval sequence", image.status());
     RecognitionTiming timing;
-    if (Status s = recognizer.Recognize(*image, *camera, &detections, &timing); !s.ok()) {
-      return Fail("eval sequence", s);
-    }
-    totals.push_back(timing.total);
+    TrackingTiming tracking;
+    const Status s = args.track ? tracker.Track(recognizer, *image, *camera, &detections, &tracking)
+                                : recognizer.Recognize(*image, *camera, &detections, &timing);
+    if (!s.ok()) return Fail("eval sequence", s);
+    const double total = args.track ? tracking.total : timing.total;
+    totals.push_back(total);
     json names = json::array();
     bool hit = false;
     for (const Detection& d : detections) {
       names.push_back(d.name);
       if (d.name == args.expect) {
         hit = true;
+        found_tracked += d.tracked;
         inliers.push_back(double(d.inliers));
       } else {
         ++false_positives;
       }
     }
     found += hit;
-    per_frame.push_back({{"frame", fs::path((*frames)[i]).filename().string()},
-                         {"objects", names},
-                         {"total_ms", timing.total}});
+    json frame = {{"frame", fs::path((*frames)[i]).filename().string()},
+                  {"objects", names},
+                  {"total_ms", total}};
+    if (args.track) {
+      (tracking.recognized ? recognised_totals : tracked_totals).push_back(total);
+      if (tracking.tracked + tracking.lost > 0) {
+        per_object.push_back(tracking.tracking / double(tracking.tracked + tracking.lost));
+      }
+      json tracked = json::array();
+      for (const Detection& d : detections) tracked.push_back(d.tracked);
+      frame["tracked"] = tracked;
+      frame["recognized"] = tracking.recognized;
+    }
+    per_frame.push_back(std::move(frame));
     if (!args.draw.empty() && !detections.empty()) {
       cv::Mat canvas;
       cv::cvtColor(*image, canvas, cv::COLOR_GRAY2BGR);
@@ -396,12 +416,27 @@ int RunEvalSequence(const EvalSequenceArgs& args) {
               {"median_inliers", Median(inliers)},
               {"timing_ms", {{"total", {{"median", Median(totals)}}}}},
               {"per_frame", per_frame}};
+  if (args.track) {
+    out["detections_tracked"] = found_tracked;
+    out["frames_recognized"] = recognised_totals.size();
+    out["frames_tracked"] = tracked_totals.size();
+    out["timing_ms"]["recognized_frame"] = {{"median", Median(recognised_totals)}};
+    out["timing_ms"]["tracked_frame"] = {{"median", Median(tracked_totals)}};
+    out["timing_ms"]["tracking_per_object"] = {{"median", Median(per_object)}};
+  }
   if (args.json) {
     std::printf("%s\n", out.dump(2).c_str());
   } else {
     std::printf(
         "%zu frames: '%s' found in %zu (recall %.1f %%), %zu false positives, median %.2f ms\n",
         frames->size(), args.expect.c_str(), found, 100 * recall, false_positives, Median(totals));
+    if (args.track) {
+      std::printf(
+          "tracking: found by tracking in %zu frames; %zu frames recognised (median %.2f ms), %zu "
+          "only tracked (median %.2f ms); %.2f ms per tracked object (median)\n",
+          found_tracked, recognised_totals.size(), Median(recognised_totals), tracked_totals.size(),
+          Median(tracked_totals), Median(per_object));
+    }
   }
   return 0;
 }
@@ -609,6 +644,8 @@ void AddEvalObjectsCommand(CLI::App& eval, int* exit_code) {
       ->required();
   sequence->add_option("--draw", sequence_args->draw, "Folder for a PNG per frame with detections");
   sequence->add_option("--vocab", sequence_args->vocabulary, "Vocabulary");
+  sequence->add_flag("--track", sequence_args->track,
+                     "Track the objects from frame to frame (as StreamRecognizeObjects does)");
   sequence->add_flag("--json", sequence_args->json, "Print JSON");
   sequence->add_flag("-q,--quiet", sequence_args->quiet, "No progress output");
   sequence->callback([sequence_args, exit_code] { *exit_code = RunEvalSequence(*sequence_args); });

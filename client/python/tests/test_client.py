@@ -211,6 +211,29 @@ class RecognitionClientTest(unittest.TestCase):
         self.assertEqual(len(detected.covariance), 36)
         self.assertTrue(all(detected.covariance[i * 7] > 0 for i in range(6)))
 
+    def test_an_object_stream_tracks_unless_tracking_is_off(self):
+        recog = os.environ.get("RECOG")
+        if not recog:
+            raise RuntimeError("set RECOG to the path of the recog binary")
+        with tempfile.TemporaryDirectory(prefix="recog-python-test-") as tmp:
+            model = Path(tmp) / "poster.robj"
+            subprocess.run([recog, "model", "build", "--planar", str(corridor(1)), "--width",
+                            "0.64", "--height", "0.48", "--name", "tracked-poster", "-o",
+                            str(model)], check=True, capture_output=True)
+            self.client.upload_model(model)
+        try:
+            camera = (500.0, 500.0, 256.0, 192.0)
+            frames = [corridor(1)] * 3
+            tracked = list(self.client.stream_objects(frames, camera, names=["tracked-poster"]))
+            untracked = list(self.client.stream_objects(frames, camera, names=["tracked-poster"],
+                                                        tracking=False))
+        finally:
+            self.client.delete_model("tracked-poster")
+        self.assertEqual([[o.tracked for o in a.objects] for a in tracked],
+                         [[False], [True], [True]])
+        self.assertEqual([[o.tracked for o in a.objects] for a in untracked],
+                         [[False], [False], [False]])
+
     def test_an_upload_passes_the_size_and_checksum_checks_before_the_file_is_refused(self):
         # Three chunks of bytes that are not a model: the server accepts the header's size and
         # SHA-256, then refuses the contents (a different message than a checksum mismatch).

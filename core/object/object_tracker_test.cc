@@ -1,0 +1,181 @@
+// ObjectTracker on a synthetic stream: a poster rendered along a smooth trajectory is recognised
+// once, then tracked with its pose; a frame without it loses it and the next frame recognises it
+// again. (The real sequence, visp-cube, is in tools/evaluation/object_tracking_test.cc.)
+#include "core/object/object_tracker.h"
+
+#include <cmath>
+
+#include <gtest/gtest.h>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "core/index/memory_index_store.h"
+#include "core/object/model_builder.h"
+#include "tests/testing/test_data.h"
+#include "tests/testing/vocabularies.h"
+
+namespace recog {
+namespace {
+
+constexpr double kWidth = 0.64, kHeight = 0.48;  // metres
+
+double RotationErrorDeg(const cv::Matx33d& a, const cv::Matx33d& b) {
+  const cv::Matx33d d = a * b.t();
+  return std::acos(std::clamp((cv::trace(d) - 1.0) / 2.0, -1.0, 1.0)) * 180.0 / CV_PI;
+}
+
+class ObjectTrackerTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    poster_ = cv::imread(testing::ProjectTestData("corridor/1.jpg"), cv::IMREAD_GRAYSCALE);
+    ASSERT_FALSE(poster_.empty());
+    ModelBuilder builder(testing::BundledObjectVocabulary());
+    auto model = builder.FromFaceImages("poster", {{BoxSide::kFront, poster_}}, kWidth, kHeight);
+    ASSERT_TRUE(model.ok()) << model.status().ToString();
+    model_ = std::move(*model);
+    auto database = ObjectDatabase::Open(&store_, testing::BundledObjectVocabulary());
+    ASSERT_TRUE(database.ok()) << database.status().ToString();
+    database_ = std::move(*database);
+    ASSERT_TRUE(database_->Put(model_).ok());
+    camera_ = {500, 500, 320, 240, {}};
+  }
+
+  // Frame i of a slow pan: the poster turns 2 degrees and slides 1 cm a frame.
+  static RigidTransform PoseAt(int i) {
+    RigidTransform pose;
+    cv::Rodrigues(cv::Vec3d(0.1 * CV_PI / 180 * i, (2.0 * i - 10) * CV_PI / 180, 0), pose.R);
+    pose.t = {0.01 * i - 0.05, 0.0, 1.0 + 0.01 * i};
+    return pose;
+  }
+
+  cv::Mat Render(const RigidTransform& camera_from_object) const {
+    const RigidTransform m = camera_from_object * model_.faces[0].object_from_face;
+    const cv::Matx33d plane(m.R(0, 0), m.R(0, 1), m.t[0], m.R(1, 0), m.R(1, 1), m.t[1], m.R(2, 0),
+                            m.R(2, 1), m.t[2]);
+    const cv::Matx33d scale(kWidth / poster_.cols, 0, 0, 0, kHeight / poster_.rows, 0, 0, 0, 1);
+    cv::Mat view;
+    cv::warpPerspective(poster_, view, cv::Mat(camera_.K() * plane * scale), cv::Size(640, 480),
+                        cv::INTER_LINEAR, cv::BORDER_CONSTANT, 90);
+    return view;
+  }
+
+  cv::Mat poster_;
+  MemoryIndexStore store_;
+  ObjectModel model_;
+  std::shared_ptr<ObjectDatabase> database_;
+  CameraIntrinsics camera_;
+};
+
+TEST_F(ObjectTrackerTest, RecognisesOnceThenTracksWithThePose) {
+  ObjectRecognizer recognizer(database_);
+  ObjectTracker tracker(database_);
+  std::vector<Detection> detections;
+  for (int i = 0; i < 8; ++i) {
+    TrackingTiming timing;
+    ASSERT_TRUE(tracker.Track(recognizer, Render(PoseAt(i)), camera_, &detections, &timing).ok());
+    ASSERT_EQ(detections.size(), 1u) << "frame " << i;
+    const Detection& d = detections[0];
+    EXPECT_EQ(d.name, "poster");
+    EXPECT_EQ(d.tracked, i > 0) << "frame " << i;
+    EXPECT_EQ(timing.recognized, i == 0) << "frame " << i;
+    EXPECT_EQ(timing.tracked, i > 0 ? 1u : 0u);
+    EXPECT_GE(d.inliers, tracker.options().min_inliers);
+    EXPECT_LT(RotationErrorDeg(d.camera_from_object.R, PoseAt(i).R), 1.0) << "frame " << i;
+    EXPECT_LT(cv::norm(d.camera_from_object.t - PoseAt(i).t), 0.02) << "frame " << i;
+    EXPECT_GE(d.outline.size(), 4u);
+  }
+  EXPECT_EQ(tracker.tracked_objects(), 1u);
+}
+
+TEST_F(ObjectTrackerTest, LostWithoutTheObjectThenRecognisedAgain) {
+  ObjectRecognizer recognizer(database_);
+  ObjectTracker tracker(database_);
+  std::vector<Detection> detections;
+  TrackingTiming timing;
+  ASSERT_TRUE(tracker.Track(recognizer, Render(PoseAt(0)), camera_, &detections).ok());
+  ASSERT_TRUE(tracker.Track(recognizer, Render(PoseAt(1)), camera_, &detections).ok());
+  ASSERT_EQ(detections.size(), 1u);
+  EXPECT_TRUE(detections[0].tracked);
+  const cv::Mat black(480, 640, CV_8U, cv::Scalar(0));
+  ASSERT_TRUE(tracker.Track(recognizer, black, camera_, &detections, &timing).ok());
+  EXPECT_TRUE(detections.empty());
+  EXPECT_EQ(timing.lost, 1u);
+  EXPECT_TRUE(timing.recognized);  // a lost object triggers the full search at once
+  EXPECT_EQ(tracker.tracked_objects(), 0u);
+  ASSERT_TRUE(tracker.Track(recognizer, Render(PoseAt(3)), camera_, &detections, &timing).ok());
+  ASSERT_EQ(detections.size(), 1u);
+  EXPECT_FALSE(detections[0].tracked);
+  EXPECT_TRUE(timing.recognized);
+  ASSERT_TRUE(tracker.Track(recognizer, Render(PoseAt(4)), camera_, &detections).ok());
+  ASSERT_EQ(detections.size(), 1u);
+  EXPECT_TRUE(detections[0].tracked);
+}
+
+TEST_F(ObjectTrackerTest, RecognitionRunsEveryIntervalWhileTracking) {
+  ObjectRecognizer recognizer(database_);
+  TrackingOptions options;
+  options.recognition_interval = 3;
+  ObjectTracker tracker(database_, options);
+  std::vector<Detection> detections;
+  for (int i = 0; i < 7; ++i) {
+    TrackingTiming timing;
+    ASSERT_TRUE(tracker.Track(recognizer, Render(PoseAt(i)), camera_, &detections, &timing).ok());
+    EXPECT_EQ(timing.recognized, i % 3 == 0) << "frame " << i;
+    ASSERT_EQ(detections.size(), 1u);
+    EXPECT_EQ(detections[0].tracked, i > 0);  // a tracked object keeps its tracked detection
+  }
+  tracker.Reset();
+  TrackingTiming timing;
+  ASSERT_TRUE(tracker.Track(recognizer, Render(PoseAt(7)), camera_, &detections, &timing).ok());
+  EXPECT_TRUE(timing.recognized);
+  ASSERT_EQ(detections.size(), 1u);
+  EXPECT_FALSE(detections[0].tracked);
+}
+
+TEST_F(ObjectTrackerTest, TracksFramesGivenAsFeaturesAndHonoursTheFilter) {
+  ObjectRecognizer recognizer(database_);
+  ObjectTracker tracker(database_);
+  FeatureOptions feature_options;
+  feature_options.orb = recognizer.options().orb;
+  auto extractor = CreateFeatureExtractor(feature_options);
+  ASSERT_TRUE(extractor.ok());
+  std::vector<Detection> detections;
+  for (int i = 0; i < 3; ++i) {
+    FeatureSet features;
+    ASSERT_TRUE((*extractor)->Extract(Render(PoseAt(i)), &features).ok());
+    ASSERT_TRUE(tracker.TrackFeatures(recognizer, features, camera_, &detections).ok());
+    ASSERT_EQ(detections.size(), 1u);
+    EXPECT_EQ(detections[0].tracked, i > 0);
+    EXPECT_LT(RotationErrorDeg(detections[0].camera_from_object.R, PoseAt(i).R), 1.0);
+  }
+  ObjectFilter other;
+  other.names = {"not-the-poster"};
+  ASSERT_TRUE(
+      tracker.Track(recognizer, Render(PoseAt(3)), camera_, &detections, nullptr, other).ok());
+  EXPECT_TRUE(detections.empty());
+}
+
+TEST_F(ObjectTrackerTest, BadInputIsRejectedAndKeepsTheTracks) {
+  ObjectRecognizer recognizer(database_);
+  ObjectTracker tracker(database_);
+  std::vector<Detection> detections;
+  ASSERT_TRUE(tracker.Track(recognizer, Render(PoseAt(0)), camera_, &detections).ok());
+  EXPECT_EQ(tracker.Track(recognizer, cv::Mat(), camera_, &detections).code(),
+            StatusCode::kInvalidArgument);
+  EXPECT_EQ(
+      tracker.Track(recognizer, Render(PoseAt(1)), {0, 500, 320, 240, {}}, &detections).code(),
+      StatusCode::kInvalidArgument);
+  FeatureSet wrong_width;
+  wrong_width.keypoints.resize(2);
+  wrong_width.descriptors = cv::Mat(2, 16, CV_8U, cv::Scalar(0));
+  EXPECT_EQ(tracker.TrackFeatures(recognizer, wrong_width, camera_, &detections).code(),
+            StatusCode::kInvalidArgument);
+  EXPECT_EQ(tracker.tracked_objects(), 1u);
+  ASSERT_TRUE(tracker.Track(recognizer, Render(PoseAt(1)), camera_, &detections).ok());
+  ASSERT_EQ(detections.size(), 1u);
+  EXPECT_TRUE(detections[0].tracked);
+}
+
+}  // namespace
+}  // namespace recog
