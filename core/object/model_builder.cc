@@ -209,10 +209,6 @@ StatusOr<BoxSide> ParseBoxSide(std::string_view name) {
                                  "' (front, back, left, right, top, bottom)");
 }
 
-namespace {
-
-// The face of a W x H x D box (object frame at the box centre, x right, y down, z away from
-// the viewer of the front) that `side` shows, as width, height and object_from_face.
 PlanarFace BoxFace(BoxSide side, double w, double h, double d) {
   PlanarFace face;
   // Columns of R are the face's x, y and z axes in the object frame; t is its top-left corner.
@@ -248,6 +244,8 @@ PlanarFace BoxFace(BoxSide side, double w, double h, double d) {
   face.object_from_face.t = origin;
   return face;
 }
+
+namespace {
 
 // A camera looking straight at a face so that its image spans the whole face: face point
 // (x, y) maps to pixel (x * cols / width, y * rows / height); the camera sits at depth 1.

@@ -56,6 +56,11 @@ struct ModelBuildOptions {
 enum class BoxSide { kFront, kBack, kLeft, kRight, kTop, kBottom };
 StatusOr<BoxSide> ParseBoxSide(std::string_view name);  // "front", "back", ...
 
+// The face of a W x H x D box that `side` shows (width, height and object_from_face): the object
+// frame is at the box centre, x right, y down, z away from the viewer of the front; the front
+// face lies at z = -D/2. FromFaceImages places its faces so.
+PlanarFace BoxFace(BoxSide side, double width, double height, double depth);
+
 struct FaceImage {
   BoxSide side = BoxSide::kFront;
   cv::Mat image;  // 8-bit grey or BGR, showing the whole face and nothing else

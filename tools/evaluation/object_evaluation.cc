@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <map>
 #include <memory>
 #include <sstream>
@@ -17,6 +18,7 @@
 #include "core/object/roboearth.h"
 #include "core/vocabulary/vocabulary_io.h"
 #include "tools/evaluation/place_evaluation.h"
+#include "tools/evaluation/plot.h"
 
 namespace recog::cli {
 namespace {
@@ -378,6 +380,118 @@ StatusOr<ObjectEvaluation> EvaluateObjects(const ObjectEvaluationOptions& option
     evaluation.summaries.push_back(Summarise(transform, evaluation.queries));
   }
   return evaluation;
+}
+
+StatusOr<ObjectTruthFrame> FindTruthFrame(const ObjectSequenceTruth& truth,
+                                          const std::string& image_path) {
+  const std::string name = fs::path(image_path).filename().string();
+  for (const ObjectTruthFrame& frame : truth.frames) {
+    if (frame.image == name) return frame;
+  }
+  return Status::NotFound("the truth has no frame '" + name + "'");
+}
+
+TruthFrameScore ScoreTruthFrame(const ObjectTruthFrame& truth, const std::string& expect,
+                                const std::vector<Detection>& detections,
+                                const SizeRecallOptions& options) {
+  TruthFrameScore score;
+  score.image = truth.image;
+  score.visible = truth.visible;
+  score.area_fraction = truth.area_fraction;
+  for (const Detection& d : detections) {
+    if (d.name != expect) {
+      ++score.other_objects;
+      continue;
+    }
+    if (score.found) continue;  // the first (best) detection of the object counts
+    score.found = true;
+    score.rotation_error_deg = RotationErrorDeg(d.camera_from_object.R, truth.camera_from_object.R);
+    score.translation_error_m = cv::norm(d.camera_from_object.t - truth.camera_from_object.t);
+    score.correct_pose = score.rotation_error_deg <= options.max_rotation_error_deg &&
+                         score.translation_error_m <=
+                             options.max_translation_error * cv::norm(truth.camera_from_object.t);
+  }
+  return score;
+}
+
+SizeRecall SummariseSizeRecall(const std::vector<TruthFrameScore>& frames,
+                               const SizeRecallOptions& options) {
+  SizeRecall out;
+  std::vector<double> edges = {0.0};
+  edges.insert(edges.end(), options.bin_edges.begin(), options.bin_edges.end());
+  edges.push_back(1.0);
+  for (size_t b = 0; b + 1 < edges.size(); ++b) {
+    SizeBin bin;
+    bin.lo = edges[b];
+    bin.hi = edges[b + 1];
+    std::vector<double> areas, rotation, translation;
+    for (const TruthFrameScore& f : frames) {
+      const bool last = b + 2 == edges.size();
+      if (!f.visible || f.area_fraction < bin.lo || (f.area_fraction >= bin.hi && !last)) continue;
+      ++bin.frames;
+      areas.push_back(f.area_fraction);
+      if (f.found) {
+        ++bin.found;
+        rotation.push_back(f.rotation_error_deg);
+        translation.push_back(f.translation_error_m);
+      }
+      bin.correct += f.correct_pose;
+    }
+    if (bin.frames > 0) {
+      bin.recall = double(bin.correct) / double(bin.frames);
+      bin.found_rate = double(bin.found) / double(bin.frames);
+    }
+    bin.median_area = Median(areas);
+    bin.median_rotation_error_deg = Median(rotation);
+    bin.median_translation_error_m = Median(translation);
+    out.bins.push_back(bin);
+  }
+  for (const TruthFrameScore& f : frames) {
+    out.other_objects += f.other_objects;
+    if (!f.visible) {
+      out.found_not_visible += f.found;
+      continue;
+    }
+    ++out.visible_frames;
+    out.found += f.found;
+    out.correct += f.correct_pose;
+  }
+  out.recall = out.visible_frames == 0 ? 0.0 : double(out.correct) / double(out.visible_frames);
+  return out;
+}
+
+Status WriteSizeRecallCsv(const SizeRecall& recall, const std::string& path) {
+  std::ofstream out(path);
+  out << "area_lo,area_hi,median_area,frames,found,correct,recall,found_rate,median_rotation_deg,"
+         "median_translation_m\n";
+  for (const SizeBin& b : recall.bins) {
+    out << b.lo << ',' << b.hi << ',' << b.median_area << ',' << b.frames << ',' << b.found << ','
+        << b.correct << ',' << b.recall << ',' << b.found_rate << ',' << b.median_rotation_error_deg
+        << ',' << b.median_translation_error_m << '\n';
+  }
+  out.close();
+  if (!out) return Status::Internal("cannot write '" + path + "'");
+  return Status::Ok();
+}
+
+Status WriteSizeRecallPlot(const SizeRecall& recall, const std::string& title,
+                           const std::string& path) {
+  PlotSeries correct{"recall (right pose)", {}, cv::Scalar(200, 80, 20), {}};
+  PlotSeries found{"found (any pose)", {}, cv::Scalar(40, 160, 40), {}};
+  for (const SizeBin& b : recall.bins) {
+    if (b.frames == 0) continue;
+    const double x = std::log10(100 * std::max(b.median_area, 1e-4));
+    correct.points.push_back({x, b.recall});
+    correct.point_labels.push_back(std::to_string(b.frames));
+    found.points.push_back({x, b.found_rate});
+  }
+  PlotOptions plot;
+  plot.title = title;
+  plot.x_label = "area, log10(% of frame); labels: frames";
+  plot.y_label = "fraction of frames";
+  plot.x_min = -1;
+  plot.x_max = 2;
+  return WritePlotPng(path, plot, {correct, found});
 }
 
 }  // namespace recog::cli

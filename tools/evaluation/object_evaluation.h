@@ -29,6 +29,7 @@
 #include "core/common/status.h"
 #include "core/object/model_builder.h"
 #include "core/object/object_recognizer.h"
+#include "tools/evaluation/object_sequence_generator.h"
 
 namespace recog::cli {
 
@@ -116,5 +117,67 @@ std::vector<ModelSource> FindModelSources(const std::string& path);
 // Draws a detection over an image: outline, model axes, inlier points; writes nothing.
 void DrawDetection(const Detection& detection, const CameraIntrinsics& camera,
                    const cv::Scalar& colour, cv::Mat* canvas);
+
+// ---- Recall against object size (recog eval sequence --truth) ----
+//
+// Given the ground truth of an object sequence (ObjectSequenceTruth), each frame is scored: was
+// the expected object found, and with the right pose (rotation and translation errors within the
+// limits)? Frames where the object is visible (at least half in view) are binned by the fraction
+// of the frame it covers; recall per bin = frames with the right pose / frames in the bin.
+
+struct SizeRecallOptions {
+  // Upper edges of the size bins (fractions of the frame, increasing); the first bin starts at 0,
+  // a last bin takes everything from the last edge up.
+  std::vector<double> bin_edges = {0.005, 0.01, 0.02, 0.04, 0.08, 0.16};
+  double max_rotation_error_deg = 10;
+  double max_translation_error = 0.1;  // fraction of the true distance
+};
+
+struct TruthFrameScore {
+  std::string image;
+  bool visible = false;
+  double area_fraction = 0;
+  bool found = false;         // the expected object is among the detections
+  bool correct_pose = false;  // and its pose is within the limits
+  double rotation_error_deg = 0, translation_error_m = 0;  // when found
+  size_t other_objects = 0;                                // detections of other objects
+};
+
+// The truth of the frame whose file name is that of `image_path`; NOT_FOUND when there is none.
+StatusOr<ObjectTruthFrame> FindTruthFrame(const ObjectSequenceTruth& truth,
+                                          const std::string& image_path);
+
+TruthFrameScore ScoreTruthFrame(const ObjectTruthFrame& truth, const std::string& expect,
+                                const std::vector<Detection>& detections,
+                                const SizeRecallOptions& options);
+
+struct SizeBin {
+  double lo = 0, hi = 0;  // area fraction range [lo, hi); hi = 1 for the last bin
+  size_t frames = 0, found = 0, correct = 0;
+  double recall = 0;       // correct / frames (0 without frames)
+  double found_rate = 0;   // found / frames
+  double median_area = 0;  // of the bin's frames
+  double median_rotation_error_deg = 0, median_translation_error_m = 0;  // found frames
+};
+
+struct SizeRecall {
+  std::vector<SizeBin> bins;
+  size_t visible_frames = 0, found = 0, correct = 0;
+  double recall = 0;             // correct / visible frames
+  size_t found_not_visible = 0;  // frames with less than half in view where it was reported
+  size_t other_objects = 0;      // detections of other objects, all frames
+};
+
+SizeRecall SummariseSizeRecall(const std::vector<TruthFrameScore>& frames,
+                               const SizeRecallOptions& options);
+
+// CSV with the header
+//   area_lo,area_hi,median_area,frames,found,correct,recall,found_rate,median_rotation_deg,
+//   median_translation_m
+// one line per bin. PNG: recall and found rate against the area in % of the frame (log scale).
+// INTERNAL when a file cannot be written.
+Status WriteSizeRecallCsv(const SizeRecall& recall, const std::string& path);
+Status WriteSizeRecallPlot(const SizeRecall& recall, const std::string& title,
+                           const std::string& path);
 
 }  // namespace recog::cli

@@ -21,6 +21,7 @@
 #include "core/index/memory_index_store.h"
 #include "core/vocabulary/vocabulary_io.h"
 #include "tools/common/cli_support.h"
+#include "tools/evaluation/synthetic_images.h"
 
 namespace recog::cli {
 namespace {
@@ -34,37 +35,8 @@ constexpr int kMaxFrames = 50'000'000;
 constexpr double kRevisitStrength = 1.5;  // revisits: 1.5x blur, noise and illumination limits
 constexpr double kMaxZoom = 1.5;          // beyond this, BORDER_REFLECT fills the view's edges
 
-uint64_t SplitMix64(uint64_t x) {
-  x += 0x9e3779b97f4a7c15ULL;
-  x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ULL;
-  x = (x ^ (x >> 27)) * 0x94d049bb133111ebULL;
-  return x ^ (x >> 31);
-}
-
-// Seed of item `index` of `stream`: a bijective mix, so nearby (seed, index) pairs give unrelated
-// generators.
-uint64_t StreamSeed(uint64_t seed, Stream stream, uint64_t index) {
-  return SplitMix64(SplitMix64(seed ^ SplitMix64(stream)) + index);
-}
-
-// Uniform in [lo, hi). Written out (not std::uniform_real_distribution) so that sequences do not
-// depend on the standard library's implementation.
-double Uniform(std::mt19937_64& rng, double lo, double hi) {
-  return lo + (hi - lo) * (double(rng() >> 11) * 0x1.0p-53);
-}
-double Symmetric(std::mt19937_64& rng, double limit) { return Uniform(rng, -limit, limit); }
-
 int NumRevisits(const SequenceOptions& o) {
   return int(std::min<double>(o.places, std::llround(o.revisit_fraction * o.places)));
-}
-
-Status CheckRange(const char* name, double value, double lo, double hi) {
-  if (!std::isfinite(value) || value < lo || value > hi) {
-    char buf[200];
-    std::snprintf(buf, sizeof(buf), "%s = %g is outside [%g, %g]", name, value, lo, hi);
-    return Status::InvalidArgument(buf);
-  }
-  return Status::Ok();
 }
 
 // Everything about one visit that stays fixed across its frames.
@@ -136,32 +108,6 @@ cv::Mat ResizeToCover(const cv::Mat& photo, const SequenceOptions& o) {
   const bool shrink = cols < photo.cols;
   cv::resize(photo, cover, cv::Size(cols, rows), 0, 0, shrink ? cv::INTER_AREA : cv::INTER_LINEAR);
   return cover;
-}
-
-// Multiplies by the illumination gain (global times a linear gradient, at least 0.05) and adds the
-// noise, rounding to 8 bits with saturation.
-void ApplyIllumination(const cv::Mat& src, const cv::Mat& noise, double gain, double gradient_x,
-                       double gradient_y, cv::Mat* dst) {
-  dst->create(src.size(), src.type());
-  const int channels = src.channels();
-  const double cx = (src.cols - 1) / 2.0, cy = (src.rows - 1) / 2.0;
-  const double sx = gradient_x / std::max(1.0, src.cols / 2.0);
-  const double sy = gradient_y / std::max(1.0, src.rows / 2.0);
-  for (int y = 0; y < src.rows; ++y) {
-    const uint8_t* in = src.ptr<uint8_t>(y);
-    const float* n = noise.empty() ? nullptr : noise.ptr<float>(y);
-    uint8_t* out = dst->ptr<uint8_t>(y);
-    const double row_gain = 1 + sy * (y - cy);
-    for (int x = 0; x < src.cols; ++x) {
-      const float g = float(std::max(0.05, gain * (row_gain + sx * (x - cx))));
-      for (int c = 0; c < channels; ++c) {
-        const int k = x * channels + c;
-        float v = float(in[k]) * g;
-        if (n != nullptr) v += n[k];
-        out[k] = cv::saturate_cast<uint8_t>(v);
-      }
-    }
-  }
 }
 
 // --- Distinct places: the same-scene test (see the header). ---
@@ -440,23 +386,7 @@ StatusOr<cv::Mat> SequenceGenerator::CoverImage(int place) const {
       }
     }
   }
-  const std::string& path = PlacePhoto(place);
-  std::error_code ec;
-  if (!fs::exists(path, ec)) return Status::NotFound("photo '" + path + "' does not exist");
-  cv::Mat photo;
-  try {
-    photo = cv::imread(path, cv::IMREAD_ANYCOLOR);  // 8-bit grey or BGR
-  } catch (const cv::Exception& e) {
-    return Status::InvalidArgument("photo '" + path + "' could not be decoded: " + e.what());
-  }
-  if (photo.empty())
-    return Status::InvalidArgument("photo '" + path + "' is not a decodable image");
-  if (photo.depth() != CV_8U) photo.convertTo(photo, CV_8U);
-  if (photo.channels() == 4) cv::cvtColor(photo, photo, cv::COLOR_BGRA2BGR);
-  if (photo.channels() != 1 && photo.channels() != 3) {
-    return Status::InvalidArgument("photo '" + path + "' has " + std::to_string(photo.channels()) +
-                                   " channels (expected grey or colour)");
-  }
+  RECOG_ASSIGN_OR_RETURN(cv::Mat photo, ReadPhoto(PlacePhoto(place)));
   if (PlaceMirrored(place)) cv::flip(photo, photo, 1);
   cv::Mat cover = ResizeToCover(photo, options_);
 
@@ -514,22 +444,15 @@ StatusOr<SequenceFrame> SequenceGenerator::Frame(int i) const {
   cv::Mat warped;
   cv::warpPerspective(cover, warped, cv::Mat(homography), cv::Size(o.width, o.height),
                       cv::INTER_LINEAR | cv::WARP_INVERSE_MAP, cv::BORDER_REFLECT);
-  if (blur_sigma >= 0.2) {
-    cv::GaussianBlur(warped, warped, cv::Size(), blur_sigma, blur_sigma, cv::BORDER_REFLECT);
-  }
-  const double gain = v.gain * flicker;
-  const double noise_sigma = v.strength * o.noise_sigma;
-  if (gain == 1 && v.gradient_x == 0 && v.gradient_y == 0 && noise_sigma == 0) {
-    frame.image = std::move(warped);
-    return frame;
-  }
-  cv::Mat noise;
-  if (noise_sigma > 0) {
-    noise.create(warped.size(), CV_32FC(warped.channels()));
-    cv::RNG noise_rng(noise_seed);
-    noise_rng.fill(noise, cv::RNG::NORMAL, 0.0, noise_sigma);
-  }
-  ApplyIllumination(warped, noise, gain, v.gradient_x, v.gradient_y, &frame.image);
+  CameraEffects effects;
+  effects.blur_sigma = blur_sigma;
+  effects.gain = v.gain * flicker;
+  effects.gradient_x = v.gradient_x;
+  effects.gradient_y = v.gradient_y;
+  effects.noise_sigma = v.strength * o.noise_sigma;
+  effects.noise_seed = noise_seed;
+  ApplyCameraEffects(effects, &warped);
+  frame.image = std::move(warped);
   return frame;
 }
 
@@ -571,16 +494,7 @@ StatusOr<SequenceWriteResult> WriteSequence(const SequenceGenerator& generator,
                                             const std::string& out_dir, bool sparse_truth,
                                             SequenceImageFormat format,
                                             const SequenceProgress& progress) {
-  std::error_code ec;
-  if (fs::exists(out_dir, ec)) {
-    if (!fs::is_directory(out_dir, ec)) {
-      return Status::InvalidArgument("output '" + out_dir + "' exists and is not a folder");
-    }
-    if (!fs::is_empty(out_dir, ec) || ec) {
-      return Status::InvalidArgument("output folder '" + out_dir +
-                                     "' is not empty; refusing to overwrite it");
-    }
-  }
+  RECOG_RETURN_IF_ERROR(PrepareOutputFolder(out_dir));
   SequenceWriteResult result;
   result.images_dir = (fs::path(out_dir) / "images").string();
   result.frames = generator.num_frames();
@@ -588,6 +502,7 @@ StatusOr<SequenceWriteResult> WriteSequence(const SequenceGenerator& generator,
   result.ground_truth_path =
       (fs::path(out_dir) / (result.sparse_truth ? "ground_truth.sparse.txt" : "ground_truth.txt"))
           .string();
+  std::error_code ec;
   fs::create_directories(result.images_dir, ec);
   if (ec) {
     return Status::Internal("cannot create folder '" + result.images_dir + "': " + ec.message());
@@ -602,13 +517,7 @@ StatusOr<SequenceWriteResult> WriteSequence(const SequenceGenerator& generator,
     char name[32];
     std::snprintf(name, sizeof(name), "%06d.%s", i + 1, extension);
     const std::string path = (fs::path(result.images_dir) / name).string();
-    bool written = false;
-    try {
-      written = cv::imwrite(path, frame.image, params);
-    } catch (const cv::Exception& e) {
-      return Status::Internal("cannot write '" + path + "': " + e.what());
-    }
-    if (!written) return Status::Internal("cannot write '" + path + "'");
+    RECOG_RETURN_IF_ERROR(WriteImage(path, frame.image, params));
     if (progress) progress(uint64_t(i + 1), uint64_t(result.frames));
   }
 

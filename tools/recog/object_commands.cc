@@ -316,8 +316,88 @@ int RunRecognize(const RecognizeArgs& args) {
 struct EvalSequenceArgs {
   std::vector<std::string> models;
   std::string images, camera, expect, draw, vocabulary;
+  std::string truth, size_recall = "size_recall";  // --truth, --size-recall
+  SizeRecallOptions size_options;
   bool json = false, quiet = false;
   bool track = false;  // follow the object with an ObjectTracker, as a stream does
+};
+
+// --truth: per-frame pose errors and recall against object size (CSV + PNG + JSON + a table).
+class SizeRecallReport {
+ public:
+  Status Open(const EvalSequenceArgs& args) {
+    if (args.truth.empty()) return Status::Ok();
+    RECOG_ASSIGN_OR_RETURN(truth_, ReadObjectSequenceTruth(args.truth));
+    return Status::Ok();
+  }
+  bool enabled() const { return !truth_.frames.empty(); }
+
+  Status Add(const EvalSequenceArgs& args, const std::string& image,
+             const std::vector<Detection>& detections, json* frame) {
+    if (!enabled()) return Status::Ok();
+    RECOG_ASSIGN_OR_RETURN(const ObjectTruthFrame truth, FindTruthFrame(truth_, image));
+    const TruthFrameScore& s =
+        scores_.emplace_back(ScoreTruthFrame(truth, args.expect, detections, args.size_options));
+    (*frame)["truth"] = {{"visible", s.visible},
+                         {"area_fraction", s.area_fraction},
+                         {"found", s.found},
+                         {"correct_pose", s.correct_pose},
+                         {"rotation_error_deg", s.rotation_error_deg},
+                         {"translation_error_m", s.translation_error_m}};
+    return Status::Ok();
+  }
+
+  Status Finish(const EvalSequenceArgs& args, json* out) {
+    if (!enabled()) return Status::Ok();
+    const SizeRecall r = SummariseSizeRecall(scores_, args.size_options);
+    const std::string csv = args.size_recall + ".csv", png = args.size_recall + ".png";
+    RECOG_RETURN_IF_ERROR(WriteSizeRecallCsv(r, csv));
+    RECOG_RETURN_IF_ERROR(WriteSizeRecallPlot(
+        r, "Recall of '" + args.expect + "' against its size on " + args.images, png));
+    json bins = json::array();
+    for (const SizeBin& b : r.bins) {
+      bins.push_back({{"area_lo", b.lo},
+                      {"area_hi", b.hi},
+                      {"median_area", b.median_area},
+                      {"frames", b.frames},
+                      {"found", b.found},
+                      {"correct", b.correct},
+                      {"recall", b.recall},
+                      {"found_rate", b.found_rate},
+                      {"median_rotation_error_deg", b.median_rotation_error_deg},
+                      {"median_translation_error_m", b.median_translation_error_m}});
+    }
+    (*out)["size_recall"] = {{"visible_frames", r.visible_frames},
+                             {"found", r.found},
+                             {"correct", r.correct},
+                             {"recall", r.recall},
+                             {"found_not_visible", r.found_not_visible},
+                             {"other_objects", r.other_objects},
+                             {"max_rotation_error_deg", args.size_options.max_rotation_error_deg},
+                             {"max_translation_error", args.size_options.max_translation_error},
+                             {"bins", bins},
+                             {"csv", csv},
+                             {"plot", png}};
+    if (args.json) return Status::Ok();
+    std::printf(
+        "visible frames %zu: found %zu, right pose %zu (recall %.1f %%); reported while "
+        "less than half in view: %zu\n",
+        r.visible_frames, r.found, r.correct, 100 * r.recall, r.found_not_visible);
+    std::printf("%-16s %6s %6s %6s %8s %8s %8s\n", "area (% frame)", "frames", "found", "right",
+                "recall", "rot(deg)", "t (cm)");
+    for (const SizeBin& b : r.bins) {
+      char range[32];
+      std::snprintf(range, sizeof(range), "%.1f-%.1f", 100 * b.lo, 100 * b.hi);
+      std::printf("%-16s %6zu %6zu %6zu %7.1f%% %8.2f %8.2f\n", range, b.frames, b.found, b.correct,
+                  100 * b.recall, b.median_rotation_error_deg, 100 * b.median_translation_error_m);
+    }
+    std::printf("size recall: %s, %s\n", csv.c_str(), png.c_str());
+    return Status::Ok();
+  }
+
+ private:
+  ObjectSequenceTruth truth_;
+  std::vector<TruthFrameScore> scores_;
 };
 
 // Recognises every frame of a sequence in which one known object (--expect) is visible: recall
@@ -348,6 +428,8 @@ int RunEvalSequence(const EvalSequenceArgs& args) {
     return Fail("eval sequence",
                 Status::InvalidArgument("--expect '" + args.expect + "' is not among the models"));
   }
+  SizeRecallReport size_recall;
+  if (Status s = size_recall.Open(args); !s.ok()) return Fail("eval sequence", s);
   if (!args.draw.empty()) fs::create_directories(args.draw);
   ObjectRecognizer recognizer(database);
   ObjectTracker tracker(database);
@@ -392,6 +474,9 @@ int RunEvalSequence(const EvalSequenceArgs& args) {
       frame["tracked"] = tracked;
       frame["recognized"] = tracking.recognized;
     }
+    if (Status s = size_recall.Add(args, (*frames)[i], detections, &frame); !s.ok()) {
+      return Fail("eval sequence", s);
+    }
     per_frame.push_back(std::move(frame));
     if (!args.draw.empty() && !detections.empty()) {
       cv::Mat canvas;
@@ -425,6 +510,7 @@ int RunEvalSequence(const EvalSequenceArgs& args) {
     out["timing_ms"]["tracking_per_object"] = {{"median", Median(per_object)}};
   }
   if (args.json) {
+    if (Status s = size_recall.Finish(args, &out); !s.ok()) return Fail("eval sequence", s);
     std::printf("%s\n", out.dump(2).c_str());
   } else {
     std::printf(
@@ -437,6 +523,7 @@ int RunEvalSequence(const EvalSequenceArgs& args) {
           found_tracked, recognised_totals.size(), Median(recognised_totals), tracked_totals.size(),
           Median(tracked_totals), Median(per_object));
     }
+    if (Status s = size_recall.Finish(args, &out); !s.ok()) return Fail("eval sequence", s);
   }
   return 0;
 }
@@ -646,6 +733,22 @@ void AddEvalObjectsCommand(CLI::App& eval, int* exit_code) {
   sequence->add_option("--vocab", sequence_args->vocabulary, "Vocabulary");
   sequence->add_flag("--track", sequence_args->track,
                      "Track the objects from frame to frame (as StreamRecognizeObjects does)");
+  sequence->add_option("--truth", sequence_args->truth,
+                       "Ground truth of recog seqgen objects (truth.txt): pose errors per frame "
+                       "and recall against object size");
+  sequence
+      ->add_option("--size-recall", sequence_args->size_recall,
+                   "With --truth: write PREFIX.csv and PREFIX.png")
+      ->capture_default_str();
+  sequence
+      ->add_option("--max-rotation-error", sequence_args->size_options.max_rotation_error_deg,
+                   "With --truth: largest rotation error of a right pose, degrees")
+      ->capture_default_str();
+  sequence
+      ->add_option("--max-translation-error", sequence_args->size_options.max_translation_error,
+                   "With --truth: largest translation error of a right pose, fraction of the "
+                   "distance")
+      ->capture_default_str();
   sequence->add_flag("--json", sequence_args->json, "Print JSON");
   sequence->add_flag("-q,--quiet", sequence_args->quiet, "No progress output");
   sequence->callback([sequence_args, exit_code] { *exit_code = RunEvalSequence(*sequence_args); });

@@ -91,6 +91,43 @@ expect_error "seqgen with a bad revisit fraction" "INVALID_ARGUMENT" "$recog" se
 expect_error "seqgen with an unknown format" "unknown image format" "$recog" seqgen --images "$images" -o "$tmp/seq3" --format gif
 [ ! -e "$tmp/seq3" ] && pass || fail "seqgen creates nothing on bad input"
 
+# seqgen objects: a tiny poster sequence, a model of its face and eval sequence --truth.
+mkdir -p "$tmp/object_photos" "$tmp/background_photos"
+cp "$images/1.jpg" "$tmp/object_photos/" && cp "$images/20.jpg" "$images/60.jpg" "$tmp/background_photos/"
+expect_ok "seqgen objects a tiny poster sequence" "$recog" seqgen objects --object-photos "$tmp/object_photos" \
+  --background-photos "$tmp/background_photos" -o "$tmp/objseq" --frames 6 --training-views 1 --min-fraction 0.1 --json
+/usr/bin/python3 -c "import json; d=json.load(open('$tmp/out')); assert d['frames']==6 and d['object']=='synthetic-poster' and d['camera']==[525,525,319.5,239.5], d" \
+  && [ -f "$tmp/objseq/images/000006.png" ] && [ -f "$tmp/objseq/depth/000006.png" ] && [ -f "$tmp/objseq/masks/000006.png" ] \
+  && [ -f "$tmp/objseq/faces/front.png" ] && [ -f "$tmp/objseq/views.txt" ] && grep -q "recog eval sequence" "$tmp/objseq/README.txt" \
+  && pass || fail "seqgen objects writes frames, depth, masks, faces, views and a README"
+expect_ok "model build of the sequence's poster" "$recog" model build --planar "$tmp/objseq/faces/front.png" \
+  --width 0.3 --height 0.21 --name synthetic-poster -o "$tmp/objseq.robj"
+expect_ok "eval sequence --truth --json" "$recog" eval sequence --models "$tmp/objseq.robj" --images "$tmp/objseq/images" \
+  --camera 525,525,319.5,239.5 --expect synthetic-poster --truth "$tmp/objseq/truth.txt" --size-recall "$tmp/size" --json -q
+/usr/bin/python3 -c "
+import json
+d = json.load(open('$tmp/out'))
+s = d['size_recall']
+assert set(s) == {'visible_frames', 'found', 'correct', 'recall', 'found_not_visible', 'other_objects',
+                  'max_rotation_error_deg', 'max_translation_error', 'bins', 'csv', 'plot'}, s
+assert set(s['bins'][0]) == {'area_lo', 'area_hi', 'median_area', 'frames', 'found', 'correct', 'recall',
+                             'found_rate', 'median_rotation_error_deg', 'median_translation_error_m'}, s
+assert s['bins'][-1]['frames'] > 0 and s['bins'][-1]['recall'] > 0, s
+assert set(d['per_frame'][0]['truth']) == {'visible', 'area_fraction', 'found', 'correct_pose',
+                                           'rotation_error_deg', 'translation_error_m'}, d['per_frame'][0]
+assert open('$tmp/size.csv').readline().startswith('area_lo,area_hi,median_area,frames,found,correct,recall')
+assert open('$tmp/size.png', 'rb').read(4) == b'\x89PNG'
+" && pass || fail "eval sequence --truth reports recall per size bin (JSON, CSV, PNG)"
+expect_error "seqgen objects from a missing folder" "NOT_FOUND" "$recog" seqgen objects --object-photos "$tmp/none" \
+  --background-photos "$tmp/background_photos" -o "$tmp/objseq2"
+expect_error "seqgen objects with a bad size" "object width" "$recog" seqgen objects --object-photos "$tmp/object_photos" \
+  --background-photos "$tmp/background_photos" -o "$tmp/objseq2" --object-width 0
+expect_error "seqgen objects with a bad shape" "unknown object shape" "$recog" seqgen objects --object-photos "$tmp/object_photos" \
+  --background-photos "$tmp/background_photos" -o "$tmp/objseq2" --shape sphere
+[ ! -e "$tmp/objseq2" ] && pass || fail "seqgen objects creates nothing on bad input"
+expect_error "eval sequence with a missing truth" "NOT_FOUND" "$recog" eval sequence --models "$tmp/objseq.robj" \
+  --images "$tmp/objseq/images" --camera 525,525,319.5,239.5 --expect synthetic-poster --truth "$tmp/none.txt" -q
+
 # recog eval place on the 4 bundled frames (41 revisits 1, 60 revisits 20).
 printf '0 0 0 0\n0 0 0 0\n1 0 0 0\n0 1 0 0\n' >"$tmp/gt4.txt"
 expect_ok "eval place on the bundled frames" "$recog" eval place --images "$images" \

@@ -1,4 +1,5 @@
-// recog seqgen: a long synthetic image sequence with exact loop ground truth, from real photos.
+// recog seqgen: a long synthetic image sequence with exact loop ground truth, from real photos;
+// recog seqgen objects: an RGB-D sequence of one object with exact pose ground truth.
 #include <chrono>
 #include <cstdio>
 #include <memory>
@@ -7,6 +8,7 @@
 #include <nlohmann/json.hpp>
 
 #include "tools/common/cli_support.h"
+#include "tools/evaluation/object_sequence_generator.h"
 #include "tools/evaluation/sequence_generator.h"
 #include "tools/recog/commands.h"
 
@@ -30,6 +32,9 @@ struct SeqgenArgs {
 };
 
 int RunSeqgen(const SeqgenArgs& args) {
+  if (args.images.empty() || args.output.empty()) {
+    return Fail(Status::InvalidArgument("--images and --output are required"));
+  }
   const auto start = std::chrono::steady_clock::now();
   auto format = ParseSequenceImageFormat(args.format);
   if (!format.ok()) return Fail(format.status());
@@ -123,6 +128,119 @@ int RunSeqgen(const SeqgenArgs& args) {
   return 0;
 }
 
+struct ObjectSeqgenArgs {
+  std::string object_photos, background_photos, output, shape = "poster";
+  ObjectSequenceOptions options;
+  bool json = false, quiet = false;
+};
+
+int RunObjectSeqgen(ObjectSeqgenArgs args) {
+  const auto fail = [](const Status& status) {
+    std::fprintf(stderr, "recog seqgen objects: %s\n", status.ToString().c_str());
+    return 1;
+  };
+  auto shape = ParseObjectShape(args.shape);
+  if (!shape.ok()) return fail(shape.status());
+  args.options.shape = *shape;
+  if (Status s = args.options.Validate(); !s.ok()) return fail(s);
+  auto objects = ListImages(args.object_photos);
+  if (!objects.ok()) return fail(objects.status().WithContext("--object-photos"));
+  auto backgrounds = ListImages(args.background_photos);
+  if (!backgrounds.ok()) return fail(backgrounds.status().WithContext("--background-photos"));
+  const auto start = std::chrono::steady_clock::now();
+  auto generator = ObjectSequenceGenerator::Create(*objects, *backgrounds, args.options);
+  if (!generator.ok()) return fail(generator.status());
+  ProgressBar progress(!args.quiet && !args.json);
+  auto written = WriteObjectSequence(*generator, args.output, [&](uint64_t done, uint64_t total) {
+    progress.Update("images", done, total);
+  });
+  progress.Finish();
+  if (!written.ok()) return fail(written.status());
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  const ObjectSequenceOptions& o = generator->options();
+  const CameraIntrinsics& camera = generator->camera();
+  nlohmann::json faces = nlohmann::json::array();
+  for (const ObjectFace& face : generator->faces()) faces.push_back(face.photo);
+  if (args.json) {
+    const nlohmann::json j = {
+        {"frames", written->frames},
+        {"visible_frames", written->visible_frames},
+        {"training_views", o.training_views},
+        {"object", o.ObjectName()},
+        {"shape", std::string(ObjectShapeName(o.shape))},
+        {"size_m", {o.width, o.height, o.shape == ObjectShape::kBox ? o.depth : 0.0}},
+        {"camera", {camera.fx, camera.fy, camera.cx, camera.cy}},
+        {"width", o.image_width},
+        {"height", o.image_height},
+        {"area_fraction_min", written->min_fraction},
+        {"area_fraction_max", written->max_fraction},
+        {"face_photos", faces},
+        {"seed", o.seed},
+        {"truth", written->truth_path},
+        {"views", written->views_path},
+        {"readme", written->readme_path},
+        {"seconds", seconds}};
+    std::printf("%s\n", j.dump(2).c_str());
+    return 0;
+  }
+  std::printf(
+      "wrote %d frames (%dx%d, fx = fy = %g, cx = %g, cy = %g) and %d training views of %s '%s', "
+      "seed %llu\n"
+      "object in view (at least half) in %d frames, covering %.2f %% .. %.2f %% of the frame\n"
+      "truth: %s\nviews: %s\ncommands: %s\ntime: %.1f s\n",
+      written->frames, o.image_width, o.image_height, camera.fx, camera.cx, camera.cy,
+      o.training_views, std::string(ObjectShapeName(o.shape)).c_str(), o.ObjectName().c_str(),
+      static_cast<unsigned long long>(o.seed), written->visible_frames, 100 * written->min_fraction,
+      100 * written->max_fraction, written->truth_path.c_str(), written->views_path.c_str(),
+      written->readme_path.c_str(), seconds);
+  return 0;
+}
+
+void AddObjectSeqgenCommand(CLI::App& seqgen, int* exit_code) {
+  auto args = std::make_shared<ObjectSeqgenArgs>();
+  ObjectSequenceOptions& o = args->options;
+  CLI::App* cmd = seqgen.add_subcommand(
+      "objects",
+      "Generate an RGB-D sequence of one object (a poster or a box made of photos) in front of "
+      "background photos, with exact poses, masks, training views and a README");
+  cmd->add_option("--object-photos", args->object_photos, "Folder of photos for the object's faces")
+      ->required();
+  cmd->add_option("--background-photos", args->background_photos,
+                  "Folder of other photos for the walls behind it")
+      ->required();
+  cmd->add_option("-o,--output", args->output, "Output folder (must not exist or be empty)")
+      ->required();
+  cmd->add_option("--shape", args->shape, "poster or box")->capture_default_str();
+  cmd->add_option("--name", o.name, "Object name (default: the shape)");
+  cmd->add_option("--object-width", o.width, "Object width, metres")->capture_default_str();
+  cmd->add_option("--object-height", o.height, "Object height, metres")->capture_default_str();
+  cmd->add_option("--object-depth", o.depth, "Box depth, metres")->capture_default_str();
+  cmd->add_option("--frames", o.frames, "Frames of the sequence")->capture_default_str();
+  cmd->add_option("--training-views", o.training_views, "Views of the training walk")
+      ->capture_default_str();
+  cmd->add_option("--width", o.image_width, "Frame width")->capture_default_str();
+  cmd->add_option("--height", o.image_height, "Frame height")->capture_default_str();
+  cmd->add_option("--focal", o.focal, "Focal length fx = fy, pixels")->capture_default_str();
+  cmd->add_option("--max-fraction", o.max_fraction, "Object area at the start, fraction of frame")
+      ->capture_default_str();
+  cmd->add_option("--min-fraction", o.min_fraction, "Object area at the end, fraction of frame")
+      ->capture_default_str();
+  cmd->add_option("--blur", o.blur_sigma_max, "Largest Gaussian blur sigma")->capture_default_str();
+  cmd->add_option("--noise", o.noise_sigma, "Gaussian noise sigma (grey levels)")
+      ->capture_default_str();
+  cmd->add_option("--illumination", o.illumination_max, "Relative illumination change")
+      ->capture_default_str();
+  cmd->add_option("--depth-noise", o.depth_noise_mm, "Depth noise on the background, mm")
+      ->capture_default_str();
+  cmd->add_option("--depth-holes", o.depth_holes, "Zero-depth holes per frame")
+      ->capture_default_str();
+  cmd->add_option("--seed", o.seed, "Random seed")->capture_default_str();
+  cmd->add_flag("--json", args->json, "Print the summary as JSON");
+  cmd->add_flag("-q,--quiet", args->quiet, "No progress output");
+  cmd->callback([args, exit_code] { *exit_code = RunObjectSeqgen(*args); });
+}
+
 }  // namespace
 
 void AddSeqgenCommand(CLI::App& app, int* exit_code) {
@@ -131,10 +249,10 @@ void AddSeqgenCommand(CLI::App& app, int* exit_code) {
   CLI::App* cmd = app.add_subcommand(
       "seqgen",
       "Generate an image sequence with exact loop ground truth from photos (one photo per place)");
-  cmd->add_option("--images", args->images, "Folder of photos (recursive, natural order)")
-      ->required();
-  cmd->add_option("-o,--output", args->output, "Output folder (must not exist or be empty)")
-      ->required();
+  cmd->add_option("--images", args->images,
+                  "Folder of photos (recursive, natural order); required without a mode");
+  cmd->add_option("-o,--output", args->output,
+                  "Output folder (must not exist or be empty); required without a mode");
   cmd->add_option("--places", o.places,
                   "Places, one photo each (photos of the same scene as an earlier one are skipped)")
       ->capture_default_str();
@@ -166,7 +284,12 @@ void AddSeqgenCommand(CLI::App& app, int* exit_code) {
                 "Sparse ground truth (forced above 5000 frames)");
   cmd->add_flag("--json", args->json, "Print the summary as JSON");
   cmd->add_flag("-q,--quiet", args->quiet, "No progress output");
-  cmd->callback([args, exit_code] { *exit_code = RunSeqgen(*args); });
+  AddObjectSeqgenCommand(*cmd, exit_code);
+  cmd->require_subcommand(0, 1);
+  cmd->callback([cmd, args, exit_code] {
+    if (cmd->got_subcommand("objects")) return;  // its own callback ran
+    *exit_code = RunSeqgen(*args);
+  });
 }
 
 }  // namespace recog::cli
