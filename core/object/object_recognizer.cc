@@ -405,8 +405,8 @@ Status ObjectRecognizer::SecondPass(const cv::Mat& image, const CameraIntrinsics
   const size_t count = std::min(revisits.size(), pass.max_regions);
   for (size_t i = 0; i < count; ++i) {
     const cv::Rect2f& bounds = revisits[i].bounds;
-    const double margin_x = std::max(pass.margin * bounds.width, pass.min_crop_side / 2.0);
-    const double margin_y = std::max(pass.margin * bounds.height, pass.min_crop_side / 2.0);
+    const double margin_x = std::max(pass.margin * bounds.width, double(pass.min_margin_px));
+    const double margin_y = std::max(pass.margin * bounds.height, double(pass.min_margin_px));
     const cv::Rect box = cv::Rect(cv::Point(int(std::floor(bounds.x - margin_x)),
                                             int(std::floor(bounds.y - margin_y))),
                                   cv::Point(int(std::ceil(bounds.br().x + margin_x)),

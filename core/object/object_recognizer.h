@@ -55,15 +55,16 @@
 
 namespace recog {
 
-// The second pass (step 6 above). Measured on visp-cube (README): 1000 crop features, 8 crop
-// levels, 8 regions, 3 candidates or a wider margin found no more; enlarging to 480 px found fewer.
+// The second pass (step 6 above). The defaults were measured on visp-cube and RoboEarth (README,
+// Evaluation): more crop features, crop levels, regions or candidates, or a wider margin, found
+// no more; enlarging to 480 or 240 px, or 2 crop levels, found fewer.
 struct SecondPassOptions {
   bool enabled = true;
   size_t max_regions = 4;  // regions re-examined per image, in the order they were searched
   // A first-pass detection with fewer inliers than this is weak: its region is searched again.
   size_t weak_inliers = 20;
   double margin = 0.25;      // added to each side of the region's box, as a fraction of its size
-  int min_crop_side = 32;    // the margin is widened to give at least this many pixels per side
+  int min_margin_px = 16;    // and at least this many pixels
   int enlarge_to_px = 320;   // crops whose longer side is shorter are enlarged towards this...
   double max_enlarge = 3.0;  // ...by at most this factor
   size_t candidates = 1;     // objects verified per crop (BC matching on the crop's features)
@@ -97,8 +98,8 @@ struct RecognitionOptions {
   SecondPassOptions second_pass;
 
   // 1000 features over 3 levels at 1.2, no grid bucketing. Measured (README, Evaluation) against
-  // 1, 2 and 4 levels and 2x2 / 4x4 grids: 3 levels found most (2 levels did as well on
-  // visp-cube, worse on RoboEarth); with either grid both found fewer.
+  // 1, 2 and 4 levels and 2x2 / 4x4 grids: 3 levels found most (2 nearly as many); the grids
+  // found fewer or let a wrong object through.
   static OrbOptions DefaultQueryOrb() {
     OrbOptions orb;
     orb.max_features = 1000;
