@@ -654,3 +654,34 @@ TEST_F(ObjectRecognitionTest, RecognizeFeaturesHasNoSecondPass) {
 
 }  // namespace
 }  // namespace recog
+
+namespace recog {
+namespace {
+
+// A second model made of the right half of the poster (like a label printed on two products): on
+// a view of the whole poster, the half's detection lies inside the poster's outline with fewer
+// inliers and is dropped.
+TEST_F(ObjectRecognitionTest, ADetectionInsideAStrongerOneOfAnotherObjectIsDropped) {
+  ASSERT_TRUE(database_->Put(poster_).ok());
+  const cv::Mat poster = Poster();
+  ModelBuilder builder(ObjectVocabulary());
+  auto half = builder.FromFaceImages(
+      "half", {{BoxSide::kFront, poster.colRange(poster.cols / 2, poster.cols).clone()}},
+      kPosterWidth / 2, kPosterHeight);
+  ASSERT_TRUE(half.ok()) << half.status().ToString();
+  ASSERT_TRUE(database_->Put(*half).ok());
+  RecognitionOptions options;
+  options.report_duplicates = true;  // every region's detection, before the suppression
+  options.candidates_per_roi = 2;    // both models verified in every region
+  options.beta = 0;                  // whatever their BC scores
+  ObjectRecognizer recognizer(database_, options);
+  const cv::Mat view = RenderPoster(poster, poster_, camera_, PoseAt(10, 0, {0, 0, 1.0}));
+  std::vector<Detection> detections;
+  ASSERT_TRUE(recognizer.Recognize(view, camera_, &detections).ok());
+  ASSERT_FALSE(detections.empty());
+  EXPECT_EQ(detections[0].name, "poster");
+  for (const Detection& d : detections) EXPECT_EQ(d.name, "poster");
+}
+
+}  // namespace
+}  // namespace recog
