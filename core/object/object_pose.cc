@@ -106,7 +106,9 @@ bool RansacPnp(const cv::Matx33d& K, const std::vector<cv::Point3f>& object,
       *pose = hypothesis;
       const double all_inliers = std::pow(double(inliers->size()) / double(n), kSample);
       if (all_inliers >= 1.0) break;
-      needed = std::min(iterations, int(std::ceil(std::log(0.01) / std::log(1.0 - all_inliers))));
+      // In doubles first: with a handful of inliers the count overflows an int.
+      needed =
+          int(std::min(double(iterations), std::ceil(std::log(0.01) / std::log1p(-all_inliers))));
     }
   }
   if (inliers->size() < kSample) return false;

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstring>
+#include <numeric>
 
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
@@ -70,6 +72,46 @@ bool HomographyPose(const cv::Matx33d& K, const IndexedObject& object,
   return true;
 }
 
+// Keeps each object's best detection (most inliers, then lowest error) unless `duplicates`, then
+// orders them best first (the documented order). Last, a detection is dropped when most of its
+// inliers lie inside the outline of a kept detection of another object with more inliers: that
+// part of the image is explained by the stronger object (a few of its features fitted by another
+// model, e.g. a label printed on two products).
+void SortDetections(bool duplicates, std::vector<Detection>* detections) {
+  if (!duplicates) {
+    std::stable_sort(detections->begin(), detections->end(),
+                     [](const Detection& a, const Detection& b) {
+                       if (a.id != b.id) return a.id < b.id;
+                       if (a.inliers != b.inliers) return a.inliers > b.inliers;
+                       return a.reprojection_error_px < b.reprojection_error_px;
+                     });
+    detections->erase(
+        std::unique(detections->begin(), detections->end(),
+                    [](const Detection& a, const Detection& b) { return a.id == b.id; }),
+        detections->end());
+  }
+  std::stable_sort(detections->begin(), detections->end(),
+                   [](const Detection& a, const Detection& b) { return a.inliers > b.inliers; });
+  std::vector<Detection> kept;
+  kept.reserve(detections->size());
+  for (Detection& detection : *detections) {
+    const bool covered = std::any_of(kept.begin(), kept.end(), [&](const Detection& stronger) {
+      if (stronger.id == detection.id || stronger.inliers <= detection.inliers ||
+          stronger.outline.size() < 3) {
+        return false;
+      }
+      const size_t inside =
+          size_t(std::count_if(detection.inlier_pixels.begin(), detection.inlier_pixels.end(),
+                               [&](const cv::Point2f& p) {
+                                 return cv::pointPolygonTest(stronger.outline, p, false) >= 0;
+                               }));
+      return 2 * inside > detection.inlier_pixels.size();
+    });
+    if (!covered) kept.push_back(std::move(detection));
+  }
+  detections->swap(kept);
+}
+
 }  // namespace
 
 bool ObjectFilter::Passes(const ObjectMetadata& object) const {
@@ -98,7 +140,13 @@ Status ObjectRecognizer::Recognize(const cv::Mat& image, const CameraIntrinsics&
   RecognitionTiming* t = timing != nullptr ? timing : &local;
   *t = RecognitionTiming();
   t->orb = MillisecondsSince(start);
-  RECOG_RETURN_IF_ERROR(Run(features_, camera, filter, extras, detections, t));
+  RECOG_RETURN_IF_ERROR(Run(features_, camera, filter, extras, detections, t, &revisits_));
+  if (options_.second_pass.enabled && !revisits_.empty()) {
+    const auto phase = Clock::now();
+    RECOG_RETURN_IF_ERROR(SecondPass(image, camera, filter, extras, revisits_, detections, t));
+    t->second_pass = MillisecondsSince(phase);
+  }
+  SortDetections(options_.report_duplicates, detections);
   t->total = MillisecondsSince(start);
   return Status::Ok();
 }
@@ -122,110 +170,183 @@ Status ObjectRecognizer::RecognizeFeatures(const FeatureSet& features,
   RecognitionTiming local;
   RecognitionTiming* t = timing != nullptr ? timing : &local;
   *t = RecognitionTiming();
-  RECOG_RETURN_IF_ERROR(Run(features, camera, filter, extras, detections, t));
+  RECOG_RETURN_IF_ERROR(Run(features, camera, filter, extras, detections, t, &revisits_));
+  SortDetections(options_.report_duplicates, detections);
   t->total = MillisecondsSince(start);
   return Status::Ok();
 }
 
+void ObjectRecognizer::Prepare(const CameraIntrinsics& camera, QueryFeatures* query) const {
+  const FeatureSet& features = *query->features;
+  query->positions.resize(features.size());
+  for (size_t i = 0; i < features.size(); ++i) query->positions[i] = features.keypoints[i].pt;
+  query->pinhole = query->positions;
+  if (!camera.distortion.empty() && !query->pinhole.empty()) {
+    cv::undistortPoints(query->positions, query->pinhole, camera.K(), camera.distortion,
+                        cv::noArray(), camera.K());
+  }
+  const Vocabulary& vocabulary = database_->vocabulary();
+  const int levels_up = database_->direct_levels_up();
+  query->words.resize(features.size());
+  query->nodes.resize(features.size());
+  for (size_t i = 0; i < features.size(); ++i) {
+    query->words[i] =
+        vocabulary.TransformOne(features.descriptors.ptr(int(i)), &query->nodes[i], levels_up);
+  }
+}
+
+Status ObjectRecognizer::QueryRegion(const QueryFeatures& query,
+                                     const std::vector<uint32_t>& region, size_t candidates,
+                                     std::vector<BcMatch>* matches, RecognitionTiming* t) {
+  const Vocabulary& vocabulary = database_->vocabulary();
+  auto phase = Clock::now();
+  std::vector<BowEntry> entries;
+  entries.reserve(region.size());
+  for (uint32_t f : region) {
+    const float weight = vocabulary.WordWeight(query.words[f]);
+    if (weight > 0) entries.push_back({query.words[f], weight});
+  }
+  BowVector bow(entries);
+  bow.Normalize(BowNormalization::kL1);
+  t->conversion += MillisecondsSince(phase);
+  phase = Clock::now();
+  RECOG_RETURN_IF_ERROR(
+      database_->index().QueryBcMatching(bow, options_.beta, candidates, matches));
+  t->query += MillisecondsSince(phase);
+  return Status::Ok();
+}
+
+void ObjectRecognizer::VerifyCandidates(const std::vector<BcMatch>& candidates,
+                                        const QueryFeatures& query,
+                                        const std::vector<uint32_t>& region, int region_index,
+                                        const CameraIntrinsics& camera, const ObjectFilter& filter,
+                                        const DetectionOptions& extras,
+                                        std::vector<Detection>* detections, RecognitionTiming* t,
+                                        bool* weak) {
+  *weak = false;
+  for (const BcMatch& candidate : candidates) {
+    // Found already with enough inliers: a duplicate (skipped unless asked for). A weak earlier
+    // detection does not stop a better one.
+    const bool found_already =
+        std::any_of(detections->begin(), detections->end(), [&](const Detection& d) {
+          return d.id == candidate.id && d.inliers >= options_.second_pass.weak_inliers;
+        });
+    if (found_already && !options_.report_duplicates) continue;
+    const std::shared_ptr<const IndexedObject> object = database_->Find(candidate.id);
+    if (!object) continue;  // removed meanwhile
+    if (!filter.Passes(object->metadata)) continue;
+    ++t->verified;
+    Detection detection;
+    if (Verify(*object, query, region, camera, extras, t, &detection)) {
+      detection.score = candidate.chi_square;
+      detection.region = region_index;
+      *weak |= detection.inliers < options_.second_pass.weak_inliers;
+      detections->push_back(std::move(detection));
+    } else {
+      *weak = true;
+    }
+  }
+}
+
 Status ObjectRecognizer::Run(const FeatureSet& features, const CameraIntrinsics& camera,
                              const ObjectFilter& filter, const DetectionOptions& extras,
-                             std::vector<Detection>* detections, RecognitionTiming* t) {
-  const Vocabulary& vocabulary = database_->vocabulary();
-  // Pixel positions without lens distortion: every later step assumes a pinhole camera.
+                             std::vector<Detection>* detections, RecognitionTiming* t,
+                             std::vector<Revisit>* revisits) {
+  revisits->clear();
   auto phase = Clock::now();
-  positions_.resize(features.size());
-  for (size_t i = 0; i < features.size(); ++i) positions_[i] = features.keypoints[i].pt;
-  pinhole_ = positions_;
-  if (!camera.distortion.empty() && !pinhole_.empty()) {
-    cv::undistortPoints(positions_, pinhole_, camera.K(), camera.distortion, cv::noArray(),
-                        camera.K());
-  }
-  clusterer_.Cluster(positions_, &regions_);
+  query_.features = &features;
+  Prepare(camera, &query_);
+  // Prepare computed the words too; they count as conversion.
+  const double prepared = MillisecondsSince(phase);
+  phase = Clock::now();
+  clusterer_.Cluster(query_.positions, &regions_);
   t->clustering = MillisecondsSince(phase);
+  t->conversion = prepared;
   t->regions = regions_.size();
 
-  // Words and level-1 nodes of every feature, once for all regions.
-  phase = Clock::now();
-  const int levels_up = database_->direct_levels_up();
-  word_of_feature_.resize(features.size());
-  node_of_feature_.resize(features.size());
-  for (size_t i = 0; i < features.size(); ++i) {
-    word_of_feature_[i] =
-        vocabulary.TransformOne(features.descriptors.ptr(int(i)), &node_of_feature_[i], levels_up);
-  }
-  t->conversion = MillisecondsSince(phase);
-
-  std::vector<BowEntry> entries;
   std::vector<BcMatch> candidates;
   // The whole image (last region) goes first: it holds every correspondence of an object that
   // fills the view, so its pose is the best one; the clusters then find the smaller objects.
   for (size_t k = 0; k < regions_.size(); ++k) {
     const size_t r = (k + regions_.size() - 1) % regions_.size();
-    const std::vector<uint32_t>& region = regions_[r].features;
-    phase = Clock::now();
-    entries.clear();
-    for (uint32_t f : region) {
-      const float weight = vocabulary.WordWeight(word_of_feature_[f]);
-      if (weight > 0) entries.push_back({word_of_feature_[f], weight});
-    }
-    BowVector bow(entries);
-    bow.Normalize(BowNormalization::kL1);
-    t->conversion += MillisecondsSince(phase);
-
-    phase = Clock::now();
-    RECOG_RETURN_IF_ERROR(database_->index().QueryBcMatching(
-        bow, options_.beta, options_.candidates_per_roi, &candidates));
-    t->query += MillisecondsSince(phase);
-
-    for (const BcMatch& candidate : candidates) {
-      const bool found_already =
-          std::any_of(detections->begin(), detections->end(),
-                      [&candidate](const Detection& d) { return d.id == candidate.id; });
-      if (found_already && !options_.report_duplicates) continue;
-      const std::shared_ptr<const IndexedObject> object = database_->Find(candidate.id);
-      if (!object) continue;  // removed meanwhile
-      if (!filter.Passes(object->metadata)) continue;
-      ++t->verified;
-      Detection detection;
-      if (Verify(*object, features, region, camera, extras, t, &detection)) {
-        detection.score = candidate.chi_square;
-        detection.region = int(r);
-        detections->push_back(std::move(detection));
-      }
-    }
+    const RegionOfInterest& region = regions_[r];
+    RECOG_RETURN_IF_ERROR(
+        QueryRegion(query_, region.features, options_.candidates_per_roi, &candidates, t));
+    bool weak = false;
+    VerifyCandidates(candidates, query_, region.features, int(r), camera, filter, extras,
+                     detections, t, &weak);
+    if (weak && !region.whole_image) revisits->push_back({r, region.bounds});
   }
-
-  if (!options_.report_duplicates) {
-    // Keep each object's best detection (most inliers, then lowest error).
-    std::stable_sort(detections->begin(), detections->end(),
-                     [](const Detection& a, const Detection& b) {
-                       if (a.id != b.id) return a.id < b.id;
-                       if (a.inliers != b.inliers) return a.inliers > b.inliers;
-                       return a.reprojection_error_px < b.reprojection_error_px;
-                     });
-    detections->erase(
-        std::unique(detections->begin(), detections->end(),
-                    [](const Detection& a, const Detection& b) { return a.id == b.id; }),
-        detections->end());
-  }
-  // Best first (the documented order), whether or not duplicates were merged.
-  std::stable_sort(detections->begin(), detections->end(),
-                   [](const Detection& a, const Detection& b) { return a.inliers > b.inliers; });
   return Status::Ok();
 }
 
-bool ObjectRecognizer::Verify(const IndexedObject& object, const FeatureSet& features,
+Status ObjectRecognizer::SecondPass(const cv::Mat& image, const CameraIntrinsics& camera,
+                                    const ObjectFilter& filter, const DetectionOptions& extras,
+                                    const std::vector<Revisit>& revisits,
+                                    std::vector<Detection>* detections, RecognitionTiming* t) {
+  const SecondPassOptions& pass = options_.second_pass;
+  if (!crop_extractor_) {
+    FeatureOptions feature_options;
+    feature_options.orb = pass.orb;
+    RECOG_ASSIGN_OR_RETURN(crop_extractor_, CreateFeatureExtractor(feature_options));
+  }
+  const cv::Rect image_rect(0, 0, image.cols, image.rows);
+  // The stages of the second pass are counted in t->second_pass, not in the first pass's.
+  RecognitionTiming stages;
+  std::vector<BcMatch> candidates;
+  std::vector<uint32_t> all;
+  const size_t count = std::min(revisits.size(), pass.max_regions);
+  for (size_t i = 0; i < count; ++i) {
+    const cv::Rect2f& bounds = revisits[i].bounds;
+    const double margin_x = std::max(pass.margin * bounds.width, double(pass.min_margin_px));
+    const double margin_y = std::max(pass.margin * bounds.height, double(pass.min_margin_px));
+    const cv::Rect box = cv::Rect(cv::Point(int(std::floor(bounds.x - margin_x)),
+                                            int(std::floor(bounds.y - margin_y))),
+                                  cv::Point(int(std::ceil(bounds.br().x + margin_x)),
+                                            int(std::ceil(bounds.br().y + margin_y)))) &
+                         image_rect;
+    if (box.empty()) continue;
+    const double scale = std::clamp(double(pass.enlarge_to_px) / std::max(box.width, box.height),
+                                    1.0, pass.max_enlarge);
+    if (scale > 1.0) {
+      cv::resize(image(box), crop_, cv::Size(), scale, scale, cv::INTER_LINEAR);
+    } else {
+      crop_ = image(box);
+    }
+    RECOG_RETURN_IF_ERROR(crop_extractor_->Extract(crop_, &crop_features_));
+    ++t->second_pass_regions;
+    // Back to image pixels (cv::resize maps pixel centres: x_crop + 0.5 = s (x_box + 0.5)).
+    for (cv::KeyPoint& keypoint : crop_features_.keypoints) {
+      keypoint.pt.x = float(box.x + (keypoint.pt.x + 0.5) / scale - 0.5);
+      keypoint.pt.y = float(box.y + (keypoint.pt.y + 0.5) / scale - 0.5);
+      keypoint.size = float(keypoint.size / scale);
+    }
+    crop_query_.features = &crop_features_;
+    Prepare(camera, &crop_query_);
+    all.resize(crop_features_.size());
+    std::iota(all.begin(), all.end(), 0u);
+    RECOG_RETURN_IF_ERROR(QueryRegion(crop_query_, all, pass.candidates, &candidates, &stages));
+    bool weak = false;
+    VerifyCandidates(candidates, crop_query_, all, int(revisits[i].region), camera, filter, extras,
+                     detections, &stages, &weak);
+  }
+  t->verified += stages.verified;
+  return Status::Ok();
+}
+
+bool ObjectRecognizer::Verify(const IndexedObject& object, const QueryFeatures& query,
                               const std::vector<uint32_t>& region, const CameraIntrinsics& camera,
                               const DetectionOptions& extras, RecognitionTiming* timing,
                               Detection* detection) {
   auto phase = Clock::now();
+  const FeatureSet& features = *query.features;
   const int row_bytes = features.descriptors.cols;
   cv::Mat region_descriptors(int(region.size()), row_bytes, CV_8U);
   std::vector<std::pair<NodeId, uint32_t>> pairs(region.size());
   for (size_t i = 0; i < region.size(); ++i) {
     std::memcpy(region_descriptors.ptr(int(i)), features.descriptors.ptr(int(region[i])),
                 size_t(row_bytes));
-    pairs[i] = {node_of_feature_[region[i]], uint32_t(i)};
+    pairs[i] = {query.nodes[region[i]], uint32_t(i)};
   }
   std::sort(pairs.begin(), pairs.end());
   FeatureVector region_direct;
@@ -243,7 +364,7 @@ bool ObjectRecognizer::Verify(const IndexedObject& object, const FeatureSet& fea
   for (size_t i = 0; i < matches.size(); ++i) {
     model_features[i] = matches[i].b;
     object_points[i] = object.points[matches[i].b];
-    image_points[i] = pinhole_[region[matches[i].a]];
+    image_points[i] = query.pinhole[region[matches[i].a]];
   }
   const cv::Matx33d K = camera.K();
   RigidTransform pose;
@@ -260,7 +381,7 @@ bool ObjectRecognizer::Verify(const IndexedObject& object, const FeatureSet& fea
   if (!solved || inliers.size() < needed) return false;
 
   std::vector<cv::Point2f> keypoints(matches.size());
-  for (size_t i = 0; i < matches.size(); ++i) keypoints[i] = positions_[region[matches[i].a]];
+  for (size_t i = 0; i < matches.size(); ++i) keypoints[i] = query.positions[region[matches[i].a]];
   CompleteDetection(object, camera, pose, inliers, model_features, object_points, image_points,
                     keypoints, extras, detection);
   return true;
