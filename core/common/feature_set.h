@@ -11,6 +11,9 @@
 
 #include <opencv2/core.hpp>
 
+#include "core/common/descriptor.h"
+#include "core/common/status.h"
+
 namespace recog {
 
 struct FeatureSet {
@@ -19,5 +22,9 @@ struct FeatureSet {
 
   size_t size() const { return keypoints.size(); }
 };
+
+// OK for an empty set or one descriptor row per keypoint in `format`; INVALID_ARGUMENT saying
+// what differs otherwise. For features that come from outside (a robot, a file).
+Status CheckFeatureSet(const FeatureSet& features, const DescriptorFormat& format);
 
 }  // namespace recog

@@ -159,14 +159,8 @@ Status ObjectRecognizer::RecognizeFeatures(const FeatureSet& features,
   const auto start = Clock::now();
   detections->clear();
   RECOG_RETURN_IF_ERROR(camera.Validate());
-  const DescriptorFormat format = database_->vocabulary().info().descriptor;
-  if (features.size() > 0 && (features.descriptors.type() != format.cv_type() ||
-                              features.descriptors.cols != format.cols() ||
-                              size_t(features.descriptors.rows) != features.size())) {
-    return Status::InvalidArgument("query descriptors do not match the object vocabulary (" +
-                                   std::to_string(format.size_bytes) +
-                                   "-byte rows, one per keypoint)");
-  }
+  RECOG_RETURN_IF_ERROR(CheckFeatureSet(features, database_->vocabulary().info().descriptor)
+                            .WithContext("query features"));
   RecognitionTiming local;
   RecognitionTiming* t = timing != nullptr ? timing : &local;
   *t = RecognitionTiming();

@@ -50,14 +50,8 @@ Status ObjectTracker::TrackFeatures(ObjectRecognizer& recognizer, const FeatureS
                                     const ObjectFilter& filter, const DetectionOptions& extras) {
   detections->clear();
   RECOG_RETURN_IF_ERROR(camera.Validate());
-  const DescriptorFormat format = database_->vocabulary().info().descriptor;
-  if (features.size() > 0 && (features.descriptors.type() != format.cv_type() ||
-                              features.descriptors.cols != format.cols() ||
-                              size_t(features.descriptors.rows) != features.size())) {
-    return Status::InvalidArgument("frame descriptors do not match the object vocabulary (" +
-                                   std::to_string(format.size_bytes) +
-                                   "-byte rows, one per keypoint)");
-  }
+  RECOG_RETURN_IF_ERROR(CheckFeatureSet(features, database_->vocabulary().info().descriptor)
+                            .WithContext("frame features"));
   return Run(recognizer, cv::Mat(), &features, camera, filter, extras, detections, timing);
 }
 

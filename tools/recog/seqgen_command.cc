@@ -15,6 +15,16 @@
 namespace recog::cli {
 namespace {
 
+// --blur, --noise and --illumination, the camera effects both generators share.
+void AddCameraEffectOptions(CLI::App* cmd, double* blur_sigma_max, double* noise_sigma,
+                            double* illumination_max) {
+  cmd->add_option("--blur", *blur_sigma_max, "Largest Gaussian blur sigma")->capture_default_str();
+  cmd->add_option("--noise", *noise_sigma, "Gaussian noise sigma (grey levels)")
+      ->capture_default_str();
+  cmd->add_option("--illumination", *illumination_max, "Relative illumination change")
+      ->capture_default_str();
+}
+
 int Fail(const Status& status) {
   std::fprintf(stderr, "recog seqgen: %s\n", status.ToString().c_str());
   return 1;
@@ -226,11 +236,7 @@ void AddObjectSeqgenCommand(CLI::App& seqgen, int* exit_code) {
       ->capture_default_str();
   cmd->add_option("--min-fraction", o.min_fraction, "Object area at the end, fraction of frame")
       ->capture_default_str();
-  cmd->add_option("--blur", o.blur_sigma_max, "Largest Gaussian blur sigma")->capture_default_str();
-  cmd->add_option("--noise", o.noise_sigma, "Gaussian noise sigma (grey levels)")
-      ->capture_default_str();
-  cmd->add_option("--illumination", o.illumination_max, "Relative illumination change")
-      ->capture_default_str();
+  AddCameraEffectOptions(cmd, &o.blur_sigma_max, &o.noise_sigma, &o.illumination_max);
   cmd->add_option("--depth-noise", o.depth_noise_mm, "Depth noise on the background, mm")
       ->capture_default_str();
   cmd->add_option("--depth-holes", o.depth_holes, "Zero-depth holes per frame")
@@ -269,11 +275,7 @@ void AddSeqgenCommand(CLI::App& app, int* exit_code) {
       ->capture_default_str();
   cmd->add_option("--max-scale", o.max_scale, "Per-frame relative scale change")
       ->capture_default_str();
-  cmd->add_option("--blur", o.blur_sigma_max, "Largest Gaussian blur sigma")->capture_default_str();
-  cmd->add_option("--noise", o.noise_sigma, "Gaussian noise sigma (grey levels)")
-      ->capture_default_str();
-  cmd->add_option("--illumination", o.illumination_max, "Relative illumination change")
-      ->capture_default_str();
+  AddCameraEffectOptions(cmd, &o.blur_sigma_max, &o.noise_sigma, &o.illumination_max);
   cmd->add_option("--seed", o.seed, "Random seed")->capture_default_str();
   cmd->add_flag("--allow-duplicate-places", args->allow_duplicate_places,
                 "Use the first photos as they are, even if two show the same scene (cycled and "
