@@ -111,7 +111,7 @@ TEST(VispFilesSharedDataTest, ReadsTheVispCube) {
 }
 
 // The CAD builder detects inside the projected faces (cropped, enlarged): far more points on the
-// cube than the ~600 a whole-frame detection left on it.
+// cube than the 598 a whole-frame detection left on it.
 TEST(VispFilesSharedDataTest, TheVispCubeModelHoldsManyPoints) {
   RECOG_SKIP_WITHOUT_SHARED_DATA("objects/visp-cube/cube.cao");
   auto faces = ReadCaoFaces(testing::SharedData("objects/visp-cube/cube.cao"));
