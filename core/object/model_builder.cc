@@ -7,11 +7,14 @@
 #include <limits>
 #include <numeric>
 #include <sstream>
+#include <unordered_map>
 
+#include <opencv2/calib3d.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "core/common/names.h"
+#include "core/geometry/depth_registration.h"
 #include "core/object/roboearth.h"
 
 namespace recog {
@@ -26,9 +29,108 @@ std::vector<uint8_t> EncodePng(const cv::Mat& image) {
   return png;
 }
 
-// The ray through a pixel, in camera coordinates (z = 1).
+// The ray through a pixel, in camera coordinates (z = 1), the lens distortion undone.
 cv::Vec3d PixelRay(const CameraIntrinsics& camera, const cv::Point2f& pixel) {
-  return {(pixel.x - camera.cx) / camera.fx, (pixel.y - camera.cy) / camera.fy, 1.0};
+  if (camera.distortion.empty()) {
+    return {(pixel.x - camera.cx) / camera.fx, (pixel.y - camera.cy) / camera.fy, 1.0};
+  }
+  std::vector<cv::Point2f> undistorted;
+  cv::undistortPoints(std::vector<cv::Point2f>{pixel}, undistorted, cv::Mat(camera.K()),
+                      cv::Mat(camera.distortion));
+  return {undistorted[0].x, undistorted[0].y, 1.0};
+}
+
+// Fills the convex hull of the projections of `corners` (object frame) into `region`; false when
+// a corner is behind the camera.
+bool FillProjectedHull(const std::vector<cv::Point3d>& corners, const CameraIntrinsics& camera,
+                       const RigidTransform& camera_from_object, cv::Mat* region) {
+  std::vector<cv::Point> pixels;
+  for (const cv::Point3d& x : corners) {
+    cv::Point2d uv;
+    if (!ProjectPoint(camera, camera_from_object, x, &uv)) return false;
+    // Far outside the image: clamp so that the integer polygon stays well-defined.
+    pixels.emplace_back(int(std::lround(std::clamp(uv.x, -1e5, 1e5))),
+                        int(std::lround(std::clamp(uv.y, -1e5, 1e5))));
+  }
+  std::vector<cv::Point> hull;
+  cv::convexHull(pixels, hull);
+  cv::fillConvexPoly(*region, hull, cv::Scalar(255));
+  return true;
+}
+
+// The 8 corners of a box in the object frame.
+std::vector<cv::Point3d> BoxCorners(const ObjectBox& box) {
+  std::vector<cv::Point3d> corners;
+  for (int k = 0; k < 8; ++k) {
+    corners.emplace_back(box.centre[0] + ((k & 1) ? 0.5 : -0.5) * box.size[0],
+                         box.centre[1] + ((k & 2) ? 0.5 : -0.5) * box.size[1],
+                         box.centre[2] + ((k & 4) ? 0.5 : -0.5) * box.size[2]);
+  }
+  return corners;
+}
+
+// The depth image of an RGB-D view in metres (CV_32F), registered to its colour image.
+cv::Mat RegisteredDepthMetres(const RgbdView& rgbd) {
+  cv::Mat metres;
+  if (rgbd.depth.type() == CV_16U) {
+    rgbd.depth.convertTo(metres, CV_32F, 1.0 / rgbd.depth_scale);
+  } else {
+    metres = rgbd.depth;
+  }
+  if (!(rgbd.depth_camera.fx > 0)) return metres;
+  const CameraIntrinsics& color = rgbd.view.camera;
+  return RegisterDepth(metres, {rgbd.depth_camera.K(), rgbd.depth_camera.distortion},
+                       rgbd.depth_from_color.R, rgbd.depth_from_color.t,
+                       {color.K(), color.distortion}, rgbd.view.image.size());
+}
+
+// True when the depth range among the valid depths within `radius` of (u, v) exceeds ratio * z.
+bool AtDepthDiscontinuity(const cv::Mat& depth, int u, int v, int radius, double ratio, double z) {
+  float low = float(z), high = float(z);
+  for (int y = std::max(0, v - radius); y <= std::min(depth.rows - 1, v + radius); ++y) {
+    const float* row = depth.ptr<float>(y);
+    for (int x = std::max(0, u - radius); x <= std::min(depth.cols - 1, u + radius); ++x) {
+      if (!(row[x] > 0) || !std::isfinite(row[x])) continue;
+      low = std::min(low, row[x]);
+      high = std::max(high, row[x]);
+    }
+  }
+  return high - low > ratio * z;
+}
+
+// Indices of the points within `mads` robust deviations (1.4826 x MAD) of the median on every
+// axis; an axis's bound is at least `floor` and a tenth of the widest axis's (a flat object is no
+// reason to cut its depth noise). mads <= 0 keeps every point.
+std::vector<size_t> RobustInliers(const std::vector<cv::Point3f>& points, double mads,
+                                  double floor) {
+  std::vector<size_t> kept;
+  if (!(mads > 0)) {
+    kept.resize(points.size());
+    std::iota(kept.begin(), kept.end(), size_t{0});
+    return kept;
+  }
+  const auto median = [](std::vector<double> v) {
+    std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+    return v[v.size() / 2];
+  };
+  cv::Vec3d centre, bound;
+  for (int axis = 0; axis < 3; ++axis) {
+    std::vector<double> values(points.size());
+    for (size_t i = 0; i < points.size(); ++i) values[i] = (&points[i].x)[axis];
+    centre[axis] = median(values);
+    for (double& v : values) v = std::abs(v - centre[axis]);
+    bound[axis] = mads * 1.4826 * median(values);
+  }
+  const double least = std::max(floor, 0.1 * std::max({bound[0], bound[1], bound[2]}));
+  for (size_t i = 0; i < points.size(); ++i) {
+    bool inside = true;
+    for (int axis = 0; axis < 3; ++axis) {
+      inside =
+          inside && std::abs((&points[i].x)[axis] - centre[axis]) <= std::max(least, bound[axis]);
+    }
+    if (inside) kept.push_back(i);
+  }
+  return kept;
 }
 
 cv::Vec3d ToVec(const cv::Point3d& p) { return {p.x, p.y, p.z}; }
@@ -129,11 +231,46 @@ class ModelBuilder::Accumulator {
     if (face >= 0) face_of_point_.push_back(uint32_t(face));
     return uint32_t(points_.size() - 1);
   }
+  // Like AddPoint, but a point within `radius` of a point that earlier views gave (and this view
+  // has not) becomes that point, whose position is the mean of its observations.
+  uint32_t AddMergedPoint(const cv::Point3f& point, uint32_t view, double radius) {
+    const auto cell = [radius](double x) { return int64_t(std::floor(x / radius)); };
+    const int64_t cx = cell(point.x), cy = cell(point.y), cz = cell(point.z);
+    int64_t best = -1;
+    double best_d2 = radius * radius;
+    for (int64_t x = cx - 1; x <= cx + 1; ++x) {
+      for (int64_t y = cy - 1; y <= cy + 1; ++y) {
+        for (int64_t z = cz - 1; z <= cz + 1; ++z) {
+          const auto found = cells_.find(CellKey(x, y, z));
+          if (found == cells_.end()) continue;
+          for (uint32_t j : found->second) {
+            if (last_view_[j] == view) continue;
+            const cv::Point3f d = points_[j] - point;
+            const double d2 = d.dot(d);
+            if (d2 <= best_d2) best_d2 = d2, best = j;
+          }
+        }
+      }
+    }
+    if (best >= 0) {
+      const uint32_t j = uint32_t(best);
+      ++observations_[j];
+      points_[j] += (point - points_[j]) * (1.0f / float(observations_[j]));
+      last_view_[j] = view;
+      return j;
+    }
+    const uint32_t index = AddPoint(point);
+    observations_.resize(points_.size(), 1);
+    last_view_.resize(points_.size(), view);
+    cells_[CellKey(cx, cy, cz)].push_back(index);
+    return index;
+  }
   void AddFeature(uint32_t point, const uint8_t* descriptor, size_t bytes) {
     point_of_feature_.push_back(point);
     descriptors_.insert(descriptors_.end(), descriptor, descriptor + bytes);
   }
   size_t num_points() const { return points_.size(); }
+  size_t num_features() const { return point_of_feature_.size(); }
 
   // Keeps one descriptor per (point, word): the bitwise majority of that group (ties to 0).
   // Points left without a feature are dropped.
@@ -180,7 +317,15 @@ class ModelBuilder::Accumulator {
   }
 
  private:
+  static uint64_t CellKey(int64_t x, int64_t y, int64_t z) {
+    return (uint64_t(x) & 0x1fffff) << 42 | (uint64_t(y) & 0x1fffff) << 21 |
+           (uint64_t(z) & 0x1fffff);
+  }
+
   std::vector<cv::Point3f> points_;
+  std::vector<uint32_t> observations_;  // merged points: views seen in, last view
+  std::vector<uint32_t> last_view_;
+  std::unordered_map<uint64_t, std::vector<uint32_t>> cells_;
   std::vector<uint32_t> face_of_point_;
   std::vector<uint32_t> point_of_feature_;
   std::vector<uint8_t> descriptors_;
@@ -196,6 +341,67 @@ Status ModelBuilder::Extract(const cv::Mat& image, FeatureSet* features) {
     RECOG_ASSIGN_OR_RETURN(extractor_, CreateFeatureExtractor(feature_options));
   }
   return extractor_->Extract(image, features);
+}
+
+Status ModelBuilder::ExtractInRegion(const cv::Mat& image, const cv::Mat& region,
+                                     FeatureSet* features) {
+  features->keypoints.clear();
+  features->descriptors = cv::Mat();
+  const cv::Rect box = cv::boundingRect(region);
+  if (box.empty()) return Status::Ok();
+  // ORB keeps edge_threshold pixels of every pyramid level free: the crop keeps that much
+  // context around the region at the coarsest level of the view's own pyramid.
+  const double context = options_.orb.edge_threshold *
+                         std::pow(double(options_.orb.scale_factor), options_.orb.levels - 1);
+  const int margin =
+      int(std::ceil(std::max(context, options_.crop_margin * std::max(box.width, box.height))));
+  const cv::Rect crop =
+      cv::Rect(box.x - margin, box.y - margin, box.width + 2 * margin, box.height + 2 * margin) &
+      cv::Rect(0, 0, image.cols, image.rows);
+  const double scale = std::clamp(double(options_.working_size) / std::max(crop.width, crop.height),
+                                  1.0, std::max(1.0, options_.max_enlarge));
+  cv::Mat patch = image(crop);
+  if (scale > 1.0) cv::resize(patch, patch, cv::Size(), scale, scale, cv::INTER_CUBIC);
+  // The pyramid gets the levels the enlargement added, so that it still reaches down as far as
+  // it does on the view itself (recognition sees the object at the view's scale).
+  const int levels =
+      options_.orb.levels +
+      int(std::ceil(std::log(scale) / std::log(double(options_.orb.scale_factor)) - 1e-9));
+  // The grid's cells outside the region leave their share unused: the budget grows with the
+  // crop's area over the region's (at most 8 times), so that the region gets about max_features.
+  const int budget = int(std::lround(
+      options_.orb.max_features *
+      std::min(8.0, double(crop.area()) / std::max(1, cv::countNonZero(region(crop))))));
+  if (!region_extractor_ || region_levels_ != levels || region_budget_ != budget) {
+    FeatureOptions feature_options;
+    feature_options.orb = options_.orb;
+    feature_options.orb.levels = levels;
+    feature_options.orb.max_features = budget;
+    feature_options.orb.grid_rows = feature_options.orb.grid_cols = options_.region_grid;
+    RECOG_ASSIGN_OR_RETURN(region_extractor_, CreateFeatureExtractor(feature_options));
+    region_levels_ = levels;
+    region_budget_ = budget;
+  }
+  FeatureSet found;
+  RECOG_RETURN_IF_ERROR(region_extractor_->Extract(patch, &found));
+  std::vector<int> rows;
+  for (size_t i = 0; i < found.size(); ++i) {
+    cv::KeyPoint keypoint = found.keypoints[i];
+    // resize maps pixel centres: crop pixel x = (patch pixel x + 0.5) / scale - 0.5.
+    keypoint.pt = {float((keypoint.pt.x + 0.5) / scale - 0.5 + crop.x),
+                   float((keypoint.pt.y + 0.5) / scale - 0.5 + crop.y)};
+    keypoint.size = float(keypoint.size / scale);
+    const int u = std::clamp(int(std::lround(keypoint.pt.x)), 0, image.cols - 1);
+    const int v = std::clamp(int(std::lround(keypoint.pt.y)), 0, image.rows - 1);
+    if (region.at<uint8_t>(v, u) == 0) continue;
+    features->keypoints.push_back(keypoint);
+    rows.push_back(int(i));
+  }
+  features->descriptors =
+      cv::Mat(int(rows.size()), found.descriptors.cols, found.descriptors.type());
+  for (size_t k = 0; k < rows.size(); ++k)
+    found.descriptors.row(rows[k]).copyTo(features->descriptors.row(int(k)));
+  return Status::Ok();
 }
 
 StatusOr<BoxSide> ParseBoxSide(std::string_view name) {
@@ -350,11 +556,19 @@ StatusOr<ObjectModel> ModelBuilder::FromPosedPolygons(const std::string& name,
   model.metadata.source = "posed-polygons";
   Accumulator accumulator;
   FeatureSet features;
-  for (const PosedImage& posed : views) {
+  for (size_t view_index = 0; view_index < views.size(); ++view_index) {
+    const PosedImage& posed = views[view_index];
     RECOG_RETURN_IF_ERROR(posed.camera.Validate());
-    RECOG_RETURN_IF_ERROR(Extract(posed.image, &features));
+    if (posed.image.empty()) return Status::InvalidArgument("view '" + posed.name + "' is empty");
+    // The region: the projected faces.
+    cv::Mat region(posed.image.size(), CV_8U, cv::Scalar(0));
+    for (const FacePolygon& polygon : polygons) {
+      FillProjectedHull(polygon.corners, posed.camera, posed.camera_from_object, &region);
+    }
+    RECOG_RETURN_IF_ERROR(ExtractInRegion(posed.image, region, &features));
     const RigidTransform object_from_camera = posed.camera_from_object.Inverse();
     const cv::Vec3d centre = object_from_camera.t;
+    const size_t points_before = accumulator.num_features();
     for (size_t i = 0; i < features.size(); ++i) {
       const cv::Vec3d ray = object_from_camera.R * PixelRay(posed.camera, features.keypoints[i].pt);
       double nearest = kNoDepth;
@@ -370,8 +584,13 @@ StatusOr<ObjectModel> ModelBuilder::FromPosedPolygons(const std::string& name,
       if (nearest == kNoDepth) continue;
       const cv::Vec3d x = centre + nearest * ray;
       accumulator.AddFeature(
-          accumulator.AddPoint(cv::Point3f(float(x[0]), float(x[1]), float(x[2]))),
+          accumulator.AddMergedPoint(cv::Point3f(float(x[0]), float(x[1]), float(x[2])),
+                                     uint32_t(view_index), options_.merge_radius),
           features.descriptors.ptr(int(i)), features.descriptors.cols);
+    }
+    if (accumulator.num_features() == points_before) {
+      return Status::InvalidArgument("view '" + posed.name +
+                                     "' gives no object point (do the faces project into it?)");
     }
     model.views.push_back({posed.name, posed.camera, posed.camera_from_object,
                            options_.keep_images ? EncodePng(posed.image) : std::vector<uint8_t>{}});
@@ -382,56 +601,111 @@ StatusOr<ObjectModel> ModelBuilder::FromPosedPolygons(const std::string& name,
 }
 
 StatusOr<ObjectModel> ModelBuilder::FromRgbd(const std::string& name,
-                                             const std::vector<RgbdView>& views) {
+                                             const std::vector<RgbdView>& views,
+                                             const std::optional<ObjectBox>& box) {
   RECOG_RETURN_IF_ERROR(ValidateName("object", name));
   if (views.empty()) return Status::InvalidArgument("an RGB-D model needs views");
+  if (box && !(box->size[0] > 0 && box->size[1] > 0 && box->size[2] > 0 &&
+               std::isfinite(box->size[0] + box->size[1] + box->size[2] + box->centre[0] +
+                             box->centre[1] + box->centre[2]))) {
+    return Status::InvalidArgument("the object box needs a positive width, height and depth");
+  }
   ObjectModel model;
   model.metadata.name = name;
   model.metadata.type = ObjectType::k3D;
   model.metadata.source = "rgbd";
-  Accumulator accumulator;
+  // Every back-projected keypoint, before the outliers are dropped and the views merged.
+  std::vector<cv::Point3f> points;
+  std::vector<uint32_t> view_of_point;
+  std::vector<uint8_t> descriptors;
+  int descriptor_bytes = 0;
   FeatureSet features;
-  cv::Vec3d low(1e300, 1e300, 1e300), high(-1e300, -1e300, -1e300);
-  for (const RgbdView& rgbd : views) {
+  for (size_t view_index = 0; view_index < views.size(); ++view_index) {
+    const RgbdView& rgbd = views[view_index];
     const PosedImage& posed = rgbd.view;
+    const std::string where = "view '" + posed.name + "'";
     RECOG_RETURN_IF_ERROR(posed.camera.Validate());
-    if (rgbd.depth.size() != posed.image.size() ||
+    if (posed.image.empty()) return Status::InvalidArgument(where + ": empty image");
+    const bool own_camera = rgbd.depth_camera.fx > 0;
+    if (own_camera) RECOG_RETURN_IF_ERROR(rgbd.depth_camera.Validate());
+    if (rgbd.depth.empty() || (!own_camera && rgbd.depth.size() != posed.image.size()) ||
         (rgbd.depth.type() != CV_16U && rgbd.depth.type() != CV_32F)) {
-      return Status::InvalidArgument("view '" + posed.name +
-                                     "': depth must be CV_16U or CV_32F of the image's size");
+      return Status::InvalidArgument(
+          where +
+          ": depth must be CV_16U or CV_32F, of the image's size unless it has its own "
+          "camera");
     }
     if (!rgbd.mask.empty() &&
         (rgbd.mask.size() != posed.image.size() || rgbd.mask.type() != CV_8U)) {
-      return Status::InvalidArgument("view '" + posed.name +
-                                     "': mask must be CV_8U of the image's size");
+      return Status::InvalidArgument(where + ": mask must be CV_8U of the image's size");
     }
     if (rgbd.depth.type() == CV_16U && !(rgbd.depth_scale > 0)) {
-      return Status::InvalidArgument("view '" + posed.name + "': depth scale must be positive");
+      return Status::InvalidArgument(where + ": depth scale must be positive");
     }
-    RECOG_RETURN_IF_ERROR(Extract(posed.image, &features));
+    const cv::Mat depth = RegisteredDepthMetres(rgbd);
+    cv::Mat region;
+    if (!rgbd.mask.empty()) {
+      region = rgbd.mask != 0;
+    } else {
+      region = cv::Mat(posed.image.size(), CV_8U, cv::Scalar(box ? 0 : 255));
+      if (box &&
+          !FillProjectedHull(BoxCorners(*box), posed.camera, posed.camera_from_object, &region)) {
+        region.setTo(255);  // the camera is inside the box's extent: the box test alone decides
+      }
+    }
+    RECOG_RETURN_IF_ERROR(ExtractInRegion(posed.image, region, &features));
+    descriptor_bytes = features.descriptors.cols;
     const RigidTransform object_from_camera = posed.camera_from_object.Inverse();
+    const size_t points_before = points.size();
     for (size_t i = 0; i < features.size(); ++i) {
       const cv::Point2f& p = features.keypoints[i].pt;
-      const int u = std::clamp(int(std::lround(p.x)), 0, rgbd.depth.cols - 1);
-      const int v = std::clamp(int(std::lround(p.y)), 0, rgbd.depth.rows - 1);
-      if (!rgbd.mask.empty() && rgbd.mask.at<uint8_t>(v, u) == 0) continue;
-      const double z = rgbd.depth.type() == CV_16U
-                           ? rgbd.depth.at<uint16_t>(v, u) / rgbd.depth_scale
-                           : double(rgbd.depth.at<float>(v, u));
+      const int u = std::clamp(int(std::lround(p.x)), 0, depth.cols - 1);
+      const int v = std::clamp(int(std::lround(p.y)), 0, depth.rows - 1);
+      const double z = depth.at<float>(v, u);
       if (!(z > 0) || !std::isfinite(z)) continue;
+      if (AtDepthDiscontinuity(depth, u, v, options_.discontinuity_radius,
+                               options_.discontinuity_ratio, z)) {
+        continue;
+      }
       const cv::Vec3d c = z * PixelRay(posed.camera, p);
       const cv::Point3d x = object_from_camera.Apply({c[0], c[1], c[2]});
-      for (int k = 0; k < 3; ++k) {
-        low[k] = std::min(low[k], (&x.x)[k]);
-        high[k] = std::max(high[k], (&x.x)[k]);
+      if (box) {
+        bool inside = true;
+        for (int k = 0; k < 3; ++k) {
+          inside = inside &&
+                   std::abs((&x.x)[k] - box->centre[k]) <= box->size[k] / 2 + options_.box_margin;
+        }
+        if (!inside) continue;
       }
-      accumulator.AddFeature(accumulator.AddPoint(cv::Point3f(x)), features.descriptors.ptr(int(i)),
-                             features.descriptors.cols);
+      points.emplace_back(x);
+      view_of_point.push_back(uint32_t(view_index));
+      const uint8_t* d = features.descriptors.ptr(int(i));
+      descriptors.insert(descriptors.end(), d, d + descriptor_bytes);
+    }
+    if (points.size() == points_before) {
+      return Status::InvalidArgument(
+          where +
+          " gives no object point (empty mask or box region, no depth on the object, or "
+          "a wrong pose?)");
     }
     model.views.push_back({posed.name, posed.camera, posed.camera_from_object,
                            options_.keep_images ? EncodePng(posed.image) : std::vector<uint8_t>{}});
   }
-  if (accumulator.num_points() > 0) model.metadata.dimensions = high - low;
+  Accumulator accumulator;
+  cv::Vec3d low(1e300, 1e300, 1e300), high(-1e300, -1e300, -1e300);
+  for (size_t i : RobustInliers(points, options_.outlier_mads, options_.merge_radius)) {
+    for (int k = 0; k < 3; ++k) {
+      low[k] = std::min(low[k], double((&points[i].x)[k]));
+      high[k] = std::max(high[k], double((&points[i].x)[k]));
+    }
+    accumulator.AddFeature(
+        accumulator.AddMergedPoint(points[i], view_of_point[i], options_.merge_radius),
+        &descriptors[i * size_t(descriptor_bytes)], size_t(descriptor_bytes));
+  }
+  if (accumulator.num_points() == 0) {
+    return Status::InvalidArgument("RGB-D model '" + name + "' has no point");
+  }
+  model.metadata.dimensions = high - low;
   model = std::move(accumulator).Finish(*vocabulary_, std::move(model));
   RECOG_RETURN_IF_ERROR(model.Validate());
   return model;

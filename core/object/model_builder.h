@@ -18,13 +18,30 @@
 //    face images of a W x H x D box, eq. 5.1; the object frame is centred on the box).
 //  - Views with known poses and polygonal faces (e.g. a CAD model and one registered frame):
 //    keypoints are intersected with the nearest face polygon facing the camera.
-//  - RGB-D views with intrinsics and poses (and optional masks): keypoints with a valid depth are
-//    back-projected.
+//  - RGB-D views with intrinsics and poses: keypoints with a valid depth are back-projected.
+//    Depth is registered to the colour image, or comes from its own camera (intrinsics and
+//    depth_from_color) and is registered first (core/geometry/depth_registration.h). The object
+//    is given by a mask per view, or once by its 3D box (ObjectBox), which is projected into
+//    every view; back-projected points must then lie in the box (+ box_margin).
+//
+// Posed polygons and RGB-D views detect features inside the object's region only (the projected
+// faces, the mask or the projected box): each view is cropped to the region's bounding box (+ a
+// margin), the crop is enlarged so that its longest side reaches `working_size` (at most
+// `max_enlarge` times), ORB runs on it with a region_grid x region_grid grid so that the features
+// spread over the object, and only keypoints inside the region are kept (their pixels mapped back
+// to the full view, whose camera and distortion are used). RGB-D keypoints at depth
+// discontinuities (depth range in a small neighbourhood above discontinuity_ratio x depth) are
+// dropped, then points beyond outlier_mads robust deviations from the median on any axis; the
+// model's `dimensions` are the extent of the points kept. Points of different views closer than
+// merge_radius are one model point (thesis §5.2.2: its descriptors are then merged per visual
+// word, eq. 5.3). A view that yields no point is refused (INVALID_ARGUMENT naming the view), and so
+// is a model without points.
 //
 // All builders are deterministic.
 #pragma once
 
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -43,6 +60,24 @@ struct ModelBuildOptions {
   bool keep_images = true;      // store the training images (PNG) in the model
   // RoboEarth: view indices (k of face_k) to leave out, e.g. for leave-one-view-out tests.
   std::vector<int> exclude_views;
+  // Detection in the object's region (posed polygons, RGB-D): crop margin (fraction of the
+  // region's box on each side, at least 8 px), target longest side of the enlarged crop
+  // (pixels; a crop already this large is not shrunk), largest enlargement, ORB grid cells a side.
+  double crop_margin = 0.1;
+  int working_size = 640;
+  double max_enlarge = 4.0;
+  int region_grid = 4;
+  // RGB-D: a keypoint whose depth range within discontinuity_radius pixels exceeds
+  // discontinuity_ratio x its depth lies on an edge (often background) and is dropped.
+  int discontinuity_radius = 2;
+  double discontinuity_ratio = 0.03;
+  // RGB-D: points farther than outlier_mads x 1.4826 x MAD from the median on an axis (and than
+  // a tenth of the widest axis's bound, and than merge_radius) are dropped; 0 = keep all.
+  double outlier_mads = 5.0;
+  // Points of different views closer than this (metres, object frame) are one model point.
+  double merge_radius = 0.003;
+  // RGB-D with an ObjectBox: points may lie this far outside the box (metres).
+  double box_margin = 0.003;
 
   static OrbOptions DefaultModelOrb() {
     OrbOptions orb;
@@ -83,7 +118,19 @@ struct RgbdView {
   PosedImage view;
   cv::Mat depth;  // CV_16U (units of 1 / depth_scale metres) or CV_32F (metres); 0 = none
   double depth_scale = 1000.0;
-  cv::Mat mask;  // optional CV_8U, non-zero on the object
+  cv::Mat mask;  // optional CV_8U of the image's size, non-zero on the object
+  // Depth from its own camera: when depth_camera.fx > 0, `depth` is that camera's image (any
+  // size) and depth_from_color places it (X_depth = R * X_colour + t, metres). Otherwise depth is
+  // registered to the colour image already (and has its size).
+  CameraIntrinsics depth_camera;
+  RigidTransform depth_from_color;
+};
+
+// The object's 3D box in the object frame: it spans centre +- size / 2 along the object's axes
+// (a box centred on the object frame by default).
+struct ObjectBox {
+  cv::Vec3d size = {0, 0, 0};  // width (x), height (y), depth (z), metres, all > 0
+  cv::Vec3d centre = {0, 0, 0};
 };
 
 class ModelBuilder {
@@ -99,15 +146,24 @@ class ModelBuilder {
   StatusOr<ObjectModel> FromPosedPolygons(const std::string& name,
                                           const std::vector<FacePolygon>& polygons,
                                           const std::vector<PosedImage>& views);
-  StatusOr<ObjectModel> FromRgbd(const std::string& name, const std::vector<RgbdView>& views);
+  // With `box`, views without a mask take the projected box as their region, and points outside
+  // the box are dropped.
+  StatusOr<ObjectModel> FromRgbd(const std::string& name, const std::vector<RgbdView>& views,
+                                 const std::optional<ObjectBox>& box = std::nullopt);
 
  private:
   class Accumulator;
   Status Extract(const cv::Mat& image, FeatureSet* features);
+  // Features inside `region` (CV_8U of the image's size, non-zero inside), detected on the
+  // enlarged crop; keypoint positions are pixels of `image`.
+  Status ExtractInRegion(const cv::Mat& image, const cv::Mat& region, FeatureSet* features);
 
   std::shared_ptr<const Vocabulary> vocabulary_;
   ModelBuildOptions options_;
   std::unique_ptr<FeatureExtractor> extractor_;
+  // The extractor of the last region: pyramid levels and feature budget.
+  std::unique_ptr<FeatureExtractor> region_extractor_;
+  int region_levels_ = 0, region_budget_ = 0;
 };
 
 // Reads an RGB-D view list: a text file whose lines (besides # comments) are

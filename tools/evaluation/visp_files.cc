@@ -9,7 +9,8 @@
 namespace recog::cli {
 namespace {
 
-// The numbers of a file, comments ('#' to the end of the line) removed.
+// The numbers of a file, comments ('#' to the end of the line) and ViSP's key=value attributes
+// of a face or line (name=floor, useLod=true, ...) removed.
 StatusOr<std::vector<std::string>> Tokens(const std::string& path) {
   std::ifstream in(path);
   if (!in) return Status::NotFound("cannot open '" + path + "'");
@@ -18,7 +19,9 @@ StatusOr<std::vector<std::string>> Tokens(const std::string& path) {
   while (std::getline(in, line)) {
     std::istringstream words(line.substr(0, line.find('#')));
     std::string word;
-    while (words >> word) tokens.push_back(word);
+    while (words >> word) {
+      if (word.find('=') == std::string::npos) tokens.push_back(word);
+    }
   }
   return tokens;
 }

@@ -1,8 +1,13 @@
 // recog model build|info, recog recognize (offline, or on recogd with --server) and recog eval
 // objects: object models and object recognition from the command line.
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
+#include <functional>
 #include <memory>
+#include <optional>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -50,11 +55,93 @@ json TimingJson(const RecognitionTiming& t) {
 
 struct ModelBuildArgs {
   std::string roboearth, planar, rgbd, cad, output, name, vocabulary;
-  std::string pose, image, camera;  // with --cad
-  std::vector<std::string> faces;   // side=IMAGE
+  std::string pose, image, camera;                  // with --cad
+  std::string box, depth_camera, depth_from_color;  // with --rgbd
+  std::vector<std::string> faces;                   // side=IMAGE
   double width = 0, height = 0, depth = 0;
   bool no_images = false;
 };
+
+// Comma-separated numbers ("0.1,0.2,0.3"); `flag` names the option in errors.
+StatusOr<std::vector<double>> ParseNumbers(const std::string& flag, const std::string& text) {
+  std::vector<double> values;
+  std::stringstream in(text);
+  std::string field;
+  while (std::getline(in, field, ',')) {
+    try {
+      size_t used = 0;
+      values.push_back(std::stod(field, &used));
+      if (used != field.size() || !std::isfinite(values.back())) throw std::invalid_argument(field);
+    } catch (const std::exception&) {
+      return Status::InvalidArgument(flag + ": '" + field + "' is not a finite number");
+    }
+  }
+  return values;
+}
+
+// --box W,H,D[,CX,CY,CZ]: the object's box, centred on the object frame unless a centre is given.
+StatusOr<ObjectBox> ParseBox(const std::string& text) {
+  RECOG_ASSIGN_OR_RETURN(std::vector<double> v, ParseNumbers("--box", text));
+  if ((v.size() != 3 && v.size() != 6) || !(v[0] > 0 && v[1] > 0 && v[2] > 0)) {
+    return Status::InvalidArgument("--box needs W,H,D[,CX,CY,CZ] with W, H, D > 0 (metres)");
+  }
+  ObjectBox box;
+  box.size = {v[0], v[1], v[2]};
+  if (v.size() == 6) box.centre = {v[3], v[4], v[5]};
+  return box;
+}
+
+// --depth-camera fx,fy,cx,cy[,k1,k2,p1,p2[,k3]].
+StatusOr<CameraIntrinsics> ParseDepthCamera(const std::string& text) {
+  auto camera = ParseCamera(text);
+  if (!camera.ok()) return Status::InvalidArgument("--depth-camera: " + camera.status().message());
+  return camera;
+}
+
+// --depth-from-color r11,...,r33,t1,t2,t3 (12 numbers, X_depth = R X_colour + t, metres), or a
+// file holding those 12 numbers or the 4 x 4 matrix (whitespace-separated, '#' comments).
+StatusOr<RigidTransform> ParseDepthFromColor(const std::string& text) {
+  std::vector<double> v;
+  if (fs::is_regular_file(text)) {
+    std::ifstream in(text);
+    std::string line, token;
+    while (std::getline(in, line)) {
+      std::istringstream tokens(line.substr(0, line.find('#')));
+      while (tokens >> token) {
+        RECOG_ASSIGN_OR_RETURN(std::vector<double> number,
+                               ParseNumbers("--depth-from-color " + text, token));
+        v.insert(v.end(), number.begin(), number.end());
+      }
+    }
+    if (v.size() == 16) {  // [R t; 0 0 0 1] row by row
+      v = {v[0], v[1], v[2], v[4], v[5], v[6], v[8], v[9], v[10], v[3], v[7], v[11]};
+    }
+  } else {
+    RECOG_ASSIGN_OR_RETURN(v, ParseNumbers("--depth-from-color", text));
+  }
+  if (v.size() != 12) {
+    return Status::InvalidArgument(
+        "--depth-from-color needs r11,r12,r13,r21,r22,r23,r31,r32,r33,t1,t2,t3 or a file of "
+        "those 12 numbers or a 4x4 matrix");
+  }
+  RigidTransform transform;
+  for (int k = 0; k < 9; ++k) transform.R.val[k] = v[size_t(k)];
+  transform.t = {v[9], v[10], v[11]};
+  if (cv::norm(transform.R.t() * transform.R - cv::Matx33d::eye()) > 1e-3 ||
+      cv::determinant(transform.R) <= 0) {
+    return Status::InvalidArgument("--depth-from-color: R is not a rotation matrix");
+  }
+  return transform;
+}
+
+// A CLI11 check that `parse` accepts the value (a bad value is a usage error: exit status 2).
+template <typename Parse>
+std::function<std::string(const std::string&)> Accepts(Parse parse) {
+  return [parse](const std::string& text) {
+    auto parsed = parse(text);
+    return parsed.ok() ? std::string() : parsed.status().message();
+  };
+}
 
 // A model from a CAD file of planar faces and one registered image (--cad --pose --image
 // --camera), e.g. the visp-cube.
@@ -72,7 +159,36 @@ StatusOr<ObjectModel> BuildFromCad(const ModelBuildArgs& args, ModelBuilder* bui
       args.name.empty() ? fs::path(args.cad).stem().string() : args.name, faces, {view});
 }
 
+// A model from an RGB-D view list (--rgbd), with --box, --depth-camera and --depth-from-color.
+StatusOr<ObjectModel> BuildFromRgbd(const ModelBuildArgs& args, ModelBuilder* builder) {
+  if (args.depth_camera.empty() != args.depth_from_color.empty()) {
+    return Status::InvalidArgument("--depth-camera and --depth-from-color go together");
+  }
+  RECOG_ASSIGN_OR_RETURN(std::vector<RgbdView> views, ReadRgbdViews(args.rgbd));
+  if (!args.depth_camera.empty()) {
+    RECOG_ASSIGN_OR_RETURN(CameraIntrinsics depth_camera, ParseDepthCamera(args.depth_camera));
+    RECOG_ASSIGN_OR_RETURN(RigidTransform depth_from_color,
+                           ParseDepthFromColor(args.depth_from_color));
+    for (RgbdView& view : views) {
+      view.depth_camera = depth_camera;
+      view.depth_from_color = depth_from_color;
+    }
+  }
+  std::optional<ObjectBox> box;
+  if (!args.box.empty()) {
+    RECOG_ASSIGN_OR_RETURN(box, ParseBox(args.box));
+  }
+  return builder->FromRgbd(
+      args.name.empty() ? fs::path(args.rgbd).parent_path().filename().string() : args.name, views,
+      box);
+}
+
 int RunModelBuild(const ModelBuildArgs& args) {
+  if (args.rgbd.empty() &&
+      !(args.box.empty() && args.depth_camera.empty() && args.depth_from_color.empty())) {
+    return Fail("model build", Status::InvalidArgument(
+                                   "--box, --depth-camera and --depth-from-color need --rgbd"));
+  }
   const int sources = int(!args.roboearth.empty()) +
                       int(!args.planar.empty() || !args.faces.empty()) + int(!args.rgbd.empty()) +
                       int(!args.cad.empty());
@@ -91,11 +207,7 @@ int RunModelBuild(const ModelBuildArgs& args) {
   } else if (!args.cad.empty()) {
     model = BuildFromCad(args, &builder);
   } else if (!args.rgbd.empty()) {
-    auto views = ReadRgbdViews(args.rgbd);
-    if (!views.ok()) return Fail("model build", views.status());
-    model = builder.FromRgbd(
-        args.name.empty() ? fs::path(args.rgbd).parent_path().filename().string() : args.name,
-        *views);
+    model = BuildFromRgbd(args, &builder);
   } else {
     std::vector<FaceImage> faces;
     std::vector<std::string> specs = args.faces;
@@ -644,7 +756,25 @@ void AddObjectCommands(CLI::App& app, int* exit_code) {
   build->add_option("--width", build_args->width, "Physical width, metres");
   build->add_option("--height", build_args->height, "Physical height, metres");
   build->add_option("--depth", build_args->depth, "Physical depth of a box, metres");
-  build->add_option("--rgbd", build_args->rgbd, "RGB-D view list (see ReadRgbdViews)");
+  build->add_option("--rgbd", build_args->rgbd,
+                    "RGB-D view list: lines 'rgb depth fx fy cx cy depth_scale r11..r33 t1 t2 t3 "
+                    "[mask]' (pose T_camera<-object, paths relative to the list)");
+  build
+      ->add_option("--box", build_args->box,
+                   "With --rgbd: the object's box W,H,D[,CX,CY,CZ] (metres, object frame, "
+                   "centred on CX,CY,CZ, default 0,0,0), projected into views without a mask; "
+                   "points outside it are dropped")
+      ->check(Accepts(ParseBox));
+  build
+      ->add_option("--depth-camera", build_args->depth_camera,
+                   "With --rgbd: the depth images come from their own camera "
+                   "fx,fy,cx,cy[,k1,k2,p1,p2[,k3]] (else they are registered to colour)")
+      ->check(Accepts(ParseDepthCamera));
+  build
+      ->add_option("--depth-from-color", build_args->depth_from_color,
+                   "With --depth-camera: X_depth = R X_colour + t as r11,...,r33,t1,t2,t3 "
+                   "(metres), or a file of those 12 numbers or the 4x4 matrix")
+      ->check(Accepts(ParseDepthFromColor));
   build->add_option("--cad", build_args->cad,
                     "ViSP .cao model of planar faces (with --pose, --image, --camera)");
   build->add_option("--pose", build_args->pose, "ViSP .pos pose of the object in --image");

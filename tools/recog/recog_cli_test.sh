@@ -188,6 +188,40 @@ expect_error "model build of a missing image" "NOT_FOUND" "$recog" model build -
 expect_error "model build with a negative width" "INVALID_ARGUMENT" "$recog" model build \
   --planar "$images/1.jpg" --width -0.64 --height 0.48 -o "$tmp/m.robj"
 [ ! -e "$tmp/m.robj" ] && pass || fail "model build writes nothing on bad input"
+# RGB-D: a 512 x 384 view of the bundled frame with a constant depth of 1 m and a black mask.
+/usr/bin/python3 - "$tmp" <<'PY'
+import struct, sys, zlib
+def png(path, depth_bits, value):
+    w, h = 512, 384
+    row = b"\0" + (struct.pack(">H", value) if depth_bits == 16 else bytes([value])) * w
+    chunk = lambda t, d: struct.pack(">I", len(d)) + t + d + struct.pack(">I", zlib.crc32(t + d))
+    open(path, "wb").write(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, depth_bits, 0, 0, 0, 0))
+                           + chunk(b"IDAT", zlib.compress(row * h)) + chunk(b"IEND", b""))
+png(sys.argv[1] + "/depth.png", 16, 1000)
+png(sys.argv[1] + "/black.png", 8, 0)
+PY
+cp "$images/1.jpg" "$tmp/rgb.jpg"
+echo "rgb.jpg depth.png 500 500 256 192 1000 1 0 0 0 1 0 0 0 1 0 0 1 black.png" >"$tmp/rgbd.txt"
+expect_error "model build of RGB-D views with a black mask" "'rgb' gives no object point" \
+  "$recog" model build --rgbd "$tmp/rgbd.txt" -o "$tmp/m.robj"
+expect_error "model build --box without --rgbd" "need --rgbd" "$recog" model build \
+  --planar "$images/1.jpg" --width 0.64 --height 0.48 --box 0.1,0.1,0.1 -o "$tmp/m.robj"
+expect_usage_error "model build with a bad --box" "--box" "$recog" model build \
+  --rgbd "$tmp/rgbd.txt" --box 0.1,-0.1,0.1 -o "$tmp/m.robj"
+expect_usage_error "model build with a bad --depth-camera" "--depth-camera" "$recog" model build \
+  --rgbd "$tmp/rgbd.txt" --depth-camera 500,x,256,192 -o "$tmp/m.robj"
+expect_usage_error "model build with a --depth-from-color that is no rotation" "rotation" \
+  "$recog" model build --rgbd "$tmp/rgbd.txt" --depth-camera 500,500,256,192 \
+  --depth-from-color 2,0,0,0,1,0,0,0,1,0,0,0 -o "$tmp/m.robj"
+expect_error "model build with --depth-camera alone" "go together" "$recog" model build \
+  --rgbd "$tmp/rgbd.txt" --depth-camera 500,500,256,192 -o "$tmp/m.robj"
+echo "rgb.jpg depth.png 500 500 256 192 1000 1 0 0 0 1 0 0 0 1 0 0 1" >"$tmp/rgbd-box.txt"
+expect_ok "model build of RGB-D views with a box and a depth camera" "$recog" model build \
+  --rgbd "$tmp/rgbd-box.txt" --box 0.8,0.6,0.1 --depth-camera 500,500,256,192 \
+  --depth-from-color 1,0,0,0,1,0,0,0,1,0,0,0 --no-images -o "$tmp/rgbd.robj"
+expect_ok "model info of the RGB-D model" "$recog" model info "$tmp/rgbd.robj" --json
+/usr/bin/python3 -c "import json; d=json.load(open('$tmp/out')); assert d['points']>100 and d['dimensions'][2]<0.01 and d['dimensions'][0]<0.8, d" \
+  && pass || fail "the RGB-D model is flat and inside its box"
 expect_error "model info of a missing file" "NOT_FOUND" "$recog" model info "$tmp/none.robj"
 head -c 100 "$tmp/poster.robj" >"$tmp/cut.robj"
 expect_error "model info of a truncated file" "DATA_LOSS" "$recog" model info "$tmp/cut.robj"
