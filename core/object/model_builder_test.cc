@@ -4,6 +4,7 @@
 #include <memory>
 
 #include <gtest/gtest.h>
+#include <opencv2/features2d.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -63,6 +64,26 @@ TEST(RgbdModelBuilderTest, MaskedFeaturesLieOnTheObjectAndGiveItsDimensions) {
   EXPECT_NEAR(model->metadata.dimensions[0], kWidth, 0.1 * kWidth);
   EXPECT_NEAR(model->metadata.dimensions[1], kHeight, 0.1 * kHeight);
   EXPECT_LT(model->metadata.dimensions[2], 0.005);
+}
+
+// An object covering 4 % of the frame (the plane at 1.56 m): the model holds at least as many
+// points as ORB finds on the object when the mask is given to its detector (2000 features, 8
+// levels, the builder's own ORB settings) -- and far more than whole-frame detection would leave.
+TEST(RgbdModelBuilderTest, ASmallObjectsModelHoldsWhatAMaskedDetectorFindsOnIt) {
+  const RgbdView view = PlaneView("far", {0, 0, 1.56});
+  const double coverage = cv::countNonZero(view.mask) / double(view.mask.total());
+  ASSERT_NEAR(coverage, 0.04, 0.005);
+  const OrbOptions orb = ModelBuildOptions::DefaultModelOrb();
+  std::vector<cv::KeyPoint> masked;
+  cv::ORB::create(orb.max_features, orb.scale_factor, orb.levels)
+      ->detect(view.view.image, masked, view.mask);
+  ModelBuilder builder(testing::BundledObjectVocabulary(), NoImages());
+  auto model = builder.FromRgbd("plane", {view});
+  ASSERT_TRUE(model.ok()) << model.status().ToString();
+  std::printf("object at %.1f %% of the frame: masked ORB %zu keypoints, model %zu points\n",
+              100 * coverage, masked.size(), model->points.size());
+  EXPECT_GE(model->points.size(), masked.size());
+  EXPECT_EQ(PointsOffThePlane(*model), 0);
 }
 
 TEST(RgbdModelBuilderTest, PointsAtDepthDiscontinuitiesAreRejected) {

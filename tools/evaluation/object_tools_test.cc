@@ -7,10 +7,10 @@
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgcodecs.hpp>
 
-#include "core/vocabulary/vocabulary_io.h"
 #include "core/index/memory_index_store.h"
 #include "core/object/object_database.h"
 #include "core/object/object_recognizer.h"
+#include "core/vocabulary/vocabulary_io.h"
 #include "tests/testing/test_data.h"
 #include "tests/testing/vocabularies.h"
 #include "tools/evaluation/object_evaluation.h"
