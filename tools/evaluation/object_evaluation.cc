@@ -62,7 +62,7 @@ ObjectEvaluationSummary Summarise(ImageTransform transform,
   ObjectEvaluationSummary s;
   s.transform = transform;
   std::vector<double> rotation, translation, orb, clustering, conversion, query, correspondences,
-      ransac, total;
+      ransac, second_pass, total;
   for (const ObjectQuery& q : queries) {
     if (q.transform != transform) continue;
     ++s.queries;
@@ -78,6 +78,7 @@ ObjectEvaluationSummary Summarise(ImageTransform transform,
     query.push_back(q.timing.query);
     correspondences.push_back(q.timing.correspondences);
     ransac.push_back(q.timing.ransac);
+    second_pass.push_back(q.timing.second_pass);
     total.push_back(q.timing.total);
   }
   s.detection_rate = s.queries == 0 ? 0.0 : double(s.detections) / double(s.queries);
@@ -89,6 +90,7 @@ ObjectEvaluationSummary Summarise(ImageTransform transform,
   s.median_timing.query = Median(query);
   s.median_timing.correspondences = Median(correspondences);
   s.median_timing.ransac = Median(ransac);
+  s.median_timing.second_pass = Median(second_pass);
   s.median_timing.total = Median(total);
   return s;
 }

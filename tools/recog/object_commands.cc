@@ -46,8 +46,13 @@ json MetadataJson(const ObjectMetadata& m) {
 }
 
 json TimingJson(const RecognitionTiming& t) {
-  return {{"orb", t.orb},     {"clustering", t.clustering},           {"conversion", t.conversion},
-          {"query", t.query}, {"correspondences", t.correspondences}, {"ransac", t.ransac},
+  return {{"orb", t.orb},
+          {"clustering", t.clustering},
+          {"conversion", t.conversion},
+          {"query", t.query},
+          {"correspondences", t.correspondences},
+          {"ransac", t.ransac},
+          {"second_pass", t.second_pass},
           {"total", t.total}};
 }
 
@@ -657,6 +662,7 @@ json SummaryJson(const ObjectEvaluationSummary& s) {
                        {"query", {{"median", t.query}}},
                        {"correspondences", {{"median", t.correspondences}}},
                        {"ransac", {{"median", t.ransac}}},
+                       {"second_pass", {{"median", t.second_pass}}},
                        {"total", {{"median", t.total}}}};
   return {{"queries", s.queries},
           {"detections", s.detections},

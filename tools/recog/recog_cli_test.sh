@@ -270,7 +270,7 @@ if [ -f "$shared/objects/roboearth/models/bio/meta.xml" ] && [ -f "$shared/objec
     json_check "eval objects --method $method --json has the documented keys and consistent counts" "
 import re
 num = (int, float)
-stages = ['orb', 'clustering', 'conversion', 'query', 'correspondences', 'ransac', 'total']
+stages = ['orb', 'clustering', 'conversion', 'query', 'correspondences', 'ransac', 'second_pass', 'total']
 def summary(s):
     assert isinstance(s['queries'], int) and isinstance(s['detections'], int), s
     assert isinstance(s['wrong_detections'], int) and 0 <= s['detections'] <= s['queries'], s
