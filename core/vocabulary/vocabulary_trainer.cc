@@ -255,11 +255,10 @@ class TreeBuilder {
   }
 
   void ReportLeafRows(size_t rows) {
+    // Counted under the lock that orders the reports, so that they never go backwards.
+    std::lock_guard lock(progress_mutex_);
     const uint64_t done = rows_done_->fetch_add(rows) + rows;
-    if (options_.progress) {
-      std::lock_guard lock(progress_mutex_);
-      options_.progress("clustering", done, rows_total_);
-    }
+    if (options_.progress) options_.progress("clustering", done, rows_total_);
   }
 
   // k-means++ seeding (Arthur & Vassilvitskii 2007): the first centre uniformly, each next one
@@ -461,11 +460,10 @@ std::vector<float> ComputeWordWeights(const Vocabulary& vocabulary, const Traini
       const WordId w = vocabulary.TransformOne(set.descriptors.data() + i * row);
       word_image[i] = (uint64_t(w) << 32) | image_of_row[i];
       if ((i - b) % 65536 == 65535 || i + 1 == e) {
+        // Counted under the lock that orders the reports, so that they never go backwards.
+        std::lock_guard lock(progress_mutex);
         const uint64_t now = done.fetch_add((i - b) % 65536 + 1) + (i - b) % 65536 + 1;
-        if (options.progress) {
-          std::lock_guard lock(progress_mutex);
-          options.progress("weighting", now, rows);
-        }
+        if (options.progress) options.progress("weighting", now, rows);
       }
     }
   });
