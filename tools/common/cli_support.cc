@@ -5,11 +5,30 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <sstream>
+#include <stdexcept>
 
 namespace recog::cli {
+
+StatusOr<std::vector<double>> ParseNumbers(const std::string& flag, const std::string& text) {
+  std::vector<double> values;
+  std::stringstream in(text);
+  std::string field;
+  while (std::getline(in, field, ',')) {
+    try {
+      size_t used = 0;
+      values.push_back(std::stod(field, &used));
+      if (used != field.size() || !std::isfinite(values.back())) throw std::invalid_argument(field);
+    } catch (const std::exception&) {
+      return Status::InvalidArgument(flag + ": '" + field + "' is not a finite number");
+    }
+  }
+  return values;
+}
 
 namespace fs = std::filesystem;
 

@@ -13,6 +13,10 @@
 
 namespace recog::cli {
 
+// Comma-separated numbers ("0.1,0.2,0.3"); INVALID_ARGUMENT naming `flag` for a field that is not
+// a finite number.
+StatusOr<std::vector<double>> ParseNumbers(const std::string& flag, const std::string& text);
+
 // Natural ("human") order of file names: digit runs compare as numbers, so 2.jpg < 10.jpg.
 bool NaturalLess(std::string_view a, std::string_view b);
 

@@ -17,6 +17,7 @@
 #include "core/index/memory_index_store.h"
 #include "core/object/roboearth.h"
 #include "core/vocabulary/vocabulary_io.h"
+#include "tools/common/cli_support.h"
 #include "tools/evaluation/place_evaluation.h"
 #include "tools/evaluation/plot.h"
 
@@ -170,18 +171,7 @@ double RotationErrorDeg(const cv::Matx33d& a, const cv::Matx33d& b) {
 }
 
 StatusOr<CameraIntrinsics> ParseCamera(const std::string& text) {
-  std::vector<double> values;
-  std::stringstream in(text);
-  std::string field;
-  while (std::getline(in, field, ',')) {
-    try {
-      size_t used = 0;
-      values.push_back(std::stod(field, &used));
-      if (used != field.size()) throw std::invalid_argument(field);
-    } catch (const std::exception&) {
-      return Status::InvalidArgument("--camera: '" + field + "' is not a number");
-    }
-  }
+  RECOG_ASSIGN_OR_RETURN(const std::vector<double> values, ParseNumbers("--camera", text));
   if (values.size() != 4 && values.size() != 8 && values.size() != 9) {
     return Status::InvalidArgument("--camera needs fx,fy,cx,cy[,k1,k2,p1,p2[,k3]]");
   }

@@ -67,23 +67,6 @@ struct ModelBuildArgs {
   bool no_images = false;
 };
 
-// Comma-separated numbers ("0.1,0.2,0.3"); `flag` names the option in errors.
-StatusOr<std::vector<double>> ParseNumbers(const std::string& flag, const std::string& text) {
-  std::vector<double> values;
-  std::stringstream in(text);
-  std::string field;
-  while (std::getline(in, field, ',')) {
-    try {
-      size_t used = 0;
-      values.push_back(std::stod(field, &used));
-      if (used != field.size() || !std::isfinite(values.back())) throw std::invalid_argument(field);
-    } catch (const std::exception&) {
-      return Status::InvalidArgument(flag + ": '" + field + "' is not a finite number");
-    }
-  }
-  return values;
-}
-
 // --box W,H,D[,CX,CY,CZ]: the object's box, centred on the object frame unless a centre is given.
 StatusOr<ObjectBox> ParseBox(const std::string& text) {
   RECOG_ASSIGN_OR_RETURN(std::vector<double> v, ParseNumbers("--box", text));
