@@ -151,6 +151,8 @@ class ModelBuilder {
   StatusOr<ObjectModel> FromRgbd(const std::string& name, const std::vector<RgbdView>& views,
                                  const std::optional<ObjectBox>& box = std::nullopt);
 
+  const std::shared_ptr<const Vocabulary>& vocabulary() const { return vocabulary_; }
+
  private:
   class Accumulator;
   Status Extract(const cv::Mat& image, FeatureSet* features);

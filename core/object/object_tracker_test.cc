@@ -1,6 +1,7 @@
 // ObjectTracker on a synthetic stream: a poster rendered along a smooth trajectory is recognised
 // once, then tracked with its pose; a frame without it loses it and the next frame recognises it
-// again. (The real sequence, visp-cube, is in tools/evaluation/object_tracking_test.cc.)
+// again. Learning from a recording of the turning poster (recording_learner.h) adds views with
+// their true poses. (The real sequence, visp-cube, is in tools/evaluation/object_tracking_test.cc.)
 #include "core/object/object_tracker.h"
 
 #include <algorithm>
@@ -13,6 +14,7 @@
 
 #include "core/index/memory_index_store.h"
 #include "core/object/model_builder.h"
+#include "core/object/recording_learner.h"
 #include "tests/testing/test_data.h"
 #include "tests/testing/vocabularies.h"
 
@@ -183,6 +185,129 @@ TEST_F(ObjectTrackerTest, BadInputIsRejectedAndKeepsTheTracks) {
   ASSERT_TRUE(tracker.Track(recognizer, Render(PoseAt(1)), camera_, &detections).ok());
   ASSERT_EQ(detections.size(), 1u);
   EXPECT_TRUE(detections[0].tracked);
+}
+
+class RecordingLearnerTest : public ObjectTrackerTest {
+ protected:
+  void SetUp() override {
+    ObjectTrackerTest::SetUp();
+    // The poster's rectangle, as a CAD model would give it.
+    const RigidTransform& face = model_.faces[0].object_from_face;
+    for (const cv::Vec3d& corner : {cv::Vec3d(0, 0, 0), cv::Vec3d(kWidth, 0, 0),
+                                    cv::Vec3d(kWidth, kHeight, 0), cv::Vec3d(0, kHeight, 0)}) {
+      const cv::Vec3d corner_in_object = face.R * corner + face.t;
+      poster_polygon_.corners.emplace_back(corner_in_object[0], corner_in_object[1],
+                                           corner_in_object[2]);
+    }
+    first_ = {"frame0", Render(PoseAt(0)), camera_, PoseAt(0)};
+    for (int i = 1; i <= 20; ++i)
+      frames_.push_back({"frame" + std::to_string(i), Render(PoseAt(i))});
+    build_ = [this](const std::vector<PosedImage>& views) {
+      ++builds_;
+      return builder_.FromPosedPolygons("poster", {poster_polygon_}, views);
+    };
+  }
+
+  static ModelBuildOptions NoImages() {
+    ModelBuildOptions options;
+    options.keep_images = false;
+    return options;
+  }
+
+  FacePolygon poster_polygon_;
+  PosedImage first_;
+  std::vector<RecordingFrame> frames_;  // frames 1..20: the poster turns 2 degrees a frame
+  ModelBuilder builder_{testing::BundledObjectVocabulary(), NoImages()};
+  ModelFromViews build_;
+  int builds_ = 0;
+};
+
+// Direction of the camera centre from the object frame's origin, in the object frame.
+cv::Vec3d ViewDirection(const RigidTransform& camera_from_object) {
+  const cv::Vec3d centre = -(camera_from_object.R.t() * camera_from_object.t);
+  return centre / cv::norm(centre);
+}
+
+double AngleDeg(const cv::Vec3d& a, const cv::Vec3d& b) {
+  return std::acos(std::clamp(a.dot(b), -1.0, 1.0)) * 180.0 / CV_PI;
+}
+
+TEST_F(RecordingLearnerTest, AddsAViewEachTimeTheObjectHasTurnedFarEnoughWithItsTruePose) {
+  RecordingLearningOptions options;
+  options.min_view_angle_deg = 10;
+  auto learned =
+      LearnFromRecording(build_, testing::BundledObjectVocabulary(), first_, frames_, options);
+  ASSERT_TRUE(learned.ok()) << learned.status().ToString();
+  EXPECT_EQ(learned->frames_found, frames_.size());
+  // The true directions turn by 30 degrees over the 20 frames: two views or more besides frame 0.
+  ASSERT_GE(learned->views.size(), 3u);
+  EXPECT_EQ(builds_, int(learned->views.size()));
+  EXPECT_EQ(learned->model.views.size(), learned->views.size());
+  std::vector<cv::Vec3d> true_directions = {ViewDirection(PoseAt(0))};
+  for (size_t k = 1; k < learned->views.size(); ++k) {
+    const int frame = int(learned->view_frames[k - 1]) + 1;  // frames_[i] is frame i + 1
+    EXPECT_EQ(learned->views[k].name, "frame" + std::to_string(frame));
+    EXPECT_LT(RotationErrorDeg(learned->views[k].camera_from_object.R, PoseAt(frame).R), 1.0);
+    EXPECT_LT(cv::norm(learned->views[k].camera_from_object.t - PoseAt(frame).t), 0.02);
+    // Truly seen from a new direction (the estimated pose may be a fraction of a degree off).
+    for (const cv::Vec3d& seen : true_directions) {
+      EXPECT_GT(AngleDeg(ViewDirection(PoseAt(frame)), seen), options.min_view_angle_deg - 1)
+          << "view " << k;
+    }
+    true_directions.push_back(ViewDirection(PoseAt(frame)));
+  }
+  // With twice the angle, fewer views.
+  options.min_view_angle_deg = 20;
+  auto fewer =
+      LearnFromRecording(build_, testing::BundledObjectVocabulary(), first_, frames_, options);
+  ASSERT_TRUE(fewer.ok()) << fewer.status().ToString();
+  EXPECT_LT(fewer->views.size(), learned->views.size());
+  EXPECT_GE(fewer->views.size(), 2u);
+}
+
+TEST_F(RecordingLearnerTest, NoViewIsLearnedFromFramesWithoutTheObject) {
+  const std::vector<RecordingFrame> empty_frames = {
+      {"grey", cv::Mat(480, 640, CV_8U, cv::Scalar(90))}, {"noise", [] {
+                                                             cv::Mat noise(480, 640, CV_8U);
+                                                             cv::randu(noise, 0, 255);
+                                                             return noise;
+                                                           }()}};
+  auto learned =
+      LearnFromRecording(build_, testing::BundledObjectVocabulary(), first_, empty_frames, {});
+  ASSERT_TRUE(learned.ok()) << learned.status().ToString();
+  EXPECT_EQ(learned->frames_found, 0u);
+  EXPECT_EQ(learned->views.size(), 1u);
+  EXPECT_TRUE(learned->view_frames.empty());
+}
+
+TEST_F(RecordingLearnerTest, BadInputAndTheBuildersErrorsAreReturned) {
+  std::vector<RecordingFrame> frames = frames_;
+  frames[3].image = cv::Mat(480, 640, CV_32F, cv::Scalar(0));
+  auto not_8_bit =
+      LearnFromRecording(build_, testing::BundledObjectVocabulary(), first_, frames, {});
+  EXPECT_EQ(not_8_bit.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(not_8_bit.status().message().find("frame4"), std::string::npos)
+      << not_8_bit.status().ToString();
+  RecordingLearningOptions options;
+  options.min_view_angle_deg = 0;
+  EXPECT_EQ(LearnFromRecording(build_, testing::BundledObjectVocabulary(), first_, frames_, options)
+                .status()
+                .code(),
+            StatusCode::kInvalidArgument);
+  options = {};
+  options.max_views = 0;
+  EXPECT_EQ(LearnFromRecording(build_, testing::BundledObjectVocabulary(), first_, frames_, options)
+                .status()
+                .code(),
+            StatusCode::kInvalidArgument);
+  EXPECT_EQ(builds_, 0);
+  const ModelFromViews failing = [](const std::vector<PosedImage>&) -> StatusOr<ObjectModel> {
+    return Status::InvalidArgument("view 'frame0' yields no point");
+  };
+  auto refused =
+      LearnFromRecording(failing, testing::BundledObjectVocabulary(), first_, frames_, {});
+  EXPECT_EQ(refused.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(refused.status().message().find("no point"), std::string::npos);
 }
 
 }  // namespace

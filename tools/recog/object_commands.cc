@@ -7,6 +7,7 @@
 #include <functional>
 #include <memory>
 #include <optional>
+#include <set>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -20,6 +21,7 @@
 #include "core/object/model_file.h"
 #include "core/object/object_recognizer.h"
 #include "core/object/object_tracker.h"
+#include "core/object/recording_learner.h"
 #include "core/vocabulary/vocabulary_io.h"
 #include "tools/common/cli_support.h"
 #include "tools/common/remote_support.h"
@@ -60,11 +62,12 @@ json TimingJson(const RecognitionTiming& t) {
 
 struct ModelBuildArgs {
   std::string roboearth, planar, rgbd, cad, output, name, vocabulary;
-  std::string pose, image, camera;                  // with --cad
+  std::string pose, image, camera, recording;  // with --cad
+  double view_angle = RecordingLearningOptions().min_view_angle_deg;
   std::string box, depth_camera, depth_from_color;  // with --rgbd
   std::vector<std::string> faces;                   // side=IMAGE
   double width = 0, height = 0, depth = 0;
-  bool no_images = false;
+  bool no_images = false, quiet = false;
 };
 
 // --box W,H,D[,CX,CY,CZ]: the object's box, centred on the object frame unless a centre is given.
@@ -132,19 +135,50 @@ std::function<std::string(const std::string&)> Accepts(Parse parse) {
 }
 
 // A model from a CAD file of planar faces and one registered image (--cad --pose --image
-// --camera), e.g. the visp-cube.
+// --camera), e.g. the visp-cube; with --recording, the frames of the recording that follow the
+// image are followed and more views learned from them (recording_learner.h).
 StatusOr<ObjectModel> BuildFromCad(const ModelBuildArgs& args, ModelBuilder* builder) {
   if (args.pose.empty() || args.image.empty() || args.camera.empty()) {
     return Status::InvalidArgument("--cad needs --pose, --image and --camera");
   }
   RECOG_ASSIGN_OR_RETURN(std::vector<FacePolygon> faces, ReadCaoFaces(args.cad));
-  PosedImage view;
-  view.name = fs::path(args.image).stem().string();
-  RECOG_ASSIGN_OR_RETURN(view.image, ReadGrayImage(args.image));
-  RECOG_ASSIGN_OR_RETURN(view.camera, ParseCamera(args.camera));
-  RECOG_ASSIGN_OR_RETURN(view.camera_from_object, ReadVispPose(args.pose));
-  return builder->FromPosedPolygons(
-      args.name.empty() ? fs::path(args.cad).stem().string() : args.name, faces, {view});
+  PosedImage first;
+  first.name = fs::path(args.image).stem().string();
+  RECOG_ASSIGN_OR_RETURN(first.image, ReadGrayImage(args.image));
+  RECOG_ASSIGN_OR_RETURN(first.camera, ParseCamera(args.camera));
+  RECOG_ASSIGN_OR_RETURN(first.camera_from_object, ReadVispPose(args.pose));
+  const std::string name = args.name.empty() ? fs::path(args.cad).stem().string() : args.name;
+  const ModelFromViews build = [&](const std::vector<PosedImage>& views) {
+    return builder->FromPosedPolygons(name, faces, views);
+  };
+  if (args.recording.empty()) return build({first});
+  // The recording's frames after --image (all of them when --image is not one of them).
+  RECOG_ASSIGN_OR_RETURN(std::vector<std::string> paths, ListImages(args.recording));
+  const auto position = std::find_if(paths.begin(), paths.end(), [&](const std::string& path) {
+    std::error_code error;
+    return fs::equivalent(path, args.image, error);
+  });
+  if (position != paths.end()) paths.erase(paths.begin(), position + 1);
+  std::vector<RecordingFrame> frames;
+  for (const std::string& path : paths) {
+    RECOG_ASSIGN_OR_RETURN(cv::Mat image, ReadGrayImage(path));
+    frames.push_back({fs::path(path).stem().string(), std::move(image)});
+  }
+  RecordingLearningOptions options;
+  options.min_view_angle_deg = args.view_angle;
+  ProgressBar progress(!args.quiet);
+  RECOG_ASSIGN_OR_RETURN(LearnedModel learned,
+                         LearnFromRecording(build, builder->vocabulary(), first, frames, options,
+                                            [&](size_t done, size_t total, size_t /*views*/) {
+                                              progress.Update("frames", done, total);
+                                            }));
+  progress.Finish();
+  std::string names;
+  for (const PosedImage& view : learned.views) names += (names.empty() ? "" : ",") + view.name;
+  std::printf("%zu views (%s); the object was found in %zu of the %zu frames that follow %s\n",
+              learned.views.size(), names.c_str(), learned.frames_found, frames.size(),
+              first.name.c_str());
+  return std::move(learned.model);
 }
 
 // A model from an RGB-D view list (--rgbd), with --box, --depth-camera and --depth-from-color.
@@ -418,6 +452,7 @@ struct EvalSequenceArgs {
   std::string images, camera, expect, draw, vocabulary;
   std::string truth, size_recall = "size_recall";  // --truth, --size-recall
   SizeRecallOptions size_options;
+  std::vector<std::string> exclude;  // frames (file stems) processed but not counted
   bool json = false, quiet = false;
   bool track = false;  // follow the object with an ObjectTracker, as a stream does
 };
@@ -504,7 +539,9 @@ class SizeRecallReport {
 // is the fraction of frames where it is found; any other object reported is a false positive.
 // With --track the frames go through an ObjectTracker (object_tracker.h) as in a stream: each
 // frame is either recognised (the full search ran) or only tracked, and the medians of both kinds
-// of frame are reported, with the tracking time per tracked object.
+// of frame are reported, with the tracking time per tracked object. Frames named by --exclude
+// (e.g. the model's own training views) are processed like the others, so that tracking sees
+// the same stream, but left out of recall and false positives.
 int RunEvalSequence(const EvalSequenceArgs& args) {
   auto camera = ParseCamera(args.camera);
   if (!camera.ok()) return Fail("eval sequence", camera.status());
@@ -534,7 +571,15 @@ int RunEvalSequence(const EvalSequenceArgs& args) {
   ObjectRecognizer recognizer(database);
   ObjectTracker tracker(database);
   ProgressBar progress(!args.quiet);
-  size_t found = 0, false_positives = 0, found_tracked = 0;
+  const std::set<std::string> excluded(args.exclude.begin(), args.exclude.end());
+  for (const std::string& name : excluded) {
+    if (std::none_of(frames->begin(), frames->end(),
+                     [&](const std::string& path) { return fs::path(path).stem() == name; })) {
+      return Fail("eval sequence",
+                  Status::InvalidArgument("--exclude: no frame '" + name + "' in --images"));
+    }
+  }
+  size_t counted = 0, found = 0, false_positives = 0, found_tracked = 0;
   std::vector<double> totals, inliers, recognised_totals, tracked_totals, per_object;
   json per_frame = json::array();
   std::vector<Detection> detections;
@@ -549,9 +594,16 @@ int RunEvalSequence(const EvalSequenceArgs& args) {
     const double total = args.track ? tracking.total : timing.total;
     totals.push_back(total);
     json names = json::array();
+    for (const Detection& d : detections) names.push_back(d.name);
+    json frame = {{"frame", fs::path((*frames)[i]).filename().string()},
+                  {"objects", names},
+                  {"total_ms", total}};
+    const bool count = !excluded.count(fs::path((*frames)[i]).stem().string());
+    counted += count;
+    if (!count) frame["excluded"] = true;
     bool hit = false;
     for (const Detection& d : detections) {
-      names.push_back(d.name);
+      if (!count) continue;
       if (d.name == args.expect) {
         hit = true;
         found_tracked += d.tracked;
@@ -561,9 +613,6 @@ int RunEvalSequence(const EvalSequenceArgs& args) {
       }
     }
     found += hit;
-    json frame = {{"frame", fs::path((*frames)[i]).filename().string()},
-                  {"objects", names},
-                  {"total_ms", total}};
     if (args.track) {
       (tracking.recognized ? recognised_totals : tracked_totals).push_back(total);
       if (tracking.tracked + tracking.lost > 0) {
@@ -593,8 +642,9 @@ int RunEvalSequence(const EvalSequenceArgs& args) {
     progress.Update("frames", i + 1, frames->size());
   }
   progress.Finish();
-  const double recall = double(found) / double(frames->size());
-  json out = {{"frames", frames->size()},
+  const double recall = counted > 0 ? double(found) / double(counted) : 0.0;
+  json out = {{"frames", counted},
+              {"frames_excluded", frames->size() - counted},
               {"detections", found},
               {"recall", recall},
               {"false_positives", false_positives},
@@ -613,9 +663,12 @@ int RunEvalSequence(const EvalSequenceArgs& args) {
     if (Status s = size_recall.Finish(args, &out); !s.ok()) return Fail("eval sequence", s);
     std::printf("%s\n", out.dump(2).c_str());
   } else {
+    const std::string left_out =
+        excluded.empty() ? "" : " (" + std::to_string(excluded.size()) + " more excluded)";
     std::printf(
-        "%zu frames: '%s' found in %zu (recall %.1f %%), %zu false positives, median %.2f ms\n",
-        frames->size(), args.expect.c_str(), found, 100 * recall, false_positives, Median(totals));
+        "%zu frames%s: '%s' found in %zu (recall %.1f %%), %zu false positives, median %.2f ms\n",
+        counted, left_out.c_str(), args.expect.c_str(), found, 100 * recall, false_positives,
+        Median(totals));
     if (args.track) {
       std::printf(
           "tracking: found by tracking in %zu frames; %zu frames recognised (median %.2f ms), %zu "
@@ -769,10 +822,21 @@ void AddObjectCommands(CLI::App& app, int* exit_code) {
   build->add_option("--pose", build_args->pose, "ViSP .pos pose of the object in --image");
   build->add_option("--image", build_args->image, "Registered image for --cad");
   build->add_option("--camera", build_args->camera, "fx,fy,cx,cy of --image");
+  build->add_option("--recording", build_args->recording,
+                    "With --cad: folder of the recording --image belongs to; the object is "
+                    "followed through the frames after --image and views from new directions "
+                    "are added to the model");
+  build
+      ->add_option("--view-angle", build_args->view_angle,
+                   "With --recording: a frame becomes a view when it sees the object from a "
+                   "direction this far (degrees) from every view's")
+      ->capture_default_str()
+      ->check(CLI::Range(1.0, 179.0));
   build->add_option("--name", build_args->name, "Object name (default: from the source)");
   build->add_option("--vocab", build_args->vocabulary,
                     "Vocabulary (default: the bundled object one)");
   build->add_flag("--no-images", build_args->no_images, "Do not keep the training images");
+  build->add_flag("-q,--quiet", build_args->quiet, "No progress output");
   build->add_option("-o,--output", build_args->output, "Model file to write")->required();
   build->callback([build_args, exit_code] { *exit_code = RunModelBuild(*build_args); });
 
@@ -868,6 +932,11 @@ void AddEvalObjectsCommand(CLI::App& eval, int* exit_code) {
                    "With --truth: largest translation error of a right pose, fraction of the "
                    "distance")
       ->capture_default_str();
+  sequence
+      ->add_option("--exclude", sequence_args->exclude,
+                   "Frames (file names without extension, comma-separated) processed but "
+                   "left out of recall and false positives, e.g. the model's training views")
+      ->delimiter(',');
   sequence->add_flag("--json", sequence_args->json, "Print JSON");
   sequence->add_flag("-q,--quiet", sequence_args->quiet, "No progress output");
   sequence->callback([sequence_args, exit_code] { *exit_code = RunEvalSequence(*sequence_args); });

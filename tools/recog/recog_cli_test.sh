@@ -323,6 +323,31 @@ assert 'visp-cube' in f[0]['objects'], 'the model was built from frame 0'
 "
   expect_error "eval sequence expecting an object not among the models" "not among the models" "$recog" \
     eval sequence --models "$tmp/cube.robj" --images "$tmp/cube" --camera 547,547,338,234 --expect lion -q
+  # Learning from the recording: frames 1-3 follow frame 0 (too close to become views), and
+  # --exclude leaves frames out of the counts.
+  expect_ok "model build --recording" "$recog" model build --cad "$shared/objects/visp-cube/cube.cao" \
+    --pose "$shared/objects/visp-cube/cube.0.pos" --image "$tmp/cube/image0000.png" \
+    --camera 547,547,338,234 --name visp-cube --recording "$tmp/cube" --no-images -q -o "$tmp/cube-rec.robj"
+  grep -q "^1 views (image0000); the object was found in 3 of the 3 frames that follow image0000" "$tmp/out" \
+    && pass || fail "model build --recording follows the cube through the frames after --image"
+  expect_usage_error "model build with --view-angle 0" "--view-angle" "$recog" model build \
+    --cad "$shared/objects/visp-cube/cube.cao" --pose "$shared/objects/visp-cube/cube.0.pos" \
+    --image "$tmp/cube/image0000.png" --camera 547,547,338,234 --recording "$tmp/cube" \
+    --view-angle 0 -o "$tmp/m.robj"
+  expect_error "model build --recording of a missing folder" "NOT_FOUND" "$recog" model build \
+    --cad "$shared/objects/visp-cube/cube.cao" --pose "$shared/objects/visp-cube/cube.0.pos" \
+    --image "$tmp/cube/image0000.png" --camera 547,547,338,234 --recording "$tmp/none" -o "$tmp/m.robj"
+  expect_ok "eval sequence --exclude" "$recog" eval sequence --models "$tmp/cube-rec.robj" \
+    --images "$tmp/cube" --camera 547,547,338,234 --expect visp-cube --exclude image0000,image0002 --json -q
+  json_check "eval sequence --exclude leaves the frames out of the counts" "
+f = d['per_frame']
+assert d['frames'] == 2 and d['frames_excluded'] == 2 and len(f) == 4, d
+assert [x.get('excluded', False) for x in f] == [True, False, True, False], f
+assert d['detections'] == sum('visp-cube' in x['objects'] for x in f if not x.get('excluded')), d
+"
+  expect_error "eval sequence --exclude of a frame not in --images" "no frame 'image9999'" "$recog" \
+    eval sequence --models "$tmp/cube-rec.robj" --images "$tmp/cube" --camera 547,547,338,234 \
+    --expect visp-cube --exclude image9999 -q
 else
   echo "skipping the eval --json checks: bio or the visp-cube not found under $shared (set RECOG_SHARED_DATA)"
 fi
