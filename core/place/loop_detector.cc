@@ -19,11 +19,13 @@ struct Island {
   double best_eta = 0, best_score = 0;
 };
 
-// The query's answer as candidates, eta = s / reference.
+// The query's answer as candidates, eta = s / reference (0 when the reference is 0).
 std::vector<LoopCandidate> Candidates(const std::vector<QueryResult>& results, double reference) {
   std::vector<LoopCandidate> candidates;
   candidates.reserve(results.size());
-  for (const QueryResult& r : results) candidates.push_back({r.id, r.score, r.score / reference});
+  for (const QueryResult& r : results) {
+    candidates.push_back({r.id, r.score, reference > 0.0 ? r.score / reference : 0.0});
+  }
   return candidates;
 }
 

@@ -100,7 +100,7 @@ struct LoopTimings {  // milliseconds spent in each stage for one frame
 struct LoopCandidate {
   EntryId entry = kInvalidEntryId;
   double score = 0;             // s(v_t, w_entry)
-  double normalized_score = 0;  // eta, with the reference of the query (may be below alpha)
+  double normalized_score = 0;  // eta with the query's reference (may be below alpha; 0 if it is 0)
   friend bool operator==(const LoopCandidate&, const LoopCandidate&) = default;
 };
 

@@ -52,7 +52,15 @@ StatusOr<PlaceFrameResult> PlaceMap::Query(const FeatureSet& features, double ti
                                            const PlaceResultOptions& options) const {
   RECOG_RETURN_IF_ERROR(options.Validate());
   PlaceFrameResult result;
-  RECOG_ASSIGN_OR_RETURN(result.loop, detector_.Query(features, timestamp));
+  StatusOr<LoopResult> loop = detector_.Query(features, timestamp);
+  if (loop.status().code() == StatusCode::kNotFound && !deleted()) {
+    // A frame removed (RemoveFrame) between the detector's query and its geometric check.
+    // deleted() took the map's lock, which RemoveFrame holds until the frame has left the index
+    // too, so the query runs again without it.
+    loop = detector_.Query(features, timestamp);
+  }
+  if (!loop.ok()) return loop.status();
+  result.loop = std::move(loop).value();
   RECOG_RETURN_IF_ERROR(AddExtras(features, options, &result));
   return result;
 }

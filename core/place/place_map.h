@@ -24,6 +24,8 @@
 // it). Deletion (by the registry) takes the lock too, so it waits for the frame being added; after
 // it, Add and Detect return NOT_FOUND "map '<name>' was deleted". A Query racing a deletion
 // answers from what the map held, without the extras whose frame is gone.
+// RemoveFrame takes the lock as well; a Query racing it does not fail for it: it answers with or
+// without the frame.
 #pragma once
 
 #include <memory>
