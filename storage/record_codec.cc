@@ -267,26 +267,36 @@ Status CheckStorable(const EntryRecord& entry) {
     return Status::InvalidArgument("descriptors of " + which +
                                    " must be a matrix of at most two dimensions and four channels");
   }
-  if (entry.metadata.user_data.size() > UINT32_MAX || entry.keypoints.size() > UINT32_MAX) {
+  if (entry.metadata.user_data.size() > UINT32_MAX ||
+      entry.metadata.client_id.size() > UINT32_MAX || entry.keypoints.size() > UINT32_MAX) {
     return Status::InvalidArgument(which + " is too large to store");
   }
   return Status::Ok();
 }
 
 std::string EncodeMetadata(const EntryMetadata& metadata) {
-  std::string out = StartValue();
-  out.reserve(1 + 8 + 4 + 4 + metadata.user_data.size());
+  const bool with_client_id = !metadata.client_id.empty();
+  std::string out(1, char(with_client_id ? kMetadataWithClientIdFormat : kRecordFormat));
+  out.reserve(1 + 8 + 4 + 4 + metadata.user_data.size() + 4 + metadata.client_id.size());
   Put<double>(&out, metadata.timestamp);
   Put<uint32_t>(&out, metadata.num_features);
   Put<uint32_t>(&out, uint32_t(metadata.user_data.size()));
   out += metadata.user_data;
+  if (with_client_id) {
+    Put<uint32_t>(&out, uint32_t(metadata.client_id.size()));
+    out += metadata.client_id;
+  }
   return out;
 }
 
 Status DecodeMetadata(std::string_view bytes, const RecordContext& context, EntryMetadata* out) {
   constexpr std::string_view kWhat = "metadata";
   Reader reader(bytes);
-  RECOG_RETURN_IF_ERROR(ReadFormat(&reader, kWhat, context));
+  uint8_t format = 0;
+  if (!reader.Read(&format)) return Malformed(kWhat, context, "empty record");
+  if (format != kRecordFormat && format != kMetadataWithClientIdFormat) {
+    return Malformed(kWhat, context, "unknown record format " + std::to_string(format));
+  }
   EntryMetadata metadata;
   uint32_t user_data_size = 0;
   const char* user_data = nullptr;
@@ -294,8 +304,16 @@ Status DecodeMetadata(std::string_view bytes, const RecordContext& context, Entr
       !reader.Read(&user_data_size) || !reader.Skip(user_data_size, &user_data)) {
     return Truncated(kWhat, context, reader);
   }
-  RECOG_RETURN_IF_ERROR(ExpectEnd(kWhat, context, reader));
   metadata.user_data.assign(user_data, user_data_size);
+  if (format == kMetadataWithClientIdFormat) {
+    uint32_t client_id_size = 0;
+    const char* client_id = nullptr;
+    if (!reader.Read(&client_id_size) || !reader.Skip(client_id_size, &client_id)) {
+      return Truncated(kWhat, context, reader);
+    }
+    metadata.client_id.assign(client_id, client_id_size);
+  }
+  RECOG_RETURN_IF_ERROR(ExpectEnd(kWhat, context, reader));
   *out = std::move(metadata);
   return Status::Ok();
 }

@@ -95,6 +95,32 @@ TEST(RecordCodecTest, EntryPartsRoundTripBitExactly) {
   }
 }
 
+TEST(RecordCodecTest, MetadataWithoutAClientIdIsTheOldRecordAndReadsAsEmpty) {
+  EntryMetadata old;
+  old.timestamp = 12.5;
+  old.num_features = 7;
+  old.user_data = "cam";
+  // The record as versions without client ids wrote it, byte by byte.
+  std::string bytes(1, char(kRecordFormat));
+  bytes.append("\x00\x00\x00\x00\x00\x00\x29\x40", 8);  // 12.5, little-endian
+  bytes.append("\x07\x00\x00\x00\x03\x00\x00\x00", 8);
+  bytes += "cam";
+  EXPECT_EQ(EncodeMetadata(old), bytes);
+  EntryMetadata decoded;
+  decoded.client_id = "stale";
+  ASSERT_TRUE(DecodeMetadata(bytes, kContext, &decoded).ok());
+  EXPECT_EQ(decoded, old);
+  EXPECT_EQ(decoded.client_id, "");
+
+  EntryMetadata with_id = old;
+  with_id.client_id = std::string("kf\0-42", 6);
+  const std::string encoded = EncodeMetadata(with_id);
+  EXPECT_EQ(uint8_t(encoded[0]), kMetadataWithClientIdFormat);
+  EXPECT_EQ(encoded.size(), bytes.size() + 4 + 6);
+  ASSERT_TRUE(DecodeMetadata(encoded, kContext, &decoded).ok());
+  EXPECT_EQ(decoded, with_id);
+}
+
 TEST(RecordCodecTest, NonContinuousDescriptorsAreStoredRowByRow) {
   cv::Mat big(10, 64, CV_8U);
   cv::randu(big, 0, 256);

@@ -99,6 +99,7 @@ inline EntryRecord MakeTestEntry(EntryId id, uint32_t seed = 0,
   e.metadata.num_features = uint32_t(n);
   const int user_bytes = std::uniform_int_distribution<int>(0, 300)(rng);
   for (int i = 0; i < user_bytes; ++i) e.metadata.user_data.push_back(char(rng() & 0xff));
+  if (id % 2 == 1) e.metadata.client_id = "kf-" + std::to_string(id);  // both metadata formats
 
   e.keypoints.resize(size_t(n));
   for (cv::KeyPoint& k : e.keypoints) {

@@ -5,7 +5,8 @@
 
 namespace recog {
 
-// The place map a call is about: CreateMap, GetMap, DeleteMap, AddFrame, QueryPlace, StreamFrames.
+// The place map a call is about: CreateMap, GetMap, DeleteMap, AddFrame, QueryPlace, StreamFrames,
+// RemoveFrame.
 inline constexpr char kMapHeader[] = "x-recog-map";
 // The shard a call without a map is meant for (ListMaps through a router); optional otherwise.
 inline constexpr char kShardHeader[] = "x-recog-shard";

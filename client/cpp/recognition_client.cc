@@ -284,6 +284,34 @@ Result<pb::QueryPlaceResponse> RecognitionClient::QueryPlace(
   return response;
 }
 
+Result<std::vector<uint64_t>> RecognitionClient::RemoveFrame(const std::string& map,
+                                                             uint64_t frame_id) {
+  pb::RemoveFrameRequest request;
+  request.set_map(map);
+  request.set_frame_id(frame_id);
+  return RemoveFrames(request);
+}
+
+Result<std::vector<uint64_t>> RecognitionClient::RemoveFramesByClientId(
+    const std::string& map, const std::string& client_frame_id) {
+  pb::RemoveFrameRequest request;
+  request.set_map(map);
+  request.set_client_frame_id(client_frame_id);
+  return RemoveFrames(request);
+}
+
+Result<std::vector<uint64_t>> RecognitionClient::RemoveFrames(
+    const pb::RemoveFrameRequest& request) {
+  pb::RemoveFrameResponse response;
+  const grpc::Status status = Run(
+      CallKind::kChanging, UnaryDeadline(),
+      ForMap(request.map(), UnaryAttempt(places_.get(), &pb::PlaceRecognition::Stub::RemoveFrame,
+                                         request, &response)));
+  if (!status.ok()) return status;
+  return std::vector<uint64_t>(response.removed_frame_ids().begin(),
+                               response.removed_frame_ids().end());
+}
+
 // --- Objects ---
 
 Result<pb::RecognizeObjectsResponse> RecognitionClient::RecognizeObjects(

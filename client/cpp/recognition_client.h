@@ -113,11 +113,19 @@ class RecognitionClient {
   Result<uint64_t> DeleteMap(const std::string& name);
   // Adds a frame to a map without querying it (keyframe upload).
   Result<pb::AddFrameResponse> AddFrame(const std::string& map, const pb::Frame& frame);
-  // Looks a frame up in a map (see QueryMode). `result_options` asks for the fundamental matrix
-  // or the relative pose of a verified loop.
+  // Looks a frame up in a map (see QueryMode). `result_options` asks for the top-k candidates,
+  // and for the fundamental matrix, the relative pose or the inlier correspondences of a verified
+  // loop. The matched frame's client_frame_id comes in result().match_client_frame_id().
   Result<pb::QueryPlaceResponse> QueryPlace(const std::string& map, const pb::Frame& frame,
                                             QueryMode mode = QueryMode::kRelocalise,
                                             const pb::ResultOptions& result_options = {});
+  // Removes frame `frame_id` from a map (keyframe culling); returns {frame_id}. NOT_FOUND for an
+  // unknown map or frame.
+  Result<std::vector<uint64_t>> RemoveFrame(const std::string& map, uint64_t frame_id);
+  // Removes every frame added with `client_frame_id` and returns their ids. NOT_FOUND for an
+  // unknown map or when no frame has that client id.
+  Result<std::vector<uint64_t>> RemoveFramesByClientId(const std::string& map,
+                                                       const std::string& client_frame_id);
 
   // --- Objects ---
 
@@ -182,6 +190,8 @@ class RecognitionClient {
   RecognitionClient(const ClientOptions& options, std::string token,
                     std::shared_ptr<grpc::Channel> channel);
 
+  // RemoveFrame and RemoveFramesByClientId.
+  Result<std::vector<uint64_t>> RemoveFrames(const pb::RemoveFrameRequest& request);
   // Sets the bearer token and, when given, the deadline.
   void PrepareContext(grpc::ClientContext& context, const Deadline* deadline) const;
   // Runs `attempt` with a fresh prepared context until it succeeds, or fails in a way the retry

@@ -96,6 +96,48 @@ TEST_F(RecognitionClientTest, AnAddedPlaceIsFoundByARelocalisationQueryThatChang
             grpc::StatusCode::NOT_FOUND);
 }
 
+TEST_F(RecognitionClientTest, MatchesNameTheClientsFrameIdsAndRemovedFramesAreGone) {
+  auto client = Connect();
+  ASSERT_NE(client, nullptr);
+  ASSERT_TRUE(client->CreateMap("keyframes").ok());
+  for (int n : {1, 20, 41}) {
+    pb::Frame frame = JpegFrame(CorridorJpeg(n));
+    frame.set_client_frame_id("kf-" + std::to_string(n));
+    ASSERT_TRUE(client->AddFrame("keyframes", frame).ok());
+  }
+  pb::ResultOptions options;
+  options.set_top_k(2);
+  options.set_include_correspondences(true);
+  Result<pb::QueryPlaceResponse> found =
+      client->QueryPlace("keyframes", JpegFrame(CorridorJpeg(20)), QueryMode::kRelocalise, options);
+  ASSERT_TRUE(found.ok()) << found.status().error_message();
+  const pb::LoopResult& r = found->result();
+  ASSERT_EQ(r.status(), pb::LOOP_STATUS_LOOP_DETECTED);
+  EXPECT_EQ(r.match_frame_id(), 1u);
+  EXPECT_EQ(r.match_client_frame_id(), "kf-20");
+  ASSERT_EQ(r.candidates_size(), 2);
+  EXPECT_EQ(r.candidates(0).client_frame_id(), "kf-20");
+  EXPECT_EQ(r.candidates(0).inliers(), r.inliers());
+  EXPECT_EQ(r.inlier_correspondences_size(), int(r.inliers()));
+
+  Result<std::vector<uint64_t>> removed = client->RemoveFramesByClientId("keyframes", "kf-20");
+  ASSERT_TRUE(removed.ok()) << removed.status().error_message();
+  EXPECT_EQ(*removed, std::vector<uint64_t>{1});
+  removed = client->RemoveFrame("keyframes", 0);
+  ASSERT_TRUE(removed.ok()) << removed.status().error_message();
+  EXPECT_EQ(*removed, std::vector<uint64_t>{0});
+  EXPECT_EQ(client->RemoveFrame("keyframes", 0).status().error_code(), grpc::StatusCode::NOT_FOUND);
+  EXPECT_EQ(client->RemoveFramesByClientId("keyframes", "kf-20").status().error_code(),
+            grpc::StatusCode::NOT_FOUND);
+  EXPECT_EQ(client->RemoveFrame("nowhere", 0).status().error_code(), grpc::StatusCode::NOT_FOUND);
+  EXPECT_EQ(client->GetMap("keyframes")->frames(), 1u);
+  found =
+      client->QueryPlace("keyframes", JpegFrame(CorridorJpeg(20)), QueryMode::kRelocalise, options);
+  ASSERT_TRUE(found.ok());
+  EXPECT_NE(found->result().match_frame_id(), 1u);
+  for (const pb::Candidate& c : found->result().candidates()) EXPECT_EQ(c.frame_id(), 2u);
+}
+
 TEST_F(RecognitionClientTest, FeaturesRawPixelsAndJpegsOfAFrameGetTheSameAnswer) {
   auto client = Connect();
   ASSERT_NE(client, nullptr);

@@ -78,11 +78,20 @@ def make_frame(image: bytes | str | os.PathLike, timestamp: float = 0.0,
     return frame
 
 
-def _as_frame(image: Image, timestamp: float = 0.0) -> common_pb2.Frame:
-    """Returns ``image`` if it is a Frame, otherwise a frame of it with ``timestamp``."""
+def _as_frame(image: Image, timestamp: float = 0.0, client_frame_id: str = "") -> common_pb2.Frame:
+    """Returns ``image`` if it is a Frame, otherwise a frame of it with ``timestamp`` and
+    ``client_frame_id``."""
     if isinstance(image, common_pb2.Frame):
         return image
-    return make_frame(image, timestamp)
+    return make_frame(image, timestamp, client_frame_id=client_frame_id)
+
+
+def _result_options(options: place_pb2.ResultOptions | Mapping | None) -> place_pb2.ResultOptions:
+    """Returns result options given as a message, a mapping of its fields (``top_k``,
+    ``include_correspondences``, ``include_fundamental``, ``include_relative_pose``), or None."""
+    if isinstance(options, place_pb2.ResultOptions):
+        return options
+    return place_pb2.ResultOptions(**(options or {}))
 
 
 def _map_settings(settings: place_pb2.MapSettings | Mapping | None) -> place_pb2.MapSettings:
@@ -180,29 +189,59 @@ class RecognitionClient:
                               name)
         return response.frames_deleted
 
-    def add_frame(self, map_name: str, image: Image, timestamp: float = 0.0
-                  ) -> place_pb2.AddFrameResponse:
+    def add_frame(self, map_name: str, image: Image, timestamp: float = 0.0,
+                  client_frame_id: str = "") -> place_pb2.AddFrameResponse:
         """Adds a frame to a map without querying it; the response carries its ``frame_id``.
 
-        ``timestamp`` (seconds, 0 = unknown) is used when ``image`` is not already a Frame.
+        ``timestamp`` (seconds, 0 = unknown) and ``client_frame_id`` (the client's own id of the
+        frame, e.g. a SLAM keyframe id: the map keeps it and returns it whenever the frame is a
+        match) are used when ``image`` is not already a Frame.
         """
-        request = place_pb2.AddFrameRequest(map=map_name, frame=_as_frame(image, timestamp))
+        request = place_pb2.AddFrameRequest(
+            map=map_name, frame=_as_frame(image, timestamp, client_frame_id))
         return self._call(self._places.AddFrame, request, map_name)
 
-    def query_place(self, map_name: str, image: Image, add_frame: bool = False
-                    ) -> place_pb2.QueryPlaceResponse:
+    def query_place(self, map_name: str, image: Image, add_frame: bool = False,
+                    result_options: place_pb2.ResultOptions | Mapping | None = None,
+                    client_frame_id: str = "") -> place_pb2.QueryPlaceResponse:
         """Looks a frame up in a map; ``response.result`` is its ``LoopResult``.
 
         Without ``add_frame`` this is a relocalisation query that changes nothing; with it the
-        frame runs the map's loop detector and is kept, like one frame of :meth:`stream_frames`.
+        frame runs the map's loop detector and is kept (with ``client_frame_id``), like one frame
+        of :meth:`stream_frames`. ``result_options`` (a ``ResultOptions`` or a mapping of its
+        fields, e.g. ``{"top_k": 5, "include_correspondences": True}``) asks for the top-k
+        candidates (``result.candidates``, at most 50) and the inlier correspondences of a verified
+        loop (``result.inlier_correspondences``). The matched frame's client id is
+        ``result.match_client_frame_id``.
         """
-        request = place_pb2.QueryPlaceRequest(map=map_name, frame=_as_frame(image),
-                                              add_frame=add_frame)
+        request = place_pb2.QueryPlaceRequest(
+            map=map_name, frame=_as_frame(image, client_frame_id=client_frame_id),
+            add_frame=add_frame, options=_result_options(result_options))
         return self._call(self._places.QueryPlace, request, map_name)
+
+    def remove_frame(self, map_name: str, frame_id: int | None = None,
+                     client_frame_id: str | None = None) -> list[int]:
+        """Removes frames from a map (keyframe culling) and returns their ids.
+
+        Give exactly one of ``frame_id`` (the id the frame got) and ``client_frame_id`` (every
+        frame added with it). A removed frame is never a candidate again. ``NOT_FOUND`` for an
+        unknown map or when no frame matches.
+        """
+        if (frame_id is None) == (client_frame_id is None):
+            raise ValueError("remove_frame takes exactly one of frame_id and client_frame_id")
+        request = place_pb2.RemoveFrameRequest(map=map_name)
+        if frame_id is not None:
+            request.frame_id = frame_id
+        else:
+            request.client_frame_id = client_frame_id
+        response = self._call(self._places.RemoveFrame, request, map_name)
+        return list(response.removed_frame_ids)
 
     def stream_frames(self, map_name: str, frames: Iterable[Image], create_if_missing: bool = True,
                       settings: place_pb2.MapSettings | Mapping | None = None,
-                      query_only: bool = False) -> Iterator[place_pb2.StreamFramesResponse]:
+                      query_only: bool = False,
+                      result_options: place_pb2.ResultOptions | Mapping | None = None
+                      ) -> Iterator[place_pb2.StreamFramesResponse]:
         """Streams frames into a map; returns the iterator of their answers, in frame order.
 
         ``frames`` may be lazy (a generator reading a camera): each is sent when gRPC flow
@@ -210,7 +249,8 @@ class RecognitionClient:
         has its ``sequence`` (index in ``frames``) and either ``result`` (a ``LoopResult``) or
         ``error`` (this frame failed, e.g. an undecodable image; the stream goes on).
         ``settings`` (as in :meth:`create_map`) apply when ``create_if_missing`` creates the map;
-        ``query_only`` looks every frame up without adding it.
+        ``query_only`` looks every frame up without adding it; ``result_options`` as in
+        :meth:`query_place`, for every frame.
 
         The returned object is also the ``grpc.Call``: ``cancel()`` ends the stream from any
         thread. An error of the whole stream raises ``grpc.RpcError`` during the iteration; so
@@ -218,7 +258,8 @@ class RecognitionClient:
         stream with ``UNKNOWN`` ("Exception iterating requests!").
         """
         config = place_pb2.StreamConfig(map=map_name, create_if_missing=create_if_missing,
-                                        settings=_map_settings(settings), query_only=query_only)
+                                        settings=_map_settings(settings), query_only=query_only,
+                                        options=_result_options(result_options))
 
         def requests():
             yield place_pb2.StreamFramesRequest(config=config)

@@ -206,6 +206,10 @@ StatusOr<EntryId> Database::AddConverted(const BowVector& bow, const FeatureVect
   if (metadata.user_data.size() > kMaxUserDataBytes) {
     return Status::InvalidArgument("entry user data exceeds 64 KiB");
   }
+  if (metadata.client_id.size() > kMaxClientIdBytes) {
+    return Status::InvalidArgument("entry client id exceeds " + std::to_string(kMaxClientIdBytes) +
+                                   " bytes");
+  }
   metadata.num_features = uint32_t(rows);
   if (std::string problem = CheckParts(bow, direct, metadata.num_features); !problem.empty()) {
     return Status::InvalidArgument("entry does not fit map '" + info_.config.name +

@@ -19,6 +19,23 @@ struct Island {
   double best_eta = 0, best_score = 0;
 };
 
+// The query's answer as candidates, eta = s / reference (0 when the reference is 0).
+std::vector<LoopCandidate> Candidates(const std::vector<QueryResult>& results, double reference) {
+  std::vector<LoopCandidate> candidates;
+  candidates.reserve(results.size());
+  for (const QueryResult& r : results) {
+    candidates.push_back({r.id, r.score, reference > 0.0 ? r.score / reference : 0.0});
+  }
+  return candidates;
+}
+
+// Before the frame changes the detector's state (Database::AddConverted checks it too late).
+Status CheckClientId(std::string_view client_id) {
+  if (client_id.size() <= kMaxClientIdBytes) return Status::Ok();
+  return Status::InvalidArgument("a frame's client id is at most " +
+                                 std::to_string(kMaxClientIdBytes) + " bytes");
+}
+
 }  // namespace
 
 std::string_view LoopStatusName(LoopStatus status) {
@@ -169,7 +186,9 @@ bool LoopDetector::FindBestIsland(const std::vector<QueryResult>& results, doubl
   return true;
 }
 
-StatusOr<LoopResult> LoopDetector::Process(const FeatureSet& features, double timestamp) {
+StatusOr<LoopResult> LoopDetector::Process(const FeatureSet& features, double timestamp,
+                                           std::string_view client_id) {
+  RECOG_RETURN_IF_ERROR(CheckClientId(client_id));
   LoopResult result;
   const uint64_t frame = frames_seen_++;
 
@@ -198,6 +217,7 @@ StatusOr<LoopResult> LoopDetector::Process(const FeatureSet& features, double ti
         bow, {.max_results = params_.max_query_results, .max_entry_id = QueryBound(timestamp)},
         &query_results_));
     result.timings.query = MsSince(start);
+    result.candidates = Candidates(query_results_, result.previous_score);
 
     start = Clock::now();
     if (FindBestIsland(query_results_, result.previous_score, &result)) {
@@ -225,17 +245,19 @@ StatusOr<LoopResult> LoopDetector::Process(const FeatureSet& features, double ti
   }
 
   start = Clock::now();
-  RECOG_ASSIGN_OR_RETURN(result.entry, Insert(features, bow, direct, timestamp));
+  RECOG_ASSIGN_OR_RETURN(result.entry, Insert(features, bow, direct, timestamp, client_id));
   result.timings.insertion = MsSince(start);
   return result;
 }
 
-StatusOr<EntryId> LoopDetector::Add(const FeatureSet& features, double timestamp) {
+StatusOr<EntryId> LoopDetector::Add(const FeatureSet& features, double timestamp,
+                                    std::string_view client_id) {
+  RECOG_RETURN_IF_ERROR(CheckClientId(client_id));
   ++frames_seen_;
   BowVector bow;
   FeatureVector direct;
   RECOG_RETURN_IF_ERROR(Convert(features, &bow, &direct));
-  return Insert(features, bow, direct, timestamp);
+  return Insert(features, bow, direct, timestamp, client_id);
 }
 
 StatusOr<LoopResult> LoopDetector::Query(const FeatureSet& features, double /*timestamp*/) const {
@@ -261,6 +283,7 @@ StatusOr<LoopResult> LoopDetector::Query(const FeatureSet& features, double /*ti
   start = Clock::now();
   // The results come best first: the first score is the reference for eta.
   const double best_score = results.empty() ? 0.0 : results.front().score;
+  result.candidates = Candidates(results, best_score);
   const bool found = FindBestIsland(results, best_score, &result);
   if (found) result.status = LoopStatus::kLoopDetected;
   result.timings.islands = MsSince(start);
@@ -270,10 +293,12 @@ StatusOr<LoopResult> LoopDetector::Query(const FeatureSet& features, double /*ti
 }
 
 StatusOr<EntryId> LoopDetector::Insert(const FeatureSet& features, const BowVector& bow,
-                                       const FeatureVector& direct, double timestamp) {
+                                       const FeatureVector& direct, double timestamp,
+                                       std::string_view client_id) {
   if (HasEnoughFeatures(features)) previous_bow_ = bow;
   EntryMetadata metadata;
   metadata.timestamp = timestamp;
+  metadata.client_id = client_id;
   RECOG_ASSIGN_OR_RETURN(const EntryId id,
                          database_->AddConverted(bow, direct, features, std::move(metadata)));
   if (timestamp > 0.0) {

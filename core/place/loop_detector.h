@@ -96,6 +96,14 @@ struct LoopTimings {  // milliseconds spent in each stage for one frame
   double conversion = 0, query = 0, islands = 0, insertion = 0, verification = 0;
 };
 
+// One entry of the database query's answer for a frame.
+struct LoopCandidate {
+  EntryId entry = kInvalidEntryId;
+  double score = 0;             // s(v_t, w_entry)
+  double normalized_score = 0;  // eta with the query's reference (may be below alpha; 0 if it is 0)
+  friend bool operator==(const LoopCandidate&, const LoopCandidate&) = default;
+};
+
 struct LoopResult {
   LoopStatus status = LoopStatus::kNoCandidates;
   EntryId entry = kInvalidEntryId;  // id this frame got in the database (none for Query)
@@ -109,6 +117,9 @@ struct LoopResult {
   uint32_t correspondences = 0;     // putative matches given to RANSAC
   std::vector<Match> inliers;       // a = this frame's feature, b = the match's feature
   cv::Matx33d fundamental = cv::Matx33d::zeros();
+  // What the database query returned (at most max_query_results entries, best score first, equal
+  // scores by increasing id), before alpha and the islands; empty when the frame was not queried.
+  std::vector<LoopCandidate> candidates;
   LoopTimings timings;
 };
 
@@ -119,16 +130,19 @@ class LoopDetector {
   static StatusOr<LoopDetector> Create(Database* database, const LoopDetectorParams& params);
 
   // Processes the next frame of the sequence (timestamp in seconds, 0 when unknown) and adds it
-  // to the database. Errors are only for bad input (e.g. descriptors of another format) or a
+  // to the database, with the client's id of the frame (stored in its metadata, at most
+  // kMaxClientIdBytes). Errors are only for bad input (e.g. descriptors of another format) or a
   // failing store; "no loop" is a result.
-  StatusOr<LoopResult> Process(const FeatureSet& features, double timestamp = 0.0);
+  StatusOr<LoopResult> Process(const FeatureSet& features, double timestamp = 0.0,
+                               std::string_view client_id = {});
 
   // Adds the next frame of the sequence (timestamp in seconds, 0 when unknown) to the database
   // without querying, and returns its entry id. The detector's state moves on as Process would
   // move it for a frame that is not queried: the frame counts in the sequence (and so in the gap
   // between queries for temporal consistency), is the previous usable frame when it has enough
-  // features, and its timestamp bounds tau_c. The same errors as Process.
-  StatusOr<EntryId> Add(const FeatureSet& features, double timestamp = 0.0);
+  // features, and its timestamp bounds tau_c. The client id and the errors are as for Process.
+  StatusOr<EntryId> Add(const FeatureSet& features, double timestamp = 0.0,
+                        std::string_view client_id = {});
 
   // Looks for the place of a single frame in the map, without adding the frame or changing the
   // detector (relocalisation). Every entry the map holds when the query runs is a candidate:
@@ -176,7 +190,8 @@ class LoopDetector {
   // Step 7: adds the converted frame to the database and moves the detector's state on (the
   // previous usable frame, the timestamps for tau_c). Returns the frame's entry id.
   StatusOr<EntryId> Insert(const FeatureSet& features, const BowVector& bow,
-                           const FeatureVector& direct, double timestamp);
+                           const FeatureVector& direct, double timestamp,
+                           std::string_view client_id);
 
   Database* database_;
   LoopDetectorParams params_;

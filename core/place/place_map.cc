@@ -1,8 +1,18 @@
 #include "core/place/place_map.h"
 
+#include <algorithm>
+
 #include "core/geometry/correspondences.h"
 
 namespace recog {
+
+Status PlaceResultOptions::Validate() const {
+  if (top_k > kMaxTopK) {
+    return Status::InvalidArgument("top_k is at most " + std::to_string(kMaxTopK) + ", not " +
+                                   std::to_string(top_k));
+  }
+  return Status::Ok();
+}
 
 StatusOr<std::shared_ptr<PlaceMap>> PlaceMap::Open(IndexStore* store, const std::string& name,
                                                    const LoopDetectorParams& params,
@@ -15,21 +25,24 @@ StatusOr<std::shared_ptr<PlaceMap>> PlaceMap::Open(IndexStore* store, const std:
       new PlaceMap(store, name, params, std::move(database), std::move(detector).value()));
 }
 
-StatusOr<PlaceFrameResult> PlaceMap::Add(const FeatureSet& features, double timestamp) {
+StatusOr<PlaceFrameResult> PlaceMap::Add(const FeatureSet& features, double timestamp,
+                                         std::string_view client_id) {
   PlaceFrameResult result;
   std::lock_guard lock(mutex_);
   if (deleted_) return Status::NotFound("map '" + name_ + "' was deleted");
-  RECOG_ASSIGN_OR_RETURN(result.loop.entry, detector_.Add(features, timestamp));
+  RECOG_ASSIGN_OR_RETURN(result.loop.entry, detector_.Add(features, timestamp, client_id));
   return result;
 }
 
 StatusOr<PlaceFrameResult> PlaceMap::Detect(const FeatureSet& features, double timestamp,
-                                            const PlaceResultOptions& options) {
+                                            const PlaceResultOptions& options,
+                                            std::string_view client_id) {
+  RECOG_RETURN_IF_ERROR(options.Validate());
   PlaceFrameResult result;
   {
     std::lock_guard lock(mutex_);
     if (deleted_) return Status::NotFound("map '" + name_ + "' was deleted");
-    RECOG_ASSIGN_OR_RETURN(result.loop, detector_.Process(features, timestamp));
+    RECOG_ASSIGN_OR_RETURN(result.loop, detector_.Process(features, timestamp, client_id));
   }
   RECOG_RETURN_IF_ERROR(AddExtras(features, options, &result));
   return result;
@@ -37,8 +50,17 @@ StatusOr<PlaceFrameResult> PlaceMap::Detect(const FeatureSet& features, double t
 
 StatusOr<PlaceFrameResult> PlaceMap::Query(const FeatureSet& features, double timestamp,
                                            const PlaceResultOptions& options) const {
+  RECOG_RETURN_IF_ERROR(options.Validate());
   PlaceFrameResult result;
-  RECOG_ASSIGN_OR_RETURN(result.loop, detector_.Query(features, timestamp));
+  StatusOr<LoopResult> loop = detector_.Query(features, timestamp);
+  if (loop.status().code() == StatusCode::kNotFound && !deleted()) {
+    // A frame removed (RemoveFrame) between the detector's query and its geometric check.
+    // deleted() took the map's lock, which RemoveFrame holds until the frame has left the index
+    // too, so the query runs again without it.
+    loop = detector_.Query(features, timestamp);
+  }
+  if (!loop.ok()) return loop.status();
+  result.loop = std::move(loop).value();
   RECOG_RETURN_IF_ERROR(AddExtras(features, options, &result));
   return result;
 }
@@ -56,21 +78,78 @@ StatusOr<size_t> PlaceMap::DeleteFrames() {
   return frames;
 }
 
+Status PlaceMap::RemoveFrame(EntryId id) {
+  std::lock_guard lock(mutex_);  // not in the middle of the detector's step
+  if (deleted_) return Status::NotFound("map '" + name_ + "' was deleted");
+  const Status removed = database_->Remove(id);
+  if (removed.code() == StatusCode::kNotFound) {
+    return Status::NotFound("map '" + name_ + "' has no frame " + std::to_string(id));
+  }
+  return removed;
+}
+
+StatusOr<std::vector<EntryId>> PlaceMap::RemoveFramesByClientId(const std::string& client_id) {
+  if (client_id.empty()) return Status::InvalidArgument("the client frame id to remove is empty");
+  std::lock_guard lock(mutex_);
+  if (deleted_) return Status::NotFound("map '" + name_ + "' was deleted");
+  std::vector<EntryId> ids;
+  RECOG_RETURN_IF_ERROR(
+      store_->ScanEntries(info().id, kEntryMetadata, [&](EntryRecord& entry) -> Status {
+        if (entry.metadata.client_id == client_id) ids.push_back(entry.id);
+        return Status::Ok();
+      }));
+  if (ids.empty()) {
+    return Status::NotFound("map '" + name_ + "' has no frame with client id '" + client_id + "'");
+  }
+  for (EntryId id : ids) RECOG_RETURN_IF_ERROR(database_->Remove(id));
+  return ids;
+}
+
 Status PlaceMap::AddExtras(const FeatureSet& features, const PlaceResultOptions& options,
                            PlaceFrameResult* result) const {
   const LoopResult& loop = result->loop;
+  // The match went through the geometric check (whether it passed or not).
+  const bool checked =
+      params_.geometry != GeometryCheck::kNone &&
+      (loop.status == LoopStatus::kLoopDetected || loop.status == LoopStatus::kFailedGeometry);
+  const size_t top_k = std::min<size_t>(options.top_k, loop.candidates.size());
+  for (size_t i = 0; i < top_k; ++i) {
+    const LoopCandidate& candidate = loop.candidates[i];
+    StatusOr<EntryRecord> entry = database_->Get(candidate.entry, kEntryMetadata);
+    if (!entry.ok()) {  // removed since the query (or its map deleted): no longer a candidate
+      if (entry.status().code() == StatusCode::kNotFound) continue;
+      return entry.status();
+    }
+    PlaceCandidate out{candidate.entry, std::move(entry.value().metadata.client_id),
+                       candidate.score, candidate.normalized_score, std::nullopt};
+    if (checked && candidate.entry == loop.match) out.inliers = uint32_t(loop.inliers.size());
+    result->candidates.push_back(std::move(out));
+  }
+
   if (loop.match == kInvalidEntryId) return Status::Ok();
   const bool verified = loop.status == LoopStatus::kLoopDetected && !loop.inliers.empty();
   const bool pose = options.include_relative_pose && verified && options.camera_matrix.has_value();
+  const bool correspondences = options.include_correspondences && verified;
   uint32_t parts = kEntryMetadata;
-  if (pose) parts |= kEntryFeatures;
+  if (pose || correspondences) parts |= kEntryFeatures;
   StatusOr<EntryRecord> match = database_->Get(loop.match, parts);
   if (!match.ok()) {
     // The matched frame went away with its map (deleted meanwhile): answer without the extras.
     return match.status().code() == StatusCode::kNotFound ? Status::Ok() : match.status();
   }
   result->match_timestamp = match.value().metadata.timestamp;
+  result->match_client_id = std::move(match.value().metadata.client_id);
   if (options.include_fundamental && verified) result->fundamental = loop.fundamental;
+  if (correspondences) {
+    const std::vector<cv::KeyPoint>& stored = match.value().keypoints;
+    result->correspondences.reserve(loop.inliers.size());
+    for (const Match& m : loop.inliers) {
+      if (m.a >= features.keypoints.size() || m.b >= stored.size()) {
+        return Status::Internal("an inlier of the loop refers to no keypoint");
+      }
+      result->correspondences.push_back({m.a, features.keypoints[m.a].pt, m.b, stored[m.b].pt});
+    }
+  }
   if (pose) {
     RelativePose relative;
     if (RelativePoseFromFundamental(loop.fundamental, *options.camera_matrix, features.keypoints,

@@ -6,9 +6,14 @@
 //  - Query looks for the place of the frame and changes nothing (LoopDetector::Query,
 //    relocalisation).
 // Detect and Query also return, when there is a match whose frame is still stored, the match's
-// timestamp, and on request two extras that only a verified loop (kLoopDetected with RANSAC
-// inliers) has: the fundamental matrix, and the relative pose of the two cameras recovered from
-// it, which needs the query camera's matrix K.
+// timestamp and client id (the id the client gave the frame when it was added), and on request:
+// the top-k candidates of the database query with their client ids, and three extras that only a
+// verified loop (kLoopDetected with RANSAC inliers) has: the fundamental matrix, the inlier
+// correspondences (keypoint indices and pixels in both frames), and the relative pose of the two
+// cameras recovered from F, which needs the query camera's matrix K.
+//
+// RemoveFrame removes frames (keyframe culling): a removed frame is never a candidate again, in
+// this process or after a restart. Ids are never reused.
 //
 // Maps are opened, created and deleted by MapRegistry (map_registry.h); holders of a map that the
 // registry deleted keep a valid object whose writes fail.
@@ -19,12 +24,16 @@
 // it). Deletion (by the registry) takes the lock too, so it waits for the frame being added; after
 // it, Add and Detect return NOT_FOUND "map '<name>' was deleted". A Query racing a deletion
 // answers from what the map held, without the extras whose frame is gone.
+// RemoveFrame takes the lock as well; a Query racing it does not fail for it: it answers with or
+// without the frame.
 #pragma once
 
 #include <memory>
 #include <mutex>
 #include <optional>
 #include <string>
+#include <string_view>
+#include <vector>
 
 #include <opencv2/core.hpp>
 
@@ -37,9 +46,18 @@ namespace recog {
 
 // What Detect and Query add to the loop result.
 struct PlaceResultOptions {
+  static constexpr uint32_t kMaxTopK = 50;  // the detector's default max_query_results
+
   bool include_fundamental = false;
   bool include_relative_pose = false;
+  bool include_correspondences = false;
+  // The best top_k candidates of the query, 0..kMaxTopK (fewer when the map's max_query_results
+  // is lower or the query returns fewer).
+  uint32_t top_k = 0;
   std::optional<cv::Matx33d> camera_matrix;  // K of the query frame; the relative pose needs it
+
+  // INVALID_ARGUMENT when top_k is above kMaxTopK.
+  Status Validate() const;
 };
 
 // The pose of the matched frame's camera relative to the query's, as RelativePoseFromFundamental
@@ -50,13 +68,36 @@ struct RelativePose {
   cv::Vec3d t = {0, 0, 0};
 };
 
+// A candidate of the query, as a client sees it.
+struct PlaceCandidate {
+  EntryId frame = kInvalidEntryId;
+  std::string client_id;        // what the client gave the frame (empty when nothing)
+  double score = 0;             // s(v_t, v_frame)
+  double normalized_score = 0;  // eta (below alpha for candidates the detector dropped)
+  // RANSAC inliers, for the candidate that was verified geometrically (the loop's match when the
+  // check ran); nothing for the others.
+  std::optional<uint32_t> inliers;
+};
+
+// One inlier correspondence of a verified loop: keypoint `query_index` of the frame at
+// `query_pixel` matches keypoint `match_index` of the matched frame (as stored) at `match_pixel`.
+struct PlaceCorrespondence {
+  uint32_t query_index = 0;
+  cv::Point2f query_pixel;
+  uint32_t match_index = 0;
+  cv::Point2f match_pixel;
+};
+
 struct PlaceFrameResult {
   // The detector's result. Add fills only `entry` (the id the frame got); Detect fills everything
   // with `entry` set; Query everything but `entry`.
   LoopResult loop;
-  std::optional<double> match_timestamp;      // of loop.match, when there is one still stored
-  std::optional<cv::Matx33d> fundamental;     // asked for and verified
-  std::optional<RelativePose> relative_pose;  // asked for, verified, K given and recoverable
+  std::optional<double> match_timestamp;   // of loop.match, when there is one still stored
+  std::string match_client_id;             // of loop.match (empty when none or not given)
+  std::vector<PlaceCandidate> candidates;  // asked for: the best top_k, best score first
+  std::vector<PlaceCorrespondence> correspondences;  // asked for and verified: the inliers
+  std::optional<cv::Matx33d> fundamental;            // asked for and verified
+  std::optional<RelativePose> relative_pose;         // asked for, verified, K given and recoverable
 };
 
 class PlaceMap {
@@ -67,14 +108,26 @@ class PlaceMap {
                                                   const LoopDetectorParams& params,
                                                   std::shared_ptr<const Vocabulary> vocabulary);
 
-  // Adds the frame (timestamp in seconds, 0 when unknown) without querying.
-  StatusOr<PlaceFrameResult> Add(const FeatureSet& features, double timestamp);
-  // Queries the map with the frame, then adds it (loop-closure detection).
+  // Adds the frame (timestamp in seconds, 0 when unknown) without querying. `client_id` (at most
+  // kMaxClientIdBytes) is stored with the frame and returned whenever it is a match.
+  StatusOr<PlaceFrameResult> Add(const FeatureSet& features, double timestamp,
+                                 std::string_view client_id = {});
+  // Queries the map with the frame, then adds it (loop-closure detection), with `client_id` as
+  // for Add. INVALID_ARGUMENT for bad options (nothing is added then).
   StatusOr<PlaceFrameResult> Detect(const FeatureSet& features, double timestamp,
-                                    const PlaceResultOptions& options = {});
+                                    const PlaceResultOptions& options = {},
+                                    std::string_view client_id = {});
   // Looks for the frame's place; adds nothing and changes nothing.
   StatusOr<PlaceFrameResult> Query(const FeatureSet& features, double timestamp,
                                    const PlaceResultOptions& options = {}) const;
+
+  // Removes frame `id` (keyframe culling). NOT_FOUND when the map has no such frame (never added,
+  // or removed already) or was deleted.
+  Status RemoveFrame(EntryId id);
+  // Removes every frame whose client id is `client_id` (non-empty) and returns their ids, in
+  // increasing order. It reads the metadata of every frame of the map (linear in the map's size;
+  // RemoveFrame by id is constant time). NOT_FOUND when no frame has that client id.
+  StatusOr<std::vector<EntryId>> RemoveFramesByClientId(const std::string& client_id);
 
   const std::string& name() const { return name_; }
   const LoopDetectorParams& params() const { return params_; }
@@ -98,7 +151,7 @@ class PlaceMap {
   // Deletes the map's frames from the store and marks the map deleted, under the lock (for
   // MapRegistry::Delete). Returns how many frames it had.
   StatusOr<size_t> DeleteFrames();
-  // Fills the match timestamp and the extras `options` asks for.
+  // Fills the match timestamp and client id, and the extras `options` asks for.
   Status AddExtras(const FeatureSet& features, const PlaceResultOptions& options,
                    PlaceFrameResult* result) const;
 

@@ -153,6 +153,7 @@ StatusOr<DecodedFrame> DecodeFrame(const pb::Frame& frame, const DescriptorForma
   DecodedFrame out;
   out.timestamp = frame.timestamp();
   out.camera_id = frame.camera_id();
+  out.client_frame_id = frame.client_frame_id();
   if (frame.has_intrinsics()) {
     CameraIntrinsics intrinsics;
     RECOG_RETURN_IF_ERROR(DecodeIntrinsics(frame.intrinsics(), &intrinsics));
@@ -284,6 +285,24 @@ void ToProto(const PlaceFrameResult& frame, pb::LoopResult* out) {
   if (frame.relative_pose.has_value()) {
     ToProto(frame.relative_pose->R, frame.relative_pose->t, out->mutable_relative_pose());
   }
+  out->set_match_client_frame_id(frame.match_client_id);
+  for (const PlaceCandidate& c : frame.candidates) {
+    pb::Candidate* candidate = out->add_candidates();
+    candidate->set_frame_id(c.frame);
+    candidate->set_client_frame_id(c.client_id);
+    candidate->set_score(c.score);
+    candidate->set_normalized_score(c.normalized_score);
+    if (c.inliers.has_value()) candidate->set_inliers(*c.inliers);
+  }
+  for (const PlaceCorrespondence& c : frame.correspondences) {
+    pb::Correspondence* correspondence = out->add_inlier_correspondences();
+    correspondence->set_query_index(c.query_index);
+    correspondence->set_query_x(c.query_pixel.x);
+    correspondence->set_query_y(c.query_pixel.y);
+    correspondence->set_match_index(c.match_index);
+    correspondence->set_match_x(c.match_pixel.x);
+    correspondence->set_match_y(c.match_pixel.y);
+  }
 }
 
 PlaceResultOptions FromProto(const pb::ResultOptions& options,
@@ -291,6 +310,8 @@ PlaceResultOptions FromProto(const pb::ResultOptions& options,
   PlaceResultOptions out;
   out.include_fundamental = options.include_fundamental();
   out.include_relative_pose = options.include_relative_pose();
+  out.include_correspondences = options.include_correspondences();
+  out.top_k = options.top_k();
   if (intrinsics.has_value()) out.camera_matrix = intrinsics->K();
   return out;
 }

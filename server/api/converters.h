@@ -38,7 +38,8 @@ struct DecodedFrame {
   std::optional<CameraIntrinsics> intrinsics;
   double timestamp = 0;  // seconds, 0 = unknown
   std::string camera_id;
-  double decode_ms = 0;  // time spent decoding the image
+  std::string client_frame_id;  // stored with a place frame
+  double decode_ms = 0;         // time spent decoding the image
   bool has_image() const { return !image.empty(); }
 };
 
@@ -56,6 +57,7 @@ pb::LoopStatus ToProto(LoopStatus status);
 void ToProto(const PlaceFrameResult& result, pb::LoopResult* out);
 void ToProto(const cv::Matx33d& R, const cv::Vec3d& t, pb::Pose* out);
 // The extras a request asks for; the relative pose uses the frame's intrinsics when it has them.
+// PlaceResultOptions::Validate checks the result (top_k).
 PlaceResultOptions FromProto(const pb::ResultOptions& options,
                              const std::optional<CameraIntrinsics>& intrinsics);
 

@@ -58,12 +58,13 @@ StatusOr<std::shared_ptr<PlaceMap>> CallMap(const ServerState& state, CallInfo& 
 }
 
 StatusOr<PlaceFrameResult> RunMode(PlaceMap& map, FrameMode mode, const FeatureSet& features,
-                                   double timestamp, const PlaceResultOptions& extras) {
+                                   const DecodedFrame& frame, const PlaceResultOptions& extras) {
+  const double timestamp = frame.timestamp;
   switch (mode) {
     case FrameMode::kAdd:
-      return map.Add(features, timestamp);
+      return map.Add(features, timestamp, frame.client_frame_id);
     case FrameMode::kDetect:
-      return map.Detect(features, timestamp, extras);
+      return map.Detect(features, timestamp, extras, frame.client_frame_id);
     case FrameMode::kQuery:
       break;
   }
@@ -89,7 +90,7 @@ Status RunPlaceFrame(ServerState& state, WorkerContext& worker, PlaceMap& map, F
   if (num_features != nullptr) *num_features = uint32_t(features->size());
   const auto start = Clock::now();
   const PlaceResultOptions extras = FromProto(options, frame.intrinsics);
-  StatusOr<PlaceFrameResult> result = RunMode(map, mode, *features, frame.timestamp, extras);
+  StatusOr<PlaceFrameResult> result = RunMode(map, mode, *features, frame, extras);
   if (!result.ok()) return result.status();
   state.metrics.AddFrames(FrameKind::kPlace);
   if (mode != FrameMode::kAdd && result->loop.status == LoopStatus::kLoopDetected) {
@@ -125,6 +126,8 @@ class PlaceFrameStream final
       if (!allowed.ok()) return ToGrpcStatus(allowed, call_.request_id);
     }
     options_ = config.options();
+    const Status options = FromProto(options_, std::nullopt).Validate();
+    if (!options.ok()) return ToGrpcStatus(options, call_.request_id);
     if (!map.ok() && map.status().code() == StatusCode::kNotFound && config.create_if_missing() &&
         !config.query_only()) {
       LoopDetectorParams params = state_.config.place;
@@ -258,6 +261,44 @@ grpc::ServerUnaryReactor* PlaceService::QueryPlace(grpc::CallbackServerContext* 
             call.request_id);
         response->set_client_frame_id(request->frame().client_frame_id());
         response->mutable_timing()->set_queue_ms(call.queue_ms);
+        return grpc::Status::OK;
+      });
+}
+
+grpc::ServerUnaryReactor* PlaceService::RemoveFrame(grpc::CallbackServerContext* context,
+                                                    const pb::RemoveFrameRequest* request,
+                                                    pb::RemoveFrameResponse* response) {
+  return RunUnary(
+      state_, context, Method("RemoveFrame"), Right::kWrite,
+      [=, this](CallInfo& call, WorkerContext&) {
+        StatusOr<std::shared_ptr<PlaceMap>> map = CallMap(state_, call, request->map());
+        if (!map.ok()) return ToGrpcStatus(map.status(), call.request_id);
+        PlaceMap& place_map = *map.value();
+        switch (request->frame_case()) {
+          case pb::RemoveFrameRequest::kFrameId: {
+            if (request->frame_id() >= kInvalidEntryId) {
+              return ToGrpcStatus(Status::NotFound("map '" + request->map() + "' has no frame " +
+                                                   std::to_string(request->frame_id())),
+                                  call.request_id);
+            }
+            RECOG_RETURN_IF_ERROR_AS_GRPC(place_map.RemoveFrame(EntryId(request->frame_id())),
+                                          call.request_id);
+            response->add_removed_frame_ids(request->frame_id());
+            break;
+          }
+          case pb::RemoveFrameRequest::kClientFrameId: {
+            StatusOr<std::vector<EntryId>> removed =
+                place_map.RemoveFramesByClientId(request->client_frame_id());
+            if (!removed.ok()) return ToGrpcStatus(removed.status(), call.request_id);
+            for (EntryId id : removed.value()) response->add_removed_frame_ids(id);
+            break;
+          }
+          case pb::RemoveFrameRequest::FRAME_NOT_SET:
+            return ToGrpcStatus(
+                Status::InvalidArgument("RemoveFrame needs a frame_id or a client_frame_id"),
+                call.request_id);
+        }
+        state_.metrics.SetMapEntries(place_map.name(), place_map.frames());
         return grpc::Status::OK;
       });
 }

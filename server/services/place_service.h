@@ -36,6 +36,9 @@ class PlaceService final : public ::recognition::v1::PlaceRecognition::CallbackS
   grpc::ServerUnaryReactor* QueryPlace(grpc::CallbackServerContext* context,
                                        const ::recognition::v1::QueryPlaceRequest* request,
                                        ::recognition::v1::QueryPlaceResponse* response) override;
+  grpc::ServerUnaryReactor* RemoveFrame(grpc::CallbackServerContext* context,
+                                        const ::recognition::v1::RemoveFrameRequest* request,
+                                        ::recognition::v1::RemoveFrameResponse* response) override;
   grpc::ServerBidiReactor<::recognition::v1::StreamFramesRequest,
                           ::recognition::v1::StreamFramesResponse>*
   StreamFrames(grpc::CallbackServerContext* context) override;

@@ -2,7 +2,9 @@
 #include <atomic>
 #include <cmath>
 #include <condition_variable>
+#include <map>
 #include <mutex>
+#include <optional>
 
 #include <opencv2/imgcodecs.hpp>
 
@@ -232,6 +234,12 @@ TEST_F(PlaceServiceTest, StreamsNeedAConfigFirstAndAnExistingMap) {
   EXPECT_TRUE(Stream(*places_, config, {JpegFrame(CorridorJpeg(1))}, &status).empty());
   EXPECT_EQ(status.error_code(), grpc::StatusCode::NOT_FOUND);
   EXPECT_EQ(GetMap("nowhere").error_code(), grpc::StatusCode::NOT_FOUND);
+
+  config.set_create_if_missing(true);  // bad result options end the stream before any change
+  config.mutable_options()->set_top_k(51);
+  EXPECT_TRUE(Stream(*places_, config, {JpegFrame(CorridorJpeg(1))}, &status).empty());
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(GetMap("nowhere").error_code(), grpc::StatusCode::NOT_FOUND);
 }
 
 TEST_F(PlaceServiceTest, BadUnaryInputGetsItsCodeAndTheServerKeepsServing) {
@@ -293,6 +301,113 @@ TEST_F(PlaceServiceTest, MapsAndTheirSettingsSurviveARestart) {
   pb::AddFrameResponse added;
   ASSERT_TRUE(AddFrame("kept", JpegFrame(CorridorJpeg(60)), &added).ok());
   EXPECT_EQ(added.frame_id(), 3u);
+}
+
+TEST_F(PlaceServiceTest, ASlamGetsItsKeyframeIdsTopCandidatesAndInlierPixelsBack) {
+  ASSERT_TRUE(CreateMap("slam").ok());
+  std::map<int, pb::Frame> frames;
+  for (int n : {1, 20, 41, 60}) {
+    frames[n] = FeaturesFrame(CorridorJpeg(n));
+    pb::Frame frame = frames[n];
+    frame.set_client_frame_id("kf-" + std::to_string(n));
+    pb::AddFrameResponse added;
+    ASSERT_TRUE(AddFrame("slam", frame, &added).ok());
+    EXPECT_EQ(added.client_frame_id(), "kf-" + std::to_string(n));
+  }
+  pb::QueryPlaceRequest query;
+  query.set_map("slam");
+  *query.mutable_frame() = frames[41];
+  query.mutable_frame()->set_client_frame_id("probe");
+  query.mutable_options()->set_top_k(3);
+  query.mutable_options()->set_include_correspondences(true);
+  pb::QueryPlaceResponse response;
+  ASSERT_TRUE(places_->QueryPlace(Context().get(), query, &response).ok());
+  const pb::LoopResult& result = response.result();
+  ASSERT_EQ(result.status(), pb::LOOP_STATUS_LOOP_DETECTED);
+  EXPECT_EQ(result.match_frame_id(), 2u);
+  EXPECT_EQ(result.match_client_frame_id(), "kf-41");  // the match's, not the query's
+  EXPECT_EQ(response.client_frame_id(), "probe");
+  ASSERT_GE(result.candidates_size(), 1);
+  EXPECT_LE(result.candidates_size(), 3);
+  const std::map<uint64_t, std::string> client_ids = {
+      {0, "kf-1"}, {1, "kf-20"}, {2, "kf-41"}, {3, "kf-60"}};
+  for (int i = 0; i < result.candidates_size(); ++i) {
+    const pb::Candidate& c = result.candidates(i);
+    EXPECT_EQ(c.client_frame_id(), client_ids.at(c.frame_id()));
+    if (i > 0) {
+      EXPECT_LE(c.score(), result.candidates(i - 1).score());
+    }
+    EXPECT_EQ(c.has_inliers(), c.frame_id() == result.match_frame_id());
+  }
+  EXPECT_EQ(result.candidates(0).frame_id(), 2u);  // the same image scores best
+  EXPECT_EQ(result.candidates(0).inliers(), result.inliers());
+  ASSERT_EQ(result.inlier_correspondences_size(), int(result.inliers()));
+  const pb::Keypoints& query_keys = frames[41].features().keypoints();  // as sent and stored
+  for (const pb::Correspondence& c : result.inlier_correspondences()) {
+    ASSERT_LT(int(c.query_index()), query_keys.x_size());
+    ASSERT_LT(int(c.match_index()), query_keys.x_size());
+    EXPECT_EQ(c.query_x(), query_keys.x(int(c.query_index())));
+    EXPECT_EQ(c.query_y(), query_keys.y(int(c.query_index())));
+    EXPECT_EQ(c.match_x(), query_keys.x(int(c.match_index())));
+    EXPECT_EQ(c.match_y(), query_keys.y(int(c.match_index())));
+  }
+
+  query.mutable_options()->set_top_k(51);  // above the documented maximum
+  EXPECT_EQ(places_->QueryPlace(Context().get(), query, &response).error_code(),
+            grpc::StatusCode::INVALID_ARGUMENT);
+}
+
+TEST_F(PlaceServiceTest, RemovedFramesAreNeverCandidatesAgainAcrossARestart) {
+  ASSERT_TRUE(CreateMap("cull").ok());
+  for (int n : {1, 20, 41, 60}) {
+    pb::Frame frame = JpegFrame(CorridorJpeg(n), n);
+    frame.set_client_frame_id("kf-" + std::to_string(n));
+    pb::AddFrameResponse added;
+    ASSERT_TRUE(AddFrame("cull", frame, &added).ok());
+  }
+  const auto remove = [this](const std::string& map, std::optional<uint64_t> id,
+                             std::optional<std::string> client_id, pb::RemoveFrameResponse* out) {
+    pb::RemoveFrameRequest request;
+    request.set_map(map);
+    if (id.has_value()) request.set_frame_id(*id);
+    if (client_id.has_value()) request.set_client_frame_id(*client_id);
+    return places_->RemoveFrame(Context().get(), request, out);
+  };
+  pb::RemoveFrameResponse removed;
+  ASSERT_TRUE(remove("cull", 2, std::nullopt, &removed).ok());
+  EXPECT_EQ(
+      std::vector<uint64_t>(removed.removed_frame_ids().begin(), removed.removed_frame_ids().end()),
+      std::vector<uint64_t>{2});
+  ASSERT_TRUE(remove("cull", std::nullopt, "kf-60", &removed).ok());
+  EXPECT_EQ(
+      std::vector<uint64_t>(removed.removed_frame_ids().begin(), removed.removed_frame_ids().end()),
+      std::vector<uint64_t>{3});
+  EXPECT_EQ(remove("cull", 2, std::nullopt, &removed).error_code(), grpc::StatusCode::NOT_FOUND);
+  EXPECT_EQ(remove("cull", 99, std::nullopt, &removed).error_code(), grpc::StatusCode::NOT_FOUND);
+  EXPECT_EQ(remove("cull", std::nullopt, "kf-60", &removed).error_code(),
+            grpc::StatusCode::NOT_FOUND);
+  EXPECT_EQ(remove("nowhere", 0, std::nullopt, &removed).error_code(), grpc::StatusCode::NOT_FOUND);
+  EXPECT_EQ(remove("cull", std::nullopt, std::nullopt, &removed).error_code(),
+            grpc::StatusCode::INVALID_ARGUMENT);
+
+  RestartServer();
+  pb::MapInfo info;
+  ASSERT_TRUE(GetMap("cull", &info).ok());
+  EXPECT_EQ(info.frames(), 2u);
+  EXPECT_EQ(info.next_frame_id(), 4u);
+  pb::QueryPlaceRequest query;
+  query.set_map("cull");
+  *query.mutable_frame() = JpegFrame(CorridorJpeg(41));
+  query.mutable_options()->set_top_k(50);
+  pb::QueryPlaceResponse response;
+  ASSERT_TRUE(places_->QueryPlace(Context().get(), query, &response).ok());
+  EXPECT_NE(response.result().match_frame_id(), 2u);
+  for (const pb::Candidate& c : response.result().candidates()) EXPECT_LT(c.frame_id(), 2u);
+  *query.mutable_frame() = JpegFrame(CorridorJpeg(20));  // the kept frames keep their client ids
+  ASSERT_TRUE(places_->QueryPlace(Context().get(), query, &response).ok());
+  EXPECT_EQ(response.result().status(), pb::LOOP_STATUS_LOOP_DETECTED);
+  EXPECT_EQ(response.result().match_frame_id(), 1u);
+  EXPECT_EQ(response.result().match_client_frame_id(), "kf-20");
 }
 
 TEST_F(PlaceServiceTest, AFullQueueAnswersResourceExhaustedWithARetryHint) {

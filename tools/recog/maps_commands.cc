@@ -1,10 +1,12 @@
-// recog maps list | create NAME [settings] | delete NAME | stats NAME: the place maps of recogd,
+// recog maps list | create NAME [settings] | delete NAME | stats NAME |
+// remove-frame NAME (--frame ID | --client-frame-id ID): the place maps of recogd,
 // over the C++ client library. Each takes the ServerFlags; a failed call prints one line
 // "recog maps <cmd>: CODE: message" and exits 1.
 #include <algorithm>
 #include <cctype>
 #include <cstdio>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include <nlohmann/json.hpp>
@@ -149,6 +151,44 @@ void AddMapsCommands(CLI::App& app, int* exit_code) {
         } else {
           std::printf("deleted map %s (%llu frame%s)\n", delete_args->name.c_str(),
                       (unsigned long long)*frames, *frames == 1 ? "" : "s");
+        }
+        return 0;
+      });
+
+  struct RemoveFrameArgs {
+    ServerFlags server;
+    std::string name, client_frame_id;
+    std::optional<uint64_t> frame_id;
+  };
+  auto remove_args = std::make_shared<RemoveFrameArgs>();
+  CLI::App* remove_frame = maps->add_subcommand(
+      "remove-frame", "Remove frames from a map (keyframe culling): never a candidate again");
+  remove_frame->add_option("name", remove_args->name, "Map name")->required();
+  CLI::Option* by_id =
+      remove_frame->add_option("--frame", remove_args->frame_id, "The frame's id in the map");
+  CLI::Option* by_client =
+      remove_frame->add_option("--client-frame-id", remove_args->client_frame_id,
+                               "Every frame added with this client frame id");
+  by_id->excludes(by_client);
+  ConnectCommand(
+      remove_frame, &remove_args->server, exit_code, [remove_args](RecognitionClient& client) {
+        if (!remove_args->frame_id.has_value() && remove_args->client_frame_id.empty()) {
+          return Fail("maps remove-frame",
+                      Status::InvalidArgument("give --frame or --client-frame-id"));
+        }
+        auto removed =
+            remove_args->frame_id.has_value()
+                ? client.RemoveFrame(remove_args->name, *remove_args->frame_id)
+                : client.RemoveFramesByClientId(remove_args->name, remove_args->client_frame_id);
+        if (!removed.ok()) return Fail("maps remove-frame", removed.status());
+        if (remove_args->server.json) {
+          std::printf(
+              "%s\n",
+              json({{"name", remove_args->name}, {"removed_frames", *removed}}).dump(2).c_str());
+        } else {
+          std::printf("removed from map %s:", remove_args->name.c_str());
+          for (uint64_t id : *removed) std::printf(" frame %llu", (unsigned long long)id);
+          std::printf("\n");
         }
         return 0;
       });

@@ -45,7 +45,8 @@ if ! "$recog" maps list "${server[@]}" >/dev/null 2>&1; then
   exit 1
 fi
 
-for sub in "stream" "query" "maps list" "maps create" "maps delete" "maps stats" "models push" \
+for sub in "stream" "query" "maps list" "maps create" "maps delete" "maps stats" \
+    "maps remove-frame" "models push" \
     "models pull" "models list" "models delete" "models watch"; do
   # shellcheck disable=SC2086
   expect_ok "help of $sub" "$recog" $sub --help
@@ -104,6 +105,36 @@ if [ "$code" -eq 0 ] && grep -qE "^[1-3] frames, .* 0 errors" "$tmp/out"; then p
 else fail "SIGINT ends the stream: exit $code, $(cat "$tmp/out")"; fi
 expect_error "query of an unknown map" "NOT_FOUND" "$recog" query --map nowhere "$images/41.jpg" "${server[@]}"
 expect_error "query of a missing image" "NOT_FOUND" "$recog" query --map corridor "$tmp/none.jpg" "${server[@]}"
+
+# A SLAM's keyframes: its own ids come back with the match and the candidates; culling.
+expect_ok "maps create slam" "$recog" maps create slam "${server[@]}"
+for n in 1 20 41 60; do
+  expect_ok "query --add with a client frame id" "$recog" query --map slam "$images/$n.jpg" --add \
+    --client-frame-id "kf-$n" "${server[@]}"
+done
+expect_ok "query --top-k --correspondences" "$recog" query --map slam "$images/41.jpg" --top-k 2 \
+  --correspondences --json "${server[@]}"
+json_check "the match's client id, the top 2 candidates and the inlier pixels" \
+  "c=d['candidates']; assert d['match']==2 and d['match_client_frame_id']=='kf-41' and len(c)==2 and c[0]['frame']==2 and c[0]['client_frame_id']=='kf-41' and c[0]['inliers']==d['inliers'] and 'inliers' not in c[1] and c[0]['score']>=c[1]['score'] and len(d['inlier_correspondences'])==d['inliers'], d"
+expect_ok "query prints the match's client id" "$recog" query --map slam "$images/41.jpg" "${server[@]}"
+grep -q "^match id *kf-41" "$tmp/out" && pass || fail "query prints the match id: $(cat "$tmp/out")"
+expect_usage_error "query --top-k above 50" "top-k" "$recog" query --map slam "$images/41.jpg" \
+  --top-k 51 "${server[@]}"
+expect_ok "maps remove-frame --frame" "$recog" maps remove-frame slam --frame 2 --json "${server[@]}"
+json_check "remove-frame reports the frame" "assert d['removed_frames']==[2], d"
+expect_ok "maps remove-frame --client-frame-id" "$recog" maps remove-frame slam \
+  --client-frame-id kf-60 "${server[@]}"
+grep -q "^removed from map slam: frame 3$" "$tmp/out" && pass || fail "remove-frame: $(cat "$tmp/out")"
+expect_error "maps remove-frame of a removed frame" "NOT_FOUND" "$recog" maps remove-frame slam \
+  --frame 2 "${server[@]}"
+expect_error "maps remove-frame of an unknown map" "NOT_FOUND" "$recog" maps remove-frame nowhere \
+  --frame 0 "${server[@]}"
+expect_error "maps remove-frame without a frame" "INVALID_ARGUMENT" "$recog" maps remove-frame slam \
+  "${server[@]}"
+expect_ok "query after the removal" "$recog" query --map slam "$images/41.jpg" --top-k 50 --json \
+  "${server[@]}"
+json_check "a removed frame is no candidate" \
+  "assert d.get('match')!=2 and all(c['frame']<2 for c in d.get('candidates', [])), d"
 
 # Models: push, list, pull, recognise on the server, delete.
 expect_ok "model build of a planar poster" "$recog" model build --planar "$images/1.jpg" \

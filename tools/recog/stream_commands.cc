@@ -55,7 +55,32 @@ json LoopJson(const pb::LoopResult& r) {
               {"correspondences", r.correspondences()},
               {"inliers", r.inliers()}};
   if (r.has_frame_id()) out["frame"] = r.frame_id();
-  if (r.has_match_frame_id()) out["match"] = r.match_frame_id();
+  if (r.has_match_frame_id()) {
+    out["match"] = r.match_frame_id();
+    out["match_client_frame_id"] = r.match_client_frame_id();
+  }
+  if (r.candidates_size() > 0) {
+    json candidates = json::array();
+    for (const pb::Candidate& c : r.candidates()) {
+      json candidate = {{"frame", c.frame_id()},
+                        {"client_frame_id", c.client_frame_id()},
+                        {"score", c.score()},
+                        {"normalized_score", c.normalized_score()}};
+      if (c.has_inliers()) candidate["inliers"] = c.inliers();
+      candidates.push_back(std::move(candidate));
+    }
+    out["candidates"] = std::move(candidates);
+  }
+  if (r.inlier_correspondences_size() > 0) {
+    json pairs = json::array();
+    for (const pb::Correspondence& c : r.inlier_correspondences()) {
+      pairs.push_back({{"query_index", c.query_index()},
+                       {"query", {c.query_x(), c.query_y()}},
+                       {"match_index", c.match_index()},
+                       {"match", {c.match_x(), c.match_y()}}});
+    }
+    out["inlier_correspondences"] = std::move(pairs);
+  }
   if (r.has_relative_pose()) {
     const pb::Pose& pose = r.relative_pose();
     out["relative_pose"] = {
@@ -289,8 +314,9 @@ int RunStream(const StreamArgs& args, RecognitionClient& client) {
 
 struct QueryArgs {
   ServerFlags server;
-  std::string map, image, camera;
-  bool add = false;
+  std::string map, image, camera, client_frame_id;
+  bool add = false, correspondences = false;
+  uint32_t top_k = 0;
 };
 
 int RunQuery(const QueryArgs& args, RecognitionClient& client) {
@@ -298,7 +324,10 @@ int RunQuery(const QueryArgs& args, RecognitionClient& client) {
   if (!gray.ok()) return Fail("query", gray.status());
   auto frame = FrameFromImageFile(args.image, *gray);
   if (!frame.ok()) return Fail("query", frame.status());
+  frame->set_client_frame_id(args.client_frame_id);
   pb::ResultOptions options;
+  options.set_top_k(args.top_k);
+  options.set_include_correspondences(args.correspondences);
   if (!args.camera.empty()) {
     auto camera = ParseCamera(args.camera);
     if (!camera.ok()) return Fail("query", camera.status());
@@ -321,7 +350,21 @@ int RunQuery(const QueryArgs& args, RecognitionClient& client) {
   if (r.has_match_frame_id()) {
     std::printf("match      frame %llu (score %.3f, normalised %.3f)\n",
                 (unsigned long long)r.match_frame_id(), r.score(), r.normalized_score());
+    if (!r.match_client_frame_id().empty()) {
+      std::printf("match id   %s\n", r.match_client_frame_id().c_str());
+    }
     std::printf("inliers    %u of %u correspondences\n", r.inliers(), r.correspondences());
+  }
+  for (const pb::Candidate& c : r.candidates()) {
+    std::printf("candidate  frame %llu%s%s (score %.3f, normalised %.3f)",
+                (unsigned long long)c.frame_id(), c.client_frame_id().empty() ? "" : " ",
+                c.client_frame_id().c_str(), c.score(), c.normalized_score());
+    if (c.has_inliers()) std::printf(", %u inliers", c.inliers());
+    std::printf("\n");
+  }
+  for (const pb::Correspondence& c : r.inlier_correspondences()) {
+    std::printf("inlier     %u (%.1f, %.1f) <-> %u (%.1f, %.1f)\n", c.query_index(), c.query_x(),
+                c.query_y(), c.match_index(), c.match_x(), c.match_y());
   }
   const pb::Pose& pose = r.relative_pose();
   if (pose.rotation_size() == 9 && pose.translation_size() == 3) {
@@ -386,6 +429,16 @@ void AddStreamCommands(CLI::App& app, int* exit_code) {
                   "Run the map's loop detector and keep the frame, as a streamed frame");
   query->add_option("--camera", query_args->camera,
                     "fx,fy,cx,cy[,k1,k2,p1,p2[,k3]]: also report the relative pose of a loop");
+  query->add_option("--client-frame-id", query_args->client_frame_id,
+                    "Your own id of the frame (at most 128 bytes); with --add the map keeps it "
+                    "and returns it whenever the frame is a match");
+  query
+      ->add_option("--top-k", query_args->top_k,
+                   "Also list the best N candidates of the query with their scores (0 to 50)")
+      ->check(CLI::Range(0, 50));
+  query->add_flag("--correspondences", query_args->correspondences,
+                  "Also list the inliers of a verified loop: keypoint index and pixel in both "
+                  "frames");
   ConnectCommand(query, &query_args->server, exit_code,
                  [query_args](RecognitionClient& client) { return RunQuery(*query_args, client); });
 }

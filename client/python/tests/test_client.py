@@ -155,6 +155,40 @@ class RecognitionClientTest(unittest.TestCase):
         self.assertFalse(response.result.HasField("frame_id"))  # nothing was added
         self.assertEqual(self.client.get_map("hall").frames, 4)
 
+    def test_a_slam_gets_its_keyframe_ids_candidates_and_inliers_and_culls_keyframes(self):
+        self.client.create_map("slam")
+        for n in (1, 20, 41, 60):
+            added = self.client.add_frame("slam", corridor(n), client_frame_id=f"kf-{n}")
+            self.assertEqual(added.client_frame_id, f"kf-{n}")
+        response = self.client.query_place(
+            "slam", corridor(41).read_bytes(),
+            result_options={"top_k": 2, "include_correspondences": True})
+        result = response.result
+        self.assertEqual(result.status, place_pb2.LOOP_STATUS_LOOP_DETECTED)
+        self.assertEqual(result.match_frame_id, 2)
+        self.assertEqual(result.match_client_frame_id, "kf-41")
+        self.assertEqual(len(result.candidates), 2)
+        self.assertEqual(result.candidates[0].frame_id, 2)
+        self.assertEqual(result.candidates[0].client_frame_id, "kf-41")
+        self.assertEqual(result.candidates[0].inliers, result.inliers)
+        self.assertGreaterEqual(result.candidates[0].score, result.candidates[1].score)
+        self.assertFalse(result.candidates[1].HasField("inliers"))
+        self.assertEqual(len(result.inlier_correspondences), result.inliers)
+        self.assert_code(grpc.StatusCode.INVALID_ARGUMENT, self.client.query_place, "slam",
+                         corridor(41).read_bytes(), False, {"top_k": 51})
+
+        self.assertEqual(self.client.remove_frame("slam", frame_id=2), [2])
+        self.assertEqual(self.client.remove_frame("slam", client_frame_id="kf-60"), [3])
+        self.assert_code(grpc.StatusCode.NOT_FOUND, self.client.remove_frame, "slam", 2)
+        self.assert_code(grpc.StatusCode.NOT_FOUND, self.client.remove_frame, "nowhere", 0)
+        with self.assertRaises(ValueError):
+            self.client.remove_frame("slam")
+        result = self.client.query_place("slam", corridor(41).read_bytes(),
+                                         result_options={"top_k": 50}).result
+        self.assertNotEqual(result.match_frame_id, 2)
+        self.assertTrue(all(c.frame_id < 2 for c in result.candidates), result.candidates)
+        self.assertEqual(self.client.get_map("slam").frames, 2)
+
     def test_stream_answers_in_order_and_detects_the_revisit(self):
         frames = [corridor(n) for n in (1, 20, 41, 60, 1)]
         answers = list(self.client.stream_frames(
