@@ -18,15 +18,18 @@
 //  7. the frame is added to the database.
 // Every frame gets a LoopResult whose status says why there is, or is not, a loop.
 //
-// Metric loops (thesis §3.3.3): a frame may come with a FrameGeometry, its camera matrix and the
-// 3D point of each keypoint (from depth or stereo, core/geometry/frame_points.h). The entry keeps
-// the points. When a loop passes step 6 and the query came with a camera matrix and the matched
-// entry has 3D points, VerifyMetric checks the loop in 3D: PnP RANSAC between the query's
-// keypoints and the match's points over the epipolar inliers, then Levenberg-Marquardt on the PnP
-// inliers; the loop must agree in structure (MetricCheckOptions: enough inliers, and enough of
-// the 2D-3D correspondences) or its status becomes kFailedGeometry. A verified loop carries the
-// metric relative pose and its covariance (LoopResult::metric). Frames without a FrameGeometry,
-// and matches without points, are handled exactly as before.
+// Metric loops (thesis §3.3.3 brings the 3D data of a stereo rig into the loop verification, with
+// CRF-Matching; this detector uses a PnP check instead, as the metric verification the thesis
+// cites there, and returns the metric pose a SLAM needs): a frame may come with a FrameGeometry,
+// its camera matrix and the 3D point of each keypoint (from depth or stereo,
+// core/geometry/frame_points.h). The entry keeps the points. When a loop passes step 6 and the
+// query came with a camera matrix and the matched entry has 3D points, VerifyMetric checks the loop
+// in 3D: PnP RANSAC between the query's keypoints and the match's points over the epipolar inliers,
+// then Levenberg-Marquardt on the PnP inliers; the loop must agree in structure
+// (MetricCheckOptions: enough inliers, and enough of the 2D-3D correspondences) or its status
+// becomes kFailedGeometry. A verified loop carries the metric relative pose and its covariance
+// (LoopResult::metric). Frames without a FrameGeometry, and matches without points, are handled
+// exactly as before.
 //
 // Add() is step 7 alone (a robot uploading its keyframes): the frame joins the sequence exactly
 // as a processed frame would — it gets the next entry id, becomes the previous usable frame when
