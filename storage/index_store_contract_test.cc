@@ -3,7 +3,10 @@
 // whole suite by adding one factory to kFactories.
 #include <algorithm>
 #include <atomic>
+#include <cmath>
+#include <cstring>
 #include <functional>
+#include <limits>
 #include <memory>
 #include <ostream>
 #include <random>
@@ -216,6 +219,29 @@ TEST_P(IndexStoreContractTest, AnEntryWithoutFeaturesRoundTrips) {
   EXPECT_EQ(EntryDifference(got, entry), "");
   EXPECT_TRUE(got.descriptors.empty());
   EXPECT_TRUE(got.keypoints.empty());
+}
+
+// A place frame with depth or stereo keeps a 3D point per keypoint, NaN where the keypoint had no
+// depth (core/geometry/frame_points.h); the points come back bit for bit.
+TEST_P(IndexStoreContractTest, APlaceFramesPointsRoundTripWithTheMissingOnes) {
+  const MapInfo map = NewMap("office");
+  EntryRecord entry = MakeTestEntry(0, 3, DescriptorFormat::Orb(), 50);
+  ASSERT_FALSE(entry.keypoints.empty());
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  entry.points.clear();
+  for (size_t i = 0; i < entry.keypoints.size(); ++i) {
+    entry.points.push_back(i % 3 == 0
+                               ? cv::Point3f(nan, nan, nan)
+                               : cv::Point3f(0.01f * float(i), -0.5f, 1.0f + 0.1f * float(i)));
+  }
+  ASSERT_TRUE(store_->CommitEntry(map.id, entry).ok());
+  EntryRecord got;
+  ASSERT_TRUE(store_->ReadEntry(map.id, 0, kEntryFeatures, &got).ok());
+  ASSERT_EQ(got.points.size(), entry.points.size());
+  EXPECT_EQ(std::memcmp(got.points.data(), entry.points.data(),
+                        entry.points.size() * sizeof(cv::Point3f)),
+            0);
+  EXPECT_TRUE(std::isnan(got.points[0].z));
 }
 
 TEST_P(IndexStoreContractTest, CommittingATakenIdIsAlreadyExistsAndKeepsTheOriginal) {

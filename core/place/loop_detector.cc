@@ -2,6 +2,10 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
+#include <string>
+
+#include <opencv2/calib3d.hpp>
 
 namespace recog {
 namespace {
@@ -34,6 +38,26 @@ Status CheckClientId(std::string_view client_id) {
   if (client_id.size() <= kMaxClientIdBytes) return Status::Ok();
   return Status::InvalidArgument("a frame's client id is at most " +
                                  std::to_string(kMaxClientIdBytes) + " bytes");
+}
+
+// INVALID_ARGUMENT unless `geometry` (when given) has a usable camera matrix and one point per
+// keypoint (or none).
+Status CheckGeometry(const FeatureSet& features, const FrameGeometry* geometry) {
+  if (geometry == nullptr) return Status::Ok();
+  const cv::Matx33d& K = geometry->K;
+  if (!(K(0, 0) > 0.0) || !(K(1, 1) > 0.0) || !std::isfinite(K(0, 2)) || !std::isfinite(K(1, 2))) {
+    return Status::InvalidArgument("frame geometry needs a camera matrix with fx, fy > 0");
+  }
+  if (!geometry->points.empty() && geometry->points.size() != features.size()) {
+    return Status::InvalidArgument("frame geometry has " + std::to_string(geometry->points.size()) +
+                                   " 3D points for " + std::to_string(features.size()) +
+                                   " keypoints");
+  }
+  return Status::Ok();
+}
+
+bool IsUsablePoint(const cv::Point3f& p) {
+  return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z) && p.z > 0.0f;
 }
 
 }  // namespace
@@ -97,6 +121,14 @@ Status LoopDetectorParams::Validate() const {
     return Status::InvalidArgument(
         "RANSAC needs a threshold > 0, a confidence in (0, 1), iterations >= 1 and at least 8 "
         "inliers");
+  }
+  if (!(metric.threshold_px > 0.0) || !(metric.confidence > 0.0 && metric.confidence < 1.0) ||
+      metric.max_iterations < 1 || metric.min_inliers < 6 ||
+      !(metric.min_inlier_ratio >= 0.0 && metric.min_inlier_ratio <= 1.0) ||
+      !(metric.min_sigma_px >= 0.0)) {
+    return Status::InvalidArgument(
+        "the metric check needs a threshold > 0, a confidence in (0, 1), iterations >= 1, at "
+        "least 6 inliers, an inlier ratio in [0, 1] and a sigma floor >= 0");
   }
   return Status::Ok();
 }
@@ -187,8 +219,10 @@ bool LoopDetector::FindBestIsland(const std::vector<QueryResult>& results, doubl
 }
 
 StatusOr<LoopResult> LoopDetector::Process(const FeatureSet& features, double timestamp,
-                                           std::string_view client_id) {
+                                           std::string_view client_id,
+                                           const FrameGeometry* geometry) {
   RECOG_RETURN_IF_ERROR(CheckClientId(client_id));
+  RECOG_RETURN_IF_ERROR(CheckGeometry(features, geometry));
   LoopResult result;
   const uint64_t frame = frames_seen_++;
 
@@ -242,25 +276,32 @@ StatusOr<LoopResult> LoopDetector::Process(const FeatureSet& features, double ti
     if (result.status == LoopStatus::kLoopDetected) {
       RECOG_RETURN_IF_ERROR(Verify(features, direct, &result));
     }
+    if (result.status == LoopStatus::kLoopDetected && geometry != nullptr) {
+      RECOG_RETURN_IF_ERROR(VerifyMetric(features, *geometry, &result));
+    }
   }
 
   start = Clock::now();
-  RECOG_ASSIGN_OR_RETURN(result.entry, Insert(features, bow, direct, timestamp, client_id));
+  RECOG_ASSIGN_OR_RETURN(result.entry,
+                         Insert(features, bow, direct, timestamp, client_id, geometry));
   result.timings.insertion = MsSince(start);
   return result;
 }
 
 StatusOr<EntryId> LoopDetector::Add(const FeatureSet& features, double timestamp,
-                                    std::string_view client_id) {
+                                    std::string_view client_id, const FrameGeometry* geometry) {
   RECOG_RETURN_IF_ERROR(CheckClientId(client_id));
+  RECOG_RETURN_IF_ERROR(CheckGeometry(features, geometry));
   ++frames_seen_;
   BowVector bow;
   FeatureVector direct;
   RECOG_RETURN_IF_ERROR(Convert(features, &bow, &direct));
-  return Insert(features, bow, direct, timestamp, client_id);
+  return Insert(features, bow, direct, timestamp, client_id, geometry);
 }
 
-StatusOr<LoopResult> LoopDetector::Query(const FeatureSet& features, double /*timestamp*/) const {
+StatusOr<LoopResult> LoopDetector::Query(const FeatureSet& features, double /*timestamp*/,
+                                         const FrameGeometry* geometry) const {
+  RECOG_RETURN_IF_ERROR(CheckGeometry(features, geometry));
   LoopResult result;
 
   auto start = Clock::now();
@@ -289,18 +330,24 @@ StatusOr<LoopResult> LoopDetector::Query(const FeatureSet& features, double /*ti
   result.timings.islands = MsSince(start);
 
   if (found) RECOG_RETURN_IF_ERROR(Verify(features, direct, &result));
+  if (found && result.status == LoopStatus::kLoopDetected && geometry != nullptr) {
+    RECOG_RETURN_IF_ERROR(VerifyMetric(features, *geometry, &result));
+  }
   return result;
 }
 
 StatusOr<EntryId> LoopDetector::Insert(const FeatureSet& features, const BowVector& bow,
                                        const FeatureVector& direct, double timestamp,
-                                       std::string_view client_id) {
+                                       std::string_view client_id, const FrameGeometry* geometry) {
   if (HasEnoughFeatures(features)) previous_bow_ = bow;
   EntryMetadata metadata;
   metadata.timestamp = timestamp;
   metadata.client_id = client_id;
-  RECOG_ASSIGN_OR_RETURN(const EntryId id,
-                         database_->AddConverted(bow, direct, features, std::move(metadata)));
+  std::vector<cv::Point3f> points;
+  if (geometry != nullptr) points = geometry->points;
+  RECOG_ASSIGN_OR_RETURN(
+      const EntryId id,
+      database_->AddConverted(bow, direct, features, std::move(metadata), std::move(points)));
   if (timestamp > 0.0) {
     entry_timestamps_.push_back(
         entry_timestamps_.empty() ? timestamp : std::max(timestamp, entry_timestamps_.back()));
@@ -330,6 +377,79 @@ Status LoopDetector::Verify(const FeatureSet& features, const FeatureVector& dir
   result->inliers = std::move(epipolar.inliers);
   if (!epipolar.verified) result->status = LoopStatus::kFailedGeometry;
   result->timings.verification = MsSince(start);
+  return Status::Ok();
+}
+
+Status LoopDetector::VerifyMetric(const FeatureSet& features, const FrameGeometry& geometry,
+                                  LoopResult* result) const {
+  if (params_.geometry == GeometryCheck::kNone) return Status::Ok();
+  const auto start = Clock::now();
+  RECOG_ASSIGN_OR_RETURN(EntryRecord candidate, database_->Get(result->match, kEntryFeatures));
+  if (candidate.points.empty()) return Status::Ok();
+  MetricLoop& metric = result->metric;
+  metric.checked = true;
+  std::vector<Match> pairs;
+  std::vector<cv::Point3f> object;
+  std::vector<cv::Point2f> image;
+  for (const Match& m : result->inliers) {
+    if (m.b >= candidate.points.size() || !IsUsablePoint(candidate.points[m.b])) continue;
+    pairs.push_back(m);
+    object.push_back(candidate.points[m.b]);
+    image.push_back(features.keypoints[m.a].pt);
+  }
+  metric.correspondences = uint32_t(pairs.size());
+  const MetricCheckOptions& options = params_.metric;
+  cv::Vec3d rvec, tvec;
+  std::vector<int> ransac_inliers;
+  const bool solved = pairs.size() >= options.min_inliers &&
+                      cv::solvePnPRansac(object, image, geometry.K, cv::noArray(), rvec, tvec,
+                                         false, options.max_iterations, float(options.threshold_px),
+                                         options.confidence, ransac_inliers, cv::SOLVEPNP_EPNP);
+  std::vector<cv::Point3f> inlier_object;
+  std::vector<cv::Point2f> inlier_image;
+  if (solved && ransac_inliers.size() >= 6) {
+    for (int i : ransac_inliers) {
+      inlier_object.push_back(object[size_t(i)]);
+      inlier_image.push_back(image[size_t(i)]);
+    }
+    cv::solvePnPRefineLM(inlier_object, inlier_image, geometry.K, cv::noArray(), rvec, tvec);
+    // The inliers of the refined pose.
+    std::vector<cv::Point2f> projected;
+    cv::projectPoints(object, rvec, tvec, geometry.K, cv::noArray(), projected);
+    inlier_object.clear();
+    inlier_image.clear();
+    cv::Matx33d R;
+    cv::Rodrigues(rvec, R);
+    double squared_sum = 0;
+    const double threshold2 = options.threshold_px * options.threshold_px;
+    for (size_t i = 0; i < pairs.size(); ++i) {
+      const cv::Point2f d = projected[i] - image[i];
+      const double e2 = double(d.x) * d.x + double(d.y) * d.y;
+      const cv::Vec3d x(object[i].x, object[i].y, object[i].z);
+      if ((R * x + tvec)[2] <= 0.0 || e2 > threshold2) continue;
+      metric.inliers.push_back(pairs[i]);
+      inlier_object.push_back(object[i]);
+      inlier_image.push_back(image[i]);
+      squared_sum += e2;
+    }
+    if (!metric.inliers.empty()) {
+      metric.rms_error_px = std::sqrt(squared_sum / double(metric.inliers.size()));
+    }
+  }
+  const size_t inliers = metric.inliers.size();
+  metric.verified = inliers >= options.min_inliers &&
+                    double(inliers) >= options.min_inlier_ratio * double(pairs.size());
+  if (metric.verified) {
+    cv::Rodrigues(rvec, metric.R);
+    metric.t = tvec;
+    if (!ComputePoseCovariance(geometry.K, metric.R, metric.t, inlier_object, inlier_image,
+                               options.min_sigma_px, &metric.covariance)) {
+      metric.covariance.fill(0.0);
+    }
+  } else {
+    result->status = LoopStatus::kFailedGeometry;
+  }
+  result->timings.metric_verification = MsSince(start);
   return Status::Ok();
 }
 

@@ -18,6 +18,19 @@
 //  7. the frame is added to the database.
 // Every frame gets a LoopResult whose status says why there is, or is not, a loop.
 //
+// Metric loops (thesis §3.3.3 brings the 3D data of a stereo rig into the loop verification, with
+// CRF-Matching; this detector uses a PnP check instead, as the metric verification the thesis
+// cites there, and returns the metric pose a SLAM needs): a frame may come with a FrameGeometry,
+// its camera matrix and the 3D point of each keypoint (from depth or stereo,
+// core/geometry/frame_points.h). The entry keeps the points. When a loop passes step 6 and the
+// query came with a camera matrix and the matched entry has 3D points, VerifyMetric checks the loop
+// in 3D: PnP RANSAC between the query's keypoints and the match's points over the epipolar inliers,
+// then Levenberg-Marquardt on the PnP inliers; the loop must agree in structure
+// (MetricCheckOptions: enough inliers, and enough of the 2D-3D correspondences) or its status
+// becomes kFailedGeometry. A verified loop carries the metric relative pose and its covariance
+// (LoopResult::metric). Frames without a FrameGeometry, and matches without points, are handled
+// exactly as before.
+//
 // Add() is step 7 alone (a robot uploading its keyframes): the frame joins the sequence exactly
 // as a processed frame would — it gets the next entry id, becomes the previous usable frame when
 // it has enough features, and its timestamp counts for tau_c — but nothing is queried.
@@ -47,6 +60,7 @@
 
 #include "core/common/feature_set.h"
 #include "core/geometry/correspondences.h"
+#include "core/geometry/pose_covariance.h"
 #include "core/index/database.h"
 
 namespace recog {
@@ -59,7 +73,7 @@ enum class LoopStatus {
   kLowScore,                   // no candidate reached alpha
   kNoConsistentIsland,         // the candidates formed no island of the minimum size
   kFailedTemporalConsistency,  // the best island is not consistent with the previous queries
-  kFailedGeometry,             // too few correspondences or RANSAC inliers
+  kFailedGeometry,             // too few correspondences or RANSAC inliers (2D, or 3D: metric)
 };
 std::string_view LoopStatusName(LoopStatus status);  // "loop_detected", "too_few_features", ...
 
@@ -70,6 +84,29 @@ enum class GeometryCheck {
 };
 std::string_view GeometryCheckName(GeometryCheck check);  // "direct_index", "exhaustive", "none"
 StatusOr<GeometryCheck> ParseGeometryCheck(std::string_view name);
+
+// The 3D check of a loop whose match has 3D points (VerifyMetric). Defaults: 2 px as the
+// epipolar check's threshold and 12 inliers as its minimum (Table 4.4); 70 % of the 2D-3D
+// correspondences (the epipolar inliers with a 3D point): on the synthetic sequences of
+// tools/evaluation/metric_sequence_test.cc, true loops keep at least 82 % (stereo) and 87 %
+// (RGB-D), while a map built from a flat picture of the place (a poster: right images, wrong
+// structure) keeps at most 60 % and is refused.
+struct MetricCheckOptions {
+  double threshold_px = 2.0;  // reprojection error of a PnP inlier
+  int max_iterations = 300;   // RANSAC iterations (OpenCV's solvePnPRansac, deterministic)
+  double confidence = 0.99;
+  uint32_t min_inliers = 12;      // PnP inliers a metric loop needs
+  double min_inlier_ratio = 0.7;  // PnP inliers / 2D-3D correspondences
+  double min_sigma_px = 0.5;      // floor of the residual sigma of the covariance (pixels)
+};
+
+// What a frame knows of its 3D structure. `K`: the pinhole camera matrix of its keypoints (lens
+// distortion removed). `points`: one per keypoint, camera frame, metres, NaN where unknown; or
+// empty (a calibrated frame without depth: it can still be checked against entries with points).
+struct FrameGeometry {
+  cv::Matx33d K = cv::Matx33d::zeros();
+  std::vector<cv::Point3f> points;
+};
 
 struct LoopDetectorParams {
   uint32_t min_features = 20;              // fewer features: the frame is not queried
@@ -86,14 +123,33 @@ struct LoopDetectorParams {
   uint32_t consistency_max_island_gap = 3;  // ids between consecutive queries' islands
   uint32_t consistency_max_query_gap = 2;   // queries further apart restart the count
   GeometryCheck geometry = GeometryCheck::kDirectIndex;
-  MatchOptions matching;     // ratio 0.6 (§4.4.6), max Hamming distance 50
-  EpipolarOptions epipolar;  // 2 px, 12 inliers (Table 4.4)
+  MatchOptions matching;      // ratio 0.6 (§4.4.6), max Hamming distance 50
+  EpipolarOptions epipolar;   // 2 px, 12 inliers (Table 4.4)
+  MetricCheckOptions metric;  // the 3D check, for frames with a FrameGeometry
 
   Status Validate() const;
 };
 
 struct LoopTimings {  // milliseconds spent in each stage for one frame
   double conversion = 0, query = 0, islands = 0, insertion = 0, verification = 0;
+  double metric_verification = 0;  // VerifyMetric (0 when it did not run)
+};
+
+// The 3D check of a loop (VerifyMetric) and the metric relative pose it gives.
+struct MetricLoop {
+  bool checked = false;          // the query had a camera matrix and the match 3D points
+  bool verified = false;         // the check passed (the loop agrees in structure)
+  uint32_t correspondences = 0;  // epipolar inliers whose match feature has a 3D point
+  std::vector<Match> inliers;    // PnP inliers (a = query feature, b = match feature)
+  double rms_error_px = 0;       // reprojection RMS over the inliers
+  // X_query = R * X_match + t: the match's camera frame into the query's, metres (set when
+  // verified). The pose of the match's camera seen from the query's camera.
+  cv::Matx33d R = cv::Matx33d::eye();
+  cv::Vec3d t = cv::Vec3d(0, 0, 0);
+  // Covariance of (R, t) as ComputePoseCovariance gives it (core/geometry/pose_covariance.h):
+  // rotation vector first (radians, left perturbation of R), then t (metres); row-major. Zeros
+  // when the geometry is degenerate.
+  PoseCovariance6 covariance{};
 };
 
 // One entry of the database query's answer for a frame.
@@ -120,6 +176,7 @@ struct LoopResult {
   // What the database query returned (at most max_query_results entries, best score first, equal
   // scores by increasing id), before alpha and the islands; empty when the frame was not queried.
   std::vector<LoopCandidate> candidates;
+  MetricLoop metric;  // the 3D check, for frames with a FrameGeometry
   LoopTimings timings;
 };
 
@@ -133,16 +190,19 @@ class LoopDetector {
   // to the database, with the client's id of the frame (stored in its metadata, at most
   // kMaxClientIdBytes). Errors are only for bad input (e.g. descriptors of another format) or a
   // failing store; "no loop" is a result.
+  // With `geometry` (may be null), the entry keeps its points and a loop is checked in 3D.
   StatusOr<LoopResult> Process(const FeatureSet& features, double timestamp = 0.0,
-                               std::string_view client_id = {});
+                               std::string_view client_id = {},
+                               const FrameGeometry* geometry = nullptr);
 
   // Adds the next frame of the sequence (timestamp in seconds, 0 when unknown) to the database
   // without querying, and returns its entry id. The detector's state moves on as Process would
   // move it for a frame that is not queried: the frame counts in the sequence (and so in the gap
   // between queries for temporal consistency), is the previous usable frame when it has enough
   // features, and its timestamp bounds tau_c. The client id and the errors are as for Process.
+  // With `geometry` (may be null), the entry keeps its 3D points.
   StatusOr<EntryId> Add(const FeatureSet& features, double timestamp = 0.0,
-                        std::string_view client_id = {});
+                        std::string_view client_id = {}, const FrameGeometry* geometry = nullptr);
 
   // Looks for the place of a single frame in the map, without adding the frame or changing the
   // detector (relocalisation). Every entry the map holds when the query runs is a candidate:
@@ -157,7 +217,10 @@ class LoopDetector {
   // stays kInvalidEntryId, `previous_score` and `consistent_queries` 0, and the insertion time 0.
   // Errors are only for bad input or a failing store. Safe to call from any number of threads,
   // concurrently with Process and Add.
-  StatusOr<LoopResult> Query(const FeatureSet& features, double timestamp = 0.0) const;
+  // With `geometry` (may be null; its points are not used), a recognised place whose entry has
+  // 3D points is checked in 3D and gets the metric pose.
+  StatusOr<LoopResult> Query(const FeatureSet& features, double timestamp = 0.0,
+                             const FrameGeometry* geometry = nullptr) const;
 
   const LoopDetectorParams& params() const { return params_; }
 
@@ -187,11 +250,17 @@ class LoopDetector {
   // kNone), filling correspondences, inliers, fundamental matrix and verification time; the
   // status becomes kFailedGeometry when the check fails.
   Status Verify(const FeatureSet& features, const FeatureVector& direct, LoopResult* result) const;
+  // The 3D check (§3.3.3), after Verify passed: when the match has 3D points, fills
+  // result->metric (PnP RANSAC over the epipolar inliers with a 3D point, LM refinement, the
+  // covariance) and sets kFailedGeometry when the loop does not agree in structure. Nothing when
+  // the match has no points or the geometry check is kNone (no correspondences).
+  Status VerifyMetric(const FeatureSet& features, const FrameGeometry& geometry,
+                      LoopResult* result) const;
   // Step 7: adds the converted frame to the database and moves the detector's state on (the
   // previous usable frame, the timestamps for tau_c). Returns the frame's entry id.
   StatusOr<EntryId> Insert(const FeatureSet& features, const BowVector& bow,
                            const FeatureVector& direct, double timestamp,
-                           std::string_view client_id);
+                           std::string_view client_id, const FrameGeometry* geometry);
 
   Database* database_;
   LoopDetectorParams params_;

@@ -1,5 +1,7 @@
 #include "core/place/loop_detector.h"
 
+#include <cmath>
+#include <limits>
 #include <set>
 #include <string>
 #include <thread>
@@ -493,6 +495,61 @@ TEST(LoopStatusTest, NamesAreDistinctAndGeometryNamesParse) {
     EXPECT_EQ(ParseGeometryCheck(GeometryCheckName(c)).value(), c);
   }
   EXPECT_FALSE(ParseGeometryCheck("homography").ok());
+}
+
+// Frames with a FrameGeometry (metric loops, thesis §3.3.3; the loops themselves are checked on
+// rendered RGB-D and stereo sequences in tools/evaluation/metric_sequence_test.cc).
+TEST_F(LoopDetectorTest, AFramesPointsAreKeptWithItsEntry) {
+  auto detector = LoopDetector::Create(db_.get(), params_);
+  ASSERT_TRUE(detector.ok());
+  const std::vector<FeatureSet> features = Extract(Visit(Places()[0], 2));
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  FrameGeometry geometry{cv::Matx33d(300, 0, 128, 0, 300, 192, 0, 0, 1), {}};
+  for (size_t i = 0; i < features[0].size(); ++i) {
+    geometry.points.push_back(i % 4 == 0 ? cv::Point3f(nan, nan, nan)
+                                         : cv::Point3f(0.1f, 0.2f, 1.0f + 0.01f * float(i)));
+  }
+  auto processed = detector->Process(features[0], 0.0, {}, &geometry);
+  ASSERT_TRUE(processed.ok()) << processed.status().ToString();
+  EXPECT_FALSE(processed->metric.checked);
+  auto added = detector->Add(features[1]);  // without geometry: no points
+  ASSERT_TRUE(added.ok());
+  auto entry = db_->Get(processed->entry, kEntryFeatures);
+  ASSERT_TRUE(entry.ok());
+  ASSERT_EQ(entry->points.size(), geometry.points.size());
+  EXPECT_TRUE(std::isnan(entry->points[0].z));
+  EXPECT_EQ(entry->points[1], geometry.points[1]);
+  entry = db_->Get(*added, kEntryFeatures);
+  ASSERT_TRUE(entry.ok());
+  EXPECT_TRUE(entry->points.empty());
+}
+
+TEST_F(LoopDetectorTest, BadFrameGeometryAndMetricParametersAreInvalidArgument) {
+  LoopDetectorParams bad = params_;
+  bad.metric.min_inlier_ratio = 1.5;
+  EXPECT_EQ(LoopDetector::Create(db_.get(), bad).status().code(), StatusCode::kInvalidArgument);
+  bad = params_;
+  bad.metric.threshold_px = 0;
+  EXPECT_EQ(LoopDetector::Create(db_.get(), bad).status().code(), StatusCode::kInvalidArgument);
+  bad = params_;
+  bad.metric.min_inliers = 3;
+  EXPECT_EQ(LoopDetector::Create(db_.get(), bad).status().code(), StatusCode::kInvalidArgument);
+
+  auto detector = LoopDetector::Create(db_.get(), params_);
+  ASSERT_TRUE(detector.ok());
+  const FeatureSet features = Extract(Visit(Places()[0], 1))[0];
+  FrameGeometry no_camera;  // K all zeros
+  auto s = detector->Process(features, 0.0, &no_camera).status();
+  EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(s.message().find("camera matrix"), std::string::npos) << s.ToString();
+  FrameGeometry too_few{cv::Matx33d(300, 0, 128, 0, 300, 192, 0, 0, 1),
+                        std::vector<cv::Point3f>(3, cv::Point3f(0, 0, 1))};
+  s = detector->Add(features, 0.0, &too_few).status();
+  EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(s.message().find("3 3D points"), std::string::npos) << s.ToString();
+  EXPECT_EQ(detector->Query(features, 0.0, &no_camera).status().code(),
+            StatusCode::kInvalidArgument);
+  EXPECT_EQ(db_->size(), 0u) << "a refused frame is not added";
 }
 
 }  // namespace
