@@ -115,8 +115,8 @@ struct LoopDetectorParams {
   // Default 0: a revisit's first frame can close the loop; on the corridor most misses of the
   // thesis detector are those first frames. At most temporal_matches.
   uint32_t strong_temporal_matches = 0;
-  // Default 30 inliers: well above the 12 that verify, and above what the rejected candidates
-  // of the corridor and of seqgen tours without revisits reach with the default matching.
+  // Default 30 inliers: two and a half times the 12 that verify a candidate waiting for k. At
+  // least epipolar.min_inliers; RANSAC does not even run with fewer correspondences.
   uint32_t strong_min_inliers = 30;
   // Default 0.25: the inliers occupy at least 4 of the 4 x 4 cells over each image's keypoints,
   // in both images (InlierSpread): a match of one small textured patch is not a place.
