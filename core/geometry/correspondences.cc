@@ -1,6 +1,7 @@
 #include "core/geometry/correspondences.h"
 
 #include <algorithm>
+#include <cmath>
 #include <limits>
 
 #include <opencv2/calib3d.hpp>
@@ -138,6 +139,113 @@ EpipolarResult VerifyEpipolar(const std::vector<cv::KeyPoint>& a_keypoints,
   result.fundamental = cv::Matx33d(f.ptr<double>(0));
   result.verified = result.inliers.size() >= options.min_inliers;
   return result;
+}
+
+namespace {
+
+// Squared distance of `x` to the line l = (a, b, c), infinite for a degenerate line.
+double SquaredLineDistance(const cv::Vec3d& l, const cv::Point2d& x) {
+  const double norm = l[0] * l[0] + l[1] * l[1];
+  if (norm <= 0.0) return std::numeric_limits<double>::infinity();
+  const double d = l[0] * x.x + l[1] * x.y + l[2];
+  return d * d / norm;
+}
+
+// Squared distance between `to` and `from` mapped by M (infinite at a point at infinity).
+double SquaredTransferError(const cv::Matx33d& m, const cv::Point2d& from, const cv::Point2d& to) {
+  const cv::Vec3d p = m * cv::Vec3d(from.x, from.y, 1.0);
+  if (std::abs(p[2]) < 1e-12) return std::numeric_limits<double>::infinity();
+  const double dx = p[0] / p[2] - to.x, dy = p[1] / p[2] - to.y;
+  return dx * dx + dy * dy;
+}
+
+// ORB-SLAM's score of one squared error: the 5.99 cutoff minus the error in sigma^2 units, when
+// the error is under the model's cutoff.
+double ChiSquareScore(double squared_error, double inv_sigma2, double cutoff) {
+  constexpr double kScoreCutoff = 5.991;  // chi-square, 2 degrees of freedom, 95 %
+  const double chi2 = squared_error * inv_sigma2;
+  return chi2 < cutoff ? kScoreCutoff - chi2 : 0.0;
+}
+
+// The share of grid x grid cells over the bounding box of `keypoints` that hold a matched one.
+double CoveredShare(const std::vector<cv::KeyPoint>& keypoints, const std::vector<uint32_t>& used,
+                    int grid) {
+  float x0 = std::numeric_limits<float>::max(), y0 = x0, x1 = -x0, y1 = -x0;
+  for (const cv::KeyPoint& k : keypoints) {
+    x0 = std::min(x0, k.pt.x);
+    y0 = std::min(y0, k.pt.y);
+    x1 = std::max(x1, k.pt.x);
+    y1 = std::max(y1, k.pt.y);
+  }
+  const double w = std::max(1e-6, double(x1 - x0)), h = std::max(1e-6, double(y1 - y0));
+  std::vector<bool> occupied(size_t(grid * grid), false);
+  for (uint32_t i : used) {
+    const int cx = std::min(grid - 1, int(double(keypoints[i].pt.x - x0) / w * grid));
+    const int cy = std::min(grid - 1, int(double(keypoints[i].pt.y - y0) / h * grid));
+    occupied[size_t(cy * grid + cx)] = true;
+  }
+  return double(std::count(occupied.begin(), occupied.end(), true)) / double(grid * grid);
+}
+
+}  // namespace
+
+ModelSelection SelectTwoViewModel(const std::vector<cv::KeyPoint>& a_keypoints,
+                                  const std::vector<cv::KeyPoint>& b_keypoints,
+                                  const std::vector<Match>& matches, const cv::Matx33d& fundamental,
+                                  const ModelSelectionOptions& options) {
+  ModelSelection result;
+  if (matches.size() < 4) return result;
+  std::vector<cv::Point2d> pa, pb;
+  pa.reserve(matches.size());
+  pb.reserve(matches.size());
+  for (const Match& m : matches) {
+    if (m.a >= a_keypoints.size() || m.b >= b_keypoints.size()) return result;
+    pa.emplace_back(a_keypoints[m.a].pt);
+    pb.emplace_back(b_keypoints[m.b].pt);
+  }
+  cv::Mat h;
+  try {
+    h = cv::findHomography(pa, pb, cv::RANSAC, options.threshold_px, cv::noArray(),
+                           options.max_iterations, options.confidence);
+  } catch (const cv::Exception&) {
+    h.release();  // degenerate configuration: no homography
+  }
+  constexpr double kLineCutoff = 3.841;      // chi-square, 1 degree of freedom, 95 %
+  constexpr double kTransferCutoff = 5.991;  // chi-square, 2 degrees of freedom, 95 %
+  const double inv_sigma2 = 1.0 / (options.sigma_px * options.sigma_px);
+  const cv::Matx33d f_t = fundamental.t();
+  for (size_t i = 0; i < pa.size(); ++i) {
+    const cv::Vec3d xa(pa[i].x, pa[i].y, 1.0), xb(pb[i].x, pb[i].y, 1.0);
+    result.fundamental_score +=
+        ChiSquareScore(SquaredLineDistance(fundamental * xa, pb[i]), inv_sigma2, kLineCutoff) +
+        ChiSquareScore(SquaredLineDistance(f_t * xb, pa[i]), inv_sigma2, kLineCutoff);
+  }
+  if (h.rows == 3 && h.cols == 3) {
+    result.homography = cv::Matx33d(h.ptr<double>(0));
+    const cv::Matx33d h_inv = result.homography.inv();
+    for (size_t i = 0; i < pa.size(); ++i) {
+      result.homography_score +=
+          ChiSquareScore(SquaredTransferError(result.homography, pa[i], pb[i]), inv_sigma2,
+                         kTransferCutoff) +
+          ChiSquareScore(SquaredTransferError(h_inv, pb[i], pa[i]), inv_sigma2, kTransferCutoff);
+    }
+  }
+  const double total = result.fundamental_score + result.homography_score;
+  result.homography_ratio = total > 0.0 ? result.homography_score / total : 0.0;
+  return result;
+}
+
+double InlierSpread(const std::vector<cv::KeyPoint>& a_keypoints,
+                    const std::vector<cv::KeyPoint>& b_keypoints, const std::vector<Match>& matches,
+                    int grid) {
+  if (matches.empty() || grid < 1) return 0.0;
+  std::vector<uint32_t> used_a, used_b;
+  for (const Match& m : matches) {
+    if (m.a >= a_keypoints.size() || m.b >= b_keypoints.size()) return 0.0;
+    used_a.push_back(m.a);
+    used_b.push_back(m.b);
+  }
+  return std::min(CoveredShare(a_keypoints, used_a, grid), CoveredShare(b_keypoints, used_b, grid));
 }
 
 bool RelativePoseFromFundamental(const cv::Matx33d& fundamental, const cv::Matx33d& K,

@@ -9,7 +9,10 @@
 // two features of A goes to the nearer one). Binary descriptors use the Hamming distance.
 //
 // VerifyEpipolar fits a fundamental matrix with RANSAC (OpenCV's, which is deterministic) and
-// keeps the inliers.
+// keeps the inliers. Two measures say how much those inliers are worth as evidence:
+// SelectTwoViewModel compares F with a homography on the same correspondences (a planar scene or
+// a pure rotation makes F degenerate: it fits, but proves nothing beyond what H explains), and
+// InlierSpread says how much of both images the inliers cover.
 #pragma once
 
 #include <vector>
@@ -61,6 +64,45 @@ struct EpipolarResult {
 EpipolarResult VerifyEpipolar(const std::vector<cv::KeyPoint>& a_keypoints,
                               const std::vector<cv::KeyPoint>& b_keypoints,
                               const std::vector<Match>& matches, const EpipolarOptions& options);
+
+struct ModelSelectionOptions {
+  // Standard deviation of a keypoint's position: errors are measured in units of sigma^2 against
+  // the chi-square cutoffs of ORB-SLAM's initialisation (3.84 for F's one-dimensional distance to
+  // the epipolar line, 5.99 for H's two-dimensional transfer error, both at 95 %).
+  double sigma_px = 1.0;
+  // RANSAC of the homography (OpenCV's findHomography, deterministic).
+  double threshold_px = 2.0;
+  double confidence = 0.99;
+  int max_iterations = 1000;
+};
+
+struct ModelSelection {
+  double fundamental_score = 0;  // S_F
+  double homography_score = 0;   // S_H
+  // R_H = S_H / (S_H + S_F), 0 when both scores are 0. About 0.5 when H explains the
+  // correspondences as well as F (a plane, a pure rotation); well below when only F does (a 3D
+  // scene seen with translation). ORB-SLAM's initialisation picks H above 0.40-0.45.
+  double homography_ratio = 0;
+  cv::Matx33d homography = cv::Matx33d::zeros();  // x_b ~ H x_a (zero when none was found)
+};
+
+// Scores `fundamental` (x_b^T F x_a = 0) and a homography fitted by RANSAC to the same matches,
+// as ORB-SLAM's initialisation does: every match adds, for each of the two images, the cutoff
+// 5.99 minus its squared error over sigma^2 when that error is under the model's cutoff (F: the
+// squared distance to the epipolar line, cutoff 3.84; H: the squared transfer error, cutoff
+// 5.99), so both scores are on one scale. Fewer than 4 matches, or an out-of-range match: all 0.
+ModelSelection SelectTwoViewModel(const std::vector<cv::KeyPoint>& a_keypoints,
+                                  const std::vector<cv::KeyPoint>& b_keypoints,
+                                  const std::vector<Match>& matches, const cv::Matx33d& fundamental,
+                                  const ModelSelectionOptions& options);
+
+// How much of both images the matches cover: each image's keypoints' bounding box is cut into a
+// grid x grid array of cells, and the share of cells holding at least one matched keypoint is
+// measured in both images; the smaller share is returned (0 without matches or with a match out
+// of range). Matches bunched in one corner say less than as many spread over the whole view.
+double InlierSpread(const std::vector<cv::KeyPoint>& a_keypoints,
+                    const std::vector<cv::KeyPoint>& b_keypoints, const std::vector<Match>& matches,
+                    int grid);
 
 // The relative pose of two views of one camera (intrinsics K) from their fundamental matrix
 // (x_b^T F x_a = 0) and its inlier matches: X_b = R * X_a + t with |t| = 1 (two views fix the

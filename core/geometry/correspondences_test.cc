@@ -164,5 +164,86 @@ TEST(RelativePoseTest, AZeroMatrixOrTooFewInliersGiveNoPose) {
   EXPECT_FALSE(RelativePoseFromFundamental(cv::Matx33d::eye(), K, ka, kb, out_of_range, &R, &t));
 }
 
+// Two views of points on one plane (z = 5 - 0.2 x), with the motion of TwoViews and 0.3 px of
+// noise: a homography explains every correspondence.
+void PlanarViews(int n, uint64_t seed, std::vector<cv::KeyPoint>* ka,
+                 std::vector<cv::KeyPoint>* kb) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> xy(-2, 2);
+  std::normal_distribution<double> noise(0.0, 0.3);
+  const cv::Matx33d rotation(std::cos(0.1), 0, std::sin(0.1), 0, 1, 0, -std::sin(0.1), 0,
+                             std::cos(0.1));
+  const cv::Vec3d translation(0.5, 0.05, 0.1);
+  for (int i = 0; i < n; ++i) {
+    const double x = xy(rng), y = xy(rng);
+    const cv::Vec3d p(x, y, 5.0 - 0.2 * x);
+    const cv::Vec3d q = rotation * p + translation;
+    ka->emplace_back(float(500 * p[0] / p[2] + 320 + noise(rng)),
+                     float(500 * p[1] / p[2] + 240 + noise(rng)), 31.f);
+    kb->emplace_back(float(500 * q[0] / q[2] + 320 + noise(rng)),
+                     float(500 * q[1] / q[2] + 240 + noise(rng)), 31.f);
+  }
+}
+
+std::vector<Match> Identity(uint32_t n) {
+  std::vector<Match> matches;
+  for (uint32_t i = 0; i < n; ++i) matches.push_back({i, i, 0});
+  return matches;
+}
+
+TEST(ModelSelectionTest, APlanarSceneIsExplainedByAHomography) {
+  std::vector<cv::KeyPoint> ka, kb;
+  PlanarViews(100, 5, &ka, &kb);
+  const std::vector<Match> matches = Identity(100);
+  const EpipolarResult f = VerifyEpipolar(ka, kb, matches, {});
+  ASSERT_TRUE(f.verified) << "F fits a plane too: that is why it proves little there";
+  const ModelSelection m = SelectTwoViewModel(ka, kb, f.inliers, f.fundamental, {});
+  EXPECT_GT(m.homography_ratio, 0.45);
+  EXPECT_GT(m.homography_score, 0.0);
+  EXPECT_NE(m.homography, cv::Matx33d::zeros());
+}
+
+TEST(ModelSelectionTest, ATranslatedThreeDimensionalSceneIsExplainedByTheFundamentalMatrix) {
+  std::vector<cv::KeyPoint> ka, kb;
+  TwoViews(100, 6, &ka, &kb);
+  const EpipolarResult f = VerifyEpipolar(ka, kb, Identity(100), {});
+  ASSERT_TRUE(f.verified);
+  const ModelSelection m = SelectTwoViewModel(ka, kb, f.inliers, f.fundamental, {});
+  EXPECT_LT(m.homography_ratio, 0.3);
+  EXPECT_GT(m.fundamental_score, m.homography_score);
+  EXPECT_NEAR(m.homography_ratio, m.homography_score / (m.homography_score + m.fundamental_score),
+              1e-12);
+}
+
+TEST(ModelSelectionTest, TooFewOrOutOfRangeMatchesScoreNothing) {
+  std::vector<cv::KeyPoint> ka, kb;
+  TwoViews(10, 7, &ka, &kb);
+  const cv::Matx33d f = VerifyEpipolar(ka, kb, Identity(10), {.min_inliers = 8}).fundamental;
+  const ModelSelection few = SelectTwoViewModel(ka, kb, Identity(3), f, {});
+  EXPECT_EQ(few.homography_ratio, 0.0);
+  EXPECT_EQ(few.fundamental_score, 0.0);
+  std::vector<Match> out_of_range = Identity(10);
+  out_of_range[3].b = 99;
+  EXPECT_EQ(SelectTwoViewModel(ka, kb, out_of_range, f, {}).fundamental_score, 0.0);
+}
+
+TEST(InlierSpreadTest, MatchesBunchedInACornerCoverLessThanSpreadOnes) {
+  std::vector<cv::KeyPoint> ka, kb;
+  for (int y = 0; y < 10; ++y) {
+    for (int x = 0; x < 10; ++x) {
+      ka.emplace_back(float(x * 64), float(y * 48), 31.f);
+      kb.emplace_back(float(x * 64 + 5), float(y * 48 + 5), 31.f);
+    }
+  }
+  EXPECT_DOUBLE_EQ(InlierSpread(ka, kb, Identity(100), 4), 1.0);
+  const std::vector<Match> corner = {{0, 0, 0}, {1, 1, 0}, {10, 10, 0}, {11, 11, 0}};
+  EXPECT_DOUBLE_EQ(InlierSpread(ka, kb, corner, 4), 1.0 / 16.0);
+  // The smaller share of the two images: all of B's matched keypoints in one cell.
+  const std::vector<Match> one_cell_in_b = {{0, 0, 0}, {99, 1, 0}};
+  EXPECT_DOUBLE_EQ(InlierSpread(ka, kb, one_cell_in_b, 4), 1.0 / 16.0);
+  EXPECT_EQ(InlierSpread(ka, kb, {}, 4), 0.0);
+  EXPECT_EQ(InlierSpread(ka, kb, {{0, 100, 0}}, 4), 0.0);
+}
+
 }  // namespace
 }  // namespace recog

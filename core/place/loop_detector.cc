@@ -60,6 +60,9 @@ bool IsUsablePoint(const cv::Point3f& p) {
   return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z) && p.z > 0.0f;
 }
 
+// The grid of InlierSpread for strong evidence: 4 x 4 cells over each image.
+constexpr int kSpreadGrid = 4;
+
 }  // namespace
 
 std::string_view LoopStatusName(LoopStatus status) {
@@ -105,6 +108,33 @@ StatusOr<GeometryCheck> ParseGeometryCheck(std::string_view name) {
                                  "' (direct_index, exhaustive or none)");
 }
 
+std::string_view LoopAcceptanceName(LoopAcceptance a) {
+  switch (a) {
+    case LoopAcceptance::kNone:
+      return "none";
+    case LoopAcceptance::kTemporalConsistency:
+      return "temporal_consistency";
+    case LoopAcceptance::kStrongEvidence:
+      return "strong_evidence";
+    case LoopAcceptance::kRelocalisation:
+      return "relocalisation";
+  }
+  return "unknown";
+}
+
+LoopDetectorParams LoopDetectorParams::Thesis() {
+  LoopDetectorParams params;
+  params.strong_acceptance = false;
+  return params;
+}
+
+StatusOr<LoopDetectorParams> ParseLoopDetectorMode(std::string_view mode) {
+  if (mode == "default") return LoopDetectorParams{};
+  if (mode == "thesis") return LoopDetectorParams::Thesis();
+  return Status::InvalidArgument("unknown loop detector mode '" + std::string(mode) +
+                                 "' (default or thesis)");
+}
+
 Status LoopDetectorParams::Validate() const {
   if (!(alpha >= 0.0)) return Status::InvalidArgument("alpha must be >= 0");
   if (!(min_score_with_previous >= 0.0)) {
@@ -129,6 +159,25 @@ Status LoopDetectorParams::Validate() const {
     return Status::InvalidArgument(
         "the metric check needs a threshold > 0, a confidence in (0, 1), iterations >= 1, at "
         "least 6 inliers, an inlier ratio in [0, 1] and a sigma floor >= 0");
+  }
+  if (strong_temporal_matches > temporal_matches) {
+    return Status::InvalidArgument("strong_temporal_matches must be <= temporal_matches");
+  }
+  if (strong_min_inliers < epipolar.min_inliers) {
+    return Status::InvalidArgument("strong_min_inliers must be >= min_inliers");
+  }
+  if (!(strong_min_spread >= 0.0 && strong_min_spread <= 1.0)) {
+    return Status::InvalidArgument("strong_min_spread must be in [0, 1]");
+  }
+  if (!(strong_max_homography_ratio >= 0.0 && strong_max_homography_ratio <= 1.0)) {
+    return Status::InvalidArgument("strong_max_homography_ratio must be in [0, 1]");
+  }
+  if (!(model_selection.sigma_px > 0.0) || !(model_selection.threshold_px > 0.0) ||
+      !(model_selection.confidence > 0.0 && model_selection.confidence < 1.0) ||
+      model_selection.max_iterations < 1) {
+    return Status::InvalidArgument(
+        "model selection needs a sigma > 0, a threshold > 0, a confidence in (0, 1) and "
+        "iterations >= 1");
   }
   return Status::Ok();
 }
@@ -274,7 +323,27 @@ StatusOr<LoopResult> LoopDetector::Process(const FeatureSet& features, double ti
     result.timings.islands = MsSince(start);
 
     if (result.status == LoopStatus::kLoopDetected) {
-      RECOG_RETURN_IF_ERROR(Verify(features, direct, &result));
+      RECOG_RETURN_IF_ERROR(Verify(features, direct, params_.epipolar, &result));
+      if (result.status == LoopStatus::kLoopDetected) {
+        result.acceptance = LoopAcceptance::kTemporalConsistency;
+      }
+    } else if (result.status == LoopStatus::kFailedTemporalConsistency &&
+               params_.strong_acceptance && params_.geometry != GeometryCheck::kNone &&
+               result.consistent_queries >= params_.strong_temporal_matches) {
+      // Too few consistent queries for a weak candidate: a strong one is accepted now. RANSAC
+      // runs only when there are correspondences enough for strong_min_inliers.
+      LoopResult trial = result;
+      EpipolarOptions epipolar = params_.epipolar;
+      epipolar.min_inliers = params_.strong_min_inliers;
+      bool strong = false;
+      RECOG_RETURN_IF_ERROR(Verify(features, direct, epipolar, &trial, &strong));
+      if (strong) {
+        result = std::move(trial);
+        result.status = LoopStatus::kLoopDetected;
+        result.acceptance = LoopAcceptance::kStrongEvidence;
+      } else {
+        result.timings.verification = trial.timings.verification;
+      }
     }
     if (result.status == LoopStatus::kLoopDetected && geometry != nullptr) {
       RECOG_RETURN_IF_ERROR(VerifyMetric(features, *geometry, &result));
@@ -329,7 +398,12 @@ StatusOr<LoopResult> LoopDetector::Query(const FeatureSet& features, double /*ti
   if (found) result.status = LoopStatus::kLoopDetected;
   result.timings.islands = MsSince(start);
 
-  if (found) RECOG_RETURN_IF_ERROR(Verify(features, direct, &result));
+  if (found) {
+    RECOG_RETURN_IF_ERROR(Verify(features, direct, params_.epipolar, &result));
+    if (result.status == LoopStatus::kLoopDetected) {
+      result.acceptance = LoopAcceptance::kRelocalisation;
+    }
+  }
   if (found && result.status == LoopStatus::kLoopDetected && geometry != nullptr) {
     RECOG_RETURN_IF_ERROR(VerifyMetric(features, *geometry, &result));
   }
@@ -357,7 +431,8 @@ StatusOr<EntryId> LoopDetector::Insert(const FeatureSet& features, const BowVect
 }
 
 Status LoopDetector::Verify(const FeatureSet& features, const FeatureVector& direct,
-                            LoopResult* result) const {
+                            const EpipolarOptions& epipolar_options, LoopResult* result,
+                            bool* strong) const {
   if (params_.geometry == GeometryCheck::kNone) return Status::Ok();
   const auto start = Clock::now();
   RECOG_ASSIGN_OR_RETURN(EntryRecord candidate,
@@ -372,10 +447,19 @@ Status LoopDetector::Verify(const FeatureSet& features, const FeatureVector& dir
   }
   result->correspondences = uint32_t(matches.size());
   EpipolarResult epipolar =
-      VerifyEpipolar(features.keypoints, candidate.keypoints, matches, params_.epipolar);
+      VerifyEpipolar(features.keypoints, candidate.keypoints, matches, epipolar_options);
   result->fundamental = epipolar.fundamental;
   result->inliers = std::move(epipolar.inliers);
   if (!epipolar.verified) result->status = LoopStatus::kFailedGeometry;
+  if (strong != nullptr) {
+    // Cheapest first: the spread, then the homography's RANSAC only when still needed.
+    *strong = epipolar.verified &&
+              InlierSpread(features.keypoints, candidate.keypoints, result->inliers, kSpreadGrid) >=
+                  params_.strong_min_spread &&
+              SelectTwoViewModel(features.keypoints, candidate.keypoints, result->inliers,
+                                 result->fundamental, params_.model_selection)
+                      .homography_ratio <= params_.strong_max_homography_ratio;
+  }
   result->timings.verification = MsSince(start);
   return Status::Ok();
 }
@@ -448,6 +532,7 @@ Status LoopDetector::VerifyMetric(const FeatureSet& features, const FrameGeometr
     }
   } else {
     result->status = LoopStatus::kFailedGeometry;
+    result->acceptance = LoopAcceptance::kNone;
   }
   result->timings.metric_verification = MsSince(start);
   return Status::Ok();

@@ -10,11 +10,18 @@
 //     previous one is too low is not queried (its eta would be meaningless);
 //  4. the remaining matches are grouped into islands of entries close in time, ranked by the sum
 //     of their eta (eq. 4.2);
-//  5. the best island must be temporally consistent with the best islands of the k previous
+//  5. the best island should be temporally consistent with the best islands of the k previous
 //     queries (§4.3.1): consecutive queries whose islands (almost) overlap;
 //  6. the best entry of the island is verified geometrically: correspondences through the
 //     direct index (Algorithm 2) or exhaustively, then a fundamental matrix with RANSAC and a
-//     minimum of inliers (or no check at all);
+//     minimum of inliers (or no check at all). A candidate consistent with k queries needs only
+//     that. One consistent with fewer (at least strong_temporal_matches; beyond the thesis, which
+//     waits for k in every case and so misses the first frames of each revisit) is verified too,
+//     and accepted only when the evidence is strong: at least strong_min_inliers inliers, covering
+//     at least strong_min_spread of both images, and not explained by a homography about as well
+//     as by F (R_H = S_H / (S_H + S_F) at most strong_max_homography_ratio, ORB-SLAM's model
+//     selection): a planar scene or a pure rotation makes F fit without proving a 3D match.
+//     Weak evidence waits for k. result.acceptance says which rule accepted a loop;
 //  7. the frame is added to the database.
 // Every frame gets a LoopResult whose status says why there is, or is not, a loop.
 //
@@ -45,7 +52,9 @@
 //
 // Defaults are thesis Table 4.4 where it gives one (k = 3, alpha = 0.3, direct index level 2,
 // 12 RANSAC inliers, minimum score 0.005 with the previous frame, tau_c = 20 s); the others are
-// documented on each field. One detector per map; independent detectors may run at once.
+// documented on each field. LoopDetectorParams::Thesis() is the thesis's detector exactly (no
+// acceptance on strong evidence); ParseLoopDetectorMode names the two presets. One detector per
+// map; independent detectors may run at once.
 //
 // Thread safety: Process and Add change the detector and must be called from one thread at a
 // time (per detector, i.e. per map). Query reads nothing they change — only the parameters and
@@ -108,6 +117,15 @@ struct FrameGeometry {
   std::vector<cv::Point3f> points;
 };
 
+// How a loop was accepted (steps 5 and 6 of the header comment).
+enum class LoopAcceptance {
+  kNone,                 // no loop
+  kTemporalConsistency,  // consistent with k previous queries, then verified (thesis)
+  kStrongEvidence,       // consistent with fewer, but a strong geometric verification
+  kRelocalisation,       // Query: the verified best candidate (no sequence, no consistency)
+};
+std::string_view LoopAcceptanceName(LoopAcceptance a);  // "none", "temporal_consistency", ...
+
 struct LoopDetectorParams {
   uint32_t min_features = 20;              // fewer features: the frame is not queried
   double min_score_with_previous = 0.005;  // thesis Table 4.4
@@ -127,8 +145,34 @@ struct LoopDetectorParams {
   EpipolarOptions epipolar;   // 2 px, 12 inliers (Table 4.4)
   MetricCheckOptions metric;  // the 3D check, for frames with a FrameGeometry
 
+  // Acceptance on strong evidence (step 6; not in the thesis): a candidate consistent with fewer
+  // than temporal_matches previous queries, but at least strong_temporal_matches, is verified and
+  // accepted when its verification is strong. Default on; Thesis() turns it off, and it has no
+  // effect with geometry kNone (no verification, no evidence).
+  bool strong_acceptance = true;
+  // Default 0: a revisit's first frame can close the loop; on the corridor most misses of the
+  // thesis detector are those first frames. At most temporal_matches.
+  uint32_t strong_temporal_matches = 0;
+  // Default 30 inliers: two and a half times the 12 that verify a candidate waiting for k. At
+  // least epipolar.min_inliers; RANSAC does not even run with fewer correspondences.
+  uint32_t strong_min_inliers = 30;
+  // Default 0.25: the inliers occupy at least 4 of the 4 x 4 cells over each image's keypoints,
+  // in both images (InlierSpread): a match of one small textured patch is not a place.
+  double strong_min_spread = 0.25;
+  // Default 0.45: above this R_H, a homography explains the correspondences about as well as F
+  // (0.5 = equally well), so F's inliers prove no 3D structure (two photos of one screen pass F
+  // with 30 inliers). ORB-SLAM's initialisation switches to H at 0.40-0.45.
+  double strong_max_homography_ratio = 0.45;
+  ModelSelectionOptions model_selection;  // sigma 1 px; H by RANSAC with 2 px as F
+
+  // The thesis's detector (Table 4.4): every loop needs k consistent queries
+  // (strong_acceptance off).
+  static LoopDetectorParams Thesis();
   Status Validate() const;
 };
+
+// The preset named `mode`: "default" (LoopDetectorParams{}) or "thesis" (Thesis()).
+StatusOr<LoopDetectorParams> ParseLoopDetectorMode(std::string_view mode);
 
 struct LoopTimings {  // milliseconds spent in each stage for one frame
   double conversion = 0, query = 0, islands = 0, insertion = 0, verification = 0;
@@ -170,8 +214,9 @@ struct LoopResult {
   EntryId island_first = kInvalidEntryId, island_last = kInvalidEntryId;
   double island_score = 0;          // H, the sum of eta over the island
   uint32_t consistent_queries = 0;  // previous queries the island is consistent with
-  uint32_t correspondences = 0;     // putative matches given to RANSAC
-  std::vector<Match> inliers;       // a = this frame's feature, b = the match's feature
+  LoopAcceptance acceptance = LoopAcceptance::kNone;  // how the loop was accepted
+  uint32_t correspondences = 0;                       // putative matches given to RANSAC
+  std::vector<Match> inliers;  // a = this frame's feature, b = the match's feature
   cv::Matx33d fundamental = cv::Matx33d::zeros();
   // What the database query returned (at most max_query_results entries, best score first, equal
   // scores by increasing id), before alpha and the islands; empty when the frame was not queried.
@@ -214,7 +259,8 @@ class LoopDetector {
   // the geometry check of the parameters. The status is kLoopDetected when the place is
   // recognised, else kTooFewFeatures, kNoCandidates, kLowScore (only when alpha > 1 or every
   // score is 0, as the best candidate's eta is 1), kNoConsistentIsland or kFailedGeometry. `entry`
-  // stays kInvalidEntryId, `previous_score` and `consistent_queries` 0, and the insertion time 0.
+  // stays kInvalidEntryId, `previous_score` and `consistent_queries` 0, and the insertion time 0;
+  // a recognised place has acceptance kRelocalisation.
   // Errors are only for bad input or a failing store. Safe to call from any number of threads,
   // concurrently with Process and Add.
   // With `geometry` (may be null; its points are not used), a recognised place whose entry has
@@ -256,6 +302,12 @@ class LoopDetector {
   // the match has no points or the geometry check is kNone (no correspondences).
   Status VerifyMetric(const FeatureSet& features, const FrameGeometry& geometry,
                       LoopResult* result) const;
+
+  // kNone) and `epipolar`, filling correspondences, inliers, fundamental matrix and verification
+  // time; the status becomes kFailedGeometry when the check fails. With `strength`, also sets
+  // *strong to whether a verified match is strong evidence (inliers, spread, R_H).
+  Status Verify(const FeatureSet& features, const FeatureVector& direct,
+                const EpipolarOptions& epipolar, LoopResult* result, bool* strong = nullptr) const;
   // Step 7: adds the converted frame to the database and moves the detector's state on (the
   // previous usable frame, the timestamps for tau_c). Returns the frame's entry id.
   StatusOr<EntryId> Insert(const FeatureSet& features, const BowVector& bow,

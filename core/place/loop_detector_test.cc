@@ -347,6 +347,7 @@ TEST_F(LoopDetectorTest, QueryRecognisesAnAddedPlaceAndChangesNothing) {
     EXPECT_GE(r->correspondences, r->inliers.size()) << i;
     EXPECT_EQ(r->entry, kInvalidEntryId);
     EXPECT_EQ(r->consistent_queries, 0u);
+    EXPECT_EQ(r->acceptance, LoopAcceptance::kRelocalisation);
     EXPECT_EQ(r->previous_score, 0.0);
     EXPECT_GT(r->score, 0.0);
     EXPECT_LE(r->normalized_score, 1.0);
@@ -481,6 +482,133 @@ TEST_F(LoopDetectorTest, QueriesFromTwoThreadsWhileAnotherProcessesGiveTheirSeri
   EXPECT_EQ(db_->size(), map.size() + processed.size());
 }
 
+// Real revisits of a 3D corridor: frames 1 and 20, the upside-down place that matches neither,
+// then frames 41 (same place as 1) and 60 (same as 20), the bundled corridor frames.
+std::vector<cv::Mat> CorridorRevisits() {
+  std::vector<cv::Mat> frames;
+  for (const char* name : {"corridor/1.jpg", "corridor/20.jpg"}) {
+    auto f = ReadGrayImage(testing::ProjectTestData(name));
+    EXPECT_TRUE(f.ok());
+    frames.push_back(*f);
+  }
+  for (const cv::Mat& v : Visit(Places()[3], 5)) frames.push_back(v);
+  for (const char* name : {"corridor/41.jpg", "corridor/60.jpg"}) {
+    auto f = ReadGrayImage(testing::ProjectTestData(name));
+    EXPECT_TRUE(f.ok());
+    frames.push_back(*f);
+  }
+  return frames;
+}
+
+TEST_F(LoopDetectorTest, AStrongCandidateIsAcceptedWithoutTemporalConsistency) {
+  const std::vector<LoopResult> results = Run(CorridorRevisits(), params_);
+  ASSERT_EQ(results.size(), 9u);
+  int strong = 0;
+  for (size_t i = 7; i < 9; ++i) {
+    const LoopResult& r = results[i];
+    if (r.status != LoopStatus::kLoopDetected) continue;
+    ++strong;
+    EXPECT_EQ(r.acceptance, LoopAcceptance::kStrongEvidence) << i;
+    EXPECT_LT(r.consistent_queries, params_.temporal_matches) << i;
+    EXPECT_EQ(r.match, i == 7 ? 0u : 1u) << "frame 41 is frame 1's place, 60 is 20's";
+    EXPECT_GE(r.inliers.size(), params_.strong_min_inliers);
+  }
+  EXPECT_GE(strong, 1);
+  for (size_t i = 0; i < 7; ++i) EXPECT_NE(results[i].status, LoopStatus::kLoopDetected) << i;
+
+  // The thesis's detector waits for k consistent queries, which these two frames lack.
+  LoopDetectorParams thesis = LoopDetectorParams::Thesis();
+  thesis.recent_frames = params_.recent_frames;
+  thesis.temporal_matches = params_.temporal_matches;
+  MemoryIndexStore store;
+  auto db = Database::Create(&store, "thesis", *vocabulary_);
+  ASSERT_TRUE(db.ok());
+  for (const LoopResult& r : Run(CorridorRevisits(), thesis, db->get())) {
+    EXPECT_NE(r.status, LoopStatus::kLoopDetected) << r.entry;
+    EXPECT_EQ(r.acceptance, LoopAcceptance::kNone);
+  }
+}
+
+TEST_F(LoopDetectorTest, ACandidateAHomographyExplainsStillNeedsTemporalConsistency) {
+  // The tour's revisits are shifted copies of flat images: F fits them, and so does H.
+  const std::vector<LoopResult> results = Run(TourWithRevisits(), params_);
+  EXPECT_EQ(results[16].status, LoopStatus::kFailedTemporalConsistency);
+  for (const LoopResult& r : results) {
+    EXPECT_NE(r.acceptance, LoopAcceptance::kStrongEvidence) << r.entry;
+  }
+  // Without the model selection, the same first revisit frame passes as strong.
+  LoopDetectorParams no_model_selection = params_;
+  no_model_selection.strong_max_homography_ratio = 1.0;
+  MemoryIndexStore store;
+  auto db = Database::Create(&store, "planar", *vocabulary_);
+  ASSERT_TRUE(db.ok());
+  const std::vector<LoopResult> unchecked = Run(TourWithRevisits(), no_model_selection, db->get());
+  EXPECT_EQ(unchecked[16].status, LoopStatus::kLoopDetected);
+  EXPECT_EQ(unchecked[16].acceptance, LoopAcceptance::kStrongEvidence);
+  EXPECT_EQ(unchecked[16].consistent_queries, 0u);
+}
+
+TEST_F(LoopDetectorTest, ThesisModeIsTheDetectorWithoutStrongAcceptance) {
+  const LoopDetectorParams thesis = LoopDetectorParams::Thesis();
+  EXPECT_FALSE(thesis.strong_acceptance);
+  EXPECT_TRUE(LoopDetectorParams{}.strong_acceptance);
+  EXPECT_EQ(thesis.temporal_matches, 3u);
+  EXPECT_DOUBLE_EQ(thesis.alpha, 0.3);
+  EXPECT_EQ(thesis.epipolar.min_inliers, 12u);
+  EXPECT_EQ(ParseLoopDetectorMode("thesis")->strong_acceptance, false);
+  EXPECT_EQ(ParseLoopDetectorMode("default")->strong_acceptance, true);
+  EXPECT_EQ(ParseLoopDetectorMode("dloop").status().code(), StatusCode::kInvalidArgument);
+
+  // Where no candidate is strong, the trial verifications leave no trace: every result is the
+  // thesis detector's, and every loop was accepted by temporal consistency.
+  LoopDetectorParams thesis_here = params_;
+  thesis_here.strong_acceptance = false;
+  const std::vector<LoopResult> a = Run(TourWithRevisits(), thesis_here);
+  MemoryIndexStore store;
+  auto db = Database::Create(&store, "default", *vocabulary_);
+  ASSERT_TRUE(db.ok());
+  const std::vector<LoopResult> b = Run(TourWithRevisits(), params_, db->get());
+  ASSERT_EQ(a.size(), b.size());
+  int loops = 0;
+  for (size_t i = 0; i < a.size(); ++i) {
+    ExpectSameResult(a[i], b[i], "frame " + std::to_string(i));
+    EXPECT_EQ(a[i].acceptance, b[i].acceptance) << i;
+    if (a[i].status == LoopStatus::kLoopDetected) {
+      ++loops;
+      EXPECT_EQ(a[i].acceptance, LoopAcceptance::kTemporalConsistency) << i;
+    }
+  }
+  EXPECT_GE(loops, 4);
+}
+
+TEST_F(LoopDetectorTest, BadStrongAcceptanceParametersAreRefused) {
+  const auto refused = [&](const LoopDetectorParams& p) {
+    return LoopDetector::Create(db_.get(), p).status().code() == StatusCode::kInvalidArgument;
+  };
+  LoopDetectorParams bad = params_;
+  bad.strong_temporal_matches = params_.temporal_matches + 1;
+  EXPECT_TRUE(refused(bad));
+  bad = params_;
+  bad.strong_min_inliers = uint32_t(params_.epipolar.min_inliers) - 1;
+  EXPECT_TRUE(refused(bad));
+  bad = params_;
+  bad.strong_min_spread = 1.5;
+  EXPECT_TRUE(refused(bad));
+  bad = params_;
+  bad.strong_max_homography_ratio = -0.1;
+  EXPECT_TRUE(refused(bad));
+  bad = params_;
+  bad.model_selection.sigma_px = 0;
+  EXPECT_TRUE(refused(bad));
+  bad = params_;
+  bad.model_selection.confidence = 1.0;
+  EXPECT_TRUE(refused(bad));
+  LoopDetectorParams good = params_;
+  good.strong_temporal_matches = params_.temporal_matches;
+  good.strong_min_inliers = uint32_t(params_.epipolar.min_inliers);
+  EXPECT_TRUE(LoopDetector::Create(db_.get(), good).ok());
+}
+
 TEST(LoopStatusTest, NamesAreDistinctAndGeometryNamesParse) {
   std::set<std::string_view> names;
   for (LoopStatus s :
@@ -495,6 +623,12 @@ TEST(LoopStatusTest, NamesAreDistinctAndGeometryNamesParse) {
     EXPECT_EQ(ParseGeometryCheck(GeometryCheckName(c)).value(), c);
   }
   EXPECT_FALSE(ParseGeometryCheck("homography").ok());
+  std::set<std::string_view> acceptances;
+  for (LoopAcceptance a : {LoopAcceptance::kNone, LoopAcceptance::kTemporalConsistency,
+                           LoopAcceptance::kStrongEvidence, LoopAcceptance::kRelocalisation}) {
+    acceptances.insert(LoopAcceptanceName(a));
+  }
+  EXPECT_EQ(acceptances.size(), 4u);
 }
 
 // Frames with a FrameGeometry (metric loops, thesis §3.3.3; the loops themselves are checked on

@@ -164,6 +164,8 @@ Status ReadConfig(const YAML::Node& root, ServerConfig* config) {
   RECOG_RETURN_IF_ERROR(store.RejectUnknownKeys());
 
   RECOG_ASSIGN_OR_RETURN(YamlSection place, top.Section("place"));
+  // The preset first: the keys below override its values.
+  RECOG_RETURN_IF_ERROR(place.ReadParsed("mode", &config->place, ParseLoopDetectorMode));
   RECOG_RETURN_IF_ERROR(place.Read("alpha", &config->place.alpha));
   RECOG_RETURN_IF_ERROR(place.Read("temporal_matches", &config->place.temporal_matches));
   RECOG_RETURN_IF_ERROR(place.Read("min_inliers", &config->place.epipolar.min_inliers));

@@ -192,6 +192,18 @@ TEST_F(ServerConfigTest, AbsentKeysKeepTheirDefaults) {
   EXPECT_DOUBLE_EQ(config->place.alpha, 0.3);
 }
 
+TEST_F(ServerConfigTest, ThePlaceModeIsThePresetTheOtherPlaceKeysOverride) {
+  EXPECT_TRUE(ServerConfig().place.strong_acceptance) << "the default mode";
+  StatusOr<ServerConfig> thesis = Load("place:\n  temporal_matches: 4\n  mode: thesis\n");
+  ASSERT_TRUE(thesis.ok()) << thesis.status().ToString();
+  EXPECT_FALSE(thesis->place.strong_acceptance);
+  EXPECT_EQ(thesis->place.temporal_matches, 4u) << "keys override the preset wherever they stand";
+  StatusOr<ServerConfig> bad = Load("place:\n  mode: dloop\n");
+  ASSERT_FALSE(bad.ok());
+  EXPECT_EQ(bad.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_THAT(bad.status().message(), HasSubstr("place.mode"));
+}
+
 TEST_F(ServerConfigTest, EmptyFileGivesTheDefaults) {
   StatusOr<ServerConfig> config = Load("# nothing configured\n");
   ASSERT_TRUE(config.ok()) << config.status().ToString();

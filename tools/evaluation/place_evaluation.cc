@@ -202,6 +202,7 @@ StatusOr<PlaceEvaluation> EvaluatePlace(const SequenceFeatures& sequence, const 
       loop.status = r.status;
       loop.correct = truth.Matches(i, int(r.match));
       loop.normalized_score = r.normalized_score;
+      loop.acceptance = r.acceptance;
       loop.inliers = uint32_t(r.inliers.size());
       if (r.status == LoopStatus::kLoopDetected) {
         ++eval.detections;

@@ -63,6 +63,7 @@ struct DetectedLoop {
   bool correct = false;  // the ground truth marks the pair
   double normalized_score = 0;
   uint32_t inliers = 0;
+  LoopAcceptance acceptance = LoopAcceptance::kNone;  // how the detector accepted it
 };
 
 struct PlaceEvaluation {

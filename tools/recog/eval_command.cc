@@ -24,6 +24,7 @@ namespace fs = std::filesystem;
 
 struct EvalPlaceArgs {
   std::string images, ground_truth, vocabulary, params_file, draw_dir, sweep;
+  std::string mode = "default";
   std::string plot = "recog_eval_place_pr.png";
   int features = 1000;
   bool json = false;
@@ -86,6 +87,16 @@ Status ReadParams(const std::string& path, PlaceEvaluationOptions* options, int*
         p.epipolar.max_iterations = v.as<int>();
       else if (key == "min_inliers")
         p.epipolar.min_inliers = v.as<size_t>();
+      else if (key == "strong_acceptance")
+        p.strong_acceptance = v.as<bool>();
+      else if (key == "strong_temporal_matches")
+        p.strong_temporal_matches = v.as<uint32_t>();
+      else if (key == "strong_min_inliers")
+        p.strong_min_inliers = v.as<uint32_t>();
+      else if (key == "strong_min_spread")
+        p.strong_min_spread = v.as<double>();
+      else if (key == "strong_max_homography_ratio")
+        p.strong_max_homography_ratio = v.as<double>();
       else if (key == "direct_index_levels_up")
         options->direct_index_levels_up = v.as<uint32_t>();
       else if (key == "features")
@@ -116,6 +127,7 @@ nlohmann::json ToJson(const PlaceEvaluation& e, const SequenceFeatures& seq) {
                      {"query_file", seq.names[size_t(l.query)]},
                      {"match_file", seq.names[size_t(l.match)]},
                      {"status", std::string(LoopStatusName(l.status))},
+                     {"acceptance", std::string(LoopAcceptanceName(l.acceptance))},
                      {"correct", l.correct},
                      {"normalized_score", l.normalized_score},
                      {"inliers", l.inliers}});
@@ -156,6 +168,9 @@ Status DrawDetections(const std::string& dir, const SequenceFeatures& seq,
 
 int RunEvalPlace(const EvalPlaceArgs& args) {
   PlaceEvaluationOptions options;
+  auto preset = ParseLoopDetectorMode(args.mode);
+  if (!preset.ok()) return Fail(preset.status());
+  options.detector = *preset;  // the parameter file overrides the preset's values
   int features = args.features;
   if (!args.params_file.empty()) {
     if (Status s = ReadParams(args.params_file, &options, &features); !s.ok()) return Fail(s);
@@ -186,7 +201,9 @@ int RunEvalPlace(const EvalPlaceArgs& args) {
   auto evaluation = EvaluatePlace(*sequence, *truth, shared, options, &results);
   if (!evaluation.ok()) return Fail(evaluation.status());
   nlohmann::json out = ToJson(*evaluation, *sequence);
-  out["parameters"] = {{"alpha", options.detector.alpha},
+  out["parameters"] = {{"mode", args.mode},
+                       {"strong_acceptance", options.detector.strong_acceptance},
+                       {"alpha", options.detector.alpha},
                        {"temporal_matches", options.detector.temporal_matches},
                        {"geometry", std::string(GeometryCheckName(options.detector.geometry))},
                        {"direct_index_levels_up", options.direct_index_levels_up},
@@ -279,7 +296,13 @@ void AddEvalCommand(CLI::App& app, int* exit_code) {
                    "the sparse format of recog seqgen")
       ->required();
   place->add_option("--vocab", args->vocabulary, "Vocabulary (default: the bundled place one)");
-  place->add_option("--params", args->params_file, "YAML file of detector parameters");
+  place
+      ->add_option("--mode", args->mode,
+                   "Detector preset: 'default' (strong geometric evidence needs no temporal "
+                   "consistency) or 'thesis' (every loop needs k consistent queries)")
+      ->capture_default_str();
+  place->add_option("--params", args->params_file,
+                    "YAML file of detector parameters (over the --mode preset)");
   place->add_option("--features", args->features, "ORB features per frame")->capture_default_str();
   place->add_option("--sweep", args->sweep, "'alpha': precision-recall curve over alpha 0..1");
   place->add_option("--plot", args->plot, "PNG of the precision-recall curve (with --sweep)")

@@ -138,8 +138,17 @@ import json; d=json.load(open('$tmp/out'))
 for k in ['frames','query_frames_with_truth','detections','correct','precision','recall','loops','sweep']: assert k in d, k
 for s in ['features','conversion','query','islands','insertion','verification','total']:
     assert set(d['timing_ms'][s]) == {'mean','median','max'}, s
-assert d['frames'] == 4 and d['query_frames_with_truth'] == 2, d" \
+assert d['frames'] == 4 and d['query_frames_with_truth'] == 2, d
+assert d['parameters']['mode'] == 'default' and d['parameters']['strong_acceptance'], d['parameters']
+for l in d['loops']: assert l['acceptance'] in ('none', 'temporal_consistency', 'strong_evidence'), l" \
   && pass || fail "eval place --json has the documented keys"
+expect_ok "eval place in thesis mode" "$recog" eval place --images "$images" \
+  --ground-truth "$tmp/gt4.txt" --vocab "$tmp/v.rvoc" --json -q --mode thesis
+/usr/bin/python3 -c "
+import json; d=json.load(open('$tmp/out'))
+assert d['parameters']['mode'] == 'thesis' and not d['parameters']['strong_acceptance'], d['parameters']
+assert all(l['acceptance'] != 'strong_evidence' for l in d['loops']), d['loops']" \
+  && pass || fail "eval place --mode thesis turns strong acceptance off"
 [ -s "$tmp/pr.png" ] && [ -d "$tmp/draw" ] && pass || fail "eval place writes the PR plot and the draw folder"
 expect_error "eval place without ground truth file" "NOT_FOUND" "$recog" eval place --images "$images" \
   --ground-truth "$tmp/none.txt" -q
@@ -157,6 +166,8 @@ expect_error "eval place with an unknown geometry check" "INVALID_ARGUMENT" "$re
   --images "$images" --ground-truth "$tmp/gt4.txt" --params "$tmp/params2.yaml" -q
 expect_error "eval place with an unsupported sweep" "only supports" "$recog" eval place \
   --images "$images" --ground-truth "$tmp/gt4.txt" --sweep k -q
+expect_error "eval place with an unknown mode" "unknown loop detector mode 'dloop'" "$recog" eval place \
+  --images "$images" --ground-truth "$tmp/gt4.txt" --mode dloop -q
 
 # Object models: a planar poster built from one bundled frame, recognised in that same frame.
 for sub in "model build" "model info" "model export" "recognize" "eval objects"; do
