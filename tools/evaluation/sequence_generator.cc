@@ -149,8 +149,9 @@ void Normalize(cv::Mat part) {
   if (norm > 0) part /= norm;
 }
 
+// The global descriptor (see kGlobalSide) of an 8-bit grey or BGR photo.
 cv::Mat GlobalDescriptor(const cv::Mat& photo) {
-  cv::Mat grey = photo, colour = photo;
+  cv::Mat grey = photo, colour = photo;  // cvtColor gives the other one its own pixels
   if (photo.channels() == 3) {
     cv::cvtColor(photo, grey, cv::COLOR_BGR2GRAY);
   } else {
