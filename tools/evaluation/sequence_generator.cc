@@ -129,13 +129,48 @@ constexpr size_t kSceneBatch = 32;  // photos described ahead of the (sequential
 constexpr int kGlobalSide = 64, kGlobalCells = 4, kGlobalBins = 8;
 constexpr int kGlobalGradientSize = kGlobalCells * kGlobalCells * kGlobalBins;
 constexpr int kGlobalSize = kGlobalGradientSize + kGlobalCells * kGlobalCells * 3;
+// Second candidate search, by the SIFT features themselves: each descriptor (less its own mean)
+// is hashed by the signs of kHashBits fixed random projections, in kHashTables tables; the
+// kSceneCandidates chosen photos sharing the most buckets with the photo are matched too.
+constexpr int kHashTables = 4, kHashBits = 16;
+constexpr uint64_t kHashSeed = 0x5eedf00d;
 
 // SIFT features and global descriptor of one photo.
 struct SceneView {
   Status status;  // of reading and describing the photo
   FeatureSet features;
   cv::Mat global;  // 1 x kGlobalSize CV_32F, unit length
+  std::vector<uint32_t>
+      hashes;  // kHashTables per feature: feature i, table t at i * kHashTables + t
 };
+
+// The fixed random projections of the feature hashes: one row of 128 Gaussian values per bit.
+const cv::Mat& HashProjections() {
+  static const cv::Mat projections = [] {
+    cv::Mat m(kHashTables * kHashBits, 128, CV_32F);
+    cv::RNG rng(kHashSeed);
+    rng.fill(m, cv::RNG::NORMAL, 0, 1);
+    return m;
+  }();
+  return projections;
+}
+
+std::vector<uint32_t> FeatureHashes(const cv::Mat& descriptors) {
+  std::vector<uint32_t> hashes(size_t(descriptors.rows) * kHashTables, 0);
+  if (descriptors.empty()) return hashes;
+  cv::Mat centred = descriptors.clone(), projected;
+  for (int i = 0; i < centred.rows; ++i) centred.row(i) -= cv::mean(centred.row(i))[0];
+  cv::gemm(centred, HashProjections(), 1, cv::noArray(), 0, projected, cv::GEMM_2_T);
+  for (int i = 0; i < projected.rows; ++i) {
+    const float* row = projected.ptr<float>(i);
+    for (int t = 0; t < kHashTables; ++t) {
+      uint32_t key = 0;
+      for (int b = 0; b < kHashBits; ++b) key |= uint32_t(row[t * kHashBits + b] > 0) << b;
+      hashes[size_t(i) * kHashTables + size_t(t)] = key;
+    }
+  }
+  return hashes;
+}
 
 // A chosen photo that shows the same scene as the one tested, with its homography inliers.
 struct SceneMatch {
@@ -255,22 +290,29 @@ class SceneIndex {
     for (std::thread& helper : helpers) helper.join();
   }
 
-  // The first of the most similar chosen photos (by global descriptor) that a homography maps
-  // onto `view` with at least kSceneMinInliers inliers.
+  // The first candidate that a homography maps onto `view` with at least kSceneMinInliers
+  // inliers. Candidates: the kSceneCandidates chosen photos most similar by global descriptor,
+  // then the kSceneCandidates sharing the most feature hash buckets (each at most once).
   SceneMatch FindSameScene(const SceneView& view) const {
     if (globals_.empty()) return SceneMatch{};
     const cv::Mat similarity = globals_ * view.global.t();  // one row per chosen photo
-    std::vector<int> order(size_t(globals_.rows));
-    for (int p = 0; p < globals_.rows; ++p) order[size_t(p)] = p;
-    const size_t candidates = std::min(order.size(), size_t(kSceneCandidates));
-    std::partial_sort(order.begin(), order.begin() + std::ptrdiff_t(candidates), order.end(),
-                      [&](int a, int b) {
-                        const float sa = similarity.at<float>(a), sb = similarity.at<float>(b);
-                        return sa != sb ? sa > sb : a < b;
-                      });
+    std::vector<int> votes(size_t(globals_.rows), 0);
+    for (size_t h = 0; h < view.hashes.size(); ++h) {
+      int last = -1;  // one vote per place and feature hash
+      for (const int place : buckets_[h % kHashTables][view.hashes[h]]) {
+        if (place != last) ++votes[size_t(place)];
+        last = place;
+      }
+    }
+    std::vector<int> candidates = Best(similarity.ptr<float>(), globals_.rows);
+    for (const int place : Best(votes.data(), globals_.rows)) {
+      if (votes[size_t(place)] > 0 &&
+          std::find(candidates.begin(), candidates.end(), place) == candidates.end()) {
+        candidates.push_back(place);
+      }
+    }
     const cv::BFMatcher matcher(cv::NORM_L2);
-    for (size_t k = 0; k < candidates; ++k) {
-      const int place = order[k];
+    for (const int place : candidates) {
       const int inliers = HomographyInliers(view.features, places_[size_t(place)], matcher);
       if (inliers >= kSceneMinInliers) return SceneMatch{place, inliers};
     }
@@ -279,7 +321,11 @@ class SceneIndex {
 
   // Makes `view` the next chosen photo (place number size()).
   void Add(SceneView view) {
+    const int place = globals_.rows;
     globals_.push_back(view.global);
+    for (size_t h = 0; h < view.hashes.size(); ++h) {
+      buckets_[h % kHashTables][view.hashes[h]].push_back(place);
+    }
     places_.push_back(std::move(view.features));
   }
 
@@ -297,11 +343,29 @@ class SceneIndex {
                  0, 0, cv::INTER_AREA);
     }
     view->global = GlobalDescriptor(photo);
-    return extractor.Extract(photo, &view->features);
+    RECOG_RETURN_IF_ERROR(extractor.Extract(photo, &view->features));
+    view->hashes = FeatureHashes(view->features.descriptors);
+    return Status::Ok();
+  }
+
+  // The kSceneCandidates places of highest score (ties: lower place first), best first.
+  template <typename T>
+  static std::vector<int> Best(const T* scores, int places) {
+    std::vector<int> order(static_cast<size_t>(places));
+    for (int p = 0; p < places; ++p) order[size_t(p)] = p;
+    const size_t best = std::min(order.size(), size_t(kSceneCandidates));
+    std::partial_sort(
+        order.begin(), order.begin() + std::ptrdiff_t(best), order.end(),
+        [&](int a, int b) { return scores[a] != scores[b] ? scores[a] > scores[b] : a < b; });
+    order.resize(best);
+    return order;
   }
 
   cv::Mat globals_;                 // one row per place, CV_32F
   std::vector<FeatureSet> places_;  // by place
+  // Per table, per hash key: the places with a feature of that key, increasing.
+  std::vector<std::vector<std::vector<int>>> buckets_ = std::vector<std::vector<std::vector<int>>>(
+      kHashTables, std::vector<std::vector<int>>(size_t(1) << kHashBits));
 };
 
 // The first `places` photos that show distinct scenes, and the photos skipped on the way.

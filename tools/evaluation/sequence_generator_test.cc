@@ -413,6 +413,43 @@ TEST_F(DistinctPlacesTest, ACroppedRotatedRescaledCopyIsSkippedUnrelatedPhotosAr
   for (int p = 0; p < 3; ++p) EXPECT_FALSE(generator->PlaceMirrored(p));
 }
 
+// Among more places than either candidate search returns, unrelated scenes are all kept and a copy
+// of the first one, rotated by 30 degrees and darkened, is found and dropped.
+TEST(DistinctPlacesManyTest, ARotatedDarkenedCopyAmongManyScenesIsSkipped) {
+  TempDir dir("many");
+  fs::create_directories(dir.path());
+  constexpr int kScenes = 40;
+  std::vector<std::string> photos;
+  cv::Mat first;
+  for (int k = 0; k < kScenes; ++k) {
+    cv::Mat scene;
+    cv::resize(RandomScene(100 + uint64_t(k)), scene, cv::Size(240, 180), 0, 0, cv::INTER_AREA);
+    if (k == 0) first = scene;
+    photos.push_back(dir / (std::to_string(k) + ".png"));
+    ASSERT_TRUE(cv::imwrite(photos.back(), scene));
+  }
+  const cv::Mat rotation = cv::getRotationMatrix2D(cv::Point2f(120, 90), 30, 0.9);
+  cv::Mat copy;
+  cv::warpAffine(first, copy, rotation, first.size());
+  copy.convertTo(copy, -1, 0.7, 10);
+  photos.push_back(dir / "copy.png");
+  ASSERT_TRUE(cv::imwrite(photos.back(), copy));
+  cv::Mat last;
+  cv::resize(RandomScene(999), last, cv::Size(240, 180), 0, 0, cv::INTER_AREA);
+  photos.push_back(dir / "last.png");
+  ASSERT_TRUE(cv::imwrite(photos.back(), last));
+
+  SequenceOptions o = SmallOptions();
+  o.distinct_places = true;
+  o.places = kScenes + 1;
+  auto generator = SequenceGenerator::Create(photos, o);
+  ASSERT_TRUE(generator.ok()) << generator.status().ToString();
+  ASSERT_EQ(generator->skipped_duplicates(), 1);
+  EXPECT_EQ(generator->skipped()[0].photo, dir / "copy.png");
+  EXPECT_EQ(generator->skipped()[0].same_as_place, 0);
+  EXPECT_EQ(generator->PlacePhoto(kScenes), dir / "last.png");
+}
+
 TEST_F(DistinctPlacesTest, WithoutDistinctPlacesTheCopyIsKept) {
   SequenceOptions o = Options(3);
   o.distinct_places = false;
