@@ -21,12 +21,27 @@ namespace fs = std::filesystem;
 
 constexpr std::string_view kCameraPrefix = "camera:";
 
-StatusOr<FrameSource> FrameSource::Open(const std::string& spec) {
+StatusOr<FrameSource> FrameSource::Open(const std::string& spec,
+                                        std::optional<DatasetLayout> layout) {
   FrameSource source;
   std::error_code ec;
   if (fs::is_directory(spec, ec)) {
-    RECOG_ASSIGN_OR_RETURN(source.files_, ListImages(spec));
+    source.layout_ = layout ? *layout : DetectDatasetLayout(spec);
+    if (source.layout_ == DatasetLayout::kFolder) {
+      RECOG_ASSIGN_OR_RETURN(source.files_, ListImages(spec));
+      return source;
+    }
+    RECOG_ASSIGN_OR_RETURN(const std::vector<DatasetFrame> frames,
+                           ReadDatasetFrames(spec, source.layout_));
+    for (const DatasetFrame& frame : frames) {
+      source.files_.push_back(frame.image);
+      source.timestamps_.push_back(frame.timestamp);
+    }
     return source;
+  }
+  if (layout) {
+    return Status::InvalidArgument("'" + spec + "' is not a folder: only a folder has a layout (" +
+                                   std::string(DatasetLayoutName(*layout)) + ")");
   }
   if (spec.rfind(kCameraPrefix, 0) == 0) {
     const std::string_view digits = std::string_view(spec).substr(kCameraPrefix.size());
@@ -93,6 +108,10 @@ StatusOr<bool> FrameSource::Next(cv::Mat* gray, std::string* name) {
   return true;
 }
 
+double FrameSource::timestamp() const {
+  return next_ > 0 && next_ <= timestamps_.size() ? timestamps_[next_ - 1] : 0.0;
+}
+
 size_t FrameSource::size() const {
   if (!video_) return files_.size();
   if (live_) return 0;
@@ -119,6 +138,7 @@ StatusOr<SequenceFeatures> ExtractSequence(FrameSource& source, const FeatureOpt
             .count());
     sequence.features.push_back(std::move(features));
     sequence.names.push_back(name);
+    sequence.timestamps.push_back(source.timestamp());
     if (keep_images) sequence.images.push_back(image.clone());
     if (progress) progress(sequence.features.size());
   }
@@ -160,8 +180,9 @@ StatusOr<std::vector<LoopResult>> DetectLoops(const SequenceFeatures& sequence,
   RECOG_ASSIGN_OR_RETURN(LoopDetector detector, LoopDetector::Create(db.get(), options.detector));
   std::vector<LoopResult> results;
   results.reserve(sequence.features.size());
-  for (const FeatureSet& features : sequence.features) {
-    RECOG_ASSIGN_OR_RETURN(LoopResult r, detector.Process(features));
+  for (size_t i = 0; i < sequence.features.size(); ++i) {
+    const double timestamp = i < sequence.timestamps.size() ? sequence.timestamps[i] : 0.0;
+    RECOG_ASSIGN_OR_RETURN(LoopResult r, detector.Process(sequence.features[i], timestamp));
     results.push_back(std::move(r));
   }
   return results;

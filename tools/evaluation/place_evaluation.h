@@ -5,6 +5,7 @@
 
 #include <map>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -12,20 +13,29 @@
 
 #include "core/features/feature_extractor.h"
 #include "core/place/loop_detector.h"
+#include "tools/evaluation/dataset_layouts.h"
 #include "tools/evaluation/ground_truth.h"
 
 namespace recog::cli {
 
-// The frames of a sequence: a folder of images (natural order of names), a text file listing one
-// image path per line (relative paths are relative to the list), a video file, or a live camera,
-// "camera:N" (the Video4Linux device /dev/videoN, read until the caller stops).
+// The frames of a sequence: a folder of images (natural order of names), a dataset folder in a
+// public layout with timestamps (TUM RGB-D, EuRoC, KITTI: dataset_layouts.h), a text file listing
+// one image path per line (relative paths are relative to the list), a video file, or a live
+// camera, "camera:N" (the Video4Linux device /dev/videoN, read until the caller stops).
 class FrameSource {
  public:
-  static StatusOr<FrameSource> Open(const std::string& spec);
+  // A folder is read in `layout`; without one, in the layout DetectDatasetLayout finds. A layout
+  // for anything but a folder is INVALID_ARGUMENT; errors of ReadDatasetFrames as they are.
+  static StatusOr<FrameSource> Open(const std::string& spec,
+                                    std::optional<DatasetLayout> layout = std::nullopt);
   // The next frame as 8-bit grey; false at the end. Undecodable images are INVALID_ARGUMENT
   // (the next call goes on with the following image). `name` is the image's path, or
   // "<video file name>#<frame number from 1>" ("camera:N#<frame number>" for a camera).
   StatusOr<bool> Next(cv::Mat* gray, std::string* name);
+  // Timestamp (seconds) of the frame Next() returned last; 0 when the source has none.
+  double timestamp() const;
+  // The dataset layout read (kFolder for anything without timestamps).
+  DatasetLayout layout() const { return layout_; }
   // True for a video or a camera, whose frames have no file of their own.
   bool is_video() const { return video_ != nullptr; }
   // Frames in the sequence: exact for images, the container's count for a video (0: unknown, and
@@ -34,6 +44,8 @@ class FrameSource {
 
  private:
   std::vector<std::string> files_;
+  std::vector<double> timestamps_;  // per file, for a dataset layout; empty otherwise
+  DatasetLayout layout_ = DatasetLayout::kFolder;
   size_t next_ = 0;
   std::shared_ptr<cv::VideoCapture> video_;  // a video file or a camera
   std::string video_name_;
@@ -43,6 +55,7 @@ class FrameSource {
 struct SequenceFeatures {
   std::vector<FeatureSet> features;
   std::vector<std::string> names;
+  std::vector<double> timestamps;  // seconds, per frame (0: unknown; tau_c then counts frames)
   std::vector<double> feature_ms;  // extraction time per frame
   std::vector<cv::Mat> images;     // kept only when asked (for drawing)
 };

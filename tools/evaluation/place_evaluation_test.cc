@@ -93,6 +93,31 @@ TEST(PlaceEvaluationTest, ATourOfDistinctPlacesWithoutRevisitsHasNoLoop) {
   EXPECT_EQ(e->detections, 0);
 }
 
+// tau_c counts frames without timestamps and seconds with them: the corridor's four demo frames
+// twice are all within the 20 most recent frames, and within 20 s when 1 s apart, but 100 s apart
+// every earlier frame is a candidate.
+TEST(PlaceEvaluationTest, TimestampsSetTauCInSeconds) {
+  SequenceFeatures sequence = Extract(testing::ProjectTestData("corridor"));
+  ASSERT_EQ(sequence.features.size(), 4u);
+  for (size_t i = 0; i < 4; ++i) sequence.features.push_back(sequence.features[i]);
+  const auto candidates = [&](const std::vector<double>& timestamps) {
+    sequence.timestamps = timestamps;
+    auto results = DetectLoops(sequence, PlaceVocabulary(), PlaceEvaluationOptions{});
+    EXPECT_TRUE(results.ok()) << results.status().ToString();
+    std::vector<EntryId> matches;
+    for (const LoopResult& r : *results) matches.push_back(r.match);
+    return matches;
+  };
+  for (const EntryId match : candidates({})) EXPECT_EQ(match, kInvalidEntryId);
+  for (const EntryId match : candidates({1, 2, 3, 4, 5, 6, 7, 8})) {
+    EXPECT_EQ(match, kInvalidEntryId);
+  }
+  const std::vector<EntryId> matches = candidates({100, 200, 300, 400, 500, 600, 700, 800});
+  int repeated = 0;
+  for (size_t i = 4; i < 8; ++i) repeated += matches[i] == EntryId(i - 4);
+  EXPECT_GE(repeated, 3);
+}
+
 TEST(PlaceEvaluationTest, AGroundTruthOfAnotherLengthIsRefused) {
   const SequenceFeatures sequence = Extract(testing::ProjectTestData("corridor"));
   GroundTruth truth;

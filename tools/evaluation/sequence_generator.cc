@@ -9,17 +9,16 @@
 #include <mutex>
 #include <numbers>
 #include <random>
+#include <set>
 #include <thread>
 #include <utility>
 
+#include <opencv2/calib3d.hpp>
+#include <opencv2/features2d.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "core/features/feature_extractor.h"
-#include "core/geometry/correspondences.h"
-#include "core/index/database.h"
-#include "core/index/memory_index_store.h"
-#include "core/vocabulary/vocabulary_io.h"
 #include "tools/common/cli_support.h"
 #include "tools/evaluation/synthetic_images.h"
 
@@ -110,58 +109,169 @@ cv::Mat ResizeToCover(const cv::Mat& photo, const SequenceOptions& o) {
   return cover;
 }
 
-// --- Distinct places: the same-scene test (see the header). ---
+// --- Distinct places: the same-scene test (see the header). It shares nothing with the loop
+// detector: SIFT instead of ORB, a global descriptor instead of the ORB bag of words, Lowe's
+// ratio test on L2 distances, and a homography instead of a fundamental matrix. ---
 
-constexpr int kSceneFeatures = 500;
+constexpr int kSceneFeatures = 500;                   // SIFT features per photo
 constexpr int kSceneWidth = 640, kSceneHeight = 480;  // larger photos are shrunk to cover this
-constexpr size_t kSceneCandidates = 5;  // chosen photos of highest BoW score that get matched
-constexpr double kSceneRatio = 0.8;
-constexpr uint32_t kSceneMaxDistance = 64;
-constexpr double kSceneThresholdPx = 3;
-constexpr size_t kSceneMinInliers = 12;  // the loop detector's own minimum (Table 4.4)
-constexpr size_t kSceneBatch = 32;       // photos described ahead of the (sequential) selection
+// Chosen photos of highest global similarity that get matched.
+constexpr int kSceneCandidates = 30;
+constexpr float kSceneRatio = 0.8f;      // Lowe's ratio test
+constexpr double kSceneThresholdPx = 5;  // homography RANSAC reprojection error of an inlier
+constexpr int kSceneMinInliers = 12;
+// A homography that scales areas by more than this (or less than its inverse) is degenerate.
+constexpr double kSceneMaxAreaChange = 16;
+constexpr size_t kSceneBatch = 32;  // photos described ahead of the (sequential) selection
+// Global descriptor: orientation histograms (8 bins, magnitude-weighted) of the grey photo
+// shrunk to 64x64, in 4x4 cells, and the mean-free colour of a 4x4 thumbnail, each part of unit
+// length, concatenated and scaled to unit length (cosine similarity = dot product).
+constexpr int kGlobalSide = 64, kGlobalCells = 4, kGlobalBins = 8;
+constexpr int kGlobalGradientSize = kGlobalCells * kGlobalCells * kGlobalBins;
+constexpr int kGlobalSize = kGlobalGradientSize + kGlobalCells * kGlobalCells * 3;
+// Second candidate search, by the SIFT features themselves: each descriptor (less its own mean)
+// is hashed by the signs of kHashBits fixed random projections, in kHashTables tables; the
+// kSceneCandidates chosen photos sharing the most buckets with the photo are matched too.
+constexpr int kHashTables = 4, kHashBits = 16;
+constexpr uint64_t kHashSeed = 0x5eedf00d;
 
-// Features and bag of words of one photo.
+// SIFT features and global descriptor of one photo.
 struct SceneView {
   Status status;  // of reading and describing the photo
   FeatureSet features;
-  BowVector bow;
+  cv::Mat global;  // 1 x kGlobalSize CV_32F, unit length
+  std::vector<uint32_t>
+      hashes;  // kHashTables per feature: feature i, table t at i * kHashTables + t
 };
 
-// A chosen photo that shows the same scene as the one tested, with its epipolar inliers.
+// The fixed random projections of the feature hashes: one row of 128 Gaussian values per bit.
+const cv::Mat& HashProjections() {
+  static const cv::Mat projections = [] {
+    cv::Mat m(kHashTables * kHashBits, 128, CV_32F);
+    cv::RNG rng(kHashSeed);
+    rng.fill(m, cv::RNG::NORMAL, 0, 1);
+    return m;
+  }();
+  return projections;
+}
+
+std::vector<uint32_t> FeatureHashes(const cv::Mat& descriptors) {
+  std::vector<uint32_t> hashes(size_t(descriptors.rows) * kHashTables, 0);
+  if (descriptors.empty()) return hashes;
+  cv::Mat centred = descriptors.clone(), projected;
+  for (int i = 0; i < centred.rows; ++i) centred.row(i) -= cv::mean(centred.row(i))[0];
+  cv::gemm(centred, HashProjections(), 1, cv::noArray(), 0, projected, cv::GEMM_2_T);
+  for (int i = 0; i < projected.rows; ++i) {
+    const float* row = projected.ptr<float>(i);
+    for (int t = 0; t < kHashTables; ++t) {
+      uint32_t key = 0;
+      for (int b = 0; b < kHashBits; ++b) key |= uint32_t(row[t * kHashBits + b] > 0) << b;
+      hashes[size_t(i) * kHashTables + size_t(t)] = key;
+    }
+  }
+  return hashes;
+}
+
+// A chosen photo that shows the same scene as the one tested, with its homography inliers.
 struct SceneMatch {
   int place = -1;  // -1: none
   int inliers = 0;
 };
 
-// The photos chosen so far: an inverted index over their bags of words (entry id = place) to find
-// candidates, and their features to verify them.
+// Scales `part` (a row range of a 1 x n CV_32F row) to unit length, when it is not all zero.
+void Normalize(cv::Mat part) {
+  const double norm = cv::norm(part);
+  if (norm > 0) part /= norm;
+}
+
+// The global descriptor (see kGlobalSide) of an 8-bit grey or BGR photo.
+cv::Mat GlobalDescriptor(const cv::Mat& photo) {
+  cv::Mat grey = photo, colour = photo;  // cvtColor gives the other one its own pixels
+  if (photo.channels() == 3) {
+    cv::cvtColor(photo, grey, cv::COLOR_BGR2GRAY);
+  } else {
+    cv::cvtColor(photo, colour, cv::COLOR_GRAY2BGR);
+  }
+  cv::Mat descriptor(1, kGlobalSize, CV_32F, cv::Scalar(0));
+  cv::Mat small, dx, dy, magnitude, angle;
+  cv::resize(grey, small, cv::Size(kGlobalSide, kGlobalSide), 0, 0, cv::INTER_AREA);
+  small.convertTo(small, CV_32F);
+  cv::Sobel(small, dx, CV_32F, 1, 0);
+  cv::Sobel(small, dy, CV_32F, 0, 1);
+  cv::cartToPolar(dx, dy, magnitude, angle);  // angle in [0, 2 pi)
+  const int cell = kGlobalSide / kGlobalCells;
+  float* out = descriptor.ptr<float>();
+  for (int y = 0; y < kGlobalSide; ++y) {
+    for (int x = 0; x < kGlobalSide; ++x) {
+      const int bin = std::min(
+          kGlobalBins - 1, int(angle.at<float>(y, x) / float(2 * std::numbers::pi) * kGlobalBins));
+      out[((y / cell) * kGlobalCells + x / cell) * kGlobalBins + bin] += magnitude.at<float>(y, x);
+    }
+  }
+  Normalize(descriptor.colRange(0, kGlobalGradientSize));
+  cv::Mat thumbnail;
+  cv::resize(colour, thumbnail, cv::Size(kGlobalCells, kGlobalCells), 0, 0, cv::INTER_AREA);
+  cv::Mat colour_part = descriptor.colRange(kGlobalGradientSize, kGlobalSize);
+  thumbnail.reshape(1, 1).convertTo(colour_part, CV_32F);
+  colour_part -= cv::mean(colour_part)[0];
+  Normalize(colour_part);
+  descriptor /= std::sqrt(2.0);
+  return descriptor;
+}
+
+// Lowe's ratio test on every feature of `a` against `b` (L2), made one-to-one (a feature of `b`,
+// or a position of `a` shared by SIFT's several orientations, keeps its nearest match), then a
+// homography (RANSAC; OpenCV's is deterministic). Returns its inliers; 0 when there are too few
+// matches to fit one or when the homography is degenerate (it changes areas by more than
+// kSceneMaxAreaChange, e.g. collapses the matches onto a point).
+int HomographyInliers(const FeatureSet& a, const FeatureSet& b, const cv::BFMatcher& matcher) {
+  if (a.descriptors.rows < 2 || b.descriptors.rows < 2) return 0;
+  std::vector<std::vector<cv::DMatch>> knn;
+  matcher.knnMatch(a.descriptors, b.descriptors, knn, 2);
+  std::vector<cv::DMatch> passed;
+  for (const std::vector<cv::DMatch>& pair : knn) {
+    if (pair.size() == 2 && pair[0].distance < kSceneRatio * pair[1].distance) {
+      passed.push_back(pair[0]);
+    }
+  }
+  std::sort(passed.begin(), passed.end(), [](const cv::DMatch& x, const cv::DMatch& y) {
+    return x.distance != y.distance ? x.distance < y.distance : x.queryIdx < y.queryIdx;
+  });
+  std::set<int> b_taken;
+  std::set<std::pair<float, float>> a_taken;
+  std::vector<cv::Point2f> a_points, b_points;
+  for (const cv::DMatch& m : passed) {
+    const cv::Point2f pa = a.keypoints[size_t(m.queryIdx)].pt;
+    if (!b_taken.insert(m.trainIdx).second || !a_taken.emplace(pa.x, pa.y).second) continue;
+    a_points.push_back(pa);
+    b_points.push_back(b.keypoints[size_t(m.trainIdx)].pt);
+  }
+  if (a_points.size() < size_t(kSceneMinInliers)) return 0;
+  cv::Mat mask;
+  const cv::Mat homography =
+      cv::findHomography(a_points, b_points, cv::RANSAC, kSceneThresholdPx, mask);
+  if (homography.empty()) return 0;
+  const cv::Matx33d h = cv::Matx33d(homography) * (1 / homography.at<double>(2, 2));
+  const double area_change = std::abs(h(0, 0) * h(1, 1) - h(0, 1) * h(1, 0));
+  if (area_change * kSceneMaxAreaChange < 1 || area_change > kSceneMaxAreaChange) return 0;
+  return cv::countNonZero(mask);
+}
+
+// The photos chosen so far: their global descriptors (one row each) to find candidates, and their
+// SIFT features to verify them.
 class SceneIndex {
  public:
-  static StatusOr<std::unique_ptr<SceneIndex>> Create() {
-    const std::string path = DefaultPlaceVocabularyPath();
-    auto vocabulary = LoadAnyVocabulary(path);
-    if (!vocabulary.ok()) {
-      return vocabulary.status().WithContext("distinct places need the place vocabulary");
-    }
-    auto index = std::unique_ptr<SceneIndex>(new SceneIndex());
-    index->vocabulary_ = std::make_shared<const Vocabulary>(std::move(vocabulary).value());
-    RECOG_ASSIGN_OR_RETURN(index->database_,
-                           Database::Create(&index->store_, "places", index->vocabulary_,
-                                            ScoringType::kL1, /*direct_index_levels_up=*/0));
-    return index;
-  }
-
   // Reads and describes photos [begin, end) into views[0 .. end - begin), on a few threads. Each
   // view depends on its photo alone, so the thread count does not change any result.
-  void Describe(const std::vector<std::string>& photos, size_t begin, size_t end,
-                std::vector<SceneView>* views) const {
+  static void Describe(const std::vector<std::string>& photos, size_t begin, size_t end,
+                       std::vector<SceneView>* views) {
     views->clear();
     views->resize(end - begin);
     std::atomic<size_t> next{begin};
     const auto work = [&] {
       FeatureOptions options;
-      options.orb.max_features = kSceneFeatures;
+      options.type = FeatureType::kSift;
+      options.sift.max_features = kSceneFeatures;
       auto extractor = CreateFeatureExtractor(options);
       for (size_t i = next++; i < end; i = next++) {
         SceneView& view = (*views)[i - begin];
@@ -180,63 +290,82 @@ class SceneIndex {
     for (std::thread& helper : helpers) helper.join();
   }
 
-  // The first of the best-scoring chosen photos whose geometry agrees with `view`.
-  StatusOr<SceneMatch> FindSameScene(const SceneView& view) const {
-    SceneMatch found;
-    if (view.bow.empty()) return found;
-    QueryOptions query;
-    query.max_results = kSceneCandidates;
-    std::vector<QueryResult> candidates;
-    RECOG_RETURN_IF_ERROR(database_->Query(view.bow, query, &candidates));
-    const MatchOptions match{.ratio = kSceneRatio, .max_distance = kSceneMaxDistance};
-    EpipolarOptions epipolar;
-    epipolar.threshold_px = kSceneThresholdPx;
-    epipolar.min_inliers = kSceneMinInliers;
-    std::vector<Match> matches;
-    for (const QueryResult& candidate : candidates) {
-      const FeatureSet& place = places_[candidate.id];
-      RECOG_RETURN_IF_ERROR(
-          MatchExhaustive(view.features.descriptors, place.descriptors, match, &matches));
-      if (matches.size() < kSceneMinInliers) continue;
-      const EpipolarResult result =
-          VerifyEpipolar(view.features.keypoints, place.keypoints, matches, epipolar);
-      if (result.verified) return SceneMatch{int(candidate.id), int(result.inliers.size())};
+  // The first candidate that a homography maps onto `view` with at least kSceneMinInliers
+  // inliers. Candidates: the kSceneCandidates chosen photos most similar by global descriptor,
+  // then the kSceneCandidates sharing the most feature hash buckets (each at most once).
+  SceneMatch FindSameScene(const SceneView& view) const {
+    if (globals_.empty()) return SceneMatch{};
+    const cv::Mat similarity = globals_ * view.global.t();  // one row per chosen photo
+    std::vector<int> votes(size_t(globals_.rows), 0);
+    for (size_t h = 0; h < view.hashes.size(); ++h) {
+      int last = -1;  // one vote per place and feature hash
+      for (const int place : buckets_[h % kHashTables][view.hashes[h]]) {
+        if (place != last) ++votes[size_t(place)];
+        last = place;
+      }
     }
-    return found;
+    std::vector<int> candidates = Best(similarity.ptr<float>(), globals_.rows);
+    for (const int place : Best(votes.data(), globals_.rows)) {
+      if (votes[size_t(place)] > 0 &&
+          std::find(candidates.begin(), candidates.end(), place) == candidates.end()) {
+        candidates.push_back(place);
+      }
+    }
+    const cv::BFMatcher matcher(cv::NORM_L2);
+    for (const int place : candidates) {
+      const int inliers = HomographyInliers(view.features, places_[size_t(place)], matcher);
+      if (inliers >= kSceneMinInliers) return SceneMatch{place, inliers};
+    }
+    return SceneMatch{};
   }
 
   // Makes `view` the next chosen photo (place number size()).
-  Status Add(SceneView view) {
-    // Only the bag of words goes to the database; the features stay here.
-    RECOG_RETURN_IF_ERROR(
-        database_->AddConverted(view.bow, FeatureVector(), FeatureSet()).status());
+  void Add(SceneView view) {
+    const int place = globals_.rows;
+    globals_.push_back(view.global);
+    for (size_t h = 0; h < view.hashes.size(); ++h) {
+      buckets_[h % kHashTables][view.hashes[h]].push_back(place);
+    }
     places_.push_back(std::move(view.features));
-    return Status::Ok();
   }
 
  private:
-  SceneIndex() = default;
-
-  Status DescribeOne(FeatureExtractor& extractor, const std::string& path, SceneView* view) const {
-    RECOG_ASSIGN_OR_RETURN(cv::Mat grey, ReadGrayImage(path));
+  static Status DescribeOne(FeatureExtractor& extractor, const std::string& path, SceneView* view) {
+    RECOG_ASSIGN_OR_RETURN(cv::Mat photo, ReadPhoto(path));
     // Large photos are looked at at about frame size (a fixed one, so that the chosen photos do
     // not depend on the options), which also bounds the time spent on them.
     const double scale =
-        std::max(double(kSceneWidth) / grey.cols, double(kSceneHeight) / grey.rows);
+        std::max(double(kSceneWidth) / photo.cols, double(kSceneHeight) / photo.rows);
     if (scale < 1) {
-      cv::resize(grey, grey,
-                 cv::Size(std::max(1, int(std::lround(grey.cols * scale))),
-                          std::max(1, int(std::lround(grey.rows * scale)))),
+      cv::resize(photo, photo,
+                 cv::Size(std::max(1, int(std::lround(photo.cols * scale))),
+                          std::max(1, int(std::lround(photo.rows * scale)))),
                  0, 0, cv::INTER_AREA);
     }
-    RECOG_RETURN_IF_ERROR(extractor.Extract(grey, &view->features));
-    return vocabulary_->Transform(view->features.descriptors, &view->bow);
+    view->global = GlobalDescriptor(photo);
+    RECOG_RETURN_IF_ERROR(extractor.Extract(photo, &view->features));
+    view->hashes = FeatureHashes(view->features.descriptors);
+    return Status::Ok();
   }
 
-  std::shared_ptr<const Vocabulary> vocabulary_;
-  MemoryIndexStore store_;
-  std::unique_ptr<Database> database_;
+  // The kSceneCandidates places of highest score (ties: lower place first), best first.
+  template <typename T>
+  static std::vector<int> Best(const T* scores, int places) {
+    std::vector<int> order(static_cast<size_t>(places));
+    for (int p = 0; p < places; ++p) order[size_t(p)] = p;
+    const size_t best = std::min(order.size(), size_t(kSceneCandidates));
+    std::partial_sort(
+        order.begin(), order.begin() + std::ptrdiff_t(best), order.end(),
+        [&](int a, int b) { return scores[a] != scores[b] ? scores[a] > scores[b] : a < b; });
+    order.resize(best);
+    return order;
+  }
+
+  cv::Mat globals_;                 // one row per place, CV_32F
   std::vector<FeatureSet> places_;  // by place
+  // Per table, per hash key: the places with a feature of that key, increasing.
+  std::vector<std::vector<std::vector<int>>> buckets_ = std::vector<std::vector<std::vector<int>>>(
+      kHashTables, std::vector<std::vector<int>>(size_t(1) << kHashBits));
 };
 
 // The first `places` photos that show distinct scenes, and the photos skipped on the way.
@@ -250,24 +379,24 @@ Status ChooseDistinctPhotos(const std::vector<std::string>& photos, const Sequen
         " places: distinct places need a different photo per place (turn distinct places off, "
         "--allow-duplicate-places, to reuse photos)");
   }
-  RECOG_ASSIGN_OR_RETURN(std::unique_ptr<SceneIndex> index, SceneIndex::Create());
+  SceneIndex index;
   std::vector<SceneView> views;
   size_t next = 0;
   while (chosen->size() < wanted && next < photos.size()) {
     // Describe about as many photos as are still needed; most of them will be taken.
     const size_t batch =
         std::min({kSceneBatch, photos.size() - next, std::max<size_t>(wanted - chosen->size(), 2)});
-    index->Describe(photos, next, next + batch, &views);
+    SceneIndex::Describe(photos, next, next + batch, &views);
     for (size_t k = 0; k < batch && chosen->size() < wanted; ++k) {
       SceneView& view = views[k];
       const std::string& photo = photos[next + k];
       RECOG_RETURN_IF_ERROR(view.status);
-      RECOG_ASSIGN_OR_RETURN(const SceneMatch same, index->FindSameScene(view));
+      const SceneMatch same = index.FindSameScene(view);
       if (same.place >= 0) {
         skipped->push_back(SkippedPhoto{photo, same.place, same.inliers});
         continue;
       }
-      RECOG_RETURN_IF_ERROR(index->Add(std::move(view)));
+      index.Add(std::move(view));
       chosen->push_back(photo);
     }
     next += batch;

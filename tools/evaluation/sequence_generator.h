@@ -33,14 +33,19 @@
 // when no two place photos show the same scene (photo collections hold near-duplicates: two shots
 // of one beach, the same animals a second later). So Create() walks the photos in order and skips
 // every photo that shows the scene of an already chosen one, until P places are chosen. The test
-// is deterministic and independent of any loop detector's settings and of the options: 500 ORB
-// features of the grey photo (shrunk to just cover 640x480 when larger); its bag of words (bundled
-// place vocabulary, DefaultPlaceVocabularyPath()) finds the 5 chosen photos of highest L1 score;
-// each of those is matched exhaustively (ratio 0.8, Hamming distance <= 64) and the photo is a
-// duplicate as soon as a fundamental matrix (RANSAC, 3 px) has at least 12 inliers. This is
-// deliberately looser than a loop detector, so that whatever a detector could take for the same
-// place is left out. The chosen list is fixed by Create(), so Frame(i) stays independent of call
-// order.
+// is deterministic, independent of the options and deliberately shares nothing with the loop
+// detector (whose own check is ORB, its bag of words and a fundamental matrix), so that the tours
+// are not cleaned of exactly what the detector would confuse: 500 SIFT features of the photo
+// (shrunk to just cover 640x480 when larger); a global descriptor (8-bin gradient orientation
+// histograms in 4x4 cells of the grey photo shrunk to 64x64, plus the mean-free colour of a 4x4
+// thumbnail) picks the 30 chosen photos of highest cosine similarity, and hashes of the SIFT
+// descriptors (signs of 16 fixed random projections of the descriptor less its mean, 4 tables)
+// the 30 that share the most hash buckets with the photo; each candidate is matched with
+// Lowe's ratio test (0.8, L2, every feature against every feature, one-to-one) and the photo is a
+// duplicate as soon as a homography (RANSAC, 5 px) has at least 12 inliers and changes areas by
+// less than a factor 16 (not degenerate). The thresholds are loose: an unrelated photo dropped
+// costs little, a near-duplicate kept turns a right match into a false positive. The
+// chosen list is fixed by Create(), so Frame(i) stays independent of call order.
 #pragma once
 
 #include <cstdint>
@@ -87,7 +92,7 @@ struct SequenceFrame {
 struct SkippedPhoto {
   std::string photo;
   int same_as_place = 0;  // the chosen place whose photo it matched
-  int inliers = 0;        // epipolar inliers of that match
+  int inliers = 0;        // homography inliers of that match
 };
 
 class SequenceGenerator {
@@ -96,8 +101,8 @@ class SequenceGenerator {
   // place uses does not exist. Without distinct_places, photos are decoded lazily, by Frame().
   // With distinct_places, Create() decodes photos in order until P distinct ones are found:
   // INVALID_ARGUMENT when there are fewer than P photos, when they run out before P distinct ones
-  // are found, or when a photo it reaches cannot be decoded; errors loading the bundled place
-  // vocabulary as they are. Then Frame() decodes the chosen photos again, on demand.
+  // are found, or when a photo it reaches cannot be decoded. Then Frame() decodes the chosen photos
+  // again, on demand.
   static StatusOr<SequenceGenerator> Create(std::vector<std::string> photos,
                                             const SequenceOptions& options);
 

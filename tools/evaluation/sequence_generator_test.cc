@@ -363,18 +363,25 @@ cv::Mat RandomScene(uint64_t seed) {
   return scene;
 }
 
-// 1.png corridor frame 20, 2.png random triangles, 3.png frame 20 moved by (7, 5) px and blurred,
-// 4.png corridor frame 1.
+// 1.png corridor frame 20, 2.png random triangles, 3.png the middle 80 % of frame 20 rotated by
+// 10 degrees, shrunk to 70 % and blurred, 4.png corridor frame 1.
 class DistinctPlacesTest : public ::testing::Test {
  protected:
   void SetUp() override {
     fs::create_directories(dir_.path());
     const cv::Mat photo = cv::imread(testing::ProjectTestData("corridor/20.jpg"));
     ASSERT_FALSE(photo.empty());
+    const cv::Rect middle(photo.cols / 10, photo.rows / 10, photo.cols * 8 / 10,
+                          photo.rows * 8 / 10);
+    const cv::Mat crop = photo(middle).clone();
+    const cv::Size size(crop.cols * 7 / 10, crop.rows * 7 / 10);
+    cv::Mat rotation =
+        cv::getRotationMatrix2D(cv::Point2f(crop.cols / 2.0f, crop.rows / 2.0f), 10, 0.7);
+    rotation.at<double>(0, 2) += (size.width - crop.cols) / 2.0;  // centre to centre
+    rotation.at<double>(1, 2) += (size.height - crop.rows) / 2.0;
     cv::Mat copy;
-    const cv::Matx23d shift(1, 0, 7, 0, 1, 5);
-    cv::warpAffine(photo, copy, shift, photo.size(), cv::INTER_LINEAR, cv::BORDER_REFLECT);
-    cv::GaussianBlur(copy, copy, cv::Size(), 1.2);
+    cv::warpAffine(crop, copy, rotation, size, cv::INTER_AREA, cv::BORDER_REFLECT);
+    cv::GaussianBlur(copy, copy, cv::Size(), 1.0);
     ASSERT_TRUE(cv::imwrite(dir_ / "1.png", photo));
     ASSERT_TRUE(cv::imwrite(dir_ / "2.png", RandomScene(5)));
     ASSERT_TRUE(cv::imwrite(dir_ / "3.png", copy));
@@ -394,7 +401,7 @@ class DistinctPlacesTest : public ::testing::Test {
   std::vector<std::string> photos_;
 };
 
-TEST_F(DistinctPlacesTest, AShiftedBlurredCopyIsSkipped) {
+TEST_F(DistinctPlacesTest, ACroppedRotatedRescaledCopyIsSkippedUnrelatedPhotosAreNot) {
   auto generator = SequenceGenerator::Create(photos_, Options(3));
   ASSERT_TRUE(generator.ok()) << generator.status().ToString();
   EXPECT_EQ(generator->photos(), (std::vector<std::string>{photos_[0], photos_[1], photos_[3]}));
@@ -404,6 +411,43 @@ TEST_F(DistinctPlacesTest, AShiftedBlurredCopyIsSkipped) {
   EXPECT_EQ(generator->skipped()[0].same_as_place, 0);
   EXPECT_GE(generator->skipped()[0].inliers, 20);
   for (int p = 0; p < 3; ++p) EXPECT_FALSE(generator->PlaceMirrored(p));
+}
+
+// Among more places than either candidate search returns, unrelated scenes are all kept and a copy
+// of the first one, rotated by 30 degrees and darkened, is found and dropped.
+TEST(DistinctPlacesManyTest, ARotatedDarkenedCopyAmongManyScenesIsSkipped) {
+  TempDir dir("many");
+  fs::create_directories(dir.path());
+  constexpr int kScenes = 40;
+  std::vector<std::string> photos;
+  cv::Mat first;
+  for (int k = 0; k < kScenes; ++k) {
+    cv::Mat scene;
+    cv::resize(RandomScene(100 + uint64_t(k)), scene, cv::Size(240, 180), 0, 0, cv::INTER_AREA);
+    if (k == 0) first = scene;
+    photos.push_back(dir / (std::to_string(k) + ".png"));
+    ASSERT_TRUE(cv::imwrite(photos.back(), scene));
+  }
+  const cv::Mat rotation = cv::getRotationMatrix2D(cv::Point2f(120, 90), 30, 0.9);
+  cv::Mat copy;
+  cv::warpAffine(first, copy, rotation, first.size());
+  copy.convertTo(copy, -1, 0.7, 10);
+  photos.push_back(dir / "copy.png");
+  ASSERT_TRUE(cv::imwrite(photos.back(), copy));
+  cv::Mat last;
+  cv::resize(RandomScene(999), last, cv::Size(240, 180), 0, 0, cv::INTER_AREA);
+  photos.push_back(dir / "last.png");
+  ASSERT_TRUE(cv::imwrite(photos.back(), last));
+
+  SequenceOptions o = SmallOptions();
+  o.distinct_places = true;
+  o.places = kScenes + 1;
+  auto generator = SequenceGenerator::Create(photos, o);
+  ASSERT_TRUE(generator.ok()) << generator.status().ToString();
+  ASSERT_EQ(generator->skipped_duplicates(), 1);
+  EXPECT_EQ(generator->skipped()[0].photo, dir / "copy.png");
+  EXPECT_EQ(generator->skipped()[0].same_as_place, 0);
+  EXPECT_EQ(generator->PlacePhoto(kScenes), dir / "last.png");
 }
 
 TEST_F(DistinctPlacesTest, WithoutDistinctPlacesTheCopyIsKept) {

@@ -1,8 +1,10 @@
-// recog eval place: runs the loop detector over a sequence with ground truth and reports
-// precision, recall, detections and per-stage timings; --sweep alpha draws the PR curve.
+// recog eval place: runs the loop detector over a sequence (a folder, a TUM RGB-D / EuRoC / KITTI
+// dataset folder with timestamps, a list or a video) and reports the detections and per-stage
+// timings, with a ground truth also precision and recall; --sweep alpha draws the PR curve.
 #include <cstdio>
 #include <filesystem>
 #include <memory>
+#include <optional>
 #include <set>
 #include <string>
 
@@ -25,6 +27,7 @@ namespace fs = std::filesystem;
 struct EvalPlaceArgs {
   std::string images, ground_truth, vocabulary, params_file, draw_dir, sweep;
   std::string mode = "default";
+  std::string layout = "auto";
   std::string plot = "recog_eval_place_pr.png";
   int features = 1000;
   bool json = false;
@@ -178,24 +181,43 @@ int RunEvalPlace(const EvalPlaceArgs& args) {
   if (!args.sweep.empty() && args.sweep != "alpha") {
     return Fail(Status::InvalidArgument("--sweep only supports 'alpha'"));
   }
-  auto truth = ReadGroundTruth(args.ground_truth);
-  if (!truth.ok()) return Fail(truth.status());
+  if (!args.sweep.empty() && args.ground_truth.empty()) {
+    return Fail(Status::InvalidArgument("--sweep needs --ground-truth"));
+  }
+  std::optional<DatasetLayout> layout;
+  if (args.layout != "auto") {
+    auto parsed = ParseDatasetLayout(args.layout);
+    if (!parsed.ok()) return Fail(parsed.status());
+    layout = *parsed;
+  }
   const std::string vocabulary_path =
       args.vocabulary.empty() ? DefaultPlaceVocabularyPath() : args.vocabulary;
   auto vocabulary = LoadAnyVocabulary(vocabulary_path);
   if (!vocabulary.ok()) return Fail(vocabulary.status());
   auto shared = std::make_shared<const Vocabulary>(std::move(vocabulary).value());
 
-  auto source = FrameSource::Open(args.images);
+  auto source = FrameSource::Open(args.images, layout);
   if (!source.ok()) return Fail(source.status());
+  // Without a ground truth, every frame is taken to have no true match: detections are counted,
+  // precision and recall are not reported.
+  const bool has_truth = !args.ground_truth.empty();
+  StatusOr<GroundTruth> truth = GroundTruth{};
+  if (has_truth) {
+    truth = ReadGroundTruth(args.ground_truth);
+    if (!truth.ok()) return Fail(truth.status());
+  }
   FeatureOptions feature_options;
   feature_options.orb.max_features = features;
   ProgressBar progress(!args.quiet);
   auto sequence = ExtractSequence(*source, feature_options, !args.draw_dir.empty(), [&](size_t n) {
-    progress.Update("features", n, uint64_t(truth->frames));
+    progress.Update("features", n, uint64_t(has_truth ? truth->frames : source->size()));
   });
   progress.Finish();
   if (!sequence.ok()) return Fail(sequence.status());
+  if (!has_truth) {
+    truth->frames = int(sequence->features.size());
+    truth->matches.resize(sequence->features.size());
+  }
 
   std::vector<LoopResult> results;
   auto evaluation = EvaluatePlace(*sequence, *truth, shared, options, &results);
@@ -209,6 +231,14 @@ int RunEvalPlace(const EvalPlaceArgs& args) {
                        {"direct_index_levels_up", options.direct_index_levels_up},
                        {"features", features},
                        {"vocabulary", vocabulary_path}};
+  out["layout"] = std::string(DatasetLayoutName(source->layout()));
+  out["ground_truth"] = has_truth ? nlohmann::json(args.ground_truth) : nlohmann::json(nullptr);
+  if (!has_truth) {
+    for (const char* key : {"query_frames_with_truth", "correct", "precision", "recall"}) {
+      out.erase(key);
+    }
+    for (nlohmann::json& loop : out["loops"]) loop.erase("correct");
+  }
 
   if (!args.sweep.empty()) {
     // Two curves: with the configured geometric check, and without any (thesis Fig. 4.7), which
@@ -258,10 +288,15 @@ int RunEvalPlace(const EvalPlaceArgs& args) {
     std::printf("%s\n", out.dump(2).c_str());
   } else {
     const PlaceEvaluation& e = *evaluation;
-    std::printf("frames %d, query frames with a true match %d\n", e.frames,
-                e.query_frames_with_truth);
-    std::printf("detections %d, correct %d: precision %.1f %%, recall %.1f %%\n", e.detections,
-                e.correct, 100 * e.precision, 100 * e.recall);
+    if (has_truth) {
+      std::printf("frames %d, query frames with a true match %d\n", e.frames,
+                  e.query_frames_with_truth);
+      std::printf("detections %d, correct %d: precision %.1f %%, recall %.1f %%\n", e.detections,
+                  e.correct, 100 * e.precision, 100 * e.recall);
+    } else {
+      std::printf("frames %d (layout %s), detections %d (no ground truth)\n", e.frames,
+                  std::string(DatasetLayoutName(source->layout())).c_str(), e.detections);
+    }
     std::printf("%-13s %8s %8s %8s  (ms per frame)\n", "stage", "mean", "median", "max");
     for (const char* stage :
          {"features", "conversion", "query", "islands", "insertion", "verification", "total"}) {
@@ -270,9 +305,9 @@ int RunEvalPlace(const EvalPlaceArgs& args) {
     }
     for (const DetectedLoop& l : e.loops) {
       if (l.status == LoopStatus::kLoopDetected) {
-        std::printf("loop %s -> %s (%s, %u inliers)\n", sequence->names[size_t(l.query)].c_str(),
-                    sequence->names[size_t(l.match)].c_str(), l.correct ? "correct" : "WRONG",
-                    l.inliers);
+        std::printf("loop %s -> %s (%s%u inliers)\n", sequence->names[size_t(l.query)].c_str(),
+                    sequence->names[size_t(l.match)].c_str(),
+                    has_truth ? (l.correct ? "correct, " : "WRONG, ") : "", l.inliers);
       }
     }
     if (!args.sweep.empty()) std::printf("precision-recall plot: %s\n", args.plot.c_str());
@@ -287,14 +322,20 @@ void AddEvalCommand(CLI::App& app, int* exit_code) {
   eval->require_subcommand(1);
   auto args = std::make_shared<EvalPlaceArgs>();
   CLI::App* place = eval->add_subcommand(
-      "place", "Run the loop detector over a sequence and score it against ground truth");
-  place->add_option("--images", args->images, "Folder of frames, a list file, or a video")
+      "place", "Run the loop detector over a sequence (scored when a ground truth is given)");
+  place
+      ->add_option("--images", args->images,
+                   "Folder of frames (or a TUM RGB-D, EuRoC or KITTI dataset folder), a list "
+                   "file, or a video")
       ->required();
   place
-      ->add_option("--ground-truth", args->ground_truth,
-                   "N x N 0/1 matrix (line i, column j = 1: frame i revisits frame j < i), or "
-                   "the sparse format of recog seqgen")
-      ->required();
+      ->add_option("--layout", args->layout,
+                   "Folder layout: auto (detected), tum, euroc, kitti or folder; the datasets' "
+                   "timestamps set tau_c in seconds")
+      ->capture_default_str();
+  place->add_option("--ground-truth", args->ground_truth,
+                    "N x N 0/1 matrix (line i, column j = 1: frame i revisits frame j < i), or "
+                    "the sparse format of recog seqgen; without it, only detections are reported");
   place->add_option("--vocab", args->vocabulary, "Vocabulary (default: the bundled place one)");
   place
       ->add_option("--mode", args->mode,

@@ -169,6 +169,24 @@ expect_error "eval place with an unsupported sweep" "only supports" "$recog" eva
 expect_error "eval place with an unknown mode" "unknown loop detector mode 'dloop'" "$recog" eval place \
   --images "$images" --ground-truth "$tmp/gt4.txt" --mode dloop -q
 
+# A TUM RGB-D folder (the 4 bundled frames, 30 s apart), without a ground truth.
+mkdir -p "$tmp/tum/rgb" && t=0
+for f in 1 20 41 60; do t=$((t + 30)); cp "$images/$f.jpg" "$tmp/tum/rgb/"; echo "$t.5 rgb/$f.jpg" >>"$tmp/tum/rgb.txt"; done
+expect_ok "eval place on a TUM folder without ground truth" "$recog" eval place --images "$tmp/tum" \
+  --vocab "$tmp/v.rvoc" --json -q
+/usr/bin/python3 -c "
+import json; d=json.load(open('$tmp/out'))
+assert d['layout'] == 'tum' and d['frames'] == 4 and d['ground_truth'] is None, d
+assert 'precision' not in d and 'recall' not in d, d" \
+  && pass || fail "eval place --json names the layout and leaves precision out without ground truth"
+expect_error "eval place with a layout the folder lacks" "times.txt" "$recog" eval place \
+  --images "$tmp/tum" --layout kitti -q
+expect_error "eval place with an unknown layout" "unknown dataset layout" "$recog" eval place \
+  --images "$tmp/tum" --layout rosbag -q
+echo "999.5 rgb/missing.jpg" >>"$tmp/tum/rgb.txt"
+expect_error "eval place on a TUM list naming a missing image" "missing.jpg" "$recog" eval place \
+  --images "$tmp/tum" -q
+
 # Object models: a planar poster built from one bundled frame, recognised in that same frame.
 for sub in "model build" "model info" "model export" "recognize" "eval objects"; do
   # shellcheck disable=SC2086
