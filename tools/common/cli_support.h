@@ -4,6 +4,7 @@
 
 #include <chrono>
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -52,5 +53,14 @@ class ProgressBar {
   std::chrono::steady_clock::time_point last_draw_;
   bool line_open_ = false;
 };
+
+// A CLI11 check that `parse` accepts the value (a bad value is a usage error: exit status 2).
+template <typename Parse>
+std::function<std::string(const std::string&)> Accepts(Parse parse) {
+  return [parse](const std::string& text) {
+    auto parsed = parse(text);
+    return parsed.ok() ? std::string() : parsed.status().message();
+  };
+}
 
 }  // namespace recog::cli

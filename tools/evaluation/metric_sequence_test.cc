@@ -9,6 +9,8 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
+#include <fstream>
 
 #include <gtest/gtest.h>
 #include <opencv2/calib3d.hpp>
@@ -20,6 +22,7 @@
 #include "core/place/loop_detector.h"
 #include "core/vocabulary/vocabulary_io.h"
 #include "tests/testing/data_paths.h"
+#include "tools/evaluation/place_evaluation.h"
 
 namespace recog::cli {
 namespace {
@@ -251,6 +254,77 @@ TEST_F(MetricSequenceTest, AQueryWithoutDepthInAnRgbdMapGetsTheMetricPose) {
     run.results.push_back(std::move(r).value());
   }
   CheckMetricLoops("query", run);
+}
+
+// recog eval place on the same frames written as a TUM RGB-D folder (depth in TUM's 1/5000 m) and
+// as a KITTI folder (left and right images): the dataset readers give each frame its depth or right
+// image, ExtractSequence its 3D points, and the evaluation's loops carry the metric pose.
+TEST_F(MetricSequenceTest, TheEvaluationReadsDepthAndStereoDatasetsAndGivesMetricLoops) {
+  namespace fs = std::filesystem;
+  const fs::path root = fs::path(::testing::TempDir()) / "metric_datasets";
+  fs::remove_all(root);
+  fs::create_directories(root / "tum" / "rgb");
+  fs::create_directories(root / "tum" / "depth");
+  fs::create_directories(root / "kitti" / "image_0");
+  fs::create_directories(root / "kitti" / "image_1");
+  std::ofstream rgb(root / "tum" / "rgb.txt"), depth(root / "tum" / "depth.txt"),
+      times(root / "kitti" / "times.txt");
+  for (size_t i = 0; i < frames_->size(); ++i) {
+    const RenderedFrame& frame = (*frames_)[i];
+    const double t = 0.1 * double(i + 1);
+    char name[32];
+    std::snprintf(name, sizeof(name), "%06d.png", int(i));
+    ASSERT_TRUE(cv::imwrite((root / "tum" / "rgb" / name).string(), frame.image));
+    cv::Mat tum_depth;
+    frame.depth_mm.convertTo(tum_depth, CV_16U, 5.0);  // 5000 units per metre
+    ASSERT_TRUE(cv::imwrite((root / "tum" / "depth" / name).string(), tum_depth));
+    rgb << t << " rgb/" << name << "\n";
+    depth << t + 0.005 << " depth/" << name << "\n";
+    ASSERT_TRUE(cv::imwrite((root / "kitti" / "image_0" / name).string(), frame.image));
+    ASSERT_TRUE(cv::imwrite((root / "kitti" / "image_1" / name).string(), frame.right));
+    times << t << "\n";
+  }
+  rgb.close();
+  depth.close();
+  times.close();
+  PlaceEvaluationOptions options;
+  options.detector.recent_seconds = 0.65;  // tau_c: the 6 frames before, as Detect's recent_frames
+  options.detector.temporal_matches = 1;
+  SequenceGeometryOptions geometry;
+  geometry.K = kK;
+  geometry.baseline_m = kBaseline;  // TUM's depth scale is the default
+  for (const char* layout : {"tum", "kitti"}) {
+    auto source = FrameSource::Open((root / layout).string());
+    ASSERT_TRUE(source.ok()) << source.status().ToString();
+    auto sequence = ExtractSequence(*source, FeatureOptions{}, false, nullptr, geometry);
+    ASSERT_TRUE(sequence.ok()) << sequence.status().ToString();
+    ASSERT_EQ(sequence->geometry.size(), frames_->size());
+    ASSERT_EQ(sequence->points_ms.size(), frames_->size());
+    GroundTruth no_truth;
+    no_truth.frames = int(frames_->size());
+    no_truth.matches.resize(frames_->size());
+    DetectorRun run;
+    auto evaluation = EvaluatePlace(*sequence, no_truth, *vocabulary_, options, &run.results);
+    ASSERT_TRUE(evaluation.ok()) << evaluation.status().ToString();
+    run.processed = frames_->size();
+    run.points_ms = evaluation->timing_ms.at("points").mean;
+    for (const char* stage :
+         {"conversion", "query", "islands", "insertion", "verification", "metric_verification"}) {
+      run.detector_ms += evaluation->timing_ms.at(stage).mean;
+    }
+    EXPECT_TRUE(evaluation->timing_ms.count("points") &&
+                evaluation->timing_ms.count("metric_verification"));
+    CheckMetricLoops(layout, run);
+  }
+  // A right image without a baseline is refused, naming the frame.
+  geometry.baseline_m = 0;
+  auto source = FrameSource::Open((root / "kitti").string());
+  ASSERT_TRUE(source.ok());
+  const Status no_baseline =
+      ExtractSequence(*source, FeatureOptions{}, false, nullptr, geometry).status();
+  EXPECT_EQ(no_baseline.code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(no_baseline.message().find("000000.png"), std::string::npos) << no_baseline.ToString();
+  fs::remove_all(root);
 }
 
 TEST_F(MetricSequenceTest, WithoutGeometryTheLoopsAreTheSameWithoutAPose) {

@@ -9,6 +9,7 @@
 #include <string_view>
 
 #include <opencv2/core/utils/logger.hpp>
+#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
 
@@ -36,6 +37,8 @@ StatusOr<FrameSource> FrameSource::Open(const std::string& spec,
     for (const DatasetFrame& frame : frames) {
       source.files_.push_back(frame.image);
       source.timestamps_.push_back(frame.timestamp);
+      source.depths_.push_back(frame.depth);
+      source.rights_.push_back(frame.right);
     }
     return source;
   }
@@ -112,6 +115,14 @@ double FrameSource::timestamp() const {
   return next_ > 0 && next_ <= timestamps_.size() ? timestamps_[next_ - 1] : 0.0;
 }
 
+std::string FrameSource::depth_path() const {
+  return next_ > 0 && next_ <= depths_.size() ? depths_[next_ - 1] : std::string();
+}
+
+std::string FrameSource::right_path() const {
+  return next_ > 0 && next_ <= rights_.size() ? rights_[next_ - 1] : std::string();
+}
+
 size_t FrameSource::size() const {
   if (!video_) return files_.size();
   if (live_) return 0;
@@ -119,9 +130,34 @@ size_t FrameSource::size() const {
   return count > 0 ? size_t(count) : 0;
 }
 
+namespace {
+
+// The 3D points of the frame `source` returned last (none without a depth or right image).
+Status FramePoints(const FrameSource& source, const cv::Mat& image, const FeatureSet& features,
+                   const SequenceGeometryOptions& options, FrameGeometry* geometry) {
+  geometry->K = options.K;
+  geometry->points.clear();
+  if (const std::string depth_path = source.depth_path(); !depth_path.empty()) {
+    const cv::Mat depth = cv::imread(depth_path, cv::IMREAD_ANYDEPTH);
+    if (depth.empty())
+      return Status::InvalidArgument("cannot read depth image '" + depth_path + "'");
+    return PointsFromDepth(features.keypoints, image.size(), options.K, depth, options.depth_scale,
+                           &geometry->points);
+  }
+  if (const std::string right_path = source.right_path(); !right_path.empty()) {
+    RECOG_ASSIGN_OR_RETURN(const cv::Mat right, ReadGrayImage(right_path));
+    return PointsFromStereo(features, image, right, options.K, options.baseline_m, options.stereo,
+                            &geometry->points);
+  }
+  return Status::Ok();
+}
+
+}  // namespace
+
 StatusOr<SequenceFeatures> ExtractSequence(FrameSource& source, const FeatureOptions& options,
                                            bool keep_images,
-                                           const std::function<void(size_t)>& progress) {
+                                           const std::function<void(size_t)>& progress,
+                                           const std::optional<SequenceGeometryOptions>& geometry) {
   RECOG_ASSIGN_OR_RETURN(std::unique_ptr<FeatureExtractor> extractor,
                          CreateFeatureExtractor(options));
   SequenceFeatures sequence;
@@ -136,6 +172,16 @@ StatusOr<SequenceFeatures> ExtractSequence(FrameSource& source, const FeatureOpt
     sequence.feature_ms.push_back(
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
             .count());
+    if (geometry) {
+      const auto points_start = std::chrono::steady_clock::now();
+      FrameGeometry frame_geometry;
+      RECOG_RETURN_IF_ERROR(FramePoints(source, image, features, *geometry, &frame_geometry)
+                                .WithContext("frame '" + name + "'"));
+      sequence.points_ms.push_back(
+          std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - points_start)
+              .count());
+      sequence.geometry.push_back(std::move(frame_geometry));
+    }
     sequence.features.push_back(std::move(features));
     sequence.names.push_back(name);
     sequence.timestamps.push_back(source.timestamp());
@@ -182,7 +228,9 @@ StatusOr<std::vector<LoopResult>> DetectLoops(const SequenceFeatures& sequence,
   results.reserve(sequence.features.size());
   for (size_t i = 0; i < sequence.features.size(); ++i) {
     const double timestamp = i < sequence.timestamps.size() ? sequence.timestamps[i] : 0.0;
-    RECOG_ASSIGN_OR_RETURN(LoopResult r, detector.Process(sequence.features[i], timestamp));
+    const FrameGeometry* geometry = i < sequence.geometry.size() ? &sequence.geometry[i] : nullptr;
+    RECOG_ASSIGN_OR_RETURN(LoopResult r,
+                           detector.Process(sequence.features[i], timestamp, {}, geometry));
     results.push_back(std::move(r));
   }
   return results;
@@ -213,8 +261,13 @@ StatusOr<PlaceEvaluation> EvaluatePlace(const SequenceFeatures& sequence, const 
     times["islands"].push_back(t.islands);
     times["insertion"].push_back(t.insertion);
     times["verification"].push_back(t.verification);
-    times["total"].push_back(sequence.feature_ms[size_t(i)] + t.conversion + t.query + t.islands +
-                             t.insertion + t.verification);
+    const double points = i < int(sequence.points_ms.size()) ? sequence.points_ms[size_t(i)] : 0.0;
+    if (!sequence.points_ms.empty()) {
+      times["points"].push_back(points);
+      times["metric_verification"].push_back(t.metric_verification);
+    }
+    times["total"].push_back(sequence.feature_ms[size_t(i)] + points + t.conversion + t.query +
+                             t.islands + t.insertion + t.verification + t.metric_verification);
     ++eval.statuses[std::string(LoopStatusName(r.status))];
     if (r.match != kInvalidEntryId) {
       DetectedLoop loop;
@@ -225,6 +278,7 @@ StatusOr<PlaceEvaluation> EvaluatePlace(const SequenceFeatures& sequence, const 
       loop.normalized_score = r.normalized_score;
       loop.acceptance = r.acceptance;
       loop.inliers = uint32_t(r.inliers.size());
+      loop.metric = r.metric;
       if (r.status == LoopStatus::kLoopDetected) {
         ++eval.detections;
         eval.correct += loop.correct;

@@ -12,6 +12,7 @@
 #include <opencv2/videoio.hpp>
 
 #include "core/features/feature_extractor.h"
+#include "core/geometry/frame_points.h"
 #include "core/place/loop_detector.h"
 #include "tools/evaluation/dataset_layouts.h"
 #include "tools/evaluation/ground_truth.h"
@@ -34,6 +35,10 @@ class FrameSource {
   StatusOr<bool> Next(cv::Mat* gray, std::string* name);
   // Timestamp (seconds) of the frame Next() returned last; 0 when the source has none.
   double timestamp() const;
+  // The depth image (TUM) and the right image (EuRoC, KITTI) of the frame Next() returned last;
+  // empty when it has none.
+  std::string depth_path() const;
+  std::string right_path() const;
   // The dataset layout read (kFolder for anything without timestamps).
   DatasetLayout layout() const { return layout_; }
   // True for a video or a camera, whose frames have no file of their own.
@@ -44,7 +49,8 @@ class FrameSource {
 
  private:
   std::vector<std::string> files_;
-  std::vector<double> timestamps_;  // per file, for a dataset layout; empty otherwise
+  std::vector<double> timestamps_;            // per file, for a dataset layout; empty otherwise
+  std::vector<std::string> depths_, rights_;  // per file, for a dataset layout; empty otherwise
   DatasetLayout layout_ = DatasetLayout::kFolder;
   size_t next_ = 0;
   std::shared_ptr<cv::VideoCapture> video_;  // a video file or a camera
@@ -52,18 +58,37 @@ class FrameSource {
   bool live_ = false;  // a camera
 };
 
+// 3D points for the frames of a dataset that has depth images (TUM) or right images (EuRoC,
+// KITTI): the loop detector then checks loops in 3D and gives their metric relative pose
+// (LoopResult::metric, thesis §3.3.3). The images must be distortion-free (stereo: rectified).
+struct SequenceGeometryOptions {
+  cv::Matx33d K = cv::Matx33d::zeros();  // the camera matrix of the (left) images
+  // Metres per unit of a 16-bit depth image (TUM: 1/5000; millimetres: 0.001). Float depth
+  // images are metres.
+  double depth_scale = 1.0 / 5000.0;
+  double baseline_m = 0;  // the right camera's offset along x; needed for right images
+  StereoOptions stereo;
+};
+
 struct SequenceFeatures {
   std::vector<FeatureSet> features;
+  // Per frame, with SequenceGeometryOptions: K and the keypoints' 3D points (empty points for a
+  // frame without depth or right image); empty without.
+  std::vector<FrameGeometry> geometry;
+  std::vector<double> points_ms;  // time to compute the 3D points, per frame (with geometry)
   std::vector<std::string> names;
   std::vector<double> timestamps;  // seconds, per frame (0: unknown; tau_c then counts frames)
   std::vector<double> feature_ms;  // extraction time per frame
   std::vector<cv::Mat> images;     // kept only when asked (for drawing)
 };
 
-// Reads every frame and extracts its features (single thread, timed per frame).
-StatusOr<SequenceFeatures> ExtractSequence(FrameSource& source, const FeatureOptions& options,
-                                           bool keep_images,
-                                           const std::function<void(size_t)>& progress = nullptr);
+// Reads every frame and extracts its features (single thread, timed per frame); with `geometry`,
+// also the 3D points of frames that have a depth or right image (errors of PointsFromDepth /
+// PointsFromStereo, e.g. a right image without a baseline, name the frame).
+StatusOr<SequenceFeatures> ExtractSequence(
+    FrameSource& source, const FeatureOptions& options, bool keep_images,
+    const std::function<void(size_t)>& progress = nullptr,
+    const std::optional<SequenceGeometryOptions>& geometry = std::nullopt);
 
 struct StageStats {
   double mean = 0, median = 0, max = 0;
@@ -77,6 +102,7 @@ struct DetectedLoop {
   double normalized_score = 0;
   uint32_t inliers = 0;
   LoopAcceptance acceptance = LoopAcceptance::kNone;  // how the detector accepted it
+  MetricLoop metric;                                  // the 3D check, for frames with 3D points
 };
 
 struct PlaceEvaluation {

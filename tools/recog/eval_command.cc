@@ -15,6 +15,7 @@
 
 #include "core/vocabulary/vocabulary_io.h"
 #include "tools/common/cli_support.h"
+#include "tools/evaluation/object_evaluation.h"  // ParseCamera
 #include "tools/evaluation/place_evaluation.h"
 #include "tools/evaluation/plot.h"
 #include "tools/recog/commands.h"
@@ -28,6 +29,8 @@ struct EvalPlaceArgs {
   std::string images, ground_truth, vocabulary, params_file, draw_dir, sweep;
   std::string mode = "default";
   std::string layout = "auto";
+  std::string camera;  // fx,fy,cx,cy: 3D points from the dataset's depth or right images
+  double depth_scale = 0, baseline = 0;
   std::string plot = "recog_eval_place_pr.png";
   int features = 1000;
   bool json = false;
@@ -125,15 +128,25 @@ nlohmann::json ToJson(const PlaceEvaluation& e, const SequenceFeatures& seq) {
   }
   nlohmann::json loops = nlohmann::json::array();
   for (const DetectedLoop& l : e.loops) {
-    loops.push_back({{"query", l.query + 1},
-                     {"match", l.match + 1},
-                     {"query_file", seq.names[size_t(l.query)]},
-                     {"match_file", seq.names[size_t(l.match)]},
-                     {"status", std::string(LoopStatusName(l.status))},
-                     {"acceptance", std::string(LoopAcceptanceName(l.acceptance))},
-                     {"correct", l.correct},
-                     {"normalized_score", l.normalized_score},
-                     {"inliers", l.inliers}});
+    nlohmann::json loop = {{"query", l.query + 1},
+                           {"match", l.match + 1},
+                           {"query_file", seq.names[size_t(l.query)]},
+                           {"match_file", seq.names[size_t(l.match)]},
+                           {"status", std::string(LoopStatusName(l.status))},
+                           {"acceptance", std::string(LoopAcceptanceName(l.acceptance))},
+                           {"correct", l.correct},
+                           {"normalized_score", l.normalized_score},
+                           {"inliers", l.inliers}};
+    if (l.metric.checked) {
+      // X_query = R X_match + t, metres.
+      loop["metric"] = {{"verified", l.metric.verified},
+                        {"inliers", l.metric.inliers.size()},
+                        {"correspondences", l.metric.correspondences},
+                        {"rotation", std::vector<double>(l.metric.R.val, l.metric.R.val + 9)},
+                        {"translation", {l.metric.t[0], l.metric.t[1], l.metric.t[2]}},
+                        {"covariance", l.metric.covariance}};
+    }
+    loops.push_back(std::move(loop));
   }
   return {{"frames", e.frames},
           {"query_frames_with_truth", e.query_frames_with_truth},
@@ -206,12 +219,31 @@ int RunEvalPlace(const EvalPlaceArgs& args) {
     truth = ReadGroundTruth(args.ground_truth);
     if (!truth.ok()) return Fail(truth.status());
   }
+  std::optional<SequenceGeometryOptions> geometry;
+  if (!args.camera.empty()) {
+    auto camera = ParseCamera(args.camera);
+    if (!camera.ok()) return Fail(camera.status());
+    geometry.emplace();
+    geometry->K = camera->K();
+    if (args.depth_scale > 0) {
+      geometry->depth_scale = args.depth_scale;
+    } else if (source->layout() != DatasetLayout::kTum) {
+      geometry->depth_scale = 0.001;  // millimetres
+    }
+    geometry->baseline_m = args.baseline;
+    geometry->stereo.max_features = features;
+  } else if (args.depth_scale > 0 || args.baseline > 0) {
+    return Fail(Status::InvalidArgument("--depth-scale and --baseline need --camera"));
+  }
   FeatureOptions feature_options;
   feature_options.orb.max_features = features;
   ProgressBar progress(!args.quiet);
-  auto sequence = ExtractSequence(*source, feature_options, !args.draw_dir.empty(), [&](size_t n) {
-    progress.Update("features", n, uint64_t(has_truth ? truth->frames : source->size()));
-  });
+  auto sequence = ExtractSequence(
+      *source, feature_options, !args.draw_dir.empty(),
+      [&](size_t n) {
+        progress.Update("features", n, uint64_t(has_truth ? truth->frames : source->size()));
+      },
+      geometry);
   progress.Finish();
   if (!sequence.ok()) return Fail(sequence.status());
   if (!has_truth) {
@@ -298,17 +330,25 @@ int RunEvalPlace(const EvalPlaceArgs& args) {
                   std::string(DatasetLayoutName(source->layout())).c_str(), e.detections);
     }
     std::printf("%-13s %8s %8s %8s  (ms per frame)\n", "stage", "mean", "median", "max");
-    for (const char* stage :
-         {"features", "conversion", "query", "islands", "insertion", "verification", "total"}) {
+    for (const char* stage : {"features", "points", "conversion", "query", "islands", "insertion",
+                              "verification", "metric_verification", "total"}) {
+      if (!e.timing_ms.count(stage)) continue;  // points and metric_verification: with --camera
       const StageStats& s = e.timing_ms.at(stage);
       std::printf("%-13s %8.3f %8.3f %8.3f\n", stage, s.mean, s.median, s.max);
     }
     for (const DetectedLoop& l : e.loops) {
-      if (l.status == LoopStatus::kLoopDetected) {
-        std::printf("loop %s -> %s (%s%u inliers)\n", sequence->names[size_t(l.query)].c_str(),
-                    sequence->names[size_t(l.match)].c_str(),
-                    has_truth ? (l.correct ? "correct, " : "WRONG, ") : "", l.inliers);
+      if (l.status != LoopStatus::kLoopDetected) continue;
+      std::string metric;
+      if (l.metric.verified) {
+        char text[96];
+        std::snprintf(text, sizeof(text), "; metric: %zu 3D inliers, |t| %.3f m",
+                      l.metric.inliers.size(), cv::norm(l.metric.t));
+        metric = text;
       }
+      std::printf("loop %s -> %s (%s%u inliers%s)\n", sequence->names[size_t(l.query)].c_str(),
+                  sequence->names[size_t(l.match)].c_str(),
+                  has_truth ? (l.correct ? "correct, " : "WRONG, ") : "", l.inliers,
+                  metric.c_str());
     }
     if (!args.sweep.empty()) std::printf("precision-recall plot: %s\n", args.plot.c_str());
   }
@@ -336,6 +376,16 @@ void AddEvalCommand(CLI::App& app, int* exit_code) {
   place->add_option("--ground-truth", args->ground_truth,
                     "N x N 0/1 matrix (line i, column j = 1: frame i revisits frame j < i), or "
                     "the sparse format of recog seqgen; without it, only detections are reported");
+  place
+      ->add_option("--camera", args->camera,
+                   "fx,fy,cx,cy of the (rectified) images: frames with a depth image (TUM) or a "
+                   "right image (EuRoC, KITTI) get 3D points, loops a 3D check and a metric pose")
+      ->check(Accepts(ParseCamera));
+  place->add_option("--depth-scale", args->depth_scale,
+                    "With --camera: metres per unit of 16-bit depth (default TUM 1/5000, else "
+                    "0.001)");
+  place->add_option("--baseline", args->baseline,
+                    "With --camera: stereo baseline in metres (needed for right images)");
   place->add_option("--vocab", args->vocabulary, "Vocabulary (default: the bundled place one)");
   place
       ->add_option("--mode", args->mode,

@@ -125,15 +125,6 @@ StatusOr<RigidTransform> ParseDepthFromColor(const std::string& text) {
   return transform;
 }
 
-// A CLI11 check that `parse` accepts the value (a bad value is a usage error: exit status 2).
-template <typename Parse>
-std::function<std::string(const std::string&)> Accepts(Parse parse) {
-  return [parse](const std::string& text) {
-    auto parsed = parse(text);
-    return parsed.ok() ? std::string() : parsed.status().message();
-  };
-}
-
 // A model from a CAD file of planar faces and one registered image (--cad --pose --image
 // --camera), e.g. the visp-cube; with --recording, the frames of the recording that follow the
 // image are followed and more views learned from them (recording_learner.h).

@@ -179,6 +179,17 @@ import json; d=json.load(open('$tmp/out'))
 assert d['layout'] == 'tum' and d['frames'] == 4 and d['ground_truth'] is None, d
 assert 'precision' not in d and 'recall' not in d, d" \
   && pass || fail "eval place --json names the layout and leaves precision out without ground truth"
+expect_ok "eval place on a TUM folder without depth, with --camera" "$recog" eval place \
+  --images "$tmp/tum" --camera 525,525,319.5,239.5 --json -q
+/usr/bin/python3 -c "
+import json; d = json.load(open('$tmp/out'))
+assert d['frames'] == 4 and 'points' in d['timing_ms'], d['timing_ms'].keys()
+assert all('metric' not in l for l in d['loops']), d['loops']
+" && pass || fail "eval place --camera times the 3D points (none without depth images)"
+expect_error "eval place --baseline without --camera" "need --camera" "$recog" eval place \
+  --images "$tmp/tum" --baseline 0.1 -q
+expect_usage_error "eval place with a bad --camera" "--camera" "$recog" eval place \
+  --images "$tmp/tum" --camera 525,x,319.5,239.5 -q
 expect_error "eval place with a layout the folder lacks" "times.txt" "$recog" eval place \
   --images "$tmp/tum" --layout kitti -q
 expect_error "eval place with an unknown layout" "unknown dataset layout" "$recog" eval place \
