@@ -1,6 +1,7 @@
 #include "client/cpp/frames.h"
 
 #include <algorithm>
+#include <cmath>
 #include <fstream>
 #include <numeric>
 #include <sstream>
@@ -38,6 +39,13 @@ grpc::Status CheckPixels(const cv::Mat& image) {
                    "; expected 8-bit grey (CV_8UC1) or 8-bit BGR (CV_8UC3)");
   }
   return grpc::Status::OK;
+}
+
+// The image's rows one after the other, without padding (little-endian on the usual hosts).
+void AppendRows(const cv::Mat& image, std::string* out) {
+  const size_t row_bytes = size_t(image.cols) * image.elemSize();
+  out->reserve(out->size() + row_bytes * size_t(image.rows));
+  for (int y = 0; y < image.rows; ++y) out->append(image.ptr<char>(y), row_bytes);
 }
 
 // Core's deterministic order of features: strongest first, then top to bottom, left to right;
@@ -86,11 +94,46 @@ Result<pb::Frame> FrameFromImage(const cv::Mat& image) {
   raw->set_width(uint32_t(image.cols));
   raw->set_height(uint32_t(image.rows));
   raw->set_format(image.channels() == 1 ? pb::PIXEL_FORMAT_GRAY8 : pb::PIXEL_FORMAT_BGR8);
-  const size_t row_bytes = size_t(image.cols) * image.elemSize();
-  std::string* pixels = raw->mutable_pixels();
-  pixels->reserve(row_bytes * size_t(image.rows));
-  for (int y = 0; y < image.rows; ++y) pixels->append(image.ptr<char>(y), row_bytes);
+  AppendRows(image, raw->mutable_pixels());
   return frame;
+}
+
+grpc::Status AttachDepth(const cv::Mat& depth, double units_per_metre, pb::Frame* frame) {
+  if (depth.empty() || depth.dims != 2) return Invalid("the depth image is empty");
+  if (depth.type() != CV_16UC1 && depth.type() != CV_32FC1) {
+    return Invalid("the depth image has pixel type " + cv::typeToString(depth.type()) +
+                   "; expected CV_16UC1 (units of 1/units_per_metre metres) or CV_32FC1 (metres)");
+  }
+  if (!(units_per_metre > 0) || !std::isfinite(units_per_metre)) {
+    return Invalid("units_per_metre must be > 0 (1000 for millimetres)");
+  }
+  pb::DepthImage* out = frame->mutable_depth();
+  pb::RawDepth* raw = out->mutable_raw();
+  raw->set_width(uint32_t(depth.cols));
+  raw->set_height(uint32_t(depth.rows));
+  raw->set_format(depth.type() == CV_16UC1 ? pb::DEPTH_FORMAT_U16 : pb::DEPTH_FORMAT_F32);
+  raw->clear_data();
+  AppendRows(depth, raw->mutable_data());
+  out->set_scale(depth.type() == CV_16UC1 ? units_per_metre : 0);
+  frame->clear_right();
+  return grpc::Status::OK;
+}
+
+grpc::Status AttachStereoRight(const cv::Mat& right, double baseline_m, pb::Frame* frame) {
+  if (grpc::Status status = CheckPixels(right); !status.ok()) return status;
+  if (!(baseline_m > 0) || !std::isfinite(baseline_m)) {
+    return Invalid("the stereo baseline must be > 0 metres");
+  }
+  pb::StereoRight* out = frame->mutable_right();
+  pb::RawImage* raw = out->mutable_raw_image();
+  raw->set_width(uint32_t(right.cols));
+  raw->set_height(uint32_t(right.rows));
+  raw->set_format(right.channels() == 1 ? pb::PIXEL_FORMAT_GRAY8 : pb::PIXEL_FORMAT_BGR8);
+  raw->clear_pixels();
+  AppendRows(right, raw->mutable_pixels());
+  out->set_baseline_m(baseline_m);
+  frame->clear_depth();
+  return grpc::Status::OK;
 }
 
 Result<OrbFeatures> ExtractOrbFeatures(const cv::Mat& image) {

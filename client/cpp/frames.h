@@ -51,4 +51,18 @@ Result<OrbFeatures> ExtractOrbFeatures(const cv::Mat& image);
 Result<pb::Frame> FrameFromFeatures(const std::vector<cv::KeyPoint>& keypoints,
                                     const cv::Mat& descriptors, cv::Size image_size = {});
 
+// Metric loops (place maps): the frame's 3D structure, for a frame that also carries its
+// intrinsics without distortion (the server refuses either without). Attaching one replaces the
+// other.
+//
+// An aligned depth image (registered to the frame's image, same size): CV_16UC1 in units of
+// 1/units_per_metre metres (1000: millimetres; 5000: TUM RGB-D) or CV_32FC1 in metres
+// (units_per_metre is then ignored); 0 or NaN = no depth. Sent raw. INVALID_ARGUMENT for an empty
+// image, another type or units_per_metre <= 0.
+grpc::Status AttachDepth(const cv::Mat& depth, double units_per_metre, pb::Frame* frame);
+// The right image of a rectified stereo pair whose left image is the frame's (same size, 8-bit
+// grey or BGR, sent raw), the camera moved by baseline_m metres (> 0) along its x axis.
+// INVALID_ARGUMENT for an empty image, another pixel type or a non-positive baseline.
+grpc::Status AttachStereoRight(const cv::Mat& right, double baseline_m, pb::Frame* frame);
+
 }  // namespace recog::client

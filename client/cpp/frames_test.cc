@@ -145,5 +145,45 @@ TEST(FramesTest, RawImagesAreSentRowByRowWithoutPadding) {
   EXPECT_EQ(FrameFromImage(cv::Mat()).status().error_code(), grpc::StatusCode::INVALID_ARGUMENT);
 }
 
+TEST(FramesTest, DepthAndRightImagesAreAttachedRawAndBadOnesAreRefused) {
+  pb::Frame frame = FrameFromImage(cv::Mat(2, 3, CV_8UC1, cv::Scalar(9))).value();
+  cv::Mat depth_mm(2, 3, CV_16UC1);
+  for (int i = 0; i < 6; ++i) depth_mm.at<uint16_t>(i / 3, i % 3) = uint16_t(1000 + i);
+  ASSERT_TRUE(AttachDepth(depth_mm(cv::Rect(0, 0, 2, 2)), 5000, &frame).ok());  // a strided view
+  ASSERT_EQ(frame.depth().raw().format(), pb::DEPTH_FORMAT_U16);
+  EXPECT_EQ(frame.depth().raw().width(), 2u);
+  EXPECT_EQ(frame.depth().raw().height(), 2u);
+  EXPECT_EQ(frame.depth().scale(), 5000.0);
+  const std::string& bytes = frame.depth().raw().data();
+  ASSERT_EQ(bytes.size(), 8u);
+  uint16_t values[4];
+  std::memcpy(values, bytes.data(), 8);
+  EXPECT_EQ(values[0], 1000);
+  EXPECT_EQ(values[1], 1001);
+  EXPECT_EQ(values[2], 1003);  // the second row, without the view's padding
+  EXPECT_EQ(values[3], 1004);
+
+  const cv::Mat metres(2, 3, CV_32FC1, cv::Scalar(1.5f));
+  ASSERT_TRUE(AttachDepth(metres, 1000, &frame).ok());
+  EXPECT_EQ(frame.depth().raw().format(), pb::DEPTH_FORMAT_F32);
+  EXPECT_EQ(frame.depth().raw().data().size(), 24u);
+  EXPECT_EQ(frame.depth().scale(), 0.0);  // floats are metres
+
+  ASSERT_TRUE(AttachStereoRight(cv::Mat(2, 3, CV_8UC1, cv::Scalar(7)), 0.12, &frame).ok());
+  EXPECT_FALSE(frame.has_depth());  // one or the other
+  EXPECT_EQ(frame.right().baseline_m(), 0.12);
+  EXPECT_EQ(frame.right().raw_image().pixels(), std::string(6, '\x07'));
+
+  EXPECT_EQ(AttachDepth(cv::Mat(2, 3, CV_8UC1), 1000, &frame).error_code(),
+            grpc::StatusCode::INVALID_ARGUMENT);  // 8-bit depth
+  EXPECT_EQ(AttachDepth(depth_mm, 0, &frame).error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(AttachDepth(cv::Mat(), 1000, &frame).error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(AttachStereoRight(cv::Mat(2, 3, CV_8UC1), 0, &frame).error_code(),
+            grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(AttachStereoRight(cv::Mat(2, 3, CV_16UC1), 0.1, &frame).error_code(),
+            grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_TRUE(frame.has_right());  // a refused attachment leaves the frame as it was
+}
+
 }  // namespace
 }  // namespace recog::client

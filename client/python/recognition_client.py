@@ -64,17 +64,42 @@ def make_intrinsics(intrinsics: common_pb2.CameraIntrinsics | Sequence[float]
 
 def make_frame(image: bytes | str | os.PathLike, timestamp: float = 0.0,
                intrinsics: common_pb2.CameraIntrinsics | Sequence[float] | None = None,
-               client_frame_id: str = "") -> common_pb2.Frame:
+               client_frame_id: str = "",
+               depth: bytes | str | os.PathLike | common_pb2.DepthImage | None = None,
+               depth_scale: float = 1000.0,
+               right: bytes | str | os.PathLike | None = None,
+               baseline: float = 0.0) -> common_pb2.Frame:
     """Builds a frame from a JPEG or PNG image (bytes or path).
 
     ``timestamp`` is in seconds in the client's clock (0 = unknown), ``intrinsics`` as in
     :func:`make_intrinsics`, ``client_frame_id`` free text (at most 128 bytes) that the server
     echoes in its answer.
+
+    Metric loops (place maps) need the frame's 3D structure and its ``intrinsics`` (without
+    distortion): either ``depth``, an aligned depth image (the bytes or path of a 16-bit PNG in
+    units of 1/``depth_scale`` metres, 1000 = millimetres; or a ready ``DepthImage``, e.g. raw
+    float metres), or ``right``, the right image of a rectified stereo pair (JPEG or PNG) with
+    ``baseline`` in metres. ``ValueError`` for both at once, intrinsics missing, or a right image
+    without a positive baseline.
     """
     frame = common_pb2.Frame(encoded_image=read_bytes(image), timestamp=timestamp,
                              client_frame_id=client_frame_id)
     if intrinsics is not None:
         frame.intrinsics.CopyFrom(make_intrinsics(intrinsics))
+    if depth is not None and right is not None:
+        raise ValueError("a frame carries depth or a right image, not both")
+    if (depth is not None or right is not None) and intrinsics is None:
+        raise ValueError("depth and right images need the frame's intrinsics")
+    if isinstance(depth, common_pb2.DepthImage):
+        frame.depth.CopyFrom(depth)
+    elif depth is not None:
+        frame.depth.encoded = read_bytes(depth)
+        frame.depth.scale = depth_scale
+    if right is not None:
+        if not baseline > 0:
+            raise ValueError("a right image needs the stereo baseline in metres (> 0)")
+        frame.right.encoded_image = read_bytes(right)
+        frame.right.baseline_m = baseline
     return frame
 
 

@@ -26,38 +26,43 @@ StatusOr<std::shared_ptr<PlaceMap>> PlaceMap::Open(IndexStore* store, const std:
 }
 
 StatusOr<PlaceFrameResult> PlaceMap::Add(const FeatureSet& features, double timestamp,
-                                         std::string_view client_id) {
+                                         std::string_view client_id,
+                                         const FrameGeometry* geometry) {
   PlaceFrameResult result;
   std::lock_guard lock(mutex_);
   if (deleted_) return Status::NotFound("map '" + name_ + "' was deleted");
-  RECOG_ASSIGN_OR_RETURN(result.loop.entry, detector_.Add(features, timestamp, client_id));
+  RECOG_ASSIGN_OR_RETURN(result.loop.entry,
+                         detector_.Add(features, timestamp, client_id, geometry));
   return result;
 }
 
 StatusOr<PlaceFrameResult> PlaceMap::Detect(const FeatureSet& features, double timestamp,
                                             const PlaceResultOptions& options,
-                                            std::string_view client_id) {
+                                            std::string_view client_id,
+                                            const FrameGeometry* geometry) {
   RECOG_RETURN_IF_ERROR(options.Validate());
   PlaceFrameResult result;
   {
     std::lock_guard lock(mutex_);
     if (deleted_) return Status::NotFound("map '" + name_ + "' was deleted");
-    RECOG_ASSIGN_OR_RETURN(result.loop, detector_.Process(features, timestamp, client_id));
+    RECOG_ASSIGN_OR_RETURN(result.loop,
+                           detector_.Process(features, timestamp, client_id, geometry));
   }
   RECOG_RETURN_IF_ERROR(AddExtras(features, options, &result));
   return result;
 }
 
 StatusOr<PlaceFrameResult> PlaceMap::Query(const FeatureSet& features, double timestamp,
-                                           const PlaceResultOptions& options) const {
+                                           const PlaceResultOptions& options,
+                                           const FrameGeometry* geometry) const {
   RECOG_RETURN_IF_ERROR(options.Validate());
   PlaceFrameResult result;
-  StatusOr<LoopResult> loop = detector_.Query(features, timestamp);
+  StatusOr<LoopResult> loop = detector_.Query(features, timestamp, geometry);
   if (loop.status().code() == StatusCode::kNotFound && !deleted()) {
     // A frame removed (RemoveFrame) between the detector's query and its geometric check.
     // deleted() took the map's lock, which RemoveFrame holds until the frame has left the index
     // too, so the query runs again without it.
-    loop = detector_.Query(features, timestamp);
+    loop = detector_.Query(features, timestamp, geometry);
   }
   if (!loop.ok()) return loop.status();
   result.loop = std::move(loop).value();

@@ -109,17 +109,22 @@ class PlaceMap {
                                                   std::shared_ptr<const Vocabulary> vocabulary);
 
   // Adds the frame (timestamp in seconds, 0 when unknown) without querying. `client_id` (at most
-  // kMaxClientIdBytes) is stored with the frame and returned whenever it is a match.
+  // kMaxClientIdBytes) is stored with the frame and returned whenever it is a match. `geometry`
+  // (may be null) is the frame's 3D structure (LoopDetector: the frame keeps its points and its
+  // loops are checked in 3D, LoopResult::metric).
   StatusOr<PlaceFrameResult> Add(const FeatureSet& features, double timestamp,
-                                 std::string_view client_id = {});
+                                 std::string_view client_id = {},
+                                 const FrameGeometry* geometry = nullptr);
   // Queries the map with the frame, then adds it (loop-closure detection), with `client_id` as
   // for Add. INVALID_ARGUMENT for bad options (nothing is added then).
   StatusOr<PlaceFrameResult> Detect(const FeatureSet& features, double timestamp,
                                     const PlaceResultOptions& options = {},
-                                    std::string_view client_id = {});
+                                    std::string_view client_id = {},
+                                    const FrameGeometry* geometry = nullptr);
   // Looks for the frame's place; adds nothing and changes nothing.
   StatusOr<PlaceFrameResult> Query(const FeatureSet& features, double timestamp,
-                                   const PlaceResultOptions& options = {}) const;
+                                   const PlaceResultOptions& options = {},
+                                   const FrameGeometry* geometry = nullptr) const;
 
   // Removes frame `id` (keyframe culling). NOT_FOUND when the map has no such frame (never added,
   // or removed already) or was deleted.

@@ -25,8 +25,9 @@ Status CheckImageSize(uint64_t width, uint64_t height, const char* field) {
   return Status::Ok();
 }
 
-StatusOr<cv::Mat> DecodeEncodedImage(const std::string& bytes) {
-  if (bytes.empty()) return Status::InvalidArgument("frame.encoded_image is empty");
+StatusOr<cv::Mat> DecodeEncodedImage(const std::string& bytes,
+                                     const std::string& field = "frame.encoded_image") {
+  if (bytes.empty()) return Status::InvalidArgument(field + " is empty");
   const cv::Mat buffer(1, int(bytes.size()), CV_8UC1, const_cast<char*>(bytes.data()));
   cv::Mat image;
   try {
@@ -35,17 +36,16 @@ StatusOr<cv::Mat> DecodeEncodedImage(const std::string& bytes) {
     image.release();  // OpenCV refused it (e.g. declared dimensions over its limits)
   }
   if (image.empty()) {
-    return Status::InvalidArgument("frame.encoded_image is not a decodable JPEG or PNG image (" +
+    return Status::InvalidArgument(field + " is not a decodable JPEG or PNG image (" +
                                    std::to_string(bytes.size()) + " bytes)");
   }
-  RECOG_RETURN_IF_ERROR(
-      CheckImageSize(uint64_t(image.cols), uint64_t(image.rows), "frame.encoded_image"));
+  RECOG_RETURN_IF_ERROR(CheckImageSize(uint64_t(image.cols), uint64_t(image.rows), field.c_str()));
   if (image.depth() != CV_8U) image.convertTo(image, CV_8U, 1.0 / 256.0);  // 16-bit PNG
   return image;
 }
 
-StatusOr<cv::Mat> DecodeRawImage(const pb::RawImage& raw) {
-  RECOG_RETURN_IF_ERROR(CheckImageSize(raw.width(), raw.height(), "frame.raw_image"));
+StatusOr<cv::Mat> DecodeRawImage(const pb::RawImage& raw, const char* field = "frame.raw_image") {
+  RECOG_RETURN_IF_ERROR(CheckImageSize(raw.width(), raw.height(), field));
   int channels = 0;
   switch (raw.format()) {
     case pb::PIXEL_FORMAT_GRAY8:
@@ -55,12 +55,12 @@ StatusOr<cv::Mat> DecodeRawImage(const pb::RawImage& raw) {
       channels = 3;
       break;
     default:
-      return Status::InvalidArgument("frame.raw_image.format must be GRAY8 or BGR8");
+      return Status::InvalidArgument(std::string(field) + ".format must be GRAY8 or BGR8");
   }
   const uint64_t expected = uint64_t(raw.width()) * raw.height() * uint64_t(channels);
   if (raw.pixels().size() != expected) {
     return Status::InvalidArgument(
-        "frame.raw_image.pixels has " + std::to_string(raw.pixels().size()) + " bytes; " +
+        std::string(field) + ".pixels has " + std::to_string(raw.pixels().size()) + " bytes; " +
         std::to_string(raw.width()) + "x" + std::to_string(raw.height()) + "x" +
         std::to_string(channels) + " needs " + std::to_string(expected));
   }
@@ -139,6 +139,140 @@ Status DecodeIntrinsics(const pb::CameraIntrinsics& in, CameraIntrinsics* out) {
   return Status::Ok();
 }
 
+// A depth image: a 16-bit single-channel PNG, or raw 16-bit or float values.
+Status DecodeDepth(const pb::DepthImage& in, DecodedFrame* out) {
+  switch (in.content_case()) {
+    case pb::DepthImage::kEncoded: {
+      const std::string& bytes = in.encoded();
+      if (bytes.empty()) return Status::InvalidArgument("frame.depth.encoded is empty");
+      const cv::Mat buffer(1, int(bytes.size()), CV_8UC1, const_cast<char*>(bytes.data()));
+      try {
+        out->depth = cv::imdecode(buffer, cv::IMREAD_UNCHANGED);
+      } catch (const cv::Exception&) {
+        out->depth.release();
+      }
+      if (out->depth.empty()) {
+        return Status::InvalidArgument("frame.depth.encoded is not a decodable PNG image (" +
+                                       std::to_string(bytes.size()) + " bytes)");
+      }
+      if (out->depth.type() != CV_16UC1) {
+        return Status::InvalidArgument(
+            "frame.depth.encoded must be a 16-bit single-channel PNG (got " +
+            std::to_string(out->depth.elemSize1() * 8) + "-bit, " +
+            std::to_string(out->depth.channels()) + " channel(s)); 8-bit depth is refused");
+      }
+      RECOG_RETURN_IF_ERROR(CheckImageSize(uint64_t(out->depth.cols), uint64_t(out->depth.rows),
+                                           "frame.depth.encoded"));
+      break;
+    }
+    case pb::DepthImage::kRaw: {
+      const pb::RawDepth& raw = in.raw();
+      RECOG_RETURN_IF_ERROR(CheckImageSize(raw.width(), raw.height(), "frame.depth.raw"));
+      int type = 0;
+      switch (raw.format()) {
+        case pb::DEPTH_FORMAT_U16:
+          type = CV_16UC1;
+          break;
+        case pb::DEPTH_FORMAT_F32:
+          type = CV_32FC1;
+          break;
+        default:
+          return Status::InvalidArgument("frame.depth.raw.format must be U16 or F32");
+      }
+      const uint64_t expected = uint64_t(raw.width()) * raw.height() * CV_ELEM_SIZE(type);
+      if (raw.data().size() != expected) {
+        return Status::InvalidArgument(
+            "frame.depth.raw.data has " + std::to_string(raw.data().size()) + " bytes; " +
+            std::to_string(raw.width()) + "x" + std::to_string(raw.height()) + " needs " +
+            std::to_string(expected));
+      }
+      out->depth =
+          cv::Mat(int(raw.height()), int(raw.width()), type, const_cast<char*>(raw.data().data()))
+              .clone();
+      break;
+    }
+    case pb::DepthImage::CONTENT_NOT_SET:
+      return Status::InvalidArgument("frame.depth has no content: set encoded or raw");
+  }
+  if (!Finite(in.scale()) || in.scale() < 0) {
+    return Status::InvalidArgument(
+        "frame.depth.scale must be finite and >= 0 (0 = 1000 per metre)");
+  }
+  out->depth_scale = 1.0 / (in.scale() == 0 ? 1000.0 : in.scale());
+  return Status::Ok();
+}
+
+Status DecodeRight(const pb::StereoRight& in, DecodedFrame* out) {
+  if (!Finite(in.baseline_m()) || in.baseline_m() <= 0) {
+    return Status::InvalidArgument("frame.right.baseline_m must be set, in metres, > 0 (got " +
+                                   std::to_string(in.baseline_m()) + ")");
+  }
+  out->baseline_m = in.baseline_m();
+  switch (in.content_case()) {
+    case pb::StereoRight::kEncodedImage: {
+      RECOG_ASSIGN_OR_RETURN(out->right,
+                             DecodeEncodedImage(in.encoded_image(), "frame.right.encoded_image"));
+      return Status::Ok();
+    }
+    case pb::StereoRight::kRawImage: {
+      RECOG_ASSIGN_OR_RETURN(out->right, DecodeRawImage(in.raw_image(), "frame.right.raw_image"));
+      return Status::Ok();
+    }
+    case pb::StereoRight::CONTENT_NOT_SET:
+      break;
+  }
+  return Status::InvalidArgument("frame.right has no image: set encoded_image or raw_image");
+}
+
+std::string SizeText(cv::Size size) {
+  return std::to_string(size.width) + "x" + std::to_string(size.height);
+}
+
+// Decodes the frame's depth or right image and checks that it goes with the frame.
+Status DecodeStructure(const pb::Frame& frame, DecodedFrame* out) {
+  if (frame.has_depth() && frame.has_right()) {
+    return Status::InvalidArgument("a frame carries depth or a right image, not both");
+  }
+  const char* field = frame.has_depth() ? "frame.depth" : "frame.right";
+  if (!out->intrinsics.has_value()) {
+    return Status::InvalidArgument(std::string(field) + " needs frame.intrinsics (the camera " +
+                                   "matrix turns its pixels into 3D points)");
+  }
+  for (double d : out->intrinsics->distortion) {
+    if (d != 0) {
+      return Status::InvalidArgument(
+          std::string(field) + " needs pinhole pixels: undistort (or rectify) the image and send " +
+          "frame.intrinsics without distortion");
+    }
+  }
+  cv::Size size = out->image.size();
+  if (frame.has_depth()) {
+    RECOG_RETURN_IF_ERROR(DecodeDepth(frame.depth(), out));
+    if (!out->has_image()) {  // client features: their image size, when given
+      const pb::Features& features = frame.features();
+      size = features.image_width() == 0 && features.image_height() == 0
+                 ? out->depth.size()
+                 : cv::Size(int(features.image_width()), int(features.image_height()));
+    }
+    if (out->depth.size() != size) {
+      return Status::InvalidArgument("frame.depth is " + SizeText(out->depth.size()) +
+                                     "; it must be aligned with the " + SizeText(size) + " image");
+    }
+    return Status::Ok();
+  }
+  if (!out->has_image()) {
+    return Status::InvalidArgument(
+        "frame.right needs the left image (encoded_image or raw_image), not features");
+  }
+  RECOG_RETURN_IF_ERROR(DecodeRight(frame.right(), out));
+  if (out->right.size() != size) {
+    return Status::InvalidArgument("frame.right is " + SizeText(out->right.size()) +
+                                   "; it must be the size of the " + SizeText(size) +
+                                   " left image");
+  }
+  return Status::Ok();
+}
+
 }  // namespace
 
 StatusOr<DecodedFrame> DecodeFrame(const pb::Frame& frame, const DescriptorFormat& format) {
@@ -177,6 +311,7 @@ StatusOr<DecodedFrame> DecodeFrame(const pb::Frame& frame, const DescriptorForma
       return Status::InvalidArgument(
           "the frame has no content: set encoded_image, raw_image or features");
   }
+  if (frame.has_depth() || frame.has_right()) RECOG_RETURN_IF_ERROR(DecodeStructure(frame, &out));
   out.decode_ms =
       std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
   return out;
@@ -262,6 +397,17 @@ void ToProto(const cv::Matx33d& R, const cv::Vec3d& t, pb::Pose* out) {
   for (int i = 0; i < 3; ++i) out->add_translation(t[i]);
 }
 
+void ToProto(const MetricLoop& metric, pb::MetricLoop* out) {
+  out->set_checked(metric.checked);
+  out->set_verified(metric.verified);
+  out->set_correspondences(metric.correspondences);
+  out->set_inliers(uint32_t(metric.inliers.size()));
+  out->set_rms_error_px(metric.rms_error_px);
+  if (!metric.verified) return;
+  ToProto(metric.R, metric.t, out->mutable_pose());
+  out->mutable_covariance()->Assign(metric.covariance.begin(), metric.covariance.end());
+}
+
 void ToProto(const PlaceFrameResult& frame, pb::LoopResult* out) {
   const LoopResult& result = frame.loop;
   out->set_status(ToProto(result.status));
@@ -286,6 +432,7 @@ void ToProto(const PlaceFrameResult& frame, pb::LoopResult* out) {
     ToProto(frame.relative_pose->R, frame.relative_pose->t, out->mutable_relative_pose());
   }
   out->set_match_client_frame_id(frame.match_client_id);
+  if (result.metric.checked) ToProto(result.metric, out->mutable_metric());
   for (const PlaceCandidate& c : frame.candidates) {
     pb::Candidate* candidate = out->add_candidates();
     candidate->set_frame_id(c.frame);

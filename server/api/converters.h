@@ -39,12 +39,21 @@ struct DecodedFrame {
   double timestamp = 0;  // seconds, 0 = unknown
   std::string camera_id;
   std::string client_frame_id;  // stored with a place frame
-  double decode_ms = 0;         // time spent decoding the image
+  double decode_ms = 0;         // time spent decoding the image (and the depth or right image)
+  // The frame's 3D structure (place maps, metric loops); at most one of the two, and then
+  // `intrinsics` is set without distortion. Sizes match the image (or the features' image size).
+  cv::Mat depth;           // CV_16U (units of depth_scale metres) or CV_32F (metres); or empty
+  double depth_scale = 0;  // metres per unit of CV_16U depth
+  cv::Mat right;           // CV_8UC1, the right image of a rectified stereo pair; or empty
+  double baseline_m = 0;   // > 0 with `right`
   bool has_image() const { return !image.empty(); }
 };
 
 // Decodes and validates a frame. Client features must have `format`'s descriptor length.
-// INVALID_ARGUMENT (naming the field) for anything unusable, including a frame without content.
+// INVALID_ARGUMENT (naming the field) for anything unusable, including a frame without content,
+// and for depth or a right image that cannot go with the frame: another size than the image, 8-bit
+// depth, a missing or non-positive baseline, no intrinsics (or intrinsics with distortion), both
+// depth and a right image, a right image with client features.
 StatusOr<DecodedFrame> DecodeFrame(const pb::Frame& frame, const DescriptorFormat& format);
 
 // Map settings. ApplyMapSettings overwrites the fields `settings` sets and validates the result.
@@ -56,6 +65,7 @@ pb::LoopStatus ToProto(LoopStatus status);
 // that came with it. `frame_id` is the id the frame got when it was added.
 void ToProto(const PlaceFrameResult& result, pb::LoopResult* out);
 void ToProto(const cv::Matx33d& R, const cv::Vec3d& t, pb::Pose* out);
+void ToProto(const MetricLoop& metric, pb::MetricLoop* out);
 // The extras a request asks for; the relative pose uses the frame's intrinsics when it has them.
 // PlaceResultOptions::Validate checks the result (top_k).
 PlaceResultOptions FromProto(const pb::ResultOptions& options,

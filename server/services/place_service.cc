@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <optional>
 
 #include "server/api/converters.h"
 #include "server/api/status_mapping.h"
@@ -58,17 +59,18 @@ StatusOr<std::shared_ptr<PlaceMap>> CallMap(const ServerState& state, CallInfo& 
 }
 
 StatusOr<PlaceFrameResult> RunMode(PlaceMap& map, FrameMode mode, const FeatureSet& features,
-                                   const DecodedFrame& frame, const PlaceResultOptions& extras) {
+                                   const DecodedFrame& frame, const PlaceResultOptions& extras,
+                                   const FrameGeometry* geometry) {
   const double timestamp = frame.timestamp;
   switch (mode) {
     case FrameMode::kAdd:
-      return map.Add(features, timestamp, frame.client_frame_id);
+      return map.Add(features, timestamp, frame.client_frame_id, geometry);
     case FrameMode::kDetect:
-      return map.Detect(features, timestamp, extras, frame.client_frame_id);
+      return map.Detect(features, timestamp, extras, frame.client_frame_id, geometry);
     case FrameMode::kQuery:
       break;
   }
-  return map.Query(features, timestamp, extras);
+  return map.Query(features, timestamp, extras, geometry);
 }
 
 // Decodes one frame, runs it against the map and encodes what it did. `num_features` reports an
@@ -89,8 +91,20 @@ Status RunPlaceFrame(ServerState& state, WorkerContext& worker, PlaceMap& map, F
   }
   if (num_features != nullptr) *num_features = uint32_t(features->size());
   const auto start = Clock::now();
+  // A frame with depth or a right image gets its 3D points (metric loops); a calibrated frame
+  // without them can still be checked against stored points.
+  std::optional<FrameGeometry> geometry;
+  if (!frame.depth.empty() || !frame.right.empty()) {
+    geometry.emplace();
+    RECOG_RETURN_IF_ERROR(worker.PlaceFrameGeometry(frame, *features, &*geometry));
+  } else if (frame.intrinsics.has_value() &&
+             std::all_of(frame.intrinsics->distortion.begin(), frame.intrinsics->distortion.end(),
+                         [](double d) { return d == 0; })) {  // pinhole keypoints
+    geometry.emplace().K = frame.intrinsics->K();
+  }
   const PlaceResultOptions extras = FromProto(options, frame.intrinsics);
-  StatusOr<PlaceFrameResult> result = RunMode(map, mode, *features, frame, extras);
+  StatusOr<PlaceFrameResult> result =
+      RunMode(map, mode, *features, frame, extras, geometry ? &*geometry : nullptr);
   if (!result.ok()) return result.status();
   state.metrics.AddFrames(FrameKind::kPlace);
   if (mode != FrameMode::kAdd && result->loop.status == LoopStatus::kLoopDetected) {

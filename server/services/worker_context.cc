@@ -1,5 +1,6 @@
 #include "server/services/worker_context.h"
 
+#include "core/geometry/frame_points.h"
 #include "server/services/server_state.h"
 
 namespace recog::server {
@@ -9,6 +10,25 @@ Status WorkerContext::ExtractPlaceFeatures(const cv::Mat& image, FeatureSet* out
     RECOG_ASSIGN_OR_RETURN(place_extractor_, CreateFeatureExtractor(state_.place_features));
   }
   return place_extractor_->Extract(image, out);
+}
+
+Status WorkerContext::PlaceFrameGeometry(const DecodedFrame& frame, const FeatureSet& features,
+                                         FrameGeometry* out) const {
+  out->K = frame.intrinsics->K();
+  if (!frame.depth.empty()) {
+    const cv::Size size = frame.has_image() ? frame.image.size() : frame.depth.size();
+    return PointsFromDepth(features.keypoints, size, out->K, frame.depth, frame.depth_scale,
+                           &out->points);
+  }
+  const OrbOptions& orb = state_.place_features.orb;
+  StereoOptions stereo;
+  stereo.max_features = orb.max_features;
+  stereo.scale_factor = orb.scale_factor;
+  stereo.levels = orb.levels;
+  stereo.fast_threshold = orb.fast_threshold;
+  stereo.edge_threshold = orb.edge_threshold;
+  return PointsFromStereo(features, frame.image, frame.right, out->K, frame.baseline_m, stereo,
+                          &out->points);
 }
 
 ObjectRecognizer& WorkerContext::Recognizer() {

@@ -6,11 +6,14 @@
 #include <mutex>
 #include <optional>
 
+#include <opencv2/calib3d.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "client/cpp/frames.h"
 #include "core/features/feature_extractor.h"
 #include "tests/server/server_fixture.h"
+#include "tools/evaluation/metric_sequence.h"
 
 namespace recog::server::testing {
 namespace {
@@ -463,6 +466,209 @@ namespace {
 
 // A server of shard "shard_a" serves the maps the placement table gives it, refuses the others
 // naming their owner, and follows the table when it is reloaded.
+// Metric loops: frames rendered from a scene of known geometry (tools/evaluation/metric_sequence.h,
+// the corridor photos on planes at 1.6, 2.6 and 4 m), with their exact depth or right image.
+const cv::Matx33d kK(525, 0, 319.5, 0, 525, 239.5, 0, 0, 1);
+const cv::Size kSize(640, 480);
+constexpr double kBaseline = 0.12;
+
+cv::Mat CorridorPhoto(int n) {
+  const std::string jpeg = CorridorJpeg(n);
+  return cv::imdecode(cv::Mat(1, int(jpeg.size()), CV_8U, (void*)jpeg.data()),
+                      cv::IMREAD_GRAYSCALE);
+}
+
+cli::RenderedFrame Render(const cli::CameraPose& pose) {
+  cv::Mat back;
+  cv::hconcat(CorridorPhoto(41), CorridorPhoto(60), back);
+  const std::vector<cli::TexturedPlane> scene = {
+      {back, {0, 0, 4.0}, {1, 0, 0}, {0, 1, 0}, 6.0, 2.25},
+      {CorridorPhoto(1), {-0.7, 0.1, 2.6}, cli::Yaw(25) * cv::Vec3d(1, 0, 0), {0, 1, 0}, 1.6, 1.2},
+      {CorridorPhoto(20), {0.55, -0.2, 1.6}, {1, 0, 0}, {0, 1, 0}, 0.9, 0.675},
+  };
+  auto frame = cli::RenderPlanes(scene, kK, kSize, pose, kBaseline);
+  EXPECT_TRUE(frame.ok()) << frame.status().ToString();
+  return std::move(frame).value();
+}
+
+// The rendered image with the pinhole intrinsics of kK.
+pb::Frame CalibratedFrame(const cli::RenderedFrame& rendered) {
+  pb::Frame frame = client::FrameFromImage(rendered.image).value();
+  pb::CameraIntrinsics* k = frame.mutable_intrinsics();
+  k->set_fx(kK(0, 0));
+  k->set_fy(kK(1, 1));
+  k->set_cx(kK(0, 2));
+  k->set_cy(kK(1, 2));
+  return frame;
+}
+
+pb::Frame RgbdFrame(const cli::RenderedFrame& rendered) {
+  pb::Frame frame = CalibratedFrame(rendered);
+  EXPECT_TRUE(client::AttachDepth(rendered.depth_mm, 1000, &frame).ok());
+  return frame;
+}
+
+// Checks a verified metric loop against the true pose of the query relative to the match:
+// translation within 3 % of the distance between the cameras, rotation within 0.3°.
+void ExpectMetricPose(const pb::LoopResult& result, const cli::CameraPose& query,
+                      const cli::CameraPose& match) {
+  ASSERT_EQ(result.status(), pb::LOOP_STATUS_LOOP_DETECTED);
+  const pb::MetricLoop& metric = result.metric();
+  ASSERT_TRUE(metric.checked());
+  ASSERT_TRUE(metric.verified());
+  EXPECT_GE(metric.inliers(), 12u);
+  EXPECT_GE(metric.correspondences(), metric.inliers());
+  EXPECT_LT(metric.rms_error_px(), 2.0);
+  ASSERT_EQ(metric.pose().rotation_size(), 9);
+  ASSERT_EQ(metric.pose().translation_size(), 3);
+  ASSERT_EQ(metric.covariance_size(), 36);
+  cv::Matx33d R_true, R;
+  cv::Vec3d t_true, t;
+  cli::RelativePose(query, match, &R_true, &t_true);
+  for (int i = 0; i < 9; ++i) R.val[i] = metric.pose().rotation(i);
+  for (int i = 0; i < 3; ++i) t[i] = metric.pose().translation(i);
+  cv::Vec3d rotation_error;
+  cv::Rodrigues(cv::Mat(R * R_true.t()), rotation_error);
+  std::printf("metric loop: %u inliers, translation error %.2f %% of %.3f m, rotation %.3f deg\n",
+              metric.inliers(), 100 * cv::norm(t - t_true) / cv::norm(query.center - match.center),
+              cv::norm(query.center - match.center), cv::norm(rotation_error) * 180 / CV_PI);
+  EXPECT_LT(cv::norm(rotation_error) * 180 / CV_PI, 0.3);
+  EXPECT_LT(cv::norm(t - t_true), 0.03 * cv::norm(query.center - match.center))
+      << "t " << t << " true " << t_true;
+  for (int i = 0; i < 6; ++i) EXPECT_GT(metric.covariance(i * 7), 0.0) << "variance " << i;
+}
+
+TEST_F(PlaceServiceTest, RgbdAndStereoFramesGiveMetricLoopsCloseToTheTruth) {
+  // Keyframes along x at yaw 0 with depth (AddFrame); a revisit 0.25 m closer, 0.08 m lower and
+  // turned 3°, sent with intrinsics only (QueryPlace), then with depth through a stream.
+  const std::vector<cli::CameraPose> keyframes = {
+      {cli::Yaw(0), {-0.3, 0, 0}}, {cli::Yaw(0), {0, 0, 0}}, {cli::Yaw(0), {0.3, 0, 0}}};
+  const cli::CameraPose revisit{cli::Yaw(3), {0.05, 0.08, 0.25}};
+  const cli::RenderedFrame query = Render(revisit);
+  pb::MapSettings settings;
+  settings.set_temporal_matches(0);
+  settings.set_recent_frames(1);
+  ASSERT_TRUE(CreateMap("rgbd", settings).ok());
+  std::vector<pb::Frame> stream_frames;
+  for (const cli::CameraPose& pose : keyframes) {
+    const pb::Frame frame = RgbdFrame(Render(pose));
+    pb::AddFrameResponse added;
+    ASSERT_TRUE(AddFrame("rgbd", frame, &added).ok());
+    stream_frames.push_back(frame);
+  }
+  pb::QueryPlaceRequest request;
+  request.set_map("rgbd");
+  *request.mutable_frame() = CalibratedFrame(query);
+  pb::QueryPlaceResponse response;
+  ASSERT_TRUE(places_->QueryPlace(Context().get(), request, &response).ok());
+  ASSERT_TRUE(response.result().has_match_frame_id());
+  const uint64_t match = response.result().match_frame_id();
+  ASSERT_LT(match, keyframes.size());
+  ExpectMetricPose(response.result(), revisit, keyframes[match]);
+
+  *request.mutable_frame() = JpegFrame(CorridorJpeg(1));  // no intrinsics: no 3D check
+  ASSERT_TRUE(places_->QueryPlace(Context().get(), request, &response).ok());
+  EXPECT_FALSE(response.result().has_metric());
+
+  // A writing stream (Detect) on a fresh map: the revisit, with depth, closes a metric loop.
+  stream_frames.push_back(RgbdFrame(query));
+  pb::StreamConfig config;
+  config.set_map("rgbd-stream");
+  config.set_create_if_missing(true);
+  *config.mutable_settings() = settings;
+  grpc::Status status;
+  const auto answers = Stream(*places_, config, stream_frames, &status);
+  ASSERT_TRUE(status.ok()) << status.error_message();
+  ASSERT_EQ(answers.size(), stream_frames.size());
+  ASSERT_TRUE(answers.back().has_result()) << answers.back().error().message();
+  const pb::LoopResult& loop = answers.back().result();
+  ASSERT_TRUE(loop.has_match_frame_id());
+  ExpectMetricPose(loop, revisit, keyframes[loop.match_frame_id()]);
+
+  // Stereo keyframes: the same revisit finds a metric loop against points from disparities.
+  ASSERT_TRUE(CreateMap("stereo").ok());
+  for (const cli::CameraPose& pose : keyframes) {
+    const cli::RenderedFrame rendered = Render(pose);
+    pb::Frame frame = CalibratedFrame(rendered);
+    ASSERT_TRUE(client::AttachStereoRight(rendered.right, kBaseline, &frame).ok());
+    pb::AddFrameResponse added;
+    ASSERT_TRUE(AddFrame("stereo", frame, &added).ok());
+  }
+  request.set_map("stereo");
+  *request.mutable_frame() = CalibratedFrame(query);
+  ASSERT_TRUE(places_->QueryPlace(Context().get(), request, &response).ok());
+  ASSERT_TRUE(response.result().has_match_frame_id());
+  ExpectMetricPose(response.result(), revisit, keyframes[response.result().match_frame_id()]);
+}
+
+TEST_F(PlaceServiceTest, DepthAndStereoThatCannotGoWithTheFrameAreRefusedAndAddNothing) {
+  ASSERT_TRUE(CreateMap("strict").ok());
+  const cli::RenderedFrame rendered = Render({});
+  const pb::Frame good = RgbdFrame(rendered);
+  std::vector<std::pair<pb::Frame, std::string>> bad;  // frame, words its error must contain
+  pb::Frame wrong_size = CalibratedFrame(rendered);
+  cv::Mat small;
+  cv::resize(rendered.depth_mm, small, {320, 240}, 0, 0, cv::INTER_NEAREST);
+  ASSERT_TRUE(client::AttachDepth(small, 1000, &wrong_size).ok());
+  bad.emplace_back(wrong_size, "aligned with the 640x480 image");
+  pb::Frame eight_bit = CalibratedFrame(rendered);
+  std::vector<uchar> png;
+  cv::Mat depth8;
+  rendered.depth_mm.convertTo(depth8, CV_8U, 1.0 / 16);
+  ASSERT_TRUE(cv::imencode(".png", depth8, png));
+  eight_bit.mutable_depth()->set_encoded(std::string(png.begin(), png.end()));
+  bad.emplace_back(eight_bit, "16-bit");
+  pb::Frame no_baseline = CalibratedFrame(rendered);
+  ASSERT_TRUE(client::AttachStereoRight(rendered.right, kBaseline, &no_baseline).ok());
+  no_baseline.mutable_right()->clear_baseline_m();
+  bad.emplace_back(no_baseline, "baseline_m");
+  pb::Frame no_intrinsics = good;
+  no_intrinsics.clear_intrinsics();
+  bad.emplace_back(no_intrinsics, "needs frame.intrinsics");
+  pb::Frame distorted = good;
+  distorted.mutable_intrinsics()->add_distortion(0.1);
+  for (int i = 0; i < 3; ++i) distorted.mutable_intrinsics()->add_distortion(0);
+  bad.emplace_back(distorted, "without distortion");
+  pb::Frame short_data = good;
+  short_data.mutable_depth()->mutable_raw()->mutable_data()->resize(100);
+  bad.emplace_back(short_data, "frame.depth.raw.data has 100 bytes");
+  pb::Frame stereo_features = FeaturesFrame(CorridorJpeg(1));
+  *stereo_features.mutable_intrinsics() = good.intrinsics();
+  ASSERT_TRUE(client::AttachStereoRight(rendered.right, kBaseline, &stereo_features).ok());
+  bad.emplace_back(stereo_features, "needs the left image");
+  for (const auto& [frame, words] : bad) {
+    pb::AddFrameResponse added;
+    const grpc::Status status = AddFrame("strict", frame, &added);
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << words;
+    EXPECT_NE(status.error_message().find(words), std::string::npos) << status.error_message();
+    pb::QueryPlaceRequest query;
+    query.set_map("strict");
+    query.set_add_frame(true);
+    *query.mutable_frame() = frame;
+    pb::QueryPlaceResponse response;
+    EXPECT_EQ(places_->QueryPlace(Context().get(), query, &response).error_code(),
+              grpc::StatusCode::INVALID_ARGUMENT)
+        << words;
+  }
+  pb::MapInfo info;
+  ASSERT_TRUE(GetMap("strict", &info).ok());
+  EXPECT_EQ(info.frames(), 0u);
+
+  // Client features with depth work: their keypoints index the depth image.
+  const client::OrbFeatures orb = client::ExtractOrbFeatures(rendered.image).value();
+  pb::Frame features =
+      client::FrameFromFeatures(orb.keypoints, orb.descriptors, rendered.image.size()).value();
+  *features.mutable_intrinsics() = good.intrinsics();
+  ASSERT_TRUE(client::AttachDepth(rendered.depth_mm, 1000, &features).ok());
+  pb::AddFrameResponse added;
+  ASSERT_TRUE(AddFrame("strict", features, &added).ok());
+  features.mutable_features()->set_image_width(320);  // but not a depth of another size
+  EXPECT_EQ(AddFrame("strict", features, &added).error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  ASSERT_TRUE(AddFrame("strict", good, &added).ok());
+  ASSERT_TRUE(GetMap("strict", &info).ok());
+  EXPECT_EQ(info.frames(), 2u);
+}
+
 TEST_F(PlaceServiceTest, AShardServesOnlyTheMapsThePlacementTableGivesIt) {
   const std::string table = data_dir_.Sub("placement.map");
   std::ofstream(table) << "mine   shard_a;\ntheirs shard_b;\n";

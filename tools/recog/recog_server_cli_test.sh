@@ -81,6 +81,25 @@ expect_ok "query with a camera" "$recog" query --map corridor "$images/41.jpg" -
 grep -q "^status *loop_detected" "$tmp/out" && pass || fail "query prints the status: $(cat "$tmp/out")"
 expect_ok "query --add" "$recog" query --map corridor "$images/60.jpg" --add --json "${server[@]}"
 json_check "query --add adds frame 4" "assert d['frame']==4, d"
+# Metric loops: a 16-bit PNG of a plane 2 m away, aligned with the 512x384 corridor images.
+/usr/bin/python3 -c "
+import struct, zlib
+def chunk(k, d): return struct.pack('>I', len(d)) + k + d + struct.pack('>I', zlib.crc32(k + d))
+rows = (b'\\x00' + struct.pack('>H', 2000) * 512) * 384
+open('$tmp/depth.png', 'wb').write(b'\\x89PNG\\r\\n\\x1a\\n' + chunk(b'IHDR', struct.pack('>IIBBBBB', 512, 384, 16, 0, 0, 0, 0))
+    + chunk(b'IDAT', zlib.compress(rows)) + chunk(b'IEND', b''))"
+expect_ok "maps create rgbd" "$recog" maps create rgbd "${server[@]}"
+expect_ok "query --add --depth" "$recog" query --map rgbd "$images/41.jpg" --add \
+  --camera 500,500,256,192 --depth "$tmp/depth.png" --json "${server[@]}"
+json_check "query --add --depth adds frame 0" "assert d['frame']==0, d"
+expect_ok "query with a camera in a map with depth" "$recog" query --map rgbd "$images/41.jpg" \
+  --camera 500,500,256,192 --json "${server[@]}"
+json_check "the loop's pose is metric" \
+  "m=d['metric']; assert m['verified'] and len(m['covariance'])==36 and max(map(abs, m['pose']['translation']))<0.01, d"
+expect_error "query --depth without --camera" "INVALID_ARGUMENT.*intrinsics" "$recog" query --map rgbd \
+  "$images/41.jpg" --add --depth "$tmp/depth.png" "${server[@]}"
+expect_error "query --right without --baseline" "baseline" "$recog" query --map rgbd \
+  "$images/41.jpg" --add --camera 500,500,256,192 --right "$images/41.jpg" "${server[@]}"
 expect_ok "stream the same frames as features" "$recog" stream --map corridor --images "$images" \
   --features-on-client --timestamps --json -q "${server[@]}"
 /usr/bin/python3 -c "

@@ -87,6 +87,23 @@ json LoopJson(const pb::LoopResult& r) {
         {"rotation", std::vector<double>(pose.rotation().begin(), pose.rotation().end())},
         {"translation", std::vector<double>(pose.translation().begin(), pose.translation().end())}};
   }
+  if (r.has_metric()) {
+    const pb::MetricLoop& m = r.metric();
+    json metric = {{"checked", m.checked()},
+                   {"verified", m.verified()},
+                   {"correspondences", m.correspondences()},
+                   {"inliers", m.inliers()},
+                   {"rms_error_px", m.rms_error_px()}};
+    if (m.verified()) {
+      metric["pose"] = {
+          // X_query = R X_match + t, metres
+          {"rotation", std::vector<double>(m.pose().rotation().begin(), m.pose().rotation().end())},
+          {"translation",
+           std::vector<double>(m.pose().translation().begin(), m.pose().translation().end())}};
+      metric["covariance"] = std::vector<double>(m.covariance().begin(), m.covariance().end());
+    }
+    out["metric"] = std::move(metric);
+  }
   return out;
 }
 
@@ -314,7 +331,8 @@ int RunStream(const StreamArgs& args, RecognitionClient& client) {
 
 struct QueryArgs {
   ServerFlags server;
-  std::string map, image, camera, client_frame_id;
+  std::string map, image, camera, client_frame_id, depth, right;
+  double depth_scale = 1000, baseline = 0;
   bool add = false, correspondences = false;
   uint32_t top_k = 0;
 };
@@ -333,6 +351,18 @@ int RunQuery(const QueryArgs& args, RecognitionClient& client) {
     if (!camera.ok()) return Fail("query", camera.status());
     SetIntrinsics(*camera, &*frame);
     options.set_include_relative_pose(true);
+  }
+  if (!args.depth.empty() || !args.right.empty()) {  // metric loops: the server checks the rest
+    const std::string& file = args.depth.empty() ? args.right : args.depth;
+    const cv::Mat image =
+        cv::imread(file, args.depth.empty() ? cv::IMREAD_GRAYSCALE : cv::IMREAD_ANYDEPTH);
+    if (image.empty()) return Fail("query", Status::InvalidArgument("cannot read '" + file + "'"));
+    const grpc::Status attached = args.depth.empty()
+                                      ? client::AttachStereoRight(image, args.baseline, &*frame)
+                                      : client::AttachDepth(image, args.depth_scale, &*frame);
+    if (!attached.ok()) {
+      return Fail("query", Status::InvalidArgument(file + ": " + attached.error_message()));
+    }
   }
   auto answer = client.QueryPlace(
       args.map, *frame, args.add ? client::QueryMode::kAddFrame : client::QueryMode::kRelocalise,
@@ -374,6 +404,21 @@ int RunQuery(const QueryArgs& args, RecognitionClient& client) {
         pose.rotation(0), pose.rotation(1), pose.rotation(2), pose.rotation(3), pose.rotation(4),
         pose.rotation(5), pose.rotation(6), pose.rotation(7), pose.rotation(8), pose.translation(0),
         pose.translation(1), pose.translation(2));
+  }
+  if (r.has_metric()) {
+    const pb::MetricLoop& m = r.metric();
+    std::printf("metric     %s: %u of %u 3D correspondences, rms %.2f px\n",
+                m.verified() ? "verified" : "failed", m.inliers(), m.correspondences(),
+                m.rms_error_px());
+    if (m.verified()) {
+      const pb::Pose& p = m.pose();
+      std::printf(
+          "metric pose R = [%.4f %.4f %.4f; %.4f %.4f %.4f; %.4f %.4f %.4f], "
+          "t = [%.4f %.4f %.4f] m (X_query = R X_match + t)\n",
+          p.rotation(0), p.rotation(1), p.rotation(2), p.rotation(3), p.rotation(4), p.rotation(5),
+          p.rotation(6), p.rotation(7), p.rotation(8), p.translation(0), p.translation(1),
+          p.translation(2));
+    }
   }
   return 0;
 }
@@ -436,6 +481,18 @@ void AddStreamCommands(CLI::App& app, int* exit_code) {
       ->add_option("--top-k", query_args->top_k,
                    "Also list the best N candidates of the query with their scores (0 to 50)")
       ->check(CLI::Range(0, 50));
+  CLI::Option* depth =
+      query->add_option("--depth", query_args->depth,
+                        "Aligned depth image of the frame (16-bit PNG; needs --camera): the loop's "
+                        "pose is then metric (\"metric\" in --json)");
+  query->add_option("--depth-scale", query_args->depth_scale, "Depth units per metre")
+      ->capture_default_str();
+  query
+      ->add_option("--right", query_args->right,
+                   "Right image of a rectified stereo pair whose left image is the frame "
+                   "(needs --camera and --baseline)")
+      ->excludes(depth);
+  query->add_option("--baseline", query_args->baseline, "Stereo baseline in metres");
   query->add_flag("--correspondences", query_args->correspondences,
                   "Also list the inliers of a verified loop: keypoint index and pixel in both "
                   "frames");

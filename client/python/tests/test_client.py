@@ -10,19 +10,21 @@ import hashlib
 import os
 import signal
 import socket
+import struct
 import subprocess
 import sys
 import tempfile
 import threading
 import time
 import unittest
+import zlib
 from pathlib import Path
 from typing import Sequence
 
 try:
     import grpc
     from recognition.v1 import place_pb2, repository_pb2
-    from recognition_client import RecognitionClient
+    from recognition_client import RecognitionClient, make_frame
 except ModuleNotFoundError as missing:
     if missing.name.split(".")[0] not in ("grpc", "google"):
         raise  # the stubs or the client are not on PYTHONPATH: an error, not a skip
@@ -40,6 +42,17 @@ SHUTDOWN_SECONDS = 30
 def corridor(n: int) -> Path:
     """The path of tests/data/corridor/<n>.jpg (n = 1, 20, 41, 60)."""
     return CORRIDOR / f"{n}.jpg"
+
+
+def depth_png(width: int, height: int, millimetres: int) -> bytes:
+    """A 16-bit grey PNG of a constant depth: a plane facing the camera."""
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return (struct.pack(">I", len(data)) + kind + data +
+                struct.pack(">I", zlib.crc32(kind + data)))
+    rows = (b"\x00" + struct.pack(">H", millimetres) * width) * height  # filter 0 on every row
+    header = struct.pack(">IIBBBBB", width, height, 16, 0, 0, 0, 0)  # 16-bit grey
+    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"IDAT", zlib.compress(rows))
+            + chunk(b"IEND", b""))
 
 
 def free_port() -> int:
@@ -154,6 +167,32 @@ class RecognitionClientTest(unittest.TestCase):
         self.assertEqual(response.result.match_frame_id, 2)
         self.assertFalse(response.result.HasField("frame_id"))  # nothing was added
         self.assertEqual(self.client.get_map("hall").frames, 4)
+
+    def test_a_frame_with_depth_gives_metric_loops_and_bad_depth_is_refused(self):
+        self.client.create_map("rgbd")
+        k = (500, 500, 256, 192)  # the corridor images are 512x384
+        added = self.client.add_frame(
+            "rgbd", make_frame(corridor(41), intrinsics=k, depth=depth_png(512, 384, 2000)))
+        self.assertEqual(added.frame_id, 0)
+        result = self.client.query_place("rgbd", make_frame(corridor(41), intrinsics=k)).result
+        self.assertEqual(result.status, place_pb2.LOOP_STATUS_LOOP_DETECTED)
+        self.assertTrue(result.metric.checked)
+        self.assertTrue(result.metric.verified)
+        self.assertGreaterEqual(result.metric.inliers, 12)
+        self.assertEqual(len(result.metric.covariance), 36)
+        self.assertLess(max(abs(v) for v in result.metric.pose.translation), 0.01)  # same view
+        bad = {"16-bit": make_frame(corridor(20), intrinsics=k, depth=corridor(20)),  # 8-bit
+               "aligned": make_frame(corridor(20), intrinsics=k, depth=depth_png(256, 192, 2000))}
+        for words, frame in bad.items():
+            with self.assertRaises(grpc.RpcError) as refused:
+                self.client.add_frame("rgbd", frame)
+            self.assertEqual(refused.exception.code(), grpc.StatusCode.INVALID_ARGUMENT)
+            self.assertIn(words, refused.exception.details())
+        with self.assertRaises(ValueError):
+            make_frame(corridor(20), intrinsics=k, right=corridor(60))  # no baseline
+        with self.assertRaises(ValueError):
+            make_frame(corridor(20), depth=depth_png(512, 384, 2000))  # no intrinsics
+        self.assertEqual(self.client.get_map("rgbd").frames, 1)
 
     def test_a_slam_gets_its_keyframe_ids_candidates_and_inliers_and_culls_keyframes(self):
         self.client.create_map("slam")
