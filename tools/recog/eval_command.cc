@@ -225,11 +225,11 @@ int RunEvalPlace(const EvalPlaceArgs& args) {
     if (!camera.ok()) return Fail(camera.status());
     geometry.emplace();
     geometry->K = camera->K();
-    if (args.depth_scale > 0) {
-      geometry->depth_scale = args.depth_scale;
-    } else if (source->layout() != DatasetLayout::kTum) {
-      geometry->depth_scale = 0.001;  // millimetres
-    }
+    // --depth-scale is in units per metre, as in recog query and the model builder's views.
+    const double units_per_metre =
+        args.depth_scale > 0 ? args.depth_scale
+                             : (source->layout() == DatasetLayout::kTum ? 5000.0 : 1000.0);
+    geometry->depth_scale = 1.0 / units_per_metre;
     geometry->baseline_m = args.baseline;
     geometry->stereo.max_features = features;
   } else if (args.depth_scale > 0 || args.baseline > 0) {
@@ -382,8 +382,8 @@ void AddEvalCommand(CLI::App& app, int* exit_code) {
                    "right image (EuRoC, KITTI) get 3D points, loops a 3D check and a metric pose")
       ->check(Accepts(ParseCamera));
   place->add_option("--depth-scale", args->depth_scale,
-                    "With --camera: metres per unit of 16-bit depth (default TUM 1/5000, else "
-                    "0.001)");
+                    "With --camera: 16-bit depth units per metre (default: TUM's 5000, else "
+                    "1000)");
   place->add_option("--baseline", args->baseline,
                     "With --camera: stereo baseline in metres (needed for right images)");
   place->add_option("--vocab", args->vocabulary, "Vocabulary (default: the bundled place one)");
