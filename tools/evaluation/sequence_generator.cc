@@ -131,7 +131,8 @@ constexpr int kGlobalGradientSize = kGlobalCells * kGlobalCells * kGlobalBins;
 constexpr int kGlobalSize = kGlobalGradientSize + kGlobalCells * kGlobalCells * 3;
 // Second candidate search, by the SIFT features themselves: each descriptor (less its own mean)
 // is hashed by the signs of kHashBits fixed random projections, in kHashTables tables; the
-// kSceneCandidates chosen photos sharing the most buckets with the photo are matched too.
+// kSceneCandidates chosen photos sharing the most buckets with the photo, each bucket weighted by
+// its rarity (idf), are matched too.
 constexpr int kHashTables = 4, kHashBits = 16;
 constexpr uint64_t kHashSeed = 0x5eedf00d;
 
@@ -296,11 +297,17 @@ class SceneIndex {
   SceneMatch FindSameScene(const SceneView& view) const {
     if (globals_.empty()) return SceneMatch{};
     const cv::Mat similarity = globals_ * view.global.t();  // one row per chosen photo
-    std::vector<int> votes(size_t(globals_.rows), 0);
+    // A shared bucket votes by its rarity (idf, log(places / places in the bucket)): buckets that
+    // half the photos share (plain texture, foliage) say little, a rare one says much.
+    std::vector<float> votes(size_t(globals_.rows), 0.0f);
+    const double places = double(globals_.rows);
     for (size_t h = 0; h < view.hashes.size(); ++h) {
+      const std::vector<int>& bucket = buckets_[h % kHashTables][view.hashes[h]];
+      const float weight = float(std::log((places + 1.0) / (double(bucket.size()) + 1.0)));
+      if (weight <= 0.0f) continue;
       int last = -1;  // one vote per place and feature hash
-      for (const int place : buckets_[h % kHashTables][view.hashes[h]]) {
-        if (place != last) ++votes[size_t(place)];
+      for (const int place : bucket) {
+        if (place != last) votes[size_t(place)] += weight;
         last = place;
       }
     }

@@ -40,7 +40,8 @@
 // histograms in 4x4 cells of the grey photo shrunk to 64x64, plus the mean-free colour of a 4x4
 // thumbnail) picks the 30 chosen photos of highest cosine similarity, and hashes of the SIFT
 // descriptors (signs of 16 fixed random projections of the descriptor less its mean, 4 tables)
-// the 30 that share the most hash buckets with the photo; each candidate is matched with
+// the 30 that share the most hash buckets with the photo (each bucket weighted by its rarity,
+// log(places / places in the bucket)); each candidate is matched with
 // Lowe's ratio test (0.8, L2, every feature against every feature, one-to-one) and the photo is a
 // duplicate as soon as a homography (RANSAC, 5 px) has at least 12 inliers and changes areas by
 // less than a factor 16 (not degenerate). The thresholds are loose: an unrelated photo dropped
