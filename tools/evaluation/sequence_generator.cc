@@ -220,6 +220,23 @@ cv::Mat GlobalDescriptor(const cv::Mat& photo) {
   return descriptor;
 }
 
+// The gradient part of a global descriptor with opposite orientations folded together (8 bins to
+// 4 per cell) and no colour, unit length: the same object on a darker or a brighter background
+// (edge polarity reversed, colours changed) still looks alike.
+cv::Mat ShapeDescriptor(const cv::Mat& global) {
+  constexpr int kHalf = kGlobalBins / 2;
+  cv::Mat shape(1, kGlobalCells * kGlobalCells * kHalf, CV_32F);
+  const float* in = global.ptr<float>();
+  float* out = shape.ptr<float>();
+  for (int c = 0; c < kGlobalCells * kGlobalCells; ++c) {
+    for (int k = 0; k < kHalf; ++k) {
+      out[c * kHalf + k] = in[c * kGlobalBins + k] + in[c * kGlobalBins + k + kHalf];
+    }
+  }
+  Normalize(shape);
+  return shape;
+}
+
 // Lowe's ratio test on every feature of `a` against `b` (L2), made one-to-one (a feature of `b`,
 // or a position of `a` shared by SIFT's several orientations, keeps its nearest match), then a
 // homography (RANSAC; OpenCV's is deterministic). Returns its inliers; 0 when there are too few
@@ -293,7 +310,8 @@ class SceneIndex {
 
   // The first candidate that a homography maps onto `view` with at least kSceneMinInliers
   // inliers. Candidates: the kSceneCandidates chosen photos most similar by global descriptor,
-  // then the kSceneCandidates sharing the most feature hash buckets (each at most once).
+  // then by its shape part (ShapeDescriptor), then the kSceneCandidates sharing the most feature
+  // hash buckets (each at most once).
   SceneMatch FindSameScene(const SceneView& view) const {
     if (globals_.empty()) return SceneMatch{};
     const cv::Mat similarity = globals_ * view.global.t();  // one row per chosen photo
@@ -312,11 +330,15 @@ class SceneIndex {
       }
     }
     std::vector<int> candidates = Best(similarity.ptr<float>(), globals_.rows);
-    for (const int place : Best(votes.data(), globals_.rows)) {
-      if (votes[size_t(place)] > 0 &&
-          std::find(candidates.begin(), candidates.end(), place) == candidates.end()) {
+    const auto add = [&candidates](int place) {
+      if (std::find(candidates.begin(), candidates.end(), place) == candidates.end()) {
         candidates.push_back(place);
       }
+    };
+    const cv::Mat shape_similarity = shapes_ * ShapeDescriptor(view.global).t();
+    for (const int place : Best(shape_similarity.ptr<float>(), shapes_.rows)) add(place);
+    for (const int place : Best(votes.data(), globals_.rows)) {
+      if (votes[size_t(place)] > 0) add(place);
     }
     const cv::BFMatcher matcher(cv::NORM_L2);
     for (const int place : candidates) {
@@ -330,6 +352,7 @@ class SceneIndex {
   void Add(SceneView view) {
     const int place = globals_.rows;
     globals_.push_back(view.global);
+    shapes_.push_back(ShapeDescriptor(view.global));
     for (size_t h = 0; h < view.hashes.size(); ++h) {
       buckets_[h % kHashTables][view.hashes[h]].push_back(place);
     }
@@ -369,6 +392,7 @@ class SceneIndex {
   }
 
   cv::Mat globals_;                 // one row per place, CV_32F
+  cv::Mat shapes_;                  // ShapeDescriptor of each place's global descriptor
   std::vector<FeatureSet> places_;  // by place
   // Per table, per hash key: the places with a feature of that key, increasing.
   std::vector<std::vector<std::vector<int>>> buckets_ = std::vector<std::vector<std::vector<int>>>(
