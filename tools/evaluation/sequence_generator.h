@@ -38,7 +38,8 @@
 // are not cleaned of exactly what the detector would confuse: 500 SIFT features of the photo
 // (shrunk to just cover 640x480 when larger); a global descriptor (8-bin gradient orientation
 // histograms in 4x4 cells of the grey photo shrunk to 64x64, plus the mean-free colour of a 4x4
-// thumbnail) picks the 30 chosen photos of highest cosine similarity, and hashes of the SIFT
+// thumbnail) picks the 30 chosen photos of highest cosine similarity, its gradient part with
+// opposite orientations folded (no colour) the 30 of most similar shape, and hashes of the SIFT
 // descriptors (signs of 16 fixed random projections of the descriptor less its mean, 4 tables)
 // the 30 that share the most hash buckets with the photo (each bucket weighted by its rarity,
 // log(places / places in the bucket)); each candidate is matched with
