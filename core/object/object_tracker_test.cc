@@ -247,7 +247,10 @@ TEST_F(RecordingLearnerTest, AddsAViewEachTimeTheObjectHasTurnedFarEnoughWithIts
   for (size_t k = 1; k < learned->views.size(); ++k) {
     const int frame = int(learned->view_frames[k - 1]) + 1;  // frames_[i] is frame i + 1
     EXPECT_EQ(learned->views[k].name, "frame" + std::to_string(frame));
-    EXPECT_LT(RotationErrorDeg(learned->views[k].camera_from_object.R, PoseAt(frame).R), 1.0);
+    // A plane's tilt is the least determined part of its pose: the same frame's rotation comes
+    // out 0.4 degrees off in a Release build and 1.7 in RelWithDebInfo, where rounding sends RANSAC
+    // down another path. A wrong view would be tens of degrees off.
+    EXPECT_LT(RotationErrorDeg(learned->views[k].camera_from_object.R, PoseAt(frame).R), 2.5);
     EXPECT_LT(cv::norm(learned->views[k].camera_from_object.t - PoseAt(frame).t), 0.02);
     // Truly seen from a new direction (the estimated pose may be a fraction of a degree off).
     for (const cv::Vec3d& seen : true_directions) {
