@@ -5,11 +5,16 @@
 namespace recog::cli {
 
 void ServerFlags::AddTo(CLI::App* command) {
-  command->add_option("--server", server, "recogd address host:port")->capture_default_str();
-  command->add_option("--token-file", token_file, "file holding the bearer token");
-  command->add_option("--tls-ca", tls_ca, "CA certificate (PEM) to trust; turns TLS on");
-  command->add_option("--tls-cert", tls_cert, "client certificate (PEM) for mutual TLS");
-  command->add_option("--tls-key", tls_key, "client key (PEM) for mutual TLS");
+  command->add_option("--server", server, "recogd address host:port")
+      ->capture_default_str()
+      ->envname(kServerEnv);
+  command->add_option("--token-file", token_file, "file holding the bearer token")
+      ->envname(kTokenFileEnv);
+  command->add_option("--tls-ca", tls_ca, "CA certificate (PEM) to trust; turns TLS on")
+      ->envname(kTlsCaEnv);
+  command->add_option("--tls-cert", tls_cert, "client certificate (PEM) for mutual TLS")
+      ->envname(kTlsCertEnv);
+  command->add_option("--tls-key", tls_key, "client key (PEM) for mutual TLS")->envname(kTlsKeyEnv);
   command->add_option("--shard", shard,
                       "behind a router of shards: the shard of calls without a map (maps list, "
                       "admin, recognition, model reads)");

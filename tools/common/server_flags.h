@@ -1,12 +1,15 @@
 // The flags every recog subcommand that talks to recogd takes, and the connection they describe.
 //
-//   --server HOST:PORT   the server (default 127.0.0.1:50051)
-//   --token-file FILE    a file holding the bearer token (default: none)
-//   --tls-ca FILE        trust this CA and use TLS (default: plaintext)
-//   --tls-cert/--tls-key client certificate and key for mutual TLS (default: none)
+//   --server HOST:PORT   the server (default 127.0.0.1:50051)            env RECOG_SERVER
+//   --token-file FILE    a file holding the bearer token (default: none)  env RECOG_TOKEN_FILE
+//   --tls-ca FILE        trust this CA and use TLS (default: plaintext)   env RECOG_TLS_CA
+//   --tls-cert/--tls-key client certificate and key for mutual TLS       env RECOG_TLS_CERT,
+//                        (default: none)                                     RECOG_TLS_KEY
 //   --shard NAME         behind a router of shards: the shard of calls without a map (maps list)
 //   --json               print machine-readable JSON instead of text
-// Connect() turns them into a RecognitionClient; a failure is one line for the caller to print.
+// A flag given on the command line wins over its environment variable (the names are the Python
+// client's too). Connect() turns them into a RecognitionClient; a failure is one line for the
+// caller to print.
 #pragma once
 
 #include <memory>
@@ -17,6 +20,12 @@
 #include "client/cpp/recognition_client.h"
 
 namespace recog::cli {
+
+inline constexpr const char* kServerEnv = "RECOG_SERVER";
+inline constexpr const char* kTokenFileEnv = "RECOG_TOKEN_FILE";
+inline constexpr const char* kTlsCaEnv = "RECOG_TLS_CA";
+inline constexpr const char* kTlsCertEnv = "RECOG_TLS_CERT";
+inline constexpr const char* kTlsKeyEnv = "RECOG_TLS_KEY";
 
 struct ServerFlags {
   std::string server = "127.0.0.1:50051";

@@ -483,7 +483,8 @@ Status WriteSizeRecallPlot(const SizeRecall& recall, const std::string& title,
   plot.y_label = "fraction of frames";
   plot.x_min = -1;
   plot.x_max = 2;
-  return WritePlotPng(path, plot, {correct, found});
+  plot.write_csv = false;  // WriteSizeRecallCsv writes the bins, with more columns
+  return WritePlot(path, plot, {correct, found});
 }
 
 }  // namespace recog::cli

@@ -1,16 +1,57 @@
 #include "tools/evaluation/plot.h"
 
 #include <cstdio>
+#include <filesystem>
+#include <fstream>
 
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
 namespace recog::cli {
+namespace {
 
-Status WritePlotPng(const std::string& path, const PlotOptions& o,
+// A CSV field, quoted when it holds a comma, a quote or a line break (RFC 4180).
+std::string CsvField(const std::string& text) {
+  if (text.find_first_of(",\"\r\n") == std::string::npos) return text;
+  std::string quoted = "\"";
+  for (char c : text) {
+    if (c == '"') quoted += '"';
+    quoted += c;
+  }
+  return quoted + '"';
+}
+
+Status WritePlotCsv(const std::string& path, const PlotOptions& o,
                     const std::vector<PlotSeries>& series) {
+  std::ofstream out(path);
+  out << "series," << CsvField(o.x_label.empty() ? "x" : o.x_label) << ','
+      << CsvField(o.y_label.empty() ? "y" : o.y_label) << ",point_label\n";
+  out.precision(10);
+  for (const PlotSeries& s : series) {
+    for (size_t i = 0; i < s.points.size(); ++i) {
+      out << CsvField(s.label) << ',' << s.points[i].x << ',' << s.points[i].y << ','
+          << CsvField(i < s.point_labels.size() ? s.point_labels[i] : "") << '\n';
+    }
+  }
+  out.close();
+  if (!out) return Status::Internal("cannot write the plot's CSV '" + path + "'");
+  return Status::Ok();
+}
+
+}  // namespace
+
+std::string PlotCsvPath(const std::string& png_path) {
+  return std::filesystem::path(png_path).replace_extension(".csv").string();
+}
+
+Status WritePlot(const std::string& path, const PlotOptions& o,
+                 const std::vector<PlotSeries>& series) {
   if (!(o.x_max > o.x_min) || !(o.y_max > o.y_min) || o.width < 200 || o.height < 150) {
     return Status::InvalidArgument("plot needs a non-empty range and at least 200x150 pixels");
+  }
+  if (std::filesystem::path(path).extension() == ".csv") {
+    return Status::InvalidArgument("plot '" + path +
+                                   "': the image needs another extension than .csv");
   }
   cv::Mat image(o.height, o.width, CV_8UC3, cv::Scalar(255, 255, 255));
   const int left = 70, right = 20, top = 60, bottom = 60;
@@ -62,7 +103,7 @@ Status WritePlotPng(const std::string& path, const PlotOptions& o,
   } catch (const cv::Exception& e) {
     return Status::Internal("cannot write plot '" + path + "': " + e.what());
   }
-  return Status::Ok();
+  return o.write_csv ? WritePlotCsv(PlotCsvPath(path), o, series) : Status::Ok();
 }
 
 }  // namespace recog::cli

@@ -1,5 +1,6 @@
 // Line plots written as PNG images (OpenCV drawing, no plotting library): enough for the
-// precision-recall curves and latency plots the evaluation tools produce.
+// precision-recall curves and latency plots the evaluation tools produce. Every plot's numbers
+// are written beside it as CSV (PlotCsvPath), for whoever would rather plot them their own way.
 #pragma once
 
 #include <string>
@@ -23,11 +24,18 @@ struct PlotOptions {
   std::string x_label, y_label;
   double x_min = 0, x_max = 1, y_min = 0, y_max = 1;
   int width = 800, height = 600;
+  // false when the caller writes a richer CSV of its own at PlotCsvPath(path).
+  bool write_csv = true;
 };
 
-// Draws the series on axes with ticks and labels and writes `path` (PNG). INVALID_ARGUMENT for
-// an empty range, INTERNAL when the file cannot be written.
-Status WritePlotPng(const std::string& path, const PlotOptions& options,
-                    const std::vector<PlotSeries>& series);
+// The CSV beside the plot `png_path`: the same path with the extension .csv.
+std::string PlotCsvPath(const std::string& png_path);
+
+// Draws the series on axes with ticks and labels and writes `path` (PNG), and, with write_csv,
+// the plotted points to PlotCsvPath(path): a header "series,<x_label>,<y_label>,point_label",
+// then one row per point in drawing order. INVALID_ARGUMENT for an empty range or a path ending
+// in .csv, INTERNAL when a file cannot be written.
+Status WritePlot(const std::string& path, const PlotOptions& options,
+                 const std::vector<PlotSeries>& series);
 
 }  // namespace recog::cli

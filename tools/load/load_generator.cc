@@ -766,7 +766,7 @@ Status WriteLatencyPlot(const LoadReport& report, const std::string& path) {
   plot.x_max = std::max(report.wall_s, 1e-3);
   plot.y_max = std::max(y_max * 1.1, 1.0);
   plot.width = 1000;
-  return WritePlotPng(path, plot, series);
+  return WritePlot(path, plot, series);
 }
 
 }  // namespace recog::cli

@@ -5,6 +5,7 @@
 
 #include <chrono>
 #include <filesystem>
+#include <fstream>
 #include <thread>
 
 #include <gtest/gtest.h>
@@ -93,6 +94,18 @@ TEST_F(LoadGeneratorTest, TwoRobotsGetEveryFrameAnsweredAndDeleteTheirMaps) {
   const std::string plot = data_dir_.Sub("latency.png");
   ASSERT_TRUE(WriteLatencyPlot(*report, plot).ok());
   EXPECT_GT(std::filesystem::file_size(plot), 0u);
+  // Its numbers beside it: a header, then one row per plotted point (p50 and p99 per slice).
+  std::ifstream csv(data_dir_.Sub("latency.csv"));
+  std::string line;
+  ASSERT_TRUE(std::getline(csv, line));
+  EXPECT_EQ(line, "series,seconds since the start,latency (ms),point_label");
+  int p50_rows = 0, p99_rows = 0;
+  while (std::getline(csv, line)) {
+    p50_rows += line.starts_with("StreamFrames p50,");
+    p99_rows += line.starts_with("StreamFrames p99,");
+  }
+  EXPECT_GT(p50_rows, 0);
+  EXPECT_EQ(p50_rows, p99_rows);
 }
 
 TEST_F(LoadGeneratorTest, VerificationPassesOnASequenceWithoutLoops) {

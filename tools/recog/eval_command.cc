@@ -309,7 +309,7 @@ int RunEvalPlace(const EvalPlaceArgs& args) {
                  ": precision vs recall, alpha from 0 to 1";
     plot.x_label = "recall";
     plot.y_label = "precision";
-    if (Status s = WritePlotPng(args.plot, plot, curves); !s.ok()) return Fail(s);
+    if (Status s = WritePlot(args.plot, plot, curves); !s.ok()) return Fail(s);
     out["plot"] = args.plot;
   }
   if (!args.draw_dir.empty()) {
@@ -396,7 +396,10 @@ void AddEvalCommand(CLI::App& app, int* exit_code) {
                     "YAML file of detector parameters (over the --mode preset)");
   place->add_option("--features", args->features, "ORB features per frame")->capture_default_str();
   place->add_option("--sweep", args->sweep, "'alpha': precision-recall curve over alpha 0..1");
-  place->add_option("--plot", args->plot, "PNG of the precision-recall curve (with --sweep)")
+  place
+      ->add_option(
+          "--plot", args->plot,
+          "PNG of the precision-recall curve (with --sweep); its points go to the same name .csv")
       ->capture_default_str();
   place->add_option("--draw", args->draw_dir, "Folder for images of every detection");
   place->add_flag("--json", args->json, "Print JSON");

@@ -223,7 +223,8 @@ void AddLoadCommand(CLI::App& app, int* exit_code) {
   load->add_flag("--verify", o.verify,
                  "Check each robot's loops (first pass) against the offline detector; exit 1 on a "
                  "mismatch");
-  load->add_option("--plot", args->plot, "PNG of the latency over the run");
+  load->add_option("--plot", args->plot,
+                   "PNG of the latency over the run; its points go to the same name .csv");
   load->add_option("--map-prefix", o.map_prefix, "Maps are named PREFIX-<run id>-<robot>")
       ->capture_default_str();
   load->add_flag("--keep-maps", o.keep_maps, "Do not delete the maps at the end");

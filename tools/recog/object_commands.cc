@@ -864,8 +864,10 @@ void AddObjectCommands(CLI::App& app, int* exit_code) {
       "--models (default: offline)");
   models->excludes(server);
   vocabulary->excludes(server);
+  // Offline unless --server is given: the connection's environment variables are not read here.
+  server->envname("");
   for (const char* name : {"--token-file", "--tls-ca", "--tls-cert", "--tls-key"}) {
-    recognize->get_option(name)->needs(server);
+    recognize->get_option(name)->needs(server)->envname("");
   }
   recognize->callback([recognize_args, exit_code] { *exit_code = RunRecognize(*recognize_args); });
 }

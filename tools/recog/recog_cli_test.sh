@@ -142,6 +142,14 @@ assert d['frames'] == 4 and d['query_frames_with_truth'] == 2, d
 assert d['parameters']['mode'] == 'default' and d['parameters']['strong_acceptance'], d['parameters']
 for l in d['loops']: assert l['acceptance'] in ('none', 'temporal_consistency', 'strong_evidence'), l" \
   && pass || fail "eval place --json has the documented keys"
+/usr/bin/python3 -c "
+import csv, json; d=json.load(open('$tmp/out')); rows=list(csv.reader(open('$tmp/pr.csv')))
+assert rows[0] == ['series', 'recall', 'precision', 'point_label'], rows[0]
+assert len(rows) == 1 + len(d['sweep']), rows
+for r, s in zip(rows[1:], d['sweep']):
+    assert r[0] == 'geometry: ' + s['geometry'], (r, s)
+    assert abs(float(r[1]) - s['recall']) < 1e-9 and abs(float(r[2]) - s['precision']) < 1e-9, (r, s)" \
+  && pass || fail "eval place writes the PR curve's points beside the plot (pr.csv)"
 expect_ok "eval place in thesis mode" "$recog" eval place --images "$images" \
   --ground-truth "$tmp/gt4.txt" --vocab "$tmp/v.rvoc" --json -q --mode thesis
 /usr/bin/python3 -c "

@@ -68,6 +68,13 @@ expect_error "maps stats of an unknown map" "NOT_FOUND" "$recog" maps stats nowh
 expect_ok "maps delete" "$recog" maps delete lab "${server[@]}"
 expect_error "maps delete of an unknown map" "NOT_FOUND" "$recog" maps delete lab "${server[@]}"
 
+# The connection from the environment; a flag given wins over its variable.
+expect_ok "maps list with RECOG_SERVER" env RECOG_SERVER="127.0.0.1:$port" "$recog" maps list
+expect_ok "--server wins over RECOG_SERVER" env RECOG_SERVER=127.0.0.1:1 "$recog" maps list \
+  "${server[@]}"
+expect_error "RECOG_TOKEN_FILE is read" "NOT_FOUND.*$tmp/no-token" env RECOG_TOKEN_FILE="$tmp/no-token" \
+  "$recog" maps list "${server[@]}"
+
 # Stream the four bundled frames, then relocalise one of them.
 expect_error "stream into an unknown map" "NOT_FOUND" "$recog" stream --map corridor \
   --images "$images" -q "${server[@]}"
@@ -180,6 +187,10 @@ expect_ok "recognize --server --inliers --covariance" "$recog" recognize --serve
   --image "$images/1.jpg" --camera 500,500,256,192 --json --inliers --covariance
 json_check "recognize --server --json reports inliers_2d3d and covariance" \
   "x=d['detections'][0]; i=x['inliers_2d3d']; assert len(i)==x['inliers'] and sorted(i[0])==['pixel', 'point', 'point_id'] and len(x['covariance'])==36, x"
+expect_ok "recognize stays offline with RECOG_SERVER set" env RECOG_SERVER=127.0.0.1:1 \
+  RECOG_TOKEN_FILE="$tmp/no-token" "$recog" recognize --models "$tmp/poster.robj" \
+  --image "$images/1.jpg" --camera 500,500,256,192 --json
+json_check "offline recognize finds the poster" "assert [x['name'] for x in d['detections']]==['poster'], d"
 expect_usage_error "recognize with --models and --server" "excludes" "$recog" recognize --models "$tmp/poster.robj" \
   --server "127.0.0.1:$port" --image "$images/1.jpg" --camera 500,500,256,192
 expect_error "recognize with neither --models nor --server" "--models" "$recog" recognize \
