@@ -7,6 +7,7 @@ The package must be on PYTHONPATH (ctest sets it); RECOG_VERSION, when set, is t
 has. Exits with 77 (skipped) when Python's grpc or protobuf modules are missing.
 """
 
+import hashlib
 import os
 import sys
 import tempfile
@@ -102,6 +103,12 @@ class FakeRepository(repository_pb2_grpc.ObjectRepositoryServicer):
         return repository_pb2.PutModelResponse(
             model=repository_pb2.ModelInfo(name=header.name, size_bytes=size))
 
+    def GetModel(self, request, context):
+        """A download whose bytes do not match the SHA-256 announced first."""
+        yield repository_pb2.GetModelResponse(info=repository_pb2.ModelInfo(
+            name=request.name, version=1, size_bytes=3, sha256=hashlib.sha256(b"abc").hexdigest()))
+        yield repository_pb2.GetModelResponse(chunk=b"abd")
+
     def DeleteModel(self, request, context):
         self.request_ids.append(request.request_id)
         return repository_pb2.DeleteModelResponse(versions_deleted=1)
@@ -196,6 +203,11 @@ class ChannelTest(unittest.TestCase):
         self.client.delete_model("m")
         self.assertEqual(self.repository.request_ids[-2], "upload-1")
         self.assertEqual(uuid.UUID(self.repository.request_ids[-1]).version, 4)
+
+    def test_a_download_that_does_not_match_its_checksum_is_data_loss(self):
+        with self.assertRaises(DataLoss) as raised:
+            self.client.download_model("m")
+        self.assertIn("SHA-256", raised.exception.details)
 
     def test_listings_fetch_pages_as_they_are_read(self):
         before = len(self.places.attempts("ListMaps"))

@@ -272,8 +272,11 @@ class RecognitionClientTest(unittest.TestCase):
             subprocess.run([recog, "model", "build", "--planar", str(corridor(1)), "--width",
                             "0.64", "--height", "0.48", "--name", "slam-poster", "-o",
                             str(model)], check=True, capture_output=True)
-            self.client.upload_model(model)
+            uploaded = self.client.upload_model(model)
+            model_bytes = model.read_bytes()
         try:
+            self.assertEqual(self.client.download_model("slam-poster", uploaded.version),
+                             model_bytes)
             camera = (500.0, 500.0, 256.0, 192.0)
             plain = self.client.recognize_objects(corridor(1), camera, names=["slam-poster"])
             full = self.client.recognize_objects(corridor(1), camera, names=["slam-poster"],
