@@ -3,8 +3,9 @@
 The images (.jpg, .jpeg, .png) are sent in natural order of their names (2.jpg before 10.jpg);
 the map is created with the server's default settings when it does not exist. Example::
 
-    PYTHONPATH=build/python:client/python /usr/bin/python3 \\
-        client/python/examples/stream_folder.py --map corridor tests/data/corridor
+    .venv/bin/python client/python/examples/stream_folder.py --map corridor tests/data/corridor
+
+(with the package installed, see client/python/README.md; or PYTHONPATH=build/python).
 """
 
 import argparse
@@ -12,10 +13,7 @@ import re
 import sys
 from pathlib import Path
 
-import grpc
-
-from recognition.v1 import place_pb2
-from recognition_client import RecognitionClient
+from recog_client import RecogError, RecognitionClient, place_pb2
 
 IMAGE_SUFFIXES = {".jpg", ".jpeg", ".png"}
 
@@ -35,9 +33,11 @@ def list_images(folder: Path) -> list[Path]:
 def parse_arguments() -> argparse.Namespace:
     """Reads the command line."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n", 1)[0])
-    parser.add_argument("--server", default="127.0.0.1:50051", help="recogd's host:port")
+    parser.add_argument("--server", help="recogd's host:port (default: RECOG_SERVER, else "
+                        "127.0.0.1:50051)")
     parser.add_argument("--map", required=True, help="name of the map to stream into")
-    parser.add_argument("--token", help="bearer token, when the server has a token file")
+    parser.add_argument("--token-file", help="file of the bearer token, when the server has "
+                        "tokens (default: RECOG_TOKEN_FILE)")
     parser.add_argument("images", type=Path, help="folder of the images")
     return parser.parse_args()
 
@@ -50,7 +50,7 @@ def main() -> int:
         print(f"stream_folder: no images in {arguments.images}", file=sys.stderr)
         return 1
     loops = 0
-    with RecognitionClient(arguments.server, token=arguments.token) as client:
+    with RecognitionClient(arguments.server, token_file=arguments.token_file) as client:
         try:
             for response in client.stream_frames(arguments.map, images):
                 if response.HasField("error"):
@@ -61,8 +61,8 @@ def main() -> int:
                     loops += 1
                     print(f"frame {result.frame_id} closes a loop with frame "
                           f"{result.match_frame_id} (inliers {result.inliers})", flush=True)
-        except grpc.RpcError as error:
-            print(f"stream_folder: {error.code().name}: {error.details()}", file=sys.stderr)
+        except RecogError as error:
+            print(f"stream_folder: {error}", file=sys.stderr)
             return 1
     print(f"streamed {len(images)} images into map {arguments.map!r}: {loops} loop closures")
     return 0

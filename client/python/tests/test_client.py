@@ -1,15 +1,14 @@
 """Tests of the Python client against the real recogd.
 
 The server binary is taken from the environment variable RECOGD, the CLI (to build a model) from
-RECOG and the corridor images from RECOG_SOURCE_DIR/tests/data/corridor; the generated stubs and recognition_client.py must be on
-PYTHONPATH (ctest sets all three: ``ctest -R python``). Exits with 77 (skipped) when Python's
-grpc or protobuf modules are missing.
+RECOG and the corridor images from RECOG_SOURCE_DIR/tests/data/corridor; the package recog_client
+(built into <build>/python by the target recog_python_package) must be on PYTHONPATH (ctest sets
+all of them: ``ctest -R python``). Exits with 77 (skipped) when Python's grpc or protobuf modules
+are missing.
 """
 
 import hashlib
 import os
-import signal
-import socket
 import struct
 import subprocess
 import sys
@@ -17,26 +16,29 @@ import tempfile
 import threading
 import time
 import unittest
+import unittest.mock
 import zlib
 from pathlib import Path
-from typing import Sequence
 
 try:
     import grpc
-    from recognition.v1 import place_pb2, repository_pb2
-    from recognition_client import RecognitionClient, make_frame
+    from recogd_process import Recogd
+    from recog_client import (AlreadyExists, Cancelled, InvalidArgument, NotFound,
+                              PermissionDenied, RecognitionClient, ResultOptions,
+                              Unauthenticated, Unavailable, make_features, make_frame, place_pb2,
+                              repository_pb2)
 except ModuleNotFoundError as missing:
     if missing.name.split(".")[0] not in ("grpc", "google"):
-        raise  # the stubs or the client are not on PYTHONPATH: an error, not a skip
+        raise  # the package is not on PYTHONPATH: an error, not a skip
     print(f"SKIP: {missing} (Debian: apt-get install python3-grpcio python3-protobuf)",
           file=sys.stderr)
     sys.exit(77)
+import cv2  # noqa: E402  (python3-opencv and python3-numpy, in scripts/install_deps.sh)
+import numpy  # noqa: E402
 
 CORRIDOR = Path(os.environ.get("RECOG_SOURCE_DIR", ".")) / "tests" / "data" / "corridor"
 TLS = Path(os.environ.get("RECOG_SOURCE_DIR", ".")) / "tests" / "data" / "tls"
 EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "stream_folder.py"
-STARTUP_SECONDS = 30
-SHUTDOWN_SECONDS = 30
 
 
 def corridor(n: int) -> Path:
@@ -53,64 +55,6 @@ def depth_png(width: int, height: int, millimetres: int) -> bytes:
     header = struct.pack(">IIBBBBB", width, height, 16, 0, 0, 0, 0)  # 16-bit grey
     return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"IDAT", zlib.compress(rows))
             + chunk(b"IEND", b""))
-
-
-def free_port() -> int:
-    """A free loopback port (bound, read, released: another process may take it, rarely)."""
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
-
-
-class Recogd:
-    """A recogd process on a free loopback port with a fresh data directory and ``args``."""
-
-    def __init__(self, args: Sequence[str] = ()):
-        recogd = os.environ.get("RECOGD")
-        if not recogd:
-            raise RuntimeError("set RECOGD to the path of the recogd binary")
-        self.data_dir = tempfile.TemporaryDirectory(prefix="recog-python-test-")
-        self.target = f"127.0.0.1:{free_port()}"  # the test certificate names 127.0.0.1
-        self.process = subprocess.Popen([recogd, "--listen", self.target, "--data-dir",
-                                         self.data_dir.name, "--metrics-listen", "",
-                                         "--log-level", "warn", *args])
-
-    def wait_until_serving(self, **client_options) -> None:
-        """Polls list_maps until it stops answering UNAVAILABLE (at most STARTUP_SECONDS), each
-        time from a new client with ``client_options`` (a channel that failed to connect waits
-        out a growing backoff); stops the server and raises when it does not come up."""
-        deadline = time.monotonic() + STARTUP_SECONDS
-        try:
-            while True:
-                if self.process.poll() is not None:
-                    raise RuntimeError(f"recogd exited with {self.process.returncode} at start-up")
-                try:
-                    with RecognitionClient(self.target, **client_options) as probe:
-                        probe.list_maps()
-                    return
-                except grpc.RpcError as error:
-                    if error.code() != grpc.StatusCode.UNAVAILABLE or time.monotonic() > deadline:
-                        raise
-                time.sleep(0.1)
-        except BaseException:
-            self.process.kill()
-            self.process.wait()
-            self.data_dir.cleanup()
-            raise
-
-    def stop(self) -> None:
-        """Stops recogd with SIGTERM and checks that it exits with 0."""
-        self.process.send_signal(signal.SIGTERM)
-        try:
-            code = self.process.wait(timeout=SHUTDOWN_SECONDS)
-        except subprocess.TimeoutExpired:
-            self.process.kill()
-            self.process.wait()
-            raise AssertionError(f"recogd did not stop within {SHUTDOWN_SECONDS} s of SIGTERM")
-        finally:
-            self.data_dir.cleanup()
-        if code != 0:
-            raise AssertionError(f"recogd exited with {code} after SIGTERM")
 
 
 class RecognitionClientTest(unittest.TestCase):
@@ -130,23 +74,24 @@ class RecognitionClientTest(unittest.TestCase):
         cls.client.close()
         cls.server.stop()
 
-    def assert_code(self, code: grpc.StatusCode, call, *args):
-        """Checks that ``call(*args)`` raises grpc.RpcError with ``code``."""
-        with self.assertRaises(grpc.RpcError) as raised:
+    def assert_raises(self, error: type, call, *args):
+        """Checks that ``call(*args)`` raises ``error`` (a RecogError) with the server's message."""
+        with self.assertRaises(error) as raised:
             call(*args)
-        self.assertEqual(raised.exception.code(), code, raised.exception.details())
+        self.assertEqual(raised.exception.code, error.code)
+        self.assertTrue(raised.exception.details)
 
     def test_map_lifecycle(self):
         info = self.client.create_map("lifecycle", {"temporal_matches": 2})
         self.assertEqual(info.name, "lifecycle")
         self.assertEqual(info.settings.temporal_matches, 2)
         self.assertEqual(info.frames, 0)
-        self.assert_code(grpc.StatusCode.ALREADY_EXISTS, self.client.create_map, "lifecycle")
+        self.assert_raises(AlreadyExists, self.client.create_map, "lifecycle")
         self.assertIn("lifecycle", [m.name for m in self.client.list_maps()])
         self.assertEqual(self.client.get_map("lifecycle").id, info.id)
         self.assertEqual(self.client.delete_map("lifecycle"), 0)
-        self.assert_code(grpc.StatusCode.NOT_FOUND, self.client.get_map, "lifecycle")
-        self.assert_code(grpc.StatusCode.NOT_FOUND, self.client.delete_map, "lifecycle")
+        self.assert_raises(NotFound, self.client.get_map, "lifecycle")
+        self.assert_raises(NotFound, self.client.delete_map, "lifecycle")
 
     def test_list_maps_reads_every_page(self):
         names = ["page-a", "page-b", "page-c"]
@@ -184,13 +129,12 @@ class RecognitionClientTest(unittest.TestCase):
         bad = {"16-bit": make_frame(corridor(20), intrinsics=k, depth=corridor(20)),  # 8-bit
                "aligned": make_frame(corridor(20), intrinsics=k, depth=depth_png(256, 192, 2000))}
         for words, frame in bad.items():
-            with self.assertRaises(grpc.RpcError) as refused:
+            with self.assertRaises(InvalidArgument) as refused:
                 self.client.add_frame("rgbd", frame)
-            self.assertEqual(refused.exception.code(), grpc.StatusCode.INVALID_ARGUMENT)
-            self.assertIn(words, refused.exception.details())
-        with self.assertRaises(ValueError):
+            self.assertIn(words, refused.exception.details)
+        with self.assertRaises(InvalidArgument):
             make_frame(corridor(20), intrinsics=k, right=corridor(60))  # no baseline
-        with self.assertRaises(ValueError):
+        with self.assertRaises(ValueError):  # InvalidArgument is a ValueError
             make_frame(corridor(20), depth=depth_png(512, 384, 2000))  # no intrinsics
         self.assertEqual(self.client.get_map("rgbd").frames, 1)
 
@@ -213,20 +157,81 @@ class RecognitionClientTest(unittest.TestCase):
         self.assertGreaterEqual(result.candidates[0].score, result.candidates[1].score)
         self.assertFalse(result.candidates[1].HasField("inliers"))
         self.assertEqual(len(result.inlier_correspondences), result.inliers)
-        self.assert_code(grpc.StatusCode.INVALID_ARGUMENT, self.client.query_place, "slam",
+        self.assert_raises(InvalidArgument, self.client.query_place, "slam",
                          corridor(41).read_bytes(), False, {"top_k": 51})
 
         self.assertEqual(self.client.remove_frame("slam", frame_id=2), [2])
         self.assertEqual(self.client.remove_frame("slam", client_frame_id="kf-60"), [3])
-        self.assert_code(grpc.StatusCode.NOT_FOUND, self.client.remove_frame, "slam", 2)
-        self.assert_code(grpc.StatusCode.NOT_FOUND, self.client.remove_frame, "nowhere", 0)
-        with self.assertRaises(ValueError):
+        self.assert_raises(NotFound, self.client.remove_frame, "slam", 2)
+        self.assert_raises(NotFound, self.client.remove_frame, "nowhere", 0)
+        with self.assertRaises(InvalidArgument):
             self.client.remove_frame("slam")
         result = self.client.query_place("slam", corridor(41).read_bytes(),
                                          result_options={"top_k": 50}).result
         self.assertNotEqual(result.match_frame_id, 2)
         self.assertTrue(all(c.frame_id < 2 for c in result.candidates), result.candidates)
         self.assertEqual(self.client.get_map("slam").frames, 2)
+
+    def test_result_options_give_the_fundamental_matrix_and_the_relative_pose(self):
+        self.client.create_map("geometry")
+        k = (500, 500, 256, 192)
+        for n in (1, 20):  # 41 revisits 1 from another view (the same image has no pose)
+            self.client.add_frame("geometry", make_frame(corridor(n), intrinsics=k))
+        plain = self.client.query_place("geometry", make_frame(corridor(41), intrinsics=k)).result
+        self.assertEqual(plain.status, place_pb2.LOOP_STATUS_LOOP_DETECTED)
+        self.assertEqual(len(plain.fundamental), 0)
+        self.assertFalse(plain.HasField("relative_pose"))
+        options = ResultOptions(include_fundamental=True, include_relative_pose=True)
+        full = self.client.query_place("geometry", make_frame(corridor(41), intrinsics=k),
+                                       result_options=options).result
+        self.assertEqual(full.match_frame_id, 0)
+        self.assertEqual(len(full.fundamental), 9)
+        self.assertEqual(len(full.relative_pose.rotation), 9)
+        self.assertAlmostEqual(sum(v * v for v in full.relative_pose.translation), 1.0, places=6)
+
+    def test_frames_from_numpy_arrays_and_from_client_side_features_find_the_place(self):
+        self.client.create_map("arrays")
+        for n in (1, 20, 41, 60):
+            added = self.client.add_frame("arrays", cv2.imread(str(corridor(n))))  # BGR
+            self.assertGreater(added.num_features, 300)
+        grey = cv2.imread(str(corridor(41)), cv2.IMREAD_GRAYSCALE)
+        self.assertEqual(self.client.query_place("arrays", grey).result.match_frame_id, 2)
+        keypoints, descriptors = cv2.ORB_create(1000).detectAndCompute(grey, None)
+        features = make_features(keypoints, descriptors, image_size=(512, 384))
+        self.assertEqual(features.descriptor_bytes, 32)
+        result = self.client.query_place("arrays", features).result
+        self.assertEqual(result.status, place_pb2.LOOP_STATUS_LOOP_DETECTED)
+        self.assertEqual(result.match_frame_id, 2)
+        with self.assertRaises(InvalidArgument):
+            make_frame(numpy.zeros((4, 4, 3), numpy.float32))  # not uint8
+        with self.assertRaises(InvalidArgument):
+            make_features(keypoints[:3], descriptors[:2])  # 2 descriptors for 3 keypoints
+
+    def test_an_exception_of_the_frames_iterator_is_raised_as_itself(self):
+        def frames():
+            yield corridor(1)
+            raise FileNotFoundError("the camera is gone")
+
+        with self.assertRaises(FileNotFoundError):
+            list(self.client.stream_frames("broken-camera", frames()))
+
+    def test_health_and_an_online_checkpoint(self):
+        self.assertEqual(self.client.check_health(), "SERVING")
+        self.client.create_map("saved")
+        self.client.add_frame("saved", corridor(1))
+        with tempfile.TemporaryDirectory(prefix="recog-python-test-") as tmp:
+            target = Path(tmp) / "checkpoint"
+            seen = []
+            manifest = self.client.checkpoint(target, lambda done, total: seen.append(done))
+            self.assertGreaterEqual(manifest.maps, 1)
+            self.assertEqual(sorted(p.name for p in target.iterdir()),
+                             sorted(f.name for f in manifest.files))
+            for file in manifest.files:
+                self.assertEqual((target / file.name).stat().st_size, file.size_bytes)
+            self.assertEqual(seen[-1], manifest.total_bytes)
+            self.assertFalse((Path(tmp) / "checkpoint.part").exists())
+            with self.assertRaises(AlreadyExists):
+                self.client.checkpoint(target)
 
     def test_stream_answers_in_order_and_detects_the_revisit(self):
         frames = [corridor(n) for n in (1, 20, 41, 60, 1)]
@@ -252,11 +257,11 @@ class RecognitionClientTest(unittest.TestCase):
         self.assertEqual(answers[1].result.frame_id, 0)  # the failed frame added nothing
 
     def test_objects_and_models(self):
-        self.assertEqual(self.client.list_models(), [])
+        self.assertEqual(list(self.client.list_models()), [])
         response = self.client.recognize_objects(corridor(1), (500.0, 500.0, 320.0, 240.0))
         self.assertEqual(len(response.objects), 0)
-        self.assert_code(grpc.StatusCode.NOT_FOUND, self.client.download_model, "nothing")
-        self.assert_code(grpc.StatusCode.NOT_FOUND, self.client.delete_model, "nothing")
+        self.assert_raises(NotFound, self.client.download_model, "nothing")
+        self.assert_raises(NotFound, self.client.delete_model, "nothing")
 
     def test_objects_carry_inliers_and_covariance_when_asked(self):
         recog = os.environ.get("RECOG")
@@ -267,8 +272,11 @@ class RecognitionClientTest(unittest.TestCase):
             subprocess.run([recog, "model", "build", "--planar", str(corridor(1)), "--width",
                             "0.64", "--height", "0.48", "--name", "slam-poster", "-o",
                             str(model)], check=True, capture_output=True)
-            self.client.upload_model(model)
+            uploaded = self.client.upload_model(model)
+            model_bytes = model.read_bytes()
         try:
+            self.assertEqual(self.client.download_model("slam-poster", uploaded.version),
+                             model_bytes)
             camera = (500.0, 500.0, 256.0, 192.0)
             plain = self.client.recognize_objects(corridor(1), camera, names=["slam-poster"])
             full = self.client.recognize_objects(corridor(1), camera, names=["slam-poster"],
@@ -310,12 +318,11 @@ class RecognitionClientTest(unittest.TestCase):
     def test_an_upload_passes_the_size_and_checksum_checks_before_the_file_is_refused(self):
         # Three chunks of bytes that are not a model: the server accepts the header's size and
         # SHA-256, then refuses the contents (a different message than a checksum mismatch).
-        with self.assertRaises(grpc.RpcError) as raised:
+        with self.assertRaises(InvalidArgument) as raised:
             self.client.upload_model(os.urandom(5 << 19), name="noise")
-        self.assertEqual(raised.exception.code(), grpc.StatusCode.INVALID_ARGUMENT)
-        self.assertNotIn("SHA-256", raised.exception.details())
-        self.assertNotIn("bytes; the header said", raised.exception.details())
-        self.assertEqual(self.client.list_models(), [])
+        self.assertNotIn("SHA-256", raised.exception.details)
+        self.assertNotIn("bytes; the header said", raised.exception.details)
+        self.assertEqual(list(self.client.list_models()), [])
 
     def test_an_upload_that_broke_off_is_resumed_from_the_bytes_the_server_kept(self):
         data = os.urandom(3 << 18)  # three 256 KiB chunks of bytes that are not a model
@@ -344,10 +351,9 @@ class RecognitionClientTest(unittest.TestCase):
         self.assertEqual(held, 1 << 18)
         # The client sends the rest only: the server has the whole file (size and SHA-256 pass)
         # and refuses its contents; the kept bytes were used.
-        with self.assertRaises(grpc.RpcError) as raised:
+        with self.assertRaises(InvalidArgument) as raised:
             self.client.upload_model(data, name="noise")
-        self.assertEqual(raised.exception.code(), grpc.StatusCode.INVALID_ARGUMENT)
-        self.assertNotIn("SHA-256", raised.exception.details())
+        self.assertNotIn("SHA-256", raised.exception.details)
         self.assertEqual(stub.GetUploadStatus(request, timeout=10).received_bytes, 0)
 
     def test_a_watch_ends_when_cancelled(self):
@@ -357,8 +363,8 @@ class RecognitionClientTest(unittest.TestCase):
         def consume():
             try:
                 outcome.extend(watch)
-            except grpc.RpcError as error:
-                outcome.append(error.code())
+            except Cancelled as error:
+                outcome.append(error.code)
 
         consumer = threading.Thread(target=consume)
         consumer.start()
@@ -399,11 +405,10 @@ class SecuredServerTest(unittest.TestCase):
                      f"  - {{name: operator, token: \"{cls.WRITER}\", rights: [read, write]}}\n")
         tokens.close()
         cls.token_file = tokens.name
-        cls.ca = (TLS / "ca.crt").read_bytes()
         cls.server = Recogd(args=["--tls-cert", str(TLS / "server.crt"), "--tls-key",
                                           str(TLS / "server.key"), "--token-file", tokens.name])
         try:
-            cls.server.wait_until_serving(token=cls.READER, root_certificates=cls.ca)
+            cls.server.wait_until_serving(token=cls.READER, ca_file=TLS / "ca.crt")
         except BaseException:
             os.unlink(cls.token_file)
             raise
@@ -416,33 +421,81 @@ class SecuredServerTest(unittest.TestCase):
 
     def client(self, token: str | None, tls: bool = True) -> RecognitionClient:
         """A client of the server with ``token``, over TLS trusting the test CA or in plaintext."""
-        client = RecognitionClient(self.server.target, token=token,
-                                   root_certificates=self.ca if tls else None, timeout=5.0)
+        client = RecognitionClient(self.server.target, token=token, tls=tls,
+                                   ca_file=TLS / "ca.crt" if tls else None, deadline=5.0)
         self.addCleanup(client.close)
         return client
 
-    def assert_code(self, code: grpc.StatusCode, call, *args):
-        """Checks that ``call(*args)`` raises grpc.RpcError with ``code``."""
-        with self.assertRaises(grpc.RpcError) as raised:
+    def assert_raises(self, error: type, call, *args):
+        """Checks that ``call(*args)`` raises ``error`` (a RecogError) with the server's message."""
+        with self.assertRaises(error) as raised:
             call(*args)
-        self.assertEqual(raised.exception.code(), code, raised.exception.details())
+        self.assertEqual(raised.exception.code, error.code)
+        self.assertTrue(raised.exception.details)
 
     def test_the_write_token_creates_and_the_read_token_only_reads(self):
         writer = self.client(self.WRITER)
         self.assertEqual(writer.create_map("secured").name, "secured")
         reader = self.client(self.READER)
         self.assertIn("secured", [m.name for m in reader.list_maps()])
-        self.assert_code(grpc.StatusCode.PERMISSION_DENIED, reader.create_map, "other")
-        self.assert_code(grpc.StatusCode.PERMISSION_DENIED, reader.delete_map, "secured")
+        self.assert_raises(PermissionDenied, reader.create_map, "other")
+        self.assert_raises(PermissionDenied, reader.delete_map, "secured")
         self.assertEqual(writer.delete_map("secured"), 0)
 
+    def test_the_environment_gives_the_server_the_token_file_and_the_ca(self):
+        with tempfile.NamedTemporaryFile("w", suffix=".token") as token_file:
+            token_file.write(f"  {self.WRITER}\n")
+            token_file.flush()
+            environment = {"RECOG_SERVER": self.server.target, "RECOG_TOKEN_FILE": token_file.name,
+                           "RECOG_TLS_CA": str(TLS / "ca.crt")}
+            with unittest.mock.patch.dict(os.environ, environment):
+                client = RecognitionClient()
+            self.addCleanup(client.close)
+            self.assertEqual(client.target, self.server.target)
+            self.assertEqual(client.create_map("from-environment").name, "from-environment")
+            self.assertEqual(client.delete_map("from-environment"), 0)
+
     def test_calls_without_a_known_token_are_unauthenticated(self):
-        self.assert_code(grpc.StatusCode.UNAUTHENTICATED, self.client(None).list_maps)
-        self.assert_code(grpc.StatusCode.UNAUTHENTICATED,
-                         self.client("unknown-token-0123456789").list_maps)
+        self.assert_raises(Unauthenticated, self.client(None).get_map, "any")
+        self.assert_raises(Unauthenticated,
+                           self.client("unknown-token-0123456789").get_map, "any")
 
     def test_a_plaintext_client_cannot_talk_to_the_tls_server(self):
-        self.assert_code(grpc.StatusCode.UNAVAILABLE, self.client(self.WRITER, tls=False).list_maps)
+        self.assert_raises(Unavailable, self.client(self.WRITER, tls=False).get_map, "any")
+
+
+class MutualTlsTest(unittest.TestCase):
+    """A recogd that requires client certificates signed by the test CA."""
+
+    @classmethod
+    def setUpClass(cls):
+        """Starts recogd and waits until it serves a client with the test certificate."""
+        cls.server = Recogd(args=["--tls-cert", str(TLS / "server.crt"), "--tls-key",
+                                  str(TLS / "server.key"), "--tls-client-ca", str(TLS / "ca.crt")])
+        cls.server.wait_until_serving(ca_file=TLS / "ca.crt", cert_file=TLS / "client.crt",
+                                      key_file=TLS / "client.key")
+
+    @classmethod
+    def tearDownClass(cls):
+        """Stops recogd and checks that it exits with 0."""
+        cls.server.stop()
+
+    def test_a_client_certificate_from_the_environment_is_let_in_and_none_is_refused(self):
+        environment = {"RECOG_SERVER": self.server.target, "RECOG_TLS_CA": str(TLS / "ca.crt"),
+                       "RECOG_TLS_CERT": str(TLS / "client.crt"),
+                       "RECOG_TLS_KEY": str(TLS / "client.key")}
+        with unittest.mock.patch.dict(os.environ, environment):
+            with RecognitionClient() as client:
+                self.assertEqual(client.check_health(), "SERVING")
+        with RecognitionClient(self.server.target, ca_file=TLS / "ca.crt", deadline=5.0,
+                               retries=False) as anonymous:
+            with self.assertRaises(Unavailable):
+                anonymous.check_health()
+        with self.assertRaises(InvalidArgument):
+            RecognitionClient(self.server.target, cert_file=TLS / "client.crt")  # no key
+        with self.assertRaises(NotFound):
+            RecognitionClient(self.server.target, ca_file=TLS / "missing.crt")
+
 
 if __name__ == "__main__":
     unittest.main(verbosity=2)
