@@ -11,7 +11,7 @@ packages=(
   libgtest-dev libgmock-dev libbenchmark-dev
   libcli11-dev libyaml-cpp-dev nlohmann-json3-dev
   python3-grpcio python3-protobuf
-  nginx
+  nginx openssl
   clang-format
 )
 
