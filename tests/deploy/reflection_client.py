@@ -30,9 +30,10 @@ MESSAGES = {
     "ServerReflectionRequest": [("host", 1, STRING, "", False),
                                 ("file_containing_symbol", 4, STRING, "", False),
                                 ("list_services", 7, STRING, "", False)],
-    "ServerReflectionResponse": [("file_descriptor_response", 4, MESSAGE, "FileDescriptorResponse", False),
-                                 ("list_services_response", 6, MESSAGE, "ListServiceResponse", False),
-                                 ("error_response", 7, MESSAGE, "ErrorResponse", False)],
+    "ServerReflectionResponse": [
+        ("file_descriptor_response", 4, MESSAGE, "FileDescriptorResponse", False),
+        ("list_services_response", 6, MESSAGE, "ListServiceResponse", False),
+        ("error_response", 7, MESSAGE, "ErrorResponse", False)],
     "FileDescriptorResponse": [("file_descriptor_proto", 1, BYTES, "", True)],
     "ListServiceResponse": [("service", 1, MESSAGE, "ServiceResponse", True)],
     "ServiceResponse": [("name", 1, STRING, "", False)],

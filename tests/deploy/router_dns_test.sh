@@ -6,7 +6,9 @@
 # it is killed and started again, with the same store, on 127.0.0.2:P (a pod restarted with a
 # new IP; the port stays, as in the router's files). Checks that calls through the router fail
 # with UNAVAILABLE while the name still points to the old address, reach the new server once the
-# name moves (the same 4 frames), and fail with UNAVAILABLE when the name stops resolving.
+# name moves (the same 4 frames), and fail with UNAVAILABLE when the name stops resolving; and that
+# calls for `any` (models.map: a name with both addresses) reach the server wherever it is, by
+# moving on from the address that refuses.
 # Usage: router_dns_test.sh RECOG RECOGD PROJECT_DIR. Exits 77 (skipped) without nginx.
 recog=$1
 recogd=$2
@@ -17,7 +19,8 @@ source "$project/tests/deploy/router_test_lib.sh"
 images=$project/tests/data/corridor
 port_shard=$(free_port); port_router=$(free_port)
 name=shard-m.recog.test
-echo "$name 127.0.0.1" >"$tmp/dns.records"
+any=models.recog.test
+printf '%s 127.0.0.1\n%s 127.0.0.1\n%s 127.0.0.2\n' "$name" "$any" "$any" >"$tmp/dns.records"
 /usr/bin/python3 "$project/tests/deploy/tiny_dns.py" "$tmp/dns.records" "$tmp/dns.port" \
   2>"$tmp/dns.log" &
 pids+=($!)
@@ -26,7 +29,7 @@ for _ in $(seq 100); do [ -s "$tmp/dns.port" ] && break; sleep 0.05; done
 echo "resolver 127.0.0.1:$(cat "$tmp/dns.port") valid=1s; resolver_timeout 1s;" >"$tmp/router/resolver.conf"
 echo "corridor-m shard_m;" >"$tmp/router/placement.map"
 echo "shard_m $name:$port_shard;" >"$tmp/router/shards.map"
-printf 'primary %s:%s;\nany %s:%s;\n' "$name" "$port_shard" "$name" "$port_shard" >"$tmp/router/models.map"
+printf 'primary %s:%s;\nany %s:%s;\n' "$name" "$port_shard" "$any" "$port_shard" >"$tmp/router/models.map"
 make_router_certs
 write_router_conf "$port_router" "$(free_port)"
 shard_flags=(--shard-name shard_m --placement-file "$tmp/router/placement.map")
@@ -59,9 +62,13 @@ assert $1" 2>/dev/null && { echo "  took $((SECONDS - start)) s"; return 0; }
   done
   return 1
 }
-echo "$name 127.0.0.2" >"$tmp/dns.records"
+sed -i "s/^$name 127.0.0.1\$/$name 127.0.0.2/" "$tmp/dns.records"
 until_router "ok and d['frames'] == 4" && pass \
   || fail "the router reaches the moved shard by its name: $(cat "$tmp/out" "$tmp/err")"
+# `any` round-robins over its two addresses: every call gets an answer, from 127.0.0.2.
+for i in 1 2 3 4; do
+  expect_ok "health through the router for any, call $i" "$recog" admin health "${router[@]}"
+done
 
 # A name that does not resolve (the pod is gone): UNAVAILABLE.
 : >"$tmp/dns.records"

@@ -1,5 +1,6 @@
-# Shared by the router tests (sharding_test.sh, router_tls_test.sh, router_dns_test.sh); sourced,
-# not run: recogd servers and nginx with the shipped router configuration
+# shellcheck shell=bash
+# Shared by the router tests (sharding_test.sh, router_tls_test.sh, router_dns_test.sh,
+# router_config_test.sh); sourced, not run: recogd servers and nginx with the shipped router configuration
 # (deploy/nginx/recogd-router.conf) on loopback ports, as the current user, everything (routing
 # files, certificates, stores, logs, nginx's pid and temp files) under one temporary folder that
 # is removed at exit with every process started here.
@@ -69,7 +70,6 @@ start_recogd() {
 }
 
 write_router_conf() {
-  router_port=$1
   router=(--server "127.0.0.1:$1" --tls-ca "$tmp/ca.crt")
   [ -f "$tmp/router/resolver.conf" ] || echo "# no host names here" >"$tmp/router/resolver.conf"
   # The shipped router configuration, with its files and ports moved here.
@@ -77,6 +77,8 @@ write_router_conf() {
     -e "s|listen 50050 ssl http2;|listen 127.0.0.1:$1 ssl http2;|" \
     -e "s|listen 50049 http2;|listen 127.0.0.1:$2 http2;|" \
     "$project/deploy/nginx/recogd-router.conf" >"$tmp/router/recogd-router.conf"
+  grep -E "/etc/recogd|listen [0-9]+ " "$tmp/router/recogd-router.conf" >"$tmp/unmoved" \
+    && fail "the test moves every path and port of the router: left $(cat "$tmp/unmoved")" || pass
   cat >"$tmp/nginx.conf" <<CONF
 daemon off;
 master_process off;
@@ -101,5 +103,4 @@ CONF
 start_router() {
   "$nginx_bin" -p "$tmp/nginx" -c "$tmp/nginx.conf" >"$tmp/nginx/stdout.log" 2>&1 &
   pids+=($!)
-  pid_nginx=$!
 }

@@ -1,9 +1,10 @@
 #!/usr/bin/python3
 """A DNS server for tests, on UDP 127.0.0.1 (a free port, written to PORT_FILE once bound).
 
-Usage: tiny_dns.py RECORDS_FILE PORT_FILE. RECORDS_FILE holds `name address` lines (IPv4); it is
-read anew for every query, so a test moves a name by rewriting the file. A query for a listed
-name gets its A record with a TTL of 1 s (other types: no answer); any other name gets NXDOMAIN.
+Usage: tiny_dns.py RECORDS_FILE PORT_FILE. RECORDS_FILE holds `name address` lines (IPv4; a name
+on several lines has several addresses); it is read anew for every query, so a test moves a name
+by rewriting the file. A query for a listed name gets its A records with a TTL of 1 s (other
+types: no answer); any other name gets NXDOMAIN.
 Runs until killed.
 """
 import os
@@ -18,7 +19,7 @@ def read_records(path):
         for line in f:
             fields = line.split()
             if len(fields) == 2:
-                records[fields[0].lower().rstrip(".")] = fields[1]
+                records.setdefault(fields[0].lower().rstrip("."), []).append(fields[1])
     return records
 
 
@@ -30,11 +31,14 @@ def answer(query, records):
         pos += 1 + query[pos]
     question_end = pos + 5
     qtype, = struct.unpack("!H", query[pos + 1:pos + 3])
-    address = records.get(".".join(labels).lower())
-    rcode, answers = (3, b"") if address is None else (0, b"")
-    if address is not None and qtype == 1:  # A; a pointer to the question's name, class IN, TTL 1
-        answers = b"\xc0\x0c" + struct.pack("!HHIH", 1, 1, 1, 4) + socket.inet_aton(address)
-    header = struct.pack("!HHHHHH", ident, 0x8400 | 0x0100 | rcode, 1, 1 if answers else 0, 0, 0)
+    addresses = records.get(".".join(labels).lower())
+    rcode = 3 if addresses is None else 0
+    if addresses is None or qtype != 1:
+        addresses = []
+    # A records: a pointer to the question's name, type A, class IN, TTL 1 s, 4 bytes.
+    answers = b"".join(b"\xc0\x0c" + struct.pack("!HHIH", 1, 1, 1, 4) + socket.inet_aton(a)
+                       for a in addresses)
+    header = struct.pack("!HHHHHH", ident, 0x8400 | 0x0100 | rcode, 1, len(addresses), 0, 0)
     return header + query[12:question_end] + answers
 
 
