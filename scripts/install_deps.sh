@@ -11,8 +11,8 @@ packages=(
   libgtest-dev libgmock-dev libbenchmark-dev
   libcli11-dev libyaml-cpp-dev nlohmann-json3-dev
   python3-grpcio python3-protobuf python3-venv python3-setuptools python3-wheel
-  python3-numpy python3-opencv
-  nginx
+  python3-numpy python3-opencv python3-yaml
+  nginx openssl
   clang-format
 )
 

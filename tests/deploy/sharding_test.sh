@@ -1,106 +1,45 @@
 #!/usr/bin/env bash
 # Several servers on one machine: two recogd shards, which are also replicas of the model
 # repository, and a repository primary, behind nginx with the shipped router configuration
-# (deploy/nginx/recogd-router.conf), the placement table read by nginx and by both shards.
+# (deploy/nginx/recogd-router.conf, clients over TLS), the placement table read by nginx and by
+# both shards.
 # Checks that maps streamed through nginx give the results of a single server, that a shard
 # refuses a map it does not own (naming the owner), that nginx refuses an unplaced map, that a
 # killed shard's maps get UNAVAILABLE while the other shard's keep working, that the restarted
 # shard has every acknowledged frame, and that a model uploaded through nginx (to the primary,
 # while a shard is down) is recognised through every shard, and deleted from every shard.
 # Usage: sharding_test.sh RECOG RECOGD PROJECT_DIR. Exits 77 (skipped) without nginx.
-set -u
 recog=$1
 recogd=$2
 project=$3
-nginx_bin=$(command -v nginx || echo /usr/sbin/nginx)
-if [ ! -x "$nginx_bin" ]; then
-  echo "SKIP: nginx is not installed (Debian: apt-get install nginx)"
-  exit 77
-fi
-tmp=$(mktemp -d)
-pids=()
-cleanup() {
-  for pid in "${pids[@]}"; do kill -KILL "$pid" 2>/dev/null; done
-  rm -rf "$tmp"
-}
-trap cleanup EXIT
-# shellcheck source=../../tools/recog/cli_test_lib.sh
-source "$project/tools/recog/cli_test_lib.sh"
+# shellcheck source=router_test_lib.sh
+source "$project/tests/deploy/router_test_lib.sh"
 
-# start_shard NAME PORT: a recogd for shard NAME on PORT with its own data directory, following
-# the repository primary.
+# start_shard NAME PORT: a recogd for shard NAME on PORT, following the repository primary.
 start_shard() {
-  "$recogd" --listen "127.0.0.1:$2" --data-dir "$tmp/$1" --metrics-listen "" --workers 2 \
-    --shard-name "$1" --placement-file "$tmp/router/placement.map" \
-    --repository-primary "127.0.0.1:$port_primary" >>"$tmp/$1.log" 2>&1 &
-  pids+=($!)
-  eval "pid_$1=$!"
-  wait_serving "127.0.0.1:$2" || fail "shard $1 did not come up: $(tail -3 "$tmp/$1.log")"
-}
-wait_serving() {
-  for _ in $(seq 150); do
-    "$recog" admin health --server "$1" --timeout-ms 500 >/dev/null 2>&1 && return 0
-    sleep 0.1
-  done
-  return 1
+  start_recogd "$1" "127.0.0.1:$2" --shard-name "$1" --placement-file "$tmp/router/placement.map" \
+    --repository-primary "127.0.0.1:$port_primary"
 }
 
 images=$project/tests/data/corridor
 port_a=$(free_port); port_b=$(free_port); port_single=$(free_port); port_router=$(free_port)
 port_primary=$(free_port)
-mkdir -p "$tmp/router"
 cat >"$tmp/router/placement.map" <<MAP
 # test placement
 corridor-a   shard_a;
 corridor-b   shard_b;
 MAP
-printf 'shard_a shard_a;\nshard_b shard_b;\n' >"$tmp/router/shards.map"
-cat >"$tmp/router/upstreams.conf" <<UPSTREAMS
-upstream shard_a { server 127.0.0.1:$port_a; }
-upstream shard_b { server 127.0.0.1:$port_b; }
-upstream models_primary { server 127.0.0.1:$port_primary; }
-upstream models_any {
-  server 127.0.0.1:$port_primary; server 127.0.0.1:$port_a; server 127.0.0.1:$port_b;
-}
-UPSTREAMS
-# The shipped router configuration, with its files and port moved here.
-sed -e "s|/etc/recogd/router/|$tmp/router/|g" -e "s|listen 50050 http2;|listen 127.0.0.1:$port_router http2;|" \
-  "$project/deploy/nginx/recogd-router.conf" >"$tmp/router/recogd-router.conf"
-mkdir -p "$tmp/nginx"
-cat >"$tmp/nginx.conf" <<CONF
-daemon off;
-master_process off;
-worker_processes 1;
-error_log $tmp/nginx/error.log warn;
-pid $tmp/nginx/nginx.pid;
-events { worker_connections 256; }
-http {
-  access_log off;
-  client_body_temp_path $tmp/nginx/body;
-  proxy_temp_path $tmp/nginx/proxy;
-  fastcgi_temp_path $tmp/nginx/fastcgi;
-  uwsgi_temp_path $tmp/nginx/uwsgi;
-  scgi_temp_path $tmp/nginx/scgi;
-  include $tmp/router/recogd-router.conf;
-}
-CONF
-"$nginx_bin" -t -p "$tmp/nginx" -c "$tmp/nginx.conf" >"$tmp/nginx-t.log" 2>&1 \
-  && pass || fail "nginx accepts the router configuration: $(cat "$tmp/nginx-t.log")"
+printf 'shard_a 127.0.0.1:%s;\nshard_b 127.0.0.1:%s;\n' "$port_a" "$port_b" >"$tmp/router/shards.map"
+printf 'primary 127.0.0.1:%s;\nany 127.0.0.1:%s;\n' "$port_primary" "$port_primary" >"$tmp/router/models.map"
+make_router_certs
+write_router_conf "$port_router" "$(free_port)"
 
-"$recogd" --listen "127.0.0.1:$port_primary" --data-dir "$tmp/primary" --metrics-listen "" \
-  --workers 2 >"$tmp/primary.log" 2>&1 &
-pids+=($!)
-wait_serving "127.0.0.1:$port_primary" || fail "the repository primary did not come up"
+start_recogd primary "127.0.0.1:$port_primary"
 start_shard shard_a "$port_a"
 start_shard shard_b "$port_b"
-"$nginx_bin" -p "$tmp/nginx" -c "$tmp/nginx.conf" >"$tmp/nginx/stdout.log" 2>&1 &
-pids+=($!)
-"$recogd" --listen "127.0.0.1:$port_single" --data-dir "$tmp/single" --metrics-listen "" \
-  --workers 2 >"$tmp/single.log" 2>&1 &
-pids+=($!)
-wait_serving "127.0.0.1:$port_single" || fail "the single server did not come up"
-wait_serving "127.0.0.1:$port_router" || fail "nginx did not route health checks: $(tail -3 "$tmp/nginx/error.log")"
-router=(--server "127.0.0.1:$port_router")
+start_router
+start_recogd single "127.0.0.1:$port_single"
+wait_serving "127.0.0.1:$port_router" --tls-ca "$tmp/ca.crt" || fail "nginx did not route health checks: $(tail -3 "$tmp/nginx/error.log")"
 
 # The same frames into a map on each shard through nginx, and into one map of a single server.
 for map in corridor-a corridor-b; do
