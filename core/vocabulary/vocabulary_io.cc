@@ -162,7 +162,10 @@ std::string BundledVocabularyPath(const std::string& file_name) {
   if (const char* env = std::getenv("RECOG_VOCABULARY_DIR"); env != nullptr && *env != '\0') {
     return std::string(env) + "/" + file_name;
   }
-  return std::string(RECOG_DEFAULT_VOCABULARY_DIR) + "/" + file_name;
+  const std::string in_source = std::string(RECOG_DEFAULT_VOCABULARY_DIR) + "/" + file_name;
+  const std::string installed = std::string(RECOG_INSTALLED_VOCABULARY_DIR) + "/" + file_name;
+  return std::filesystem::exists(in_source) || !std::filesystem::exists(installed) ? in_source
+                                                                                   : installed;
 }
 
 std::string DefaultPlaceVocabularyPath() { return BundledVocabularyPath("place_orb_k10_l5.rvoc"); }

@@ -53,7 +53,8 @@ StatusOr<Vocabulary> LoadVocabulary(const std::string& path);
 StatusOr<Vocabulary> LoadAnyVocabulary(const std::string& path);
 
 // Path of a vocabulary shipped with the project (e.g. "place_orb_k10_l5.rvoc"):
-// $RECOG_VOCABULARY_DIR when set, otherwise the project's vocabularies/ folder.
+// $RECOG_VOCABULARY_DIR when set, otherwise the project's vocabularies/ folder, or, when the file
+// is not there but cmake --install put it in <prefix>/share/recog/vocabularies, that one.
 std::string BundledVocabularyPath(const std::string& file_name);
 std::string DefaultPlaceVocabularyPath();   // the bundled place vocabulary (k = 10, L = 5, ORB)
 std::string DefaultObjectVocabularyPath();  // the bundled object vocabulary (12 trees, ORB)

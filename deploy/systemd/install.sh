@@ -1,15 +1,16 @@
 #!/usr/bin/env bash
-# Installs recogd as a systemd service from a built tree: the binaries build/bin/recogd and
-# build/bin/recog to /usr/local/bin, the bundled vocabularies to
-# /usr/local/share/recog/vocabularies, the configuration example to /etc/recogd/recogd.yaml (an
-# existing one is kept), the unit to /etc/systemd/system/recogd.service and the user entry to
-# /etc/sysusers.d/recogd.conf; then creates the recogd user (systemd-sysusers) and reloads
-# systemd. Start it with: systemctl enable --now recogd. Run as root, after a Release build
-# (bash scripts/run.sh, or RECOG_CMAKE_ARGS=-DCMAKE_BUILD_TYPE=Release bash scripts/build.sh).
+# Installs recogd as a systemd service from a built tree: the "runtime" component of
+# `cmake --install` with the prefix /usr/local (the binaries recogd and recog to /usr/local/bin,
+# the bundled vocabularies to /usr/local/share/recog/vocabularies), the configuration example to
+# /etc/recogd/recogd.yaml (an existing one is kept), the unit to
+# /etc/systemd/system/recogd.service and the user entry to /etc/sysusers.d/recogd.conf; then
+# creates the recogd user (systemd-sysusers) and reloads systemd. Start it with: systemctl enable
+# --now recogd. Run as root, after a Release build (bash scripts/run.sh, or
+# RECOG_CMAKE_ARGS=-DCMAKE_BUILD_TYPE=Release bash scripts/build.sh).
 #
 # Usage: bash deploy/systemd/install.sh [--root DIR]
-#   --root DIR  install under DIR instead of / (for testing or image building); creates no user
-#               and does not touch systemd
+#   --root DIR  install under DIR instead of / (for testing or image building; DESTDIR of
+#               cmake --install); creates no user and does not touch systemd
 #
 # Environment:
 #   RECOG_BUILD_DIR  build folder holding bin/recogd and bin/recog (default: build)
@@ -43,10 +44,8 @@ if [ "$root" = / ] && [ "$(id -u)" -ne 0 ]; then
 fi
 
 echo "install: into ${root}"
-install -d -m 0755 "$dest/usr/local/bin" "$dest/usr/local/share/recog/vocabularies" \
-  "$dest/etc/recogd" "$dest/etc/systemd/system" "$dest/etc/sysusers.d"
-install -m 0755 "$build_dir/bin/recogd" "$build_dir/bin/recog" "$dest/usr/local/bin/"
-install -m 0644 vocabularies/*.rvoc "$dest/usr/local/share/recog/vocabularies/"
+DESTDIR=$dest cmake --install "$build_dir" --prefix /usr/local --component runtime
+install -d -m 0755 "$dest/etc/recogd" "$dest/etc/systemd/system" "$dest/etc/sysusers.d"
 if [ -e "$dest/etc/recogd/recogd.yaml" ]; then
   echo "install: kept the existing $dest/etc/recogd/recogd.yaml" \
     "(compare it with deploy/config/recogd.yaml)"
