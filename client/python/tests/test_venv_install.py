@@ -106,7 +106,8 @@ class VenvInstallTest(unittest.TestCase):
         try:
             server.wait_until_serving()
             example = self.checkout / "client" / "python" / "examples" / "stream_corridor.py"
-            streamed = self.run_in_venv(str(example), str(corridor),
+            streamed = self.run_in_venv(str(example), str(corridor), "temporal_matches=0",
+                                        "recent_frames=1",
                                         env={**self.environment, "RECOG_SERVER": server.target})
         finally:
             server.stop()
