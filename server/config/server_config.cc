@@ -3,7 +3,12 @@
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>
+#include <charconv>
 #include <climits>
+#include <filesystem>
+#include <fstream>
+#include <optional>
+#include <sstream>
 #include <thread>
 #include <utility>
 #include <vector>
@@ -307,7 +312,86 @@ Status ServerConfig::Validate() const {
 
 uint32_t ServerConfig::WorkerCount() const {
   if (workers > 0) return workers;
-  return std::max(1u, std::thread::hardware_concurrency());
+  return AvailableCpus(CgroupPaths(), std::thread::hardware_concurrency());
+}
+
+namespace {
+
+// The whole of a small file, empty when it cannot be read.
+std::string ReadSmallFile(const std::filesystem::path& path) {
+  std::ifstream in(path);
+  std::ostringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
+// ceil(quota / period) for a positive quota and period given as text; nullopt for anything else
+// ("max", "-1", garbage).
+std::optional<uint64_t> CpusOfQuota(std::string_view quota, std::string_view period) {
+  uint64_t q = 0, p = 0;
+  const auto [q_end, q_error] = std::from_chars(quota.data(), quota.data() + quota.size(), q);
+  const auto [p_end, p_error] = std::from_chars(period.data(), period.data() + period.size(), p);
+  if (q_error != std::errc() || p_error != std::errc() || q_end != quota.data() + quota.size() ||
+      p_end != period.data() + period.size() || q == 0 || p == 0) {
+    return std::nullopt;
+  }
+  return (q + p - 1) / p;
+}
+
+std::string_view Trim(std::string_view text) {
+  const size_t first = text.find_first_not_of(" \t\n");
+  if (first == std::string_view::npos) return {};
+  return text.substr(first, text.find_last_not_of(" \t\n") - first + 1);
+}
+
+// `path` normalised and without a trailing separator, so that parent_path() goes up one level.
+std::filesystem::path Normalised(const std::filesystem::path& path) {
+  std::filesystem::path normal = path.lexically_normal();
+  return normal.has_filename() ? normal : normal.parent_path();
+}
+
+// cgroup v2: the tightest `cpu.max` ("<quota> <period>" or "max <period>") from the process's
+// cgroup up to the root.
+std::optional<uint64_t> CgroupV2Cpus(const CgroupPaths& paths) {
+  std::istringstream lines(ReadSmallFile(paths.self));
+  std::string relative;
+  for (std::string line; std::getline(lines, line);) {
+    if (line.rfind("0::", 0) == 0) relative = line.substr(3);
+  }
+  const std::filesystem::path root = Normalised(paths.root);
+  std::filesystem::path dir = Normalised(root / std::filesystem::path(relative).relative_path());
+  if (dir.lexically_relative(root).native().starts_with("..")) dir = root;
+  std::optional<uint64_t> cpus;
+  for (;; dir = dir.parent_path()) {
+    const std::string text = ReadSmallFile(dir / "cpu.max");
+    const std::string_view line = Trim(text);
+    const size_t space = line.find(' ');
+    if (space != std::string_view::npos) {
+      const std::optional<uint64_t> here =
+          CpusOfQuota(line.substr(0, space), Trim(line.substr(space)));
+      if (here.has_value() && (!cpus.has_value() || *here < *cpus)) cpus = here;
+    }
+    if (dir == root || dir == dir.parent_path()) break;
+  }
+  return cpus;
+}
+
+// cgroup v1, as a container sees its own cgroup: cpu/cpu.cfs_quota_us (-1: none) and
+// cpu/cpu.cfs_period_us.
+std::optional<uint64_t> CgroupV1Cpus(const CgroupPaths& paths) {
+  const std::filesystem::path cpu = std::filesystem::path(paths.root) / "cpu";
+  return CpusOfQuota(Trim(ReadSmallFile(cpu / "cpu.cfs_quota_us")),
+                     Trim(ReadSmallFile(cpu / "cpu.cfs_period_us")));
+}
+
+}  // namespace
+
+uint32_t AvailableCpus(const CgroupPaths& paths, uint32_t hardware_cpus) {
+  const uint32_t cpus = std::max(1u, hardware_cpus);
+  std::optional<uint64_t> quota = CgroupV2Cpus(paths);
+  if (!quota.has_value()) quota = CgroupV1Cpus(paths);
+  if (!quota.has_value()) return cpus;
+  return uint32_t(std::clamp<uint64_t>(*quota, 1, cpus));
 }
 
 void AddFlags(CLI::App& app, ServerConfig* config) {
@@ -318,7 +402,8 @@ void AddFlags(CLI::App& app, ServerConfig* config) {
                  "Vocabulary of new place maps (default: the bundled one)");
   app.add_option("--object-vocabulary", config->object_vocabulary,
                  "Vocabulary of object models (default: the bundled one)");
-  app.add_option("--workers", config->workers, "Worker threads (0 = one per hardware thread)")
+  app.add_option("--workers", config->workers,
+                 "Worker threads (0 = one per CPU of the cgroup quota, else per hardware thread)")
       ->capture_default_str();
   app.add_option("--queue-capacity", config->queue_capacity,
                  "Tasks that may wait for a worker before calls fail with RESOURCE_EXHAUSTED")
