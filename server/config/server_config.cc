@@ -249,8 +249,7 @@ Status ServerConfig::Validate() const {
   if (data_dir.empty()) return Status::InvalidArgument("data_dir must not be empty");
   if (workers > kMaxWorkers) {
     return Status::InvalidArgument("workers must be at most " + std::to_string(kMaxWorkers) +
-                                   " (0 = one per hardware thread), got " +
-                                   std::to_string(workers));
+                                   " (0 = one per available CPU), got " + std::to_string(workers));
   }
   if (queue_capacity < 1) return Status::InvalidArgument("queue_capacity must be at least 1");
   if (max_message_bytes < kMinMessageBytes || max_message_bytes > INT_MAX) {
