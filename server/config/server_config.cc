@@ -7,6 +7,7 @@
 #include <climits>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <optional>
 #include <sstream>
 #include <thread>
@@ -349,46 +350,70 @@ std::filesystem::path Normalised(const std::filesystem::path& path) {
   return normal.has_filename() ? normal : normal.parent_path();
 }
 
-// cgroup v2: the tightest `cpu.max` ("<quota> <period>" or "max <period>") from the process's
-// cgroup up to the root.
-std::optional<uint64_t> CgroupV2Cpus(const CgroupPaths& paths) {
-  std::istringstream lines(ReadSmallFile(paths.self));
-  std::string relative;
+// The process's cgroup in /proc/self/cgroup's text `self`: the cgroup v2 line ("0::/path") or,
+// with `v1_controller`, the line of the v1 hierarchy holding that controller
+// ("4:cpu,cpuacct:/path"). "" when there is no such line.
+std::string OwnCgroup(const std::string& self, std::string_view v1_controller) {
+  std::istringstream lines(self);
   for (std::string line; std::getline(lines, line);) {
-    if (line.rfind("0::", 0) == 0) relative = line.substr(3);
+    const size_t first = line.find(':'), second = line.find(':', first + 1);
+    if (first == std::string::npos || second == std::string::npos) continue;
+    const std::string controllers = "," + line.substr(first + 1, second - first - 1) + ",";
+    const bool wanted =
+        v1_controller.empty()
+            ? controllers == ",,"
+            : controllers.find("," + std::string(v1_controller) + ",") != std::string::npos;
+    if (wanted) return line.substr(second + 1);
   }
-  const std::filesystem::path root = Normalised(paths.root);
-  std::filesystem::path dir = Normalised(root / std::filesystem::path(relative).relative_path());
-  if (dir.lexically_relative(root).native().starts_with("..")) dir = root;
+  return {};
+}
+
+// The tightest quota that `cpus_in` finds in `root`/`relative` and in each of its ancestors up to
+// `root`. A container's own cgroup is its root, where the path of /proc/self/cgroup (the host's
+// view) does not exist: then only the root is read.
+std::optional<uint64_t> TightestUpTo(
+    const std::filesystem::path& root, const std::string& relative,
+    const std::function<std::optional<uint64_t>(const std::filesystem::path&)>& cpus_in) {
+  const std::filesystem::path top = Normalised(root);
+  std::filesystem::path dir = Normalised(top / std::filesystem::path(relative).relative_path());
+  if (dir.lexically_relative(top).native().starts_with("..")) dir = top;
   std::optional<uint64_t> cpus;
   for (;; dir = dir.parent_path()) {
-    const std::string text = ReadSmallFile(dir / "cpu.max");
-    const std::string_view line = Trim(text);
-    const size_t space = line.find(' ');
-    if (space != std::string_view::npos) {
-      const std::optional<uint64_t> here =
-          CpusOfQuota(line.substr(0, space), Trim(line.substr(space)));
-      if (here.has_value() && (!cpus.has_value() || *here < *cpus)) cpus = here;
-    }
-    if (dir == root || dir == dir.parent_path()) break;
+    const std::optional<uint64_t> here = cpus_in(dir);
+    if (here.has_value() && (!cpus.has_value() || *here < *cpus)) cpus = here;
+    if (dir == top || dir == dir.parent_path()) break;
   }
   return cpus;
 }
 
-// cgroup v1, as a container sees its own cgroup: cpu/cpu.cfs_quota_us (-1: none) and
-// cpu/cpu.cfs_period_us.
-std::optional<uint64_t> CgroupV1Cpus(const CgroupPaths& paths) {
-  const std::filesystem::path cpu = std::filesystem::path(paths.root) / "cpu";
-  return CpusOfQuota(Trim(ReadSmallFile(cpu / "cpu.cfs_quota_us")),
-                     Trim(ReadSmallFile(cpu / "cpu.cfs_period_us")));
+// cgroup v2: `cpu.max` is "<quota> <period>" or "max <period>".
+std::optional<uint64_t> CgroupV2Cpus(const CgroupPaths& paths, const std::string& self) {
+  return TightestUpTo(paths.root, OwnCgroup(self, ""), [](const std::filesystem::path& dir) {
+    const std::string text = ReadSmallFile(dir / "cpu.max");
+    const std::string_view line = Trim(text);
+    const size_t space = line.find(' ');
+    if (space == std::string_view::npos) return std::optional<uint64_t>();
+    return CpusOfQuota(line.substr(0, space), Trim(line.substr(space)));
+  });
+}
+
+// cgroup v1: the cpu hierarchy (mounted at <root>/cpu) has cpu.cfs_quota_us (-1: none) and
+// cpu.cfs_period_us.
+std::optional<uint64_t> CgroupV1Cpus(const CgroupPaths& paths, const std::string& self) {
+  return TightestUpTo(std::filesystem::path(paths.root) / "cpu", OwnCgroup(self, "cpu"),
+                      [](const std::filesystem::path& dir) {
+                        return CpusOfQuota(Trim(ReadSmallFile(dir / "cpu.cfs_quota_us")),
+                                           Trim(ReadSmallFile(dir / "cpu.cfs_period_us")));
+                      });
 }
 
 }  // namespace
 
 uint32_t AvailableCpus(const CgroupPaths& paths, uint32_t hardware_cpus) {
   const uint32_t cpus = std::max(1u, hardware_cpus);
-  std::optional<uint64_t> quota = CgroupV2Cpus(paths);
-  if (!quota.has_value()) quota = CgroupV1Cpus(paths);
+  const std::string self = ReadSmallFile(paths.self);
+  std::optional<uint64_t> quota = CgroupV2Cpus(paths, self);
+  if (!quota.has_value()) quota = CgroupV1Cpus(paths, self);
   if (!quota.has_value()) return cpus;
   return uint32_t(std::clamp<uint64_t>(*quota, 1, cpus));
 }

@@ -153,12 +153,11 @@ struct CgroupPaths {
   std::string self = "/proc/self/cgroup";  // "0::/system.slice/recogd.service" for cgroup v2
 };
 
-// The CPUs the process may use: ceil(quota / period) of the tightest CPU quota among its cgroup
-// (v2: `cpu.max` of the process's cgroup, named by the "0::" line of `paths.self`, and of each
-// ancestor up to `paths.root`; v1: `cpu/cpu.cfs_quota_us` and `cpu/cpu.cfs_period_us` under
-// `paths.root`, the view inside a container), at least 1 and at most `hardware_cpus`.
-// `hardware_cpus` (at least 1) when there is no quota ("max", -1), no such file, or a malformed
-// one.
+// The CPUs the process may use: ceil(quota / period) of the tightest CPU quota of its cgroup and
+// its ancestors up to `paths.root` (cgroup v2: `cpu.max` along the "0::" line of `paths.self`;
+// else v1: `cpu.cfs_quota_us` / `cpu.cfs_period_us` under `paths.root`/cpu along the line of the
+// cpu controller), at least 1 and at most `hardware_cpus`. `hardware_cpus` (at least 1) when
+// there is no quota ("max", -1), no such file, or a malformed one.
 uint32_t AvailableCpus(const CgroupPaths& paths, uint32_t hardware_cpus);
 
 // Adds one flag per commonly changed field (--listen, --data-dir, --place-vocabulary,

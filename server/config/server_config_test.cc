@@ -122,7 +122,9 @@ TEST_F(ServerConfigTest, AvailableCpusFollowsTheTightestCgroupQuota) {
 }
 
 TEST_F(ServerConfigTest, AvailableCpusReadsCgroupV1AndIgnoresMalformedFiles) {
-  CgroupPaths paths{(dir_ / "v1").string(), WriteFile("self", "4:cpu,cpuacct:/\n")};
+  // A container's view: its cgroup (/docker/<id> on the host) is the root of the cpu hierarchy.
+  CgroupPaths paths{(dir_ / "v1").string(),
+                    WriteFile("self", "5:memory:/docker/abc\n4:cpu,cpuacct:/docker/abc\n")};
   const fs::path cpu = dir_ / "v1/cpu";
   fs::create_directories(cpu);
   std::ofstream(cpu / "cpu.cfs_period_us") << "100000\n";
@@ -130,6 +132,13 @@ TEST_F(ServerConfigTest, AvailableCpusReadsCgroupV1AndIgnoresMalformedFiles) {
   EXPECT_EQ(AvailableCpus(paths, 8), 8u) << "no quota";
   std::ofstream(cpu / "cpu.cfs_quota_us") << "300000\n";
   EXPECT_EQ(AvailableCpus(paths, 8), 3u);
+  // A systemd service on a cgroup v1 host: its own directory of the cpu hierarchy.
+  paths.self = WriteFile("self_service", "4:cpu,cpuacct:/system.slice/recogd.service\n");
+  const fs::path service = cpu / "system.slice/recogd.service";
+  fs::create_directories(service);
+  std::ofstream(service / "cpu.cfs_period_us") << "50000\n";
+  std::ofstream(service / "cpu.cfs_quota_us") << "100000\n";
+  EXPECT_EQ(AvailableCpus(paths, 8), 2u);
 
   for (const char* malformed : {"", "lots", "100000 x", "0 100000", "100000 0", "-5 100000"}) {
     CgroupPaths v2{(dir_ / "bad").string(), WriteFile("self_bad", "0::/\n")};
