@@ -1,21 +1,44 @@
 // recogd: the recognition server. `recogd --help` lists the flags; server/README.md explains the
 // configuration, security and operations.
 //
+// Signals: SIGTERM and SIGINT shut down gracefully; SIGHUP reloads the placement table, the token
+// file and the TLS files (RecognitionServer::Reload). Under systemd (Type=notify, NOTIFY_SOCKET
+// set) it reports READY=1 once serving, RELOADING=1 then READY=1 around a reload, STOPPING=1 when
+// shutting down.
+//
 // Exit status: 0 after --help, --version or a clean shutdown (SIGTERM, SIGINT); 2 when the command
 // line or the configuration is refused before anything starts (an unknown flag, a bad value, a
 // --config file that cannot be read or does not validate: one line "recogd: CODE: message"); 1
 // when the server fails to start.
 #include <csignal>
 #include <cstdio>
+#include <ctime>
+#include <string>
 
 #include <spdlog/spdlog.h>
 
 #include "recog_build_info.h"
 #include "server/app/recognition_server.h"
+#include "server/app/systemd_notify.h"
 
 namespace {
 
 constexpr int kUsageError = 2;
+
+// Tells systemd `state`; a failure is logged, never fatal.
+void Notify(const std::string& state) {
+  if (const recog::Status sent = recog::server::NotifySystemd(state); !sent.ok()) {
+    spdlog::warn("recogd: {}", sent.ToString());
+  }
+}
+
+// "RELOADING=1" with the CLOCK_MONOTONIC time systemd (Type=notify-reload) wants beside it.
+std::string ReloadingState() {
+  timespec now{};
+  clock_gettime(CLOCK_MONOTONIC, &now);
+  return "RELOADING=1\nMONOTONIC_USEC=" +
+         std::to_string(uint64_t(now.tv_sec) * 1000000 + uint64_t(now.tv_nsec) / 1000);
+}
 
 }  // namespace
 
@@ -52,14 +75,18 @@ int main(int argc, char** argv) {
     spdlog::error("recogd: {}", server.status().ToString());
     return 1;
   }
+  Notify("READY=1\nSTATUS=serving on port " + std::to_string(server.value()->port()));
   int signal = 0;
-  // SIGHUP re-reads the placement table of a sharded server (a bad file keeps the old one).
+  // SIGHUP reloads; each file that does not load is logged and the one in use kept.
   while (sigwait(&signals, &signal) == 0 && signal == SIGHUP) {
-    if (const recog::Status reloaded = server.value()->ReloadPlacement(); !reloaded.ok()) {
-      spdlog::error("recogd: SIGHUP: {}; the placement table in use is kept", reloaded.ToString());
-    }
+    spdlog::info("recogd: SIGHUP received, reloading");
+    Notify(ReloadingState());
+    const recog::Status reloaded = server.value()->Reload();
+    Notify(std::string("READY=1\nSTATUS=") +
+           (reloaded.ok() ? "reloaded" : "reload failed, see the log"));
   }
   spdlog::info("recogd: {} received, shutting down", signal == SIGTERM ? "SIGTERM" : "SIGINT");
+  Notify("STOPPING=1");
   server.value()->Shutdown(std::chrono::milliseconds(config.shutdown_grace_ms));
   return 0;
 }

@@ -1,14 +1,14 @@
 #include "server/app/recognition_server.h"
 
 #include <filesystem>
-#include <fstream>
-#include <sstream>
 
 #include <grpcpp/ext/proto_server_reflection_plugin.h>
 #include <grpcpp/health_check_service_interface.h>
 #include <spdlog/spdlog.h>
 
 #include "core/vocabulary/vocabulary_io.h"
+#include "server/app/grpc_metrics.h"
+#include "server/app/server_tls.h"
 #include "server/replication/repository_follower.h"
 #include "server/services/admin_service.h"
 #include "server/services/object_service.h"
@@ -21,27 +21,10 @@
 namespace recog::server {
 namespace {
 
-StatusOr<std::string> ReadPem(const std::string& path, const char* what) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return Status::NotFound(std::string(what) + " '" + path + "' cannot be read");
-  std::ostringstream text;
-  text << in.rdbuf();
-  return text.str();
-}
+namespace pb = ::recognition::v1;
 
-StatusOr<std::shared_ptr<grpc::ServerCredentials>> Credentials(const TlsConfig& tls) {
-  if (tls.cert.empty()) return grpc::InsecureServerCredentials();
-  RECOG_ASSIGN_OR_RETURN(std::string cert, ReadPem(tls.cert, "TLS certificate"));
-  RECOG_ASSIGN_OR_RETURN(std::string key, ReadPem(tls.key, "TLS key"));
-  grpc::SslServerCredentialsOptions options(
-      tls.client_ca.empty() ? GRPC_SSL_DONT_REQUEST_CLIENT_CERTIFICATE
-                            : GRPC_SSL_REQUEST_AND_REQUIRE_CLIENT_CERTIFICATE_AND_VERIFY);
-  if (!tls.client_ca.empty()) {
-    RECOG_ASSIGN_OR_RETURN(options.pem_root_certs, ReadPem(tls.client_ca, "client CA"));
-  }
-  options.pem_key_cert_pairs.push_back({std::move(key), std::move(cert)});
-  return grpc::SslServerCredentials(options);
-}
+// The directory under data_dir of the checked copies of the TLS files (see ServerTls).
+constexpr char kLiveTlsDir[] = "tls";
 
 StatusOr<std::shared_ptr<const Vocabulary>> OpenVocabulary(const std::string& configured,
                                                            const std::string& bundled) {
@@ -65,10 +48,16 @@ StatusOr<std::unique_ptr<RecognitionServer>> RecognitionServer::Start(const Serv
                                           ? TokenAuthenticator::AllowAll()
                                           : TokenAuthenticator::Load(config.token_file);
   if (!auth.ok()) return auth.status();
-  RECOG_ASSIGN_OR_RETURN(std::shared_ptr<grpc::ServerCredentials> credentials,
-                         Credentials(config.tls));
-
   std::unique_ptr<RecognitionServer> server(new RecognitionServer());
+  std::shared_ptr<grpc::ServerCredentials> credentials = grpc::InsecureServerCredentials();
+  if (!config.tls.cert.empty()) {
+    RECOG_ASSIGN_OR_RETURN(
+        server->tls_,
+        ServerTls::Create(config.tls,
+                          (std::filesystem::path(config.data_dir) / kLiveTlsDir).string()));
+    credentials = server->tls_->credentials();
+  }
+  server->tokens_.emplace(*auth);  // shares the tokens the services authenticate with
   server->state_ = std::make_unique<ServerState>(config, std::move(auth).value());
   ServerState& state = *server->state_;
   state.pool = std::make_unique<WorkerPool<WorkerContext>>(
@@ -100,6 +89,13 @@ StatusOr<std::unique_ptr<RecognitionServer>> RecognitionServer::Start(const Serv
   builder.RegisterService(server->object_service_.get());
   builder.RegisterService(server->repository_service_.get());
   builder.RegisterService(server->admin_service_.get());
+  RegisterServiceMethods(
+      state.metrics,
+      {pb::PlaceRecognition::service_full_name(), pb::ObjectRecognition::service_full_name(),
+       pb::ObjectRepository::service_full_name(), pb::Admin::service_full_name()});
+  std::vector<std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface>> interceptors;
+  interceptors.push_back(MakeGrpcMetricsInterceptorFactory(&state.metrics));
+  builder.experimental().SetInterceptorCreators(std::move(interceptors));
   server->server_ = builder.BuildAndStart();
   if (server->server_ == nullptr || server->port_ == 0) {
     server->server_.reset();
@@ -197,6 +193,30 @@ void RecognitionServer::Shutdown(std::chrono::milliseconds grace) {
     state.store.reset();
     if (server_ != nullptr) spdlog::info("recogd stopped");
   });
+}
+
+Status RecognitionServer::Reload() {
+  Status first = Status::Ok();
+  const auto reload = [&first](const char* kept, const Status& status) {
+    if (status.ok()) return;
+    spdlog::error("recogd: reload: {}; {}", status.ToString(), kept);
+    if (first.ok()) first = status;
+  };
+  reload("the placement table in use is kept", ReloadPlacement());
+  const Status tokens = tokens_->Reload();
+  reload("the tokens in use are kept", tokens);
+  if (tokens.ok() && !state_->config.token_file.empty()) {
+    spdlog::info("recogd: tokens reloaded from {}", state_->config.token_file);
+  }
+  if (tls_ != nullptr) {
+    const Status certificates = tls_->Reload();
+    reload("the certificates in use are kept", certificates);
+    if (certificates.ok()) {
+      spdlog::info("recogd: certificates reloaded from {}; new connections use them within {} s",
+                   state_->config.tls.cert, ServerTls::kRefreshSeconds);
+    }
+  }
+  return first;
 }
 
 Status RecognitionServer::ReloadPlacement() {

@@ -17,19 +17,28 @@
 //
 // With a shard configuration, place-map calls for maps the placement table does not give to this
 // shard are refused (FAILED_PRECONDITION naming the owner); the table is read at Start (a bad one
-// fails it) and again by ReloadPlacement (recogd: SIGHUP).
+// fails it) and again by ReloadPlacement.
+//
+// Reload (recogd: SIGHUP) re-reads what may change while the server runs: the placement table,
+// the token file (calls after it authenticate with the new tokens) and the TLS files (connections
+// made after it use the new certificate, see server/app/server_tls.h). A file that does not load
+// is logged and the one in use is kept. With TLS, checked copies of the files are kept under
+// <data_dir>/tls.
 //
 // Also serving: grpc.health.v1.Health, server reflection, and Prometheus metrics over HTTP on
-// `metrics_listen` (unless empty).
+// `metrics_listen` (unless empty), including the standard gRPC server metrics of the recognition
+// services (server/app/grpc_metrics.h).
 #pragma once
 
 #include <chrono>
 #include <memory>
 #include <mutex>
+#include <optional>
 
 #include <grpcpp/grpcpp.h>
 
 #include "core/common/status.h"
+#include "server/auth/token_auth.h"
 #include "server/config/server_config.h"
 
 namespace recog::server {
@@ -40,6 +49,7 @@ class ObjectService;
 class RepositoryService;
 class AdminService;
 class RepositoryFollower;
+class ServerTls;
 
 class RecognitionServer {
  public:
@@ -59,6 +69,10 @@ class RecognitionServer {
   // and nothing done without a shard configuration. On error the table in use is kept.
   Status ReloadPlacement();
 
+  // Reloads the placement table, the tokens and the TLS files (see the header comment), each
+  // independently; logs each failure and returns the first. Call from one thread at a time.
+  Status Reload();
+
   // Graceful shutdown (see the header comment). Idempotent; thread-safe.
   void Shutdown(std::chrono::milliseconds grace);
 
@@ -68,6 +82,8 @@ class RecognitionServer {
   Status StartFollowing();  // the repository follower of a replica; nothing on a primary
 
   std::unique_ptr<ServerState> state_;
+  std::optional<TokenAuthenticator> tokens_;  // a copy of state_->auth, to reload it
+  std::unique_ptr<ServerTls> tls_;            // null without TLS; outlives server_
   std::unique_ptr<PlaceService> place_service_;
   std::unique_ptr<ObjectService> object_service_;
   std::unique_ptr<RepositoryService> repository_service_;

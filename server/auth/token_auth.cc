@@ -104,9 +104,27 @@ std::string_view RightName(Right right) {
 }
 
 StatusOr<TokenAuthenticator> TokenAuthenticator::Load(const std::string& path) {
+  RECOG_ASSIGN_OR_RETURN(std::shared_ptr<const Callers> callers, Read(path));
+  TokenAuthenticator authenticator;
+  authenticator.shared_ = std::make_shared<Shared>();
+  authenticator.shared_->path = path;
+  authenticator.shared_->callers = std::move(callers);
+  return authenticator;
+}
+
+Status TokenAuthenticator::Reload() {
+  if (shared_ == nullptr) return Status::Ok();
+  RECOG_ASSIGN_OR_RETURN(std::shared_ptr<const Callers> callers, Read(shared_->path));
+  std::lock_guard lock(shared_->mutex);
+  shared_->callers = std::move(callers);
+  return Status::Ok();
+}
+
+StatusOr<std::shared_ptr<const TokenAuthenticator::Callers>> TokenAuthenticator::Read(
+    const std::string& path) {
   const std::string what = "token file '" + path + "'";
   RECOG_ASSIGN_OR_RETURN(const std::string text, ReadWholeFile(path, what));
-  TokenAuthenticator authenticator;
+  auto callers = std::make_shared<Callers>();
   std::unordered_map<std::string, std::string> entry_of_digest;  // for duplicate errors
   try {
     const YAML::Node root = YAML::Load(text);
@@ -139,22 +157,18 @@ StatusOr<TokenAuthenticator> TokenAuthenticator::Load(const std::string& path) {
         return Status::InvalidArgument(what + ": " + named + " has the same token as " +
                                        it->second);
       }
-      authenticator.callers_.emplace(std::move(digest), std::move(caller));
+      callers->emplace(std::move(digest), std::move(caller));
     }
   } catch (const YAML::Exception& e) {
     return Status::InvalidArgument(what + " is not valid YAML: " + e.what());
   }
-  return authenticator;
+  return std::shared_ptr<const Callers>(std::move(callers));
 }
 
-TokenAuthenticator TokenAuthenticator::AllowAll() {
-  TokenAuthenticator authenticator;
-  authenticator.allows_all_ = true;
-  return authenticator;
-}
+TokenAuthenticator TokenAuthenticator::AllowAll() { return TokenAuthenticator(); }
 
 StatusOr<Caller> TokenAuthenticator::Authenticate(std::string_view authorization_header) const {
-  if (allows_all_) return Caller{std::string(kAnonymous), true, true};
+  if (shared_ == nullptr) return Caller{std::string(kAnonymous), true, true};
   const std::string_view header = TrimSpaces(authorization_header);
   if (header.empty()) {
     return Status::Unauthenticated("missing authorization header (expected 'Bearer <token>')");
@@ -168,8 +182,13 @@ StatusOr<Caller> TokenAuthenticator::Authenticate(std::string_view authorization
     return Status::Unauthenticated("malformed authorization header (expected 'Bearer <token>')");
   }
   const std::string digest = Sha256Hex(token);
-  const auto it = callers_.find(digest);
-  if (it == callers_.end()) return Status::Unauthenticated("unknown token");
+  std::shared_ptr<const Callers> callers;
+  {
+    std::lock_guard lock(shared_->mutex);
+    callers = shared_->callers;
+  }
+  const auto it = callers->find(digest);
+  if (it == callers->end()) return Status::Unauthenticated("unknown token");
   return it->second;
 }
 

@@ -15,10 +15,17 @@
 //
 // Only the SHA-256 digests of the tokens are kept, and a presented token is found by looking up
 // its digest, so the time Authenticate takes says nothing useful about the secrets. Error
-// messages and Caller never contain a token. An authenticator is immutable once built and safe to
-// use from any number of threads; to reload the file, build a new one.
+// messages and Caller never contain a token.
+//
+// Reload() re-reads the file (recogd: SIGHUP): calls authenticated after it use the new tokens, so
+// an added token works and a removed one is refused from then on; a file that does not load
+// leaves the tokens in use. Copies of an authenticator share their tokens, so a reload through
+// one copy is seen by all (the server keeps one to reload while the RPC handlers authenticate
+// through theirs). Every method is safe to call from any number of threads.
 #pragma once
 
+#include <memory>
+#include <mutex>
 #include <string>
 #include <string_view>
 #include <unordered_map>
@@ -58,19 +65,31 @@ class TokenAuthenticator {
   // missing, is not a bearer token, or the token is unknown.
   StatusOr<Caller> Authenticate(std::string_view authorization_header) const;
 
+  // Re-reads the file given to Load, with Load's errors; on error the tokens in use are kept. OK
+  // and nothing done for AllowAll().
+  Status Reload();
+
   // OK when `caller` holds `right`, else PERMISSION_DENIED naming the caller and the right.
   static Status Check(const Caller& caller, Right right);
 
   // True for AllowAll().
-  bool allows_all() const { return allows_all_; }
+  bool allows_all() const { return shared_ == nullptr; }
 
   static constexpr size_t kMinTokenLength = 16;
 
  private:
-  TokenAuthenticator() = default;
+  using Callers = std::unordered_map<std::string, Caller>;  // by the SHA-256 digest of the token
+  // The token file and its tokens, shared by the copies of an authenticator.
+  struct Shared {
+    std::string path;
+    mutable std::mutex mutex;
+    std::shared_ptr<const Callers> callers;  // replaced whole by Reload, under `mutex`
+  };
 
-  bool allows_all_ = false;
-  std::unordered_map<std::string, Caller> callers_;  // by the SHA-256 digest of the token
+  TokenAuthenticator() = default;
+  static StatusOr<std::shared_ptr<const Callers>> Read(const std::string& path);
+
+  std::shared_ptr<Shared> shared_;  // null for AllowAll()
 };
 
 }  // namespace recog::server

@@ -212,5 +212,42 @@ TEST_F(TokenAuthTest, TwoEntriesMayShareANameDuringTokenRotation) {
   EXPECT_EQ(auth->Authenticate("Bearer new-token-0123456789")->name, "robot-7");
 }
 
+TEST_F(TokenAuthTest, ReloadSwapsTheTokensForEveryCopyAndKeepsThemWhenTheFileIsBad) {
+  StatusOr<TokenAuthenticator> loaded = LoadText(kTokenFile);
+  ASSERT_TRUE(loaded.ok()) << loaded.status().ToString();
+  TokenAuthenticator reloader = *loaded;
+  const TokenAuthenticator serving = *loaded;  // a copy, as the RPC handlers hold it
+  ASSERT_TRUE(serving.Authenticate(std::string("Bearer ") + kReaderToken).ok());
+
+  // The reader's token is rotated out, a new one comes in.
+  std::ofstream(dir_ / "tokens.yaml") << R"(tokens:
+  - name: robot-7
+    token: rotated-token-0123456789
+    rights: [read]
+)";
+  ASSERT_TRUE(reloader.Reload().ok());
+  EXPECT_EQ(serving.Authenticate("Bearer rotated-token-0123456789")->name, "robot-7");
+  StatusOr<Caller> removed = serving.Authenticate(std::string("Bearer ") + kReaderToken);
+  ASSERT_FALSE(removed.ok());
+  EXPECT_EQ(removed.status().code(), StatusCode::kUnauthenticated);
+
+  // A malformed file, then a missing one: errors as Load's, and the rotated token still works.
+  std::ofstream(dir_ / "tokens.yaml") << "tokens: [ {name: x, token: short, rights: [read]} ]\n";
+  const Status bad = reloader.Reload();
+  EXPECT_EQ(bad.code(), StatusCode::kInvalidArgument);
+  EXPECT_THAT(bad.message(), HasSubstr("at least 16"));
+  fs::remove(dir_ / "tokens.yaml");
+  EXPECT_EQ(reloader.Reload().code(), StatusCode::kNotFound);
+  EXPECT_TRUE(serving.Authenticate("Bearer rotated-token-0123456789").ok());
+  EXPECT_FALSE(serving.Authenticate(std::string("Bearer ") + kWriterToken).ok());
+}
+
+TEST_F(TokenAuthTest, ReloadOfAllowAllDoesNothing) {
+  TokenAuthenticator auth = TokenAuthenticator::AllowAll();
+  EXPECT_TRUE(auth.Reload().ok());
+  EXPECT_TRUE(auth.allows_all());
+  EXPECT_EQ(auth.Authenticate("")->name, "anonymous");
+}
+
 }  // namespace
 }  // namespace recog::server

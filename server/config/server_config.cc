@@ -3,7 +3,13 @@
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>
+#include <charconv>
 #include <climits>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <optional>
+#include <sstream>
 #include <thread>
 #include <utility>
 #include <vector>
@@ -244,8 +250,7 @@ Status ServerConfig::Validate() const {
   if (data_dir.empty()) return Status::InvalidArgument("data_dir must not be empty");
   if (workers > kMaxWorkers) {
     return Status::InvalidArgument("workers must be at most " + std::to_string(kMaxWorkers) +
-                                   " (0 = one per hardware thread), got " +
-                                   std::to_string(workers));
+                                   " (0 = one per available CPU), got " + std::to_string(workers));
   }
   if (queue_capacity < 1) return Status::InvalidArgument("queue_capacity must be at least 1");
   if (max_message_bytes < kMinMessageBytes || max_message_bytes > INT_MAX) {
@@ -307,7 +312,110 @@ Status ServerConfig::Validate() const {
 
 uint32_t ServerConfig::WorkerCount() const {
   if (workers > 0) return workers;
-  return std::max(1u, std::thread::hardware_concurrency());
+  return AvailableCpus(CgroupPaths(), std::thread::hardware_concurrency());
+}
+
+namespace {
+
+// The whole of a small file, empty when it cannot be read.
+std::string ReadSmallFile(const std::filesystem::path& path) {
+  std::ifstream in(path);
+  std::ostringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
+// ceil(quota / period) for a positive quota and period given as text; nullopt for anything else
+// ("max", "-1", garbage).
+std::optional<uint64_t> CpusOfQuota(std::string_view quota, std::string_view period) {
+  uint64_t q = 0, p = 0;
+  const auto [q_end, q_error] = std::from_chars(quota.data(), quota.data() + quota.size(), q);
+  const auto [p_end, p_error] = std::from_chars(period.data(), period.data() + period.size(), p);
+  if (q_error != std::errc() || p_error != std::errc() || q_end != quota.data() + quota.size() ||
+      p_end != period.data() + period.size() || q == 0 || p == 0) {
+    return std::nullopt;
+  }
+  return (q + p - 1) / p;
+}
+
+std::string_view Trim(std::string_view text) {
+  const size_t first = text.find_first_not_of(" \t\n");
+  if (first == std::string_view::npos) return {};
+  return text.substr(first, text.find_last_not_of(" \t\n") - first + 1);
+}
+
+// `path` normalised and without a trailing separator, so that parent_path() goes up one level.
+std::filesystem::path Normalised(const std::filesystem::path& path) {
+  std::filesystem::path normal = path.lexically_normal();
+  return normal.has_filename() ? normal : normal.parent_path();
+}
+
+// The process's cgroup in /proc/self/cgroup's text `self`: the cgroup v2 line ("0::/path") or,
+// with `v1_controller`, the line of the v1 hierarchy holding that controller
+// ("4:cpu,cpuacct:/path"). "" when there is no such line.
+std::string OwnCgroup(const std::string& self, std::string_view v1_controller) {
+  std::istringstream lines(self);
+  for (std::string line; std::getline(lines, line);) {
+    const size_t first = line.find(':'), second = line.find(':', first + 1);
+    if (first == std::string::npos || second == std::string::npos) continue;
+    const std::string controllers = "," + line.substr(first + 1, second - first - 1) + ",";
+    const bool wanted =
+        v1_controller.empty()
+            ? controllers == ",,"
+            : controllers.find("," + std::string(v1_controller) + ",") != std::string::npos;
+    if (wanted) return line.substr(second + 1);
+  }
+  return {};
+}
+
+// The tightest quota that `cpus_in` finds in `root`/`relative` and in each of its ancestors up to
+// `root`. A container's own cgroup is its root, where the path of /proc/self/cgroup (the host's
+// view) does not exist: then only the root is read.
+std::optional<uint64_t> TightestUpTo(
+    const std::filesystem::path& root, const std::string& relative,
+    const std::function<std::optional<uint64_t>(const std::filesystem::path&)>& cpus_in) {
+  const std::filesystem::path top = Normalised(root);
+  std::filesystem::path dir = Normalised(top / std::filesystem::path(relative).relative_path());
+  if (dir.lexically_relative(top).native().starts_with("..")) dir = top;
+  std::optional<uint64_t> cpus;
+  for (;; dir = dir.parent_path()) {
+    const std::optional<uint64_t> here = cpus_in(dir);
+    if (here.has_value() && (!cpus.has_value() || *here < *cpus)) cpus = here;
+    if (dir == top || dir == dir.parent_path()) break;
+  }
+  return cpus;
+}
+
+// cgroup v2: `cpu.max` is "<quota> <period>" or "max <period>".
+std::optional<uint64_t> CgroupV2Cpus(const CgroupPaths& paths, const std::string& self) {
+  return TightestUpTo(paths.root, OwnCgroup(self, ""), [](const std::filesystem::path& dir) {
+    const std::string text = ReadSmallFile(dir / "cpu.max");
+    const std::string_view line = Trim(text);
+    const size_t space = line.find(' ');
+    if (space == std::string_view::npos) return std::optional<uint64_t>();
+    return CpusOfQuota(line.substr(0, space), Trim(line.substr(space)));
+  });
+}
+
+// cgroup v1: the cpu hierarchy (mounted at <root>/cpu) has cpu.cfs_quota_us (-1: none) and
+// cpu.cfs_period_us.
+std::optional<uint64_t> CgroupV1Cpus(const CgroupPaths& paths, const std::string& self) {
+  return TightestUpTo(std::filesystem::path(paths.root) / "cpu", OwnCgroup(self, "cpu"),
+                      [](const std::filesystem::path& dir) {
+                        return CpusOfQuota(Trim(ReadSmallFile(dir / "cpu.cfs_quota_us")),
+                                           Trim(ReadSmallFile(dir / "cpu.cfs_period_us")));
+                      });
+}
+
+}  // namespace
+
+uint32_t AvailableCpus(const CgroupPaths& paths, uint32_t hardware_cpus) {
+  const uint32_t cpus = std::max(1u, hardware_cpus);
+  const std::string self = ReadSmallFile(paths.self);
+  std::optional<uint64_t> quota = CgroupV2Cpus(paths, self);
+  if (!quota.has_value()) quota = CgroupV1Cpus(paths, self);
+  if (!quota.has_value()) return cpus;
+  return uint32_t(std::clamp<uint64_t>(*quota, 1, cpus));
 }
 
 void AddFlags(CLI::App& app, ServerConfig* config) {
@@ -318,7 +426,8 @@ void AddFlags(CLI::App& app, ServerConfig* config) {
                  "Vocabulary of new place maps (default: the bundled one)");
   app.add_option("--object-vocabulary", config->object_vocabulary,
                  "Vocabulary of object models (default: the bundled one)");
-  app.add_option("--workers", config->workers, "Worker threads (0 = one per hardware thread)")
+  app.add_option("--workers", config->workers,
+                 "Worker threads (0 = one per CPU of the cgroup quota, else per hardware thread)")
       ->capture_default_str();
   app.add_option("--queue-capacity", config->queue_capacity,
                  "Tasks that may wait for a worker before calls fail with RESOURCE_EXHAUSTED")

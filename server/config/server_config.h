@@ -98,7 +98,9 @@ struct ServerConfig {
   std::string place_vocabulary;
   // Default "": the vocabulary of object models; empty means the bundled object vocabulary.
   std::string object_vocabulary;
-  // Default 0: threads recognising frames; 0 means one per hardware thread (see WorkerCount()).
+  // Default 0: threads recognising frames; 0 means one per CPU this process may use: the
+  // container's or service's CPU quota when there is one, else the hardware threads (see
+  // WorkerCount()).
   uint32_t workers = 0;
   // Default 64: tasks that may wait for a worker; beyond that, calls fail with
   // RESOURCE_EXHAUSTED. At least 1.
@@ -140,9 +142,23 @@ struct ServerConfig {
   // INVALID_ARGUMENT naming the first bad field (as its YAML key, e.g. "tls.key").
   Status Validate() const;
 
-  // The number of worker threads: `workers`, or the hardware concurrency (at least 1) when 0.
+  // The number of worker threads: `workers`, or when 0 AvailableCpus(the process's cgroups, the
+  // hardware concurrency).
   uint32_t WorkerCount() const;
 };
+
+// Where AvailableCpus looks: the cgroup file system and the process's own line(s) in it.
+struct CgroupPaths {
+  std::string root = "/sys/fs/cgroup";     // the cgroup (v2) or cgroup-v1 mount root
+  std::string self = "/proc/self/cgroup";  // "0::/system.slice/recogd.service" for cgroup v2
+};
+
+// The CPUs the process may use: ceil(quota / period) of the tightest CPU quota of its cgroup and
+// its ancestors up to `paths.root` (cgroup v2: `cpu.max` along the "0::" line of `paths.self`;
+// else v1: `cpu.cfs_quota_us` / `cpu.cfs_period_us` under `paths.root`/cpu along the line of the
+// cpu controller), at least 1 and at most `hardware_cpus`. `hardware_cpus` (at least 1) when
+// there is no quota ("max", -1), no such file, or a malformed one.
+uint32_t AvailableCpus(const CgroupPaths& paths, uint32_t hardware_cpus);
 
 // Adds one flag per commonly changed field (--listen, --data-dir, --place-vocabulary,
 // --object-vocabulary, --workers, --queue-capacity, --max-message-bytes, --token-file,

@@ -86,11 +86,68 @@ TEST_F(ServerConfigTest, DefaultsAreValidAndAsDocumented) {
   EXPECT_EQ(config.place.recent_frames, 20u);
 }
 
-TEST_F(ServerConfigTest, ZeroWorkersMeansOnePerHardwareThread) {
+TEST_F(ServerConfigTest, ZeroWorkersMeansOnePerAvailableCpu) {
   ServerConfig config;
-  EXPECT_EQ(config.WorkerCount(), std::max(1u, std::thread::hardware_concurrency()));
+  EXPECT_EQ(config.WorkerCount(),
+            AvailableCpus(CgroupPaths(), std::thread::hardware_concurrency()));
+  EXPECT_GE(config.WorkerCount(), 1u);
+  EXPECT_LE(config.WorkerCount(), std::max(1u, std::thread::hardware_concurrency()));
   config.workers = 3;
   EXPECT_EQ(config.WorkerCount(), 3u);
+}
+
+TEST_F(ServerConfigTest, AvailableCpusFollowsTheTightestCgroupQuota) {
+  // cgroup v2 as systemd sets it: the service's own cpu.max and its slice's.
+  CgroupPaths paths{(dir_ / "cgroup").string(),
+                    WriteFile("self", "0::/system.slice/recogd.service\n")};
+  const fs::path service = dir_ / "cgroup/system.slice/recogd.service";
+  fs::create_directories(service);
+  EXPECT_EQ(AvailableCpus(paths, 16), 16u) << "no cpu.max anywhere";
+  EXPECT_EQ(AvailableCpus(paths, 0), 1u) << "an unknown hardware count is 1";
+  std::ofstream(service / "cpu.max") << "max 100000\n";
+  EXPECT_EQ(AvailableCpus(paths, 16), 16u) << "no quota";
+  std::ofstream(service / "cpu.max") << "250000 100000\n";
+  EXPECT_EQ(AvailableCpus(paths, 16), 3u) << "2.5 CPUs round up";
+  EXPECT_EQ(AvailableCpus(paths, 2), 2u) << "never more than the hardware";
+  std::ofstream(dir_ / "cgroup/system.slice/cpu.max") << "150000 100000\n";
+  EXPECT_EQ(AvailableCpus(paths, 16), 2u) << "the slice's quota is tighter";
+  std::ofstream(service / "cpu.max") << "1000 100000\n";
+  EXPECT_EQ(AvailableCpus(paths, 16), 1u) << "at least one";
+
+  // A container with its own cgroup namespace sees its cgroup as the root.
+  CgroupPaths container{(dir_ / "container").string(), WriteFile("self_ns", "0::/\n")};
+  fs::create_directories(container.root);
+  std::ofstream(fs::path(container.root) / "cpu.max") << "400000 100000\n";
+  EXPECT_EQ(AvailableCpus(container, 16), 4u);
+}
+
+TEST_F(ServerConfigTest, AvailableCpusReadsCgroupV1AndIgnoresMalformedFiles) {
+  // A container's view: its cgroup (/docker/<id> on the host) is the root of the cpu hierarchy.
+  CgroupPaths paths{(dir_ / "v1").string(),
+                    WriteFile("self", "5:memory:/docker/abc\n4:cpu,cpuacct:/docker/abc\n")};
+  const fs::path cpu = dir_ / "v1/cpu";
+  fs::create_directories(cpu);
+  std::ofstream(cpu / "cpu.cfs_period_us") << "100000\n";
+  std::ofstream(cpu / "cpu.cfs_quota_us") << "-1\n";
+  EXPECT_EQ(AvailableCpus(paths, 8), 8u) << "no quota";
+  std::ofstream(cpu / "cpu.cfs_quota_us") << "300000\n";
+  EXPECT_EQ(AvailableCpus(paths, 8), 3u);
+  // A systemd service on a cgroup v1 host: its own directory of the cpu hierarchy.
+  paths.self = WriteFile("self_service", "4:cpu,cpuacct:/system.slice/recogd.service\n");
+  const fs::path service = cpu / "system.slice/recogd.service";
+  fs::create_directories(service);
+  std::ofstream(service / "cpu.cfs_period_us") << "50000\n";
+  std::ofstream(service / "cpu.cfs_quota_us") << "100000\n";
+  EXPECT_EQ(AvailableCpus(paths, 8), 2u);
+
+  for (const char* malformed : {"", "lots", "100000 x", "0 100000", "100000 0", "-5 100000"}) {
+    CgroupPaths v2{(dir_ / "bad").string(), WriteFile("self_bad", "0::/\n")};
+    fs::create_directories(v2.root);
+    std::ofstream(fs::path(v2.root) / "cpu.max") << malformed;
+    EXPECT_EQ(AvailableCpus(v2, 8), 8u) << "'" << malformed << "'";
+  }
+  EXPECT_EQ(AvailableCpus(CgroupPaths{(dir_ / "absent").string(), (dir_ / "absent").string()}, 5),
+            5u);
 }
 
 TEST_F(ServerConfigTest, StoreSyncNamesRoundTrip) {

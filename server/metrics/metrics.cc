@@ -23,6 +23,20 @@ const prometheus::Histogram::BucketBoundaries& RpcBuckets() {
   return buckets;
 }
 
+std::string RpcTypeName(RpcType type) {
+  switch (type) {
+    case RpcType::kUnary:
+      return "unary";
+    case RpcType::kClientStream:
+      return "client_stream";
+    case RpcType::kServerStream:
+      return "server_stream";
+    case RpcType::kBidiStream:
+      return "bidi_stream";
+  }
+  return "unknown";
+}
+
 template <typename T>
 prometheus::Family<T>& Register(prometheus::detail::Builder<T> builder, prometheus::Registry& r,
                                 const std::string& name, const std::string& help) {
@@ -63,6 +77,16 @@ ServerMetrics::ServerMetrics() : registry_(std::make_shared<prometheus::Registry
   replica_changes_ = &Register(prometheus::BuildCounter(), r, "recog_replica_changes_total",
                                "Model changes this repository replica copied from its primary")
                           .Add({});
+  grpc_started_ = &Register(prometheus::BuildCounter(), r, "grpc_server_started_total",
+                            "RPCs started, by type, service and method");
+  grpc_handled_ = &Register(prometheus::BuildCounter(), r, "grpc_server_handled_total",
+                            "RPCs finished, by type, service, method and status code");
+  grpc_handling_ = &Register(prometheus::BuildHistogram(), r, "grpc_server_handling_seconds",
+                             "Duration of finished RPCs by type, service and method");
+  grpc_received_ = &Register(prometheus::BuildCounter(), r, "grpc_server_msg_received_total",
+                             "Request messages received, by type, service and method");
+  grpc_sent_ = &Register(prometheus::BuildCounter(), r, "grpc_server_msg_sent_total",
+                         "Response messages sent, by type, service and method");
   Register(prometheus::BuildGauge(), r, "recog_build_info",
            "Always 1: the version and commit of this recogd")
       .Add({{"version", build_info::kVersion}, {"commit", build_info::kCommit}})
@@ -72,31 +96,90 @@ ServerMetrics::ServerMetrics() : registry_(std::make_shared<prometheus::Registry
 // The exposer stops serving before the registry goes away.
 ServerMetrics::~ServerMetrics() = default;
 
+ServerMetrics::FinishedSeries ServerMetrics::FindFinished(std::string_view method,
+                                                          std::string_view code) {
+  FinishedSeries found;
+  const auto by_method = rpc_histograms_.find(method);
+  if (by_method != rpc_histograms_.end()) {
+    const auto by_code = by_method->second.find(code);
+    if (by_code != by_method->second.end()) found.duration = by_code->second;
+  }
+  found.grpc = FindGrpc(method);
+  if (found.grpc != nullptr) {
+    const auto handled = found.grpc->handled.find(code);
+    if (handled != found.grpc->handled.end()) found.handled = handled->second;
+  }
+  return found;
+}
+
+ServerMetrics::GrpcSeries* ServerMetrics::FindGrpc(std::string_view method) {
+  const auto it = grpc_series_.find(method);
+  return it == grpc_series_.end() ? nullptr : &it->second;
+}
+
 void ServerMetrics::ObserveRpc(std::string_view method, std::string_view code, double seconds) {
+  FinishedSeries series;
   {
     std::shared_lock lock(rpc_mutex_);
-    const auto by_method = rpc_histograms_.find(method);
-    if (by_method != rpc_histograms_.end()) {
-      const auto by_code = by_method->second.find(code);
-      if (by_code != by_method->second.end()) {
-        by_code->second->Observe(seconds);
-        return;
-      }
+    series = FindFinished(method, code);
+  }
+  if (series.duration == nullptr || (series.grpc != nullptr && series.handled == nullptr)) {
+    std::unique_lock lock(rpc_mutex_);
+    series = FindFinished(method, code);
+    if (series.duration == nullptr) {
+      series.duration = &rpc_duration_->Add(
+          {{"method", std::string(method)}, {"code", std::string(code)}}, RpcBuckets());
+      rpc_histograms_[std::string(method)].emplace(std::string(code), series.duration);
+    }
+    if (series.grpc != nullptr && series.handled == nullptr) {
+      const GrpcSeries& g = *series.grpc;
+      series.handled = &grpc_handled_->Add({{"grpc_type", g.type},
+                                            {"grpc_service", g.service},
+                                            {"grpc_method", g.method},
+                                            {"grpc_code", std::string(code)}});
+      series.grpc->handled.emplace(std::string(code), series.handled);
     }
   }
+  series.duration->Observe(seconds);
+  if (series.grpc != nullptr) {
+    series.handled->Increment();
+    series.grpc->handling->Observe(seconds);
+  }
+}
+
+void ServerMetrics::RegisterRpc(std::string_view method, RpcType type) {
   std::unique_lock lock(rpc_mutex_);
-  auto by_method = rpc_histograms_.find(method);
-  if (by_method == rpc_histograms_.end()) {
-    by_method =
-        rpc_histograms_.emplace(std::string(method), StringMap<prometheus::Histogram*>()).first;
-  }
-  auto by_code = by_method->second.find(code);
-  if (by_code == by_method->second.end()) {
-    prometheus::Histogram& histogram = rpc_duration_->Add(
-        {{"method", std::string(method)}, {"code", std::string(code)}}, RpcBuckets());
-    by_code = by_method->second.emplace(std::string(code), &histogram).first;
-  }
-  by_code->second->Observe(seconds);
+  if (grpc_series_.find(method) != grpc_series_.end()) return;
+  // "/recognition.v1.PlaceRecognition/QueryPlace": service and method.
+  const size_t slash = method.rfind('/');
+  const std::string_view service =
+      slash == std::string_view::npos ? std::string_view() : method.substr(0, slash);
+  GrpcSeries series;
+  series.type = RpcTypeName(type);
+  series.service = std::string(service.starts_with('/') ? service.substr(1) : service);
+  series.method = std::string(method.substr(slash + 1));
+  const prometheus::Labels labels = {
+      {"grpc_type", series.type}, {"grpc_service", series.service}, {"grpc_method", series.method}};
+  series.started = &grpc_started_->Add(labels);
+  series.received = &grpc_received_->Add(labels);
+  series.sent = &grpc_sent_->Add(labels);
+  series.handling = &grpc_handling_->Add(labels, RpcBuckets());
+  grpc_series_.emplace(std::string(method), std::move(series));
+}
+
+void ServerMetrics::RpcStarted(std::string_view method) {
+  std::shared_lock lock(rpc_mutex_);
+  if (GrpcSeries* series = FindGrpc(method)) series->started->Increment();
+}
+
+void ServerMetrics::MessageReceived(std::string_view method) {
+  std::shared_lock lock(rpc_mutex_);
+  if (GrpcSeries* series = FindGrpc(method)) series->received->Increment();
+}
+
+void ServerMetrics::MessageSent(std::string_view method) {
+  std::shared_lock lock(rpc_mutex_);
+  if (GrpcSeries* series = FindGrpc(method)) series->sent->Increment();
 }
 
 void ServerMetrics::AddFrames(FrameKind kind, uint64_t count) {

@@ -15,9 +15,21 @@
 //   recog_replica_changes_total                counter: model changes a replica copied
 //   recog_build_info{version, commit}          gauge, always 1: the build serving (the version
 //                                              and commit `recogd --version` prints)
+// and, for the methods given to RegisterRpc, the standard gRPC server metrics of stock dashboards
+// (the names and labels of go-grpc-prometheus), labelled grpc_type ("unary", "client_stream",
+// "server_stream", "bidi_stream"), grpc_service ("recognition.v1.PlaceRecognition") and
+// grpc_method ("QueryPlace"):
+//   grpc_server_started_total                  counter: calls started (RpcStarted)
+//   grpc_server_handled_total{..., grpc_code}  counter: calls finished, by status code ("OK")
+//   grpc_server_handling_seconds               histogram: duration of finished calls
+//   grpc_server_msg_received_total             counter: request messages received
+//   grpc_server_msg_sent_total                 counter: response messages sent
+// A finished call is recorded once, by ObserveRpc, in both recog_rpc_duration_seconds and the
+// grpc_server_handled_total / grpc_server_handling_seconds pair.
 // StartHttp serves them as text on http://<listen_address>/metrics; Serialize returns the same
-// text. Every method is thread-safe; ObserveRpc, on every call's path, takes a shared lock and
-// allocates nothing once a (method, code) pair has been seen. No method throws.
+// text. Every method is thread-safe; ObserveRpc, RpcStarted, MessageReceived and MessageSent, on
+// every call's path, take a shared lock and allocate nothing once a (method, code) pair has been
+// seen. No method throws.
 #pragma once
 
 #include <cstdint>
@@ -48,6 +60,14 @@ enum class FrameKind {
   kObject,  // a frame searched for objects
 };
 
+// How a gRPC method streams (grpc_type).
+enum class RpcType {
+  kUnary,         // "unary"
+  kClientStream,  // "client_stream"
+  kServerStream,  // "server_stream"
+  kBidiStream,    // "bidi_stream"
+};
+
 class ServerMetrics {
  public:
   ServerMetrics();
@@ -56,8 +76,18 @@ class ServerMetrics {
   ServerMetrics& operator=(const ServerMetrics&) = delete;
 
   // Records a finished RPC: `method` is the full name ("/recognition.v1.PlaceRecognition/
-  // QueryPlace"), `code` the gRPC status code name ("OK", "NOT_FOUND").
+  // QueryPlace"), `code` the gRPC status code name ("OK", "NOT_FOUND"). Also counts it in the
+  // standard gRPC metrics when `method` is registered.
   void ObserveRpc(std::string_view method, std::string_view code, double seconds);
+
+  // Gives `method` (a full name, as above) the standard gRPC metrics, at zero; before serving.
+  // Registering a method again does nothing.
+  void RegisterRpc(std::string_view method, RpcType type);
+  // A call of `method` started, received a request message, sent a response message. Nothing for
+  // a method not registered (e.g. health checks, reflection).
+  void RpcStarted(std::string_view method);
+  void MessageReceived(std::string_view method);
+  void MessageSent(std::string_view method);
 
   void AddFrames(FrameKind kind, uint64_t count = 1);
   void AddLoopDetections(uint64_t count = 1);
@@ -117,9 +147,36 @@ class ServerMetrics {
   prometheus::Gauge* replica_synced_;
   prometheus::Counter* replica_changes_;
 
-  // rpc_duration_'s histograms by method, then code; the registry owns them.
+  // The standard gRPC series of one registered method; the registry owns them.
+  struct GrpcSeries {
+    std::string type, service, method;  // the labels
+    prometheus::Counter* started;
+    prometheus::Counter* received;
+    prometheus::Counter* sent;
+    prometheus::Histogram* handling;
+    StringMap<prometheus::Counter*> handled;  // by code, under rpc_mutex_
+  };
+  // The series a finished call of (method, code) is counted in; null when not yet created, and
+  // *grpc (and *handled) null for a method not registered.
+  struct FinishedSeries {
+    prometheus::Histogram* duration = nullptr;
+    GrpcSeries* grpc = nullptr;
+    prometheus::Counter* handled = nullptr;
+  };
+  FinishedSeries FindFinished(std::string_view method, std::string_view code);  // under rpc_mutex_
+  GrpcSeries* FindGrpc(std::string_view method);                                // under rpc_mutex_
+
+  prometheus::Family<prometheus::Counter>* grpc_started_;
+  prometheus::Family<prometheus::Counter>* grpc_handled_;
+  prometheus::Family<prometheus::Histogram>* grpc_handling_;
+  prometheus::Family<prometheus::Counter>* grpc_received_;
+  prometheus::Family<prometheus::Counter>* grpc_sent_;
+
+  // rpc_duration_'s histograms by method, then code, and the registered methods' standard series
+  // by method; the registry owns the metrics.
   mutable std::shared_mutex rpc_mutex_;
   StringMap<StringMap<prometheus::Histogram*>> rpc_histograms_;
+  StringMap<GrpcSeries> grpc_series_;
   std::mutex map_mutex_;  // makes RemoveMap's find-and-remove atomic with SetMapEntries
   mutable std::mutex exposer_mutex_;
 };

@@ -81,6 +81,53 @@ TEST(ServerMetricsTest, RpcDurationsAreHistogramsByMethodAndCode) {
   EXPECT_THAT(Sample(text, "recog_rpc_duration_seconds_count" + not_found + "}"), Optional(1.0));
 }
 
+TEST(ServerMetricsTest, RegisteredMethodsGetTheStandardGrpcSeries) {
+  ServerMetrics metrics;
+  constexpr char kStream[] = "/recognition.v1.PlaceRecognition/StreamFrames";
+  metrics.RegisterRpc(kQueryPlace, RpcType::kUnary);
+  metrics.RegisterRpc(kStream, RpcType::kBidiStream);
+  metrics.RegisterRpc(kQueryPlace, RpcType::kUnary);  // again: nothing changes
+  metrics.RpcStarted(kQueryPlace);
+  metrics.MessageReceived(kQueryPlace);
+  metrics.MessageSent(kQueryPlace);
+  metrics.ObserveRpc(kQueryPlace, "OK", 0.02);
+  metrics.RpcStarted(kQueryPlace);
+  metrics.MessageReceived(kQueryPlace);
+  metrics.ObserveRpc(kQueryPlace, "NOT_FOUND", 0.001);
+  metrics.RpcStarted(kStream);
+  metrics.MessageReceived(kStream);
+  metrics.MessageReceived(kStream);
+  metrics.ObserveRpc(std::string(kStream) + "#frame", "OK", 0.01);  // a frame, not a call
+  // Not registered: only the project's own histogram.
+  metrics.RpcStarted("/grpc.health.v1.Health/Check");
+  metrics.ObserveRpc("/grpc.health.v1.Health/Check", "OK", 0.001);
+
+  const std::string text = metrics.Serialize();
+  const std::string query =
+      "grpc_method=\"QueryPlace\",grpc_service=\"recognition.v1.PlaceRecognition\","
+      "grpc_type=\"unary\"}";
+  const std::string stream =
+      "grpc_method=\"StreamFrames\",grpc_service=\"recognition.v1.PlaceRecognition\","
+      "grpc_type=\"bidi_stream\"}";
+  EXPECT_THAT(text, HasSubstr("# TYPE grpc_server_handling_seconds histogram"));
+  EXPECT_THAT(Sample(text, "grpc_server_started_total{" + query), Optional(2.0));
+  EXPECT_THAT(Sample(text, "grpc_server_handled_total{grpc_code=\"OK\"," + query), Optional(1.0));
+  EXPECT_THAT(Sample(text, "grpc_server_handled_total{grpc_code=\"NOT_FOUND\"," + query),
+              Optional(1.0));
+  EXPECT_THAT(Sample(text, "grpc_server_msg_received_total{" + query), Optional(2.0));
+  EXPECT_THAT(Sample(text, "grpc_server_msg_sent_total{" + query), Optional(1.0));
+  EXPECT_THAT(Sample(text, "grpc_server_handling_seconds_count{" + query), Optional(2.0));
+  EXPECT_THAT(Sample(text, "grpc_server_handling_seconds_sum{" + query),
+              Optional(DoubleNear(0.021, 1e-9)));
+  EXPECT_THAT(Sample(text, "grpc_server_started_total{" + stream), Optional(1.0));
+  EXPECT_THAT(Sample(text, "grpc_server_msg_received_total{" + stream), Optional(2.0));
+  EXPECT_THAT(Sample(text, "grpc_server_handling_seconds_count{" + stream), Optional(0.0));
+  EXPECT_THAT(text, Not(HasSubstr("grpc_service=\"grpc.health.v1.Health\"")));
+  EXPECT_THAT(text, Not(HasSubstr("grpc_method=\"StreamFrames#frame\"")));
+  EXPECT_THAT(text,
+              HasSubstr("recog_rpc_duration_seconds_count{code=\"OK\",method=\"/grpc.health"));
+}
+
 TEST(ServerMetricsTest, ConcurrentRpcObservationsAreAllCounted) {
   ServerMetrics metrics;
   constexpr int kThreads = 4, kCalls = 2000;
