@@ -25,8 +25,8 @@ RequestLog::Claim RequestLog::Begin(const std::string& key, Clock::time_point no
       return {};
     }
     if (!it->second.running) return {Claim::Kind::kRepeat, it->second.answer};
-    if (ended_.wait_until(lock, wait_until) == std::cv_status::timeout &&
-        entries_.contains(key) && entries_.at(key).running) {
+    if (ended_.wait_until(lock, wait_until) == std::cv_status::timeout && entries_.contains(key) &&
+        entries_.at(key).running) {
       return {Claim::Kind::kTimedOut, {}};
     }
   }
