@@ -6,10 +6,12 @@
 #include <fstream>
 #include <mutex>
 #include <sstream>
+#include <thread>
 
 #include "client/cpp/file_errors.h"
 #include "client/cpp/recognition_client.h"
 #include "client/cpp/request_id.h"
+#include "client/cpp/service_config.h"
 #include "client/cpp/sha256.h"
 #include "wire/sha256.h"
 
@@ -168,10 +170,13 @@ Result<pb::ModelInfo> RecognitionClient::UploadModel(std::string_view file_bytes
   // holds of this file: the bytes of an interrupted upload (an earlier attempt's, or another
   // process's) are not sent again, and an earlier attempt of this call that completed but lost its
   // answer is not stored twice. A first attempt does not take a completed upload for its own
-  // (uploading a file again creates a new version). An attempt after which the server holds no
-  // more than before ends the call.
-  uint64_t offset = 0;  // where the previous attempt started
+  // (uploading a file again creates a new version). At most as many attempts as the retry policy's.
   for (int attempt = 0;; ++attempt) {
+    if (attempt > 0) {
+      // The server keeps the bytes of a broken upload once it notices the break, which may be a
+      // moment after this side did: the policy's first backoff gives it that moment.
+      std::this_thread::sleep_for(std::chrono::milliseconds(internal::kInitialBackoffMs));
+    }
     pb::GetUploadStatusRequest request;
     request.set_sha256(header.header().sha256());
     request.set_size_bytes(header.header().size_bytes());
@@ -184,12 +189,7 @@ Result<pb::ModelInfo> RecognitionClient::UploadModel(std::string_view file_bytes
         (name.empty() || progress.stored().name() == name)) {
       return progress.stored();
     }
-    if (attempt > 0 && progress.received_bytes() <= offset) {
-      return grpc::Status(grpc::StatusCode::UNAVAILABLE,
-                          "the upload broke off at byte " + std::to_string(offset) +
-                              " and the server kept nothing more of it");
-    }
-    offset = progress.received_bytes();
+    const uint64_t offset = progress.received_bytes();
     grpc::ClientContext context;
     PrepareContext(context, &deadline);
     grpc::Status sent = SendUpload(*models_, context, file_bytes, header, offset, &response);
@@ -197,11 +197,10 @@ Result<pb::ModelInfo> RecognitionClient::UploadModel(std::string_view file_bytes
       // The kept bytes went in the meantime (expired, or resumed by another client).
       grpc::ClientContext again;
       PrepareContext(again, &deadline);
-      offset = 0;
       sent = SendUpload(*models_, again, file_bytes, header, 0, &response);
     }
     if (sent.ok()) return std::move(*response.mutable_model());
-    if (!Resumable(sent)) return sent;
+    if (!Resumable(sent) || attempt + 1 >= internal::kMaxAttempts) return sent;
   }
 }
 

@@ -185,15 +185,16 @@ std::vector<grpc::Status> Flood(RecognitionClient& client, const std::string& ma
 TEST_F(RecognitionClientTest, AFloodedServerTakesEveryAddedFrameOnceThanksToRetries) {
   StopServer();
   config().workers = 1;
-  config().queue_capacity = 1;
-  // gRPC's retries come back after exactly the pushback: each round of the flood gets two frames
-  // in (one running, one waiting) if the frames take under a second, so eight calls need four of
-  // the policy's five attempts.
+  config().queue_capacity = 3;
+  // gRPC's retries come back after exactly the pushback, all together: each round of the flood
+  // gets in as many frames as there is room (up to one running and three waiting), so ten calls
+  // need three of the policy's five attempts when frames take under a quarter of a second, and
+  // still fit in five on a slow machine.
   config().retry_after_ms = 1000;
   StartServer();
-  constexpr int kCalls = 8;
+  constexpr int kCalls = 10;
 
-  // Without retries, the calls beyond one running and one waiting are refused, and add nothing.
+  // Without retries, the calls beyond one running and three waiting are refused, and add nothing.
   ClientOptions once = Options();
   once.retries = false;
   auto impatient = Connect(once);
