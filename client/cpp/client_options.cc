@@ -6,8 +6,6 @@
 namespace recog::client {
 namespace {
 
-constexpr int kMaxAttempts = 100;
-constexpr double kMaxMultiplier = 10.0;
 constexpr uint32_t kMinMessageBytes = 1u << 20;
 constexpr uint32_t kMaxMessageBytes = 0x7fffffffu;
 constexpr uint32_t kMaxFramesInFlight = 1024;
@@ -18,30 +16,6 @@ grpc::Status Invalid(const std::string& message) {
 
 bool VisibleAscii(const std::string& text) {
   return std::all_of(text.begin(), text.end(), [](char c) { return c > ' ' && c < 127; });
-}
-
-grpc::Status ValidateRetry(const RetryPolicy& retry) {
-  if (retry.max_attempts < 1 || retry.max_attempts > kMaxAttempts) {
-    return Invalid("retry.max_attempts must be between 1 and " + std::to_string(kMaxAttempts) +
-                   ", got " + std::to_string(retry.max_attempts));
-  }
-  if (retry.initial_backoff.count() < 1) {
-    return Invalid("retry.initial_backoff must be at least 1 ms, got " +
-                   std::to_string(retry.initial_backoff.count()) + " ms");
-  }
-  if (!(retry.multiplier >= 1.0 && retry.multiplier <= kMaxMultiplier)) {
-    return Invalid("retry.multiplier must be between 1 and 10, got " +
-                   std::to_string(retry.multiplier));
-  }
-  if (retry.max_backoff < retry.initial_backoff) {
-    return Invalid("retry.max_backoff (" + std::to_string(retry.max_backoff.count()) +
-                   " ms) must be at least retry.initial_backoff (" +
-                   std::to_string(retry.initial_backoff.count()) + " ms)");
-  }
-  if (!(retry.jitter >= 0.0 && retry.jitter <= 1.0)) {
-    return Invalid("retry.jitter must be between 0 and 1, got " + std::to_string(retry.jitter));
-  }
-  return grpc::Status::OK;
 }
 
 grpc::Status ValidateTls(const TlsOptions& tls) {
@@ -76,7 +50,6 @@ grpc::Status ClientOptions::Validate() const {
     return Invalid("transfer_deadline must be at least 1 ms, got " +
                    std::to_string(transfer_deadline.count()));
   }
-  if (grpc::Status status = ValidateRetry(retry); !status.ok()) return status;
   if (max_message_bytes < kMinMessageBytes || max_message_bytes > kMaxMessageBytes) {
     return Invalid("max_message_bytes must be between 1 MiB and 2 GiB - 1, got " +
                    std::to_string(max_message_bytes));

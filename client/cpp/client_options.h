@@ -2,26 +2,17 @@
 // authentication, deadlines, retries and message size. Every field has a working default for a
 // server on this machine with its default configuration (plaintext, no tokens).
 //
-// The retry rule (RetryPolicy) is the client's whole answer to a busy or unreachable server:
-//  - Retried, for every call: RESOURCE_EXHAUSTED that carries the server's `retry-after-ms`
-//    trailer. The server sends it only when it refused the call from a full work queue, before
-//    running any of it, so even an AddFrame or an upload can be sent again. Other
-//    RESOURCE_EXHAUSTED errors (a message over the size limit, a model over 256 MiB) are final.
-//  - Retried, for calls that change nothing or can be repeated without harm (GetMap, ListMaps,
-//    QueryPlace without add_frame, RecognizeObjects, ListModels, DownloadModel): UNAVAILABLE.
-//    UploadModel is one of them: a retry first asks the server what it holds of the file
-//    (GetUploadStatus) and sends only the rest, or returns the version stored by an attempt
-//    whose answer was lost.
-//  - Retried, for calls that change the server (CreateMap, DeleteMap, AddFrame, QueryPlace with
-//    add_frame, DeleteModel): UNAVAILABLE only when nothing was sent. Before sending
-//    such a call the client waits for the channel to be connected; when it cannot connect, the
-//    attempt fails without sending anything and is retried. An UNAVAILABLE after the request left
-//    (the connection broke, the server was draining) is returned to the caller: the server may
-//    have applied it, and only the caller knows whether doing it twice is harmless.
-//  - Never retried: every other code, and the streams (FrameStream, ObjectStream, WatchModels).
-// The delay before retry n (1, 2, ...) is min(max_backoff, initial_backoff * multiplier^(n-1)),
-// times a random factor in [1 - jitter, 1 + jitter], and at least the server's `retry-after-ms`
-// when it sent one. No retry starts after the call's deadline: the deadline covers every attempt.
+// Retries are gRPC's own (gRFC A6), by the one policy of proto/service_config.json, compiled into
+// the client (as shipped: up to 5 attempts of a call, randomised backoff from 0.1 s doubling up to
+// 5 s, for UNAVAILABLE and RESOURCE_EXHAUSTED). A busy server's RESOURCE_EXHAUSTED carries
+// `grpc-retry-pushback-ms`, and gRPC waits that long before the next attempt; a refusal that a
+// retry cannot cure (a model over 256 MiB, a full disk) carries a pushback of -1 and is not
+// retried. The deadline covers every attempt. Calls that change the server are retried too: each
+// carries a request_id (a fresh UUID v4 unless the caller gives one), and the server answers a
+// repeat of a recent id with the first attempt's result instead of applying it twice (for 10
+// minutes, per server process). Streams are retried by gRPC only before their first answer; model
+// uploads and downloads and checkpoints resume or restart a transfer that broke later
+// (recognition_client.h).
 #pragma once
 
 #include <chrono>
@@ -46,22 +37,6 @@ struct TlsOptions {
   std::string key_file;
 };
 
-// When and how often failed calls are tried again (the rule is in the header comment).
-struct RetryPolicy {
-  // Default 5: attempts of one call, the first included; 1 = never retry. 1 to 100.
-  int max_attempts = 5;
-  // Default 100 ms: the delay before the first retry. At least 1 ms.
-  std::chrono::milliseconds initial_backoff{100};
-  // Default 2: each further retry waits this many times longer than the previous one. 1 to 10.
-  double multiplier = 2.0;
-  // Default 5 s: the longest computed delay (a longer `retry-after-ms` from the server wins).
-  // At least initial_backoff.
-  std::chrono::milliseconds max_backoff{5000};
-  // Default 0.2: every delay is multiplied by a random factor in [1 - jitter, 1 + jitter], so
-  // that clients refused together do not come back together. 0 to 1.
-  double jitter = 0.2;
-};
-
 struct ClientOptions {
   // Default "127.0.0.1:50051": the server's address, as gRPC takes it (host:port,
   // dns:///host:port, ipv4:addr:port, unix:path).
@@ -79,7 +54,9 @@ struct ClientOptions {
   // Default 10 min: the deadline of a model upload or download, every retry and resumption
   // included.
   std::chrono::milliseconds transfer_deadline{600000};
-  RetryPolicy retry;
+  // Default true: gRPC retries calls by the policy above (grpc.enable_retries); false: every call
+  // is one attempt (tests, probes). Transfers that break mid-file resume either way.
+  bool retries = true;
   // Default 32 MiB (the server's default): the largest message sent or received. 1 MiB to
   // 2 GiB - 1 (gRPC's limit).
   uint32_t max_message_bytes = 32u << 20;

@@ -20,8 +20,10 @@
 // (an unknown map, a missing right, a broken connection, a server shutting down), every frame
 // still waiting for an answer gets the stream's status as its Result, and so does every later
 // Send. Close() half-closes, waits for the remaining answers and returns the stream's final
-// status; destroying a stream that was not closed cancels it. Streams are not retried, and have no
-// deadline. Thread-safe: any thread may Send, while another closes.
+// status; destroying a stream that was not closed cancels it. A FrameStream is never retried (its
+// frames carry no request id; proto/service_config.json); gRPC retries an ObjectStream only before
+// its first answer. Streams have no deadline. Thread-safe: any thread may Send, while another
+// closes.
 //
 // A stream keeps its own reference to the client's connection and may outlive the client.
 #pragma once

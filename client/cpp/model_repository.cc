@@ -6,17 +6,18 @@
 #include <fstream>
 #include <mutex>
 #include <sstream>
+#include <thread>
 
 #include "client/cpp/file_errors.h"
 #include "client/cpp/recognition_client.h"
-#include "client/cpp/retry.h"
+#include "client/cpp/request_id.h"
+#include "client/cpp/service_config.h"
 #include "client/cpp/sha256.h"
 #include "wire/sha256.h"
 
 namespace recog::client {
 namespace {
 
-using internal::CallKind;
 using internal::CannotWrite;
 
 constexpr size_t kChunkBytes = 256u << 10;
@@ -151,7 +152,8 @@ grpc::Status SendUpload(pb::ObjectRepository::Stub& models, grpc::ClientContext&
 
 Result<pb::ModelInfo> RecognitionClient::UploadModel(std::string_view file_bytes,
                                                      const std::string& name,
-                                                     const std::vector<std::string>& tags) {
+                                                     const std::vector<std::string>& tags,
+                                                     const std::string& request_id) {
   if (file_bytes.empty()) {
     return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, "the model file is empty");
   }
@@ -160,47 +162,52 @@ Result<pb::ModelInfo> RecognitionClient::UploadModel(std::string_view file_bytes
   for (const std::string& tag : tags) header.mutable_header()->add_tags(tag);
   header.mutable_header()->set_sha256(Sha256Hex(file_bytes));
   header.mutable_header()->set_size_bytes(file_bytes.size());
+  header.mutable_header()->set_request_id(internal::RequestIdOr(request_id));
   const Deadline deadline = std::chrono::system_clock::now() + options_.transfer_deadline;
   pb::PutModelResponse response;
-  int attempts = 0;
-  // Each attempt first asks the server what it holds of this file: the bytes of an interrupted
-  // upload (an earlier attempt's, or another process's) are not sent again, and an earlier attempt
-  // of this call that completed but lost its answer is not stored twice. So the call is
-  // repeatable; a first attempt does not take a completed upload for its own (uploading a file
-  // again creates a new version).
-  const grpc::Status status =
-      Run(CallKind::kRepeatable, deadline, [&](grpc::ClientContext& context) {
-        const bool retry = attempts++ > 0;
-        pb::GetUploadStatusRequest request;
-        request.set_sha256(header.header().sha256());
-        request.set_size_bytes(header.header().size_bytes());
-        pb::GetUploadStatusResponse progress;
-        grpc::ClientContext status_context;
-        PrepareContext(status_context, &deadline);
-        const grpc::Status asked = models_->GetUploadStatus(&status_context, request, &progress);
-        if (!asked.ok()) return asked;
-        if (retry && progress.has_stored() && (name.empty() || progress.stored().name() == name)) {
-          response.Clear();
-          *response.mutable_model() = progress.stored();
-          return grpc::Status::OK;
-        }
-        const uint64_t offset = progress.received_bytes();
-        grpc::Status sent = SendUpload(*models_, context, file_bytes, header, offset, &response);
-        if (sent.error_code() == grpc::StatusCode::FAILED_PRECONDITION && offset > 0) {
-          // The kept bytes went in the meantime (expired, or resumed by another client).
-          grpc::ClientContext again;
-          PrepareContext(again, &deadline);
-          sent = SendUpload(*models_, again, file_bytes, header, 0, &response);
-        }
-        return sent;
-      });
-  if (!status.ok()) return status;
-  return std::move(*response.mutable_model());
+  // gRPC retries a PutModel whole while it has sent at most the retry buffer (max_message_bytes);
+  // a larger upload that broke off is resumed here. Each attempt first asks the server what it
+  // holds of this file: the bytes of an interrupted upload (an earlier attempt's, or another
+  // process's) are not sent again, and an earlier attempt of this call that completed but lost its
+  // answer is not stored twice. A first attempt does not take a completed upload for its own
+  // (uploading a file again creates a new version). At most as many attempts as the retry policy's.
+  for (int attempt = 0;; ++attempt) {
+    if (attempt > 0) {
+      // The server keeps the bytes of a broken upload once it notices the break, which may be a
+      // moment after this side did: the policy's first backoff gives it that moment.
+      std::this_thread::sleep_for(std::chrono::milliseconds(internal::kInitialBackoffMs));
+    }
+    pb::GetUploadStatusRequest request;
+    request.set_sha256(header.header().sha256());
+    request.set_size_bytes(header.header().size_bytes());
+    pb::GetUploadStatusResponse progress;
+    grpc::ClientContext status_context;
+    PrepareContext(status_context, &deadline);
+    const grpc::Status asked = models_->GetUploadStatus(&status_context, request, &progress);
+    if (!asked.ok()) return asked;
+    if (attempt > 0 && progress.has_stored() &&
+        (name.empty() || progress.stored().name() == name)) {
+      return progress.stored();
+    }
+    const uint64_t offset = progress.received_bytes();
+    grpc::ClientContext context;
+    PrepareContext(context, &deadline);
+    grpc::Status sent = SendUpload(*models_, context, file_bytes, header, offset, &response);
+    if (sent.error_code() == grpc::StatusCode::FAILED_PRECONDITION && offset > 0) {
+      // The kept bytes went in the meantime (expired, or resumed by another client).
+      grpc::ClientContext again;
+      PrepareContext(again, &deadline);
+      sent = SendUpload(*models_, again, file_bytes, header, 0, &response);
+    }
+    if (sent.ok()) return std::move(*response.mutable_model());
+    if (!Resumable(sent) || attempt + 1 >= internal::kMaxAttempts) return sent;
+  }
 }
 
 Result<pb::ModelInfo> RecognitionClient::UploadModelFile(const std::string& path,
                                                          const std::string& name,
-                                                         const std::vector<std::string>& tags) {
+                                                         const std::vector<std::string>& tags,
+                                                         const std::string& request_id) {
   std::ifstream in(path, std::ios::binary);
   if (!in) return grpc::Status(grpc::StatusCode::NOT_FOUND, "cannot open '" + path + "'");
   std::ostringstream bytes;
@@ -208,7 +215,7 @@ Result<pb::ModelInfo> RecognitionClient::UploadModelFile(const std::string& path
   if (in.bad()) {
     return grpc::Status(grpc::StatusCode::FAILED_PRECONDITION, "cannot read '" + path + "'");
   }
-  return UploadModel(bytes.view(), name, tags);
+  return UploadModel(bytes.view(), name, tags, request_id);
 }
 
 // --- Downloads ---
@@ -226,7 +233,8 @@ Result<pb::ModelInfo> RecognitionClient::DownloadModel(const std::string& name, 
   // then does not verify is not fetched again.
   bool from_start = have == 0;
   pb::ModelInfo info;  // of the version being fetched, once the server has named it
-  int failures = 0;    // failed attempts since the last one that received bytes (included)
+  // gRPC retries each GetModel until its first answer; a download that broke after bytes arrived
+  // is continued here from the byte it has, and one that broke before ends the call.
   for (;;) {
     grpc::ClientContext context;
     PrepareContext(context, &deadline);
@@ -274,17 +282,11 @@ Result<pb::ModelInfo> RecognitionClient::DownloadModel(const std::string& name, 
       have = 0;
       if (!from_start) {  // the partial file was not (all) this version's: fetch it whole
         from_start = true;
-        failures = 0;
         continue;
       }
       return status;
     }
-    failures = progressed ? 1 : failures + 1;
-    const std::optional<std::chrono::milliseconds> retry_after = internal::RetryAfter(context);
-    if (!internal::ShouldRetry(status, CallKind::kRepeatable, /*sent=*/true, retry_after) ||
-        failures >= options_.retry.max_attempts || !Backoff(failures, retry_after, deadline)) {
-      return status;  // `part` stays, for a later call to continue
-    }
+    if (!progressed || !Resumable(status)) return status;  // `part` stays, for a later call
   }
 }
 
@@ -298,11 +300,8 @@ Result<std::vector<pb::ModelInfo>> RecognitionClient::ListModels(const ModelFilt
   request.set_tag(filter.tag);
   pb::ListModelsResponse response;
   do {
-    const grpc::Status status =
-        Run(CallKind::kRepeatable, UnaryDeadline(), [&](grpc::ClientContext& context) {
-          response.Clear();
-          return models_->ListModels(&context, request, &response);
-        });
+    response.Clear();
+    const grpc::Status status = models_->ListModels(UnaryContext().get(), request, &response);
     if (!status.ok()) return status;
     for (pb::ModelInfo& model : *response.mutable_models()) models.push_back(std::move(model));
     request.set_page_token(response.next_page_token());
@@ -310,15 +309,13 @@ Result<std::vector<pb::ModelInfo>> RecognitionClient::ListModels(const ModelFilt
   return models;
 }
 
-Result<uint32_t> RecognitionClient::DeleteModel(const std::string& name) {
+Result<uint32_t> RecognitionClient::DeleteModel(const std::string& name,
+                                                const std::string& request_id) {
   pb::DeleteModelRequest request;
   request.set_name(name);
+  request.set_request_id(internal::RequestIdOr(request_id));
   pb::DeleteModelResponse response;
-  const grpc::Status status =
-      Run(CallKind::kChanging, UnaryDeadline(), [&](grpc::ClientContext& context) {
-        response.Clear();
-        return models_->DeleteModel(&context, request, &response);
-      });
+  const grpc::Status status = models_->DeleteModel(UnaryContext().get(), request, &response);
   if (!status.ok()) return status;
   return response.versions_deleted();
 }

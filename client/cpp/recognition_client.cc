@@ -1,20 +1,15 @@
 #include "client/cpp/recognition_client.h"
 
-#include <algorithm>
 #include <chrono>
 #include <fstream>
 #include <sstream>
-#include <thread>
 
-#include <spdlog/spdlog.h>
-
-#include "client/cpp/retry.h"
+#include "client/cpp/request_id.h"
+#include "client/cpp/service_config.h"
 #include "wire/routing.h"
 
 namespace recog::client {
 namespace {
-
-using internal::CallKind;
 
 // The whole content of a small file (certificates, keys, tokens).
 Result<std::string> ReadSmallFile(const std::string& what, const std::string& path) {
@@ -66,26 +61,6 @@ Result<std::shared_ptr<grpc::ChannelCredentials>> Credentials(const TlsOptions& 
   return grpc::SslCredentials(ssl);
 }
 
-// One attempt of a unary call: clears the response, then calls `method`.
-template <class Stub, class Request, class Response>
-std::function<grpc::Status(grpc::ClientContext&)> UnaryAttempt(
-    Stub* stub, grpc::Status (Stub::*method)(grpc::ClientContext*, const Request&, Response*),
-    const Request& request, Response* response) {
-  return [stub, method, &request, response](grpc::ClientContext& context) {
-    response->Clear();
-    return (stub->*method)(&context, request, response);
-  };
-}
-
-// The attempt of a call about place map `map`: the routing header first (wire/routing.h).
-std::function<grpc::Status(grpc::ClientContext&)> ForMap(
-    const std::string& map, std::function<grpc::Status(grpc::ClientContext&)> attempt) {
-  return [map, attempt = std::move(attempt)](grpc::ClientContext& context) {
-    context.AddMetadata(kMapHeader, map);
-    return attempt(context);
-  };
-}
-
 }  // namespace
 
 Result<std::unique_ptr<RecognitionClient>> RecognitionClient::Connect(
@@ -103,12 +78,19 @@ Result<std::unique_ptr<RecognitionClient>> RecognitionClient::Connect(
   grpc::ChannelArguments args;
   args.SetMaxReceiveMessageSize(int(options.max_message_bytes));
   args.SetMaxSendMessageSize(int(options.max_message_bytes));
+  // gRPC's retries by the one policy (proto/service_config.json, compiled in). Retries are on by
+  // default in Debian 12's gRPC 1.51 too; the switch is set anyway, both ways.
+  args.SetServiceConfigJSON(internal::kServiceConfigJson);
+  args.SetInt(GRPC_ARG_ENABLE_RETRIES, options.retries ? 1 : 0);
+  // gRPC keeps a call's messages for its retries until the first answer, up to this many bytes
+  // (default 256 KiB); beyond, the call is committed and not retried. Any message may be retried.
+  args.SetInt(GRPC_ARG_PER_RPC_RETRY_BUFFER_SIZE, int(options.max_message_bytes));
   // gRPC reconnects a broken channel at the pace of the retry policy, so that a retry after a
   // server restart finds the channel connected again. (GRPC_ARG_MIN_RECONNECT_BACKOFF_MS is left
   // at its default: gRPC also uses it as the connect timeout, and a short one fails whenever the
   // process is busy when the connection is made.)
-  args.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, int(options.retry.initial_backoff.count()));
-  args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, int(options.retry.max_backoff.count()));
+  args.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, internal::kInitialBackoffMs);
+  args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, internal::kMaxBackoffMs);
   std::shared_ptr<grpc::Channel> channel =
       grpc::CreateCustomChannel(options.target, *credentials, args);
   channel->GetState(/*try_to_connect=*/true);
@@ -136,80 +118,29 @@ void RecognitionClient::PrepareContext(grpc::ClientContext& context,
   if (!options_.shard.empty()) context.AddMetadata(kShardHeader, options_.shard);
 }
 
-RecognitionClient::Deadline RecognitionClient::UnaryDeadline() const {
-  return std::chrono::system_clock::now() + options_.deadline;
+std::unique_ptr<grpc::ClientContext> RecognitionClient::UnaryContext(const std::string* map) const {
+  auto context = std::make_unique<grpc::ClientContext>();
+  const Deadline deadline = std::chrono::system_clock::now() + options_.deadline;
+  PrepareContext(*context, &deadline);
+  if (map != nullptr) context->AddMetadata(kMapHeader, *map);
+  return context;
 }
 
-grpc::Status RecognitionClient::WaitForConnection(Deadline deadline) const {
-  grpc_connectivity_state state = channel_->GetState(/*try_to_connect=*/true);
-  while (state != GRPC_CHANNEL_READY) {
-    if (state == GRPC_CHANNEL_SHUTDOWN) {
-      return {grpc::StatusCode::UNAVAILABLE, "cannot connect to " + options_.target};
-    }
-    if (state == GRPC_CHANNEL_TRANSIENT_FAILURE) {
-      // gRPC tries again after its reconnect backoff: give it up to one retry backoff to get
-      // out of the failure; if it does not, nothing was sent and the caller may retry.
-      const Deadline slice =
-          std::min(deadline, std::chrono::system_clock::now() + options_.retry.max_backoff);
-      if (!channel_->WaitForStateChange(state, slice)) {
-        return {grpc::StatusCode::UNAVAILABLE, "cannot connect to " + options_.target};
-      }
-      state = channel_->GetState(/*try_to_connect=*/true);
-      continue;
-    }
-    if (!channel_->WaitForStateChange(state, deadline)) {
-      return {grpc::StatusCode::DEADLINE_EXCEEDED,
-              "no connection to " + options_.target + " before the deadline"};
-    }
-    state = channel_->GetState(/*try_to_connect=*/true);
-  }
-  return grpc::Status::OK;
-}
-
-bool RecognitionClient::Backoff(int retry, std::optional<std::chrono::milliseconds> retry_after,
-                                Deadline deadline) const {
-  const std::chrono::milliseconds delay =
-      internal::RetryDelay(options_.retry, retry, internal::UnitRandom(), retry_after);
-  if (std::chrono::system_clock::now() + delay >= deadline) return false;
-  std::this_thread::sleep_for(delay);
-  return true;
-}
-
-grpc::Status RecognitionClient::Run(CallKind kind, Deadline deadline,
-                                    const Attempt& attempt) const {
-  for (int number = 1;; ++number) {
-    grpc::ClientContext context;
-    PrepareContext(context, &deadline);
-    // A changing call is sent only over a connected channel, so that a failure to connect is
-    // known to have sent nothing.
-    grpc::Status status =
-        kind == CallKind::kChanging ? WaitForConnection(deadline) : grpc::Status::OK;
-    const bool sent = status.ok();
-    if (sent) status = attempt(context);
-    if (status.ok()) return status;
-    const std::optional<std::chrono::milliseconds> retry_after =
-        sent ? internal::RetryAfter(context) : std::nullopt;
-    if (!internal::ShouldRetry(status, kind, sent, retry_after) ||
-        number >= options_.retry.max_attempts || !Backoff(number, retry_after, deadline)) {
-      return status;
-    }
-    spdlog::debug("recog client: attempt {} failed with {} ({}); retrying", number,
-                  int(status.error_code()), status.error_message());
-  }
+bool RecognitionClient::Resumable(const grpc::Status& status) {
+  return status.error_code() == grpc::StatusCode::UNAVAILABLE;
 }
 
 // --- Place maps ---
 
 Result<pb::MapInfo> RecognitionClient::CreateMap(const std::string& name,
-                                                 const pb::MapSettings& settings) {
+                                                 const pb::MapSettings& settings,
+                                                 const std::string& request_id) {
   pb::CreateMapRequest request;
   request.set_name(name);
   *request.mutable_settings() = settings;
+  request.set_request_id(internal::RequestIdOr(request_id));
   pb::CreateMapResponse response;
-  const grpc::Status status =
-      Run(CallKind::kChanging, UnaryDeadline(),
-          ForMap(request.name(), UnaryAttempt(places_.get(), &pb::PlaceRecognition::Stub::CreateMap,
-                                              request, &response)));
+  const grpc::Status status = places_->CreateMap(UnaryContext(&name).get(), request, &response);
   if (!status.ok()) return status;
   return std::move(*response.mutable_map());
 }
@@ -218,10 +149,7 @@ Result<pb::MapInfo> RecognitionClient::GetMap(const std::string& name) {
   pb::GetMapRequest request;
   request.set_name(name);
   pb::GetMapResponse response;
-  const grpc::Status status = Run(
-      CallKind::kRepeatable, UnaryDeadline(),
-      ForMap(request.name(),
-             UnaryAttempt(places_.get(), &pb::PlaceRecognition::Stub::GetMap, request, &response)));
+  const grpc::Status status = places_->GetMap(UnaryContext(&name).get(), request, &response);
   if (!status.ok()) return status;
   return std::move(*response.mutable_map());
 }
@@ -231,9 +159,8 @@ Result<std::vector<pb::MapInfo>> RecognitionClient::ListMaps() {
   pb::ListMapsRequest request;
   pb::ListMapsResponse response;
   do {
-    const grpc::Status status =
-        Run(CallKind::kRepeatable, UnaryDeadline(),
-            UnaryAttempt(places_.get(), &pb::PlaceRecognition::Stub::ListMaps, request, &response));
+    response.Clear();
+    const grpc::Status status = places_->ListMaps(UnaryContext().get(), request, &response);
     if (!status.ok()) return status;
     for (pb::MapInfo& map : *response.mutable_maps()) maps.push_back(std::move(map));
     request.set_page_token(response.next_page_token());
@@ -241,72 +168,68 @@ Result<std::vector<pb::MapInfo>> RecognitionClient::ListMaps() {
   return maps;
 }
 
-Result<uint64_t> RecognitionClient::DeleteMap(const std::string& name) {
+Result<uint64_t> RecognitionClient::DeleteMap(const std::string& name,
+                                              const std::string& request_id) {
   pb::DeleteMapRequest request;
   request.set_name(name);
+  request.set_request_id(internal::RequestIdOr(request_id));
   pb::DeleteMapResponse response;
-  const grpc::Status status =
-      Run(CallKind::kChanging, UnaryDeadline(),
-          ForMap(request.name(), UnaryAttempt(places_.get(), &pb::PlaceRecognition::Stub::DeleteMap,
-                                              request, &response)));
+  const grpc::Status status = places_->DeleteMap(UnaryContext(&name).get(), request, &response);
   if (!status.ok()) return status;
   return response.frames_deleted();
 }
 
 Result<pb::AddFrameResponse> RecognitionClient::AddFrame(const std::string& map,
-                                                         const pb::Frame& frame) {
+                                                         const pb::Frame& frame,
+                                                         const std::string& request_id) {
   pb::AddFrameRequest request;
   request.set_map(map);
   *request.mutable_frame() = frame;
+  request.set_request_id(internal::RequestIdOr(request_id));
   pb::AddFrameResponse response;
-  const grpc::Status status =
-      Run(CallKind::kChanging, UnaryDeadline(),
-          ForMap(request.map(), UnaryAttempt(places_.get(), &pb::PlaceRecognition::Stub::AddFrame,
-                                             request, &response)));
+  const grpc::Status status = places_->AddFrame(UnaryContext(&map).get(), request, &response);
   if (!status.ok()) return status;
   return response;
 }
 
 Result<pb::QueryPlaceResponse> RecognitionClient::QueryPlace(
     const std::string& map, const pb::Frame& frame, QueryMode mode,
-    const pb::ResultOptions& result_options) {
+    const pb::ResultOptions& result_options, const std::string& request_id) {
   pb::QueryPlaceRequest request;
   request.set_map(map);
   *request.mutable_frame() = frame;
   request.set_add_frame(mode == QueryMode::kAddFrame);
   *request.mutable_options() = result_options;
+  if (mode == QueryMode::kAddFrame) request.set_request_id(internal::RequestIdOr(request_id));
   pb::QueryPlaceResponse response;
-  const grpc::Status status = Run(
-      mode == QueryMode::kAddFrame ? CallKind::kChanging : CallKind::kRepeatable, UnaryDeadline(),
-      ForMap(request.map(), UnaryAttempt(places_.get(), &pb::PlaceRecognition::Stub::QueryPlace,
-                                         request, &response)));
+  const grpc::Status status = places_->QueryPlace(UnaryContext(&map).get(), request, &response);
   if (!status.ok()) return status;
   return response;
 }
 
 Result<std::vector<uint64_t>> RecognitionClient::RemoveFrame(const std::string& map,
-                                                             uint64_t frame_id) {
+                                                             uint64_t frame_id,
+                                                             const std::string& request_id) {
   pb::RemoveFrameRequest request;
   request.set_map(map);
   request.set_frame_id(frame_id);
-  return RemoveFrames(request);
+  return RemoveFrames(std::move(request), request_id);
 }
 
 Result<std::vector<uint64_t>> RecognitionClient::RemoveFramesByClientId(
-    const std::string& map, const std::string& client_frame_id) {
+    const std::string& map, const std::string& client_frame_id, const std::string& request_id) {
   pb::RemoveFrameRequest request;
   request.set_map(map);
   request.set_client_frame_id(client_frame_id);
-  return RemoveFrames(request);
+  return RemoveFrames(std::move(request), request_id);
 }
 
-Result<std::vector<uint64_t>> RecognitionClient::RemoveFrames(
-    const pb::RemoveFrameRequest& request) {
+Result<std::vector<uint64_t>> RecognitionClient::RemoveFrames(pb::RemoveFrameRequest request,
+                                                              const std::string& request_id) {
+  request.set_request_id(internal::RequestIdOr(request_id));
   pb::RemoveFrameResponse response;
-  const grpc::Status status = Run(
-      CallKind::kChanging, UnaryDeadline(),
-      ForMap(request.map(), UnaryAttempt(places_.get(), &pb::PlaceRecognition::Stub::RemoveFrame,
-                                         request, &response)));
+  const grpc::Status status =
+      places_->RemoveFrame(UnaryContext(&request.map()).get(), request, &response);
   if (!status.ok()) return status;
   return std::vector<uint64_t>(response.removed_frame_ids().begin(),
                                response.removed_frame_ids().end());
@@ -322,10 +245,7 @@ Result<pb::RecognizeObjectsResponse> RecognitionClient::RecognizeObjects(
   *request.mutable_filter() = filter;
   *request.mutable_detection_options() = detection_options;
   pb::RecognizeObjectsResponse response;
-  const grpc::Status status =
-      Run(CallKind::kRepeatable, UnaryDeadline(),
-          UnaryAttempt(objects_.get(), &pb::ObjectRecognition::Stub::RecognizeObjects, request,
-                       &response));
+  const grpc::Status status = objects_->RecognizeObjects(UnaryContext().get(), request, &response);
   if (!status.ok()) return status;
   return response;
 }

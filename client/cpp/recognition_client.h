@@ -5,18 +5,25 @@
 // One client holds one gRPC channel; it is thread-safe, and meant to be shared by every thread of
 // a process. Connect() checks the options and reads the TLS and token files, then returns at
 // once: the channel connects in the background, and a server that is not listening yet is met by
-// the retries of the first calls (ClientOptions, retry rule). Each call adds the bearer token, the
-// deadline (ClientOptions::deadline for unary calls, transfer_deadline for model files) and
-// retries as ClientOptions describes. Errors are grpc::Status values with canonical codes (see
-// result.h); nothing throws.
+// gRPC's retries of the first calls. Each call adds the bearer token and the deadline
+// (ClientOptions::deadline for unary calls, transfer_deadline for model files); gRPC retries it
+// by the policy of proto/service_config.json (ClientOptions). Every call that changes the server
+// (CreateMap, DeleteMap, AddFrame, QueryPlace with add_frame, RemoveFrame, UploadModel,
+// DeleteModel) takes an optional `request_id`; without one it sends a fresh UUID v4, so that the
+// server answers a retry whose first answer was lost with that answer instead of applying the
+// call twice. Give your own id to make a repeat of the whole call (say, after the process
+// restarted) idempotent too, within the server's 10-minute window. Errors are grpc::Status values
+// with canonical codes (see result.h); nothing throws.
 //
 // CheckHealth and DownloadCheckpoint serve operators (recog admin).
 //
 // Frame streams are separate objects (FrameStream, ObjectStream in frame_stream.h), opened on a
 // client; they and ModelWatch handles may outlive it.
 //
-// Model files travel in 256 KiB chunks. UploadModel computes the SHA-256 the server checks; when
-// the connection breaks mid-file, its retries resume the upload from the bytes the server kept
+// What gRPC's retry cannot do stays here: gRPC retries a stream only until its first answer (or
+// until it sent more than the retry buffer), so the transfers resume themselves. Model files
+// travel in 256 KiB chunks. UploadModel computes the SHA-256 the server checks; when
+// the connection breaks mid-file, it resumes the upload from the bytes the server kept
 // (GetUploadStatus, PutModelHeader.offset) and, when the upload had completed but its answer was
 // lost, return the version it created instead of storing the file twice.
 // DownloadModel writes to `<path>.part`, verifies the size and SHA-256 the server announced, and
@@ -51,12 +58,11 @@ namespace pb = ::recognition::v1;
 
 namespace internal {
 class WatchReactor;
-enum class CallKind;  // retry.h
 }  // namespace internal
 
 // What QueryPlace does with the frame.
 enum class QueryMode {
-  kRelocalise,  // look the frame up and change nothing (needs the read right; retried freely)
+  kRelocalise,  // look the frame up and change nothing (needs the read right)
   kAddFrame,    // run the map's loop detector and keep the frame, as a stream frame does
 };
 
@@ -104,28 +110,34 @@ class RecognitionClient {
   // --- Place maps ---
 
   // Creates an empty map; unset settings take the server's defaults. ALREADY_EXISTS.
-  Result<pb::MapInfo> CreateMap(const std::string& name, const pb::MapSettings& settings = {});
+  Result<pb::MapInfo> CreateMap(const std::string& name, const pb::MapSettings& settings = {},
+                                const std::string& request_id = {});
   // NOT_FOUND for an unknown map.
   Result<pb::MapInfo> GetMap(const std::string& name);
   // Every map, by name (all pages).
   Result<std::vector<pb::MapInfo>> ListMaps();
   // Deletes a map and its frames; returns the number of frames deleted. NOT_FOUND.
-  Result<uint64_t> DeleteMap(const std::string& name);
+  Result<uint64_t> DeleteMap(const std::string& name, const std::string& request_id = {});
   // Adds a frame to a map without querying it (keyframe upload).
-  Result<pb::AddFrameResponse> AddFrame(const std::string& map, const pb::Frame& frame);
+  Result<pb::AddFrameResponse> AddFrame(const std::string& map, const pb::Frame& frame,
+                                        const std::string& request_id = {});
   // Looks a frame up in a map (see QueryMode). `result_options` asks for the top-k candidates,
   // and for the fundamental matrix, the relative pose or the inlier correspondences of a verified
   // loop. The matched frame's client_frame_id comes in result().match_client_frame_id().
+  // `request_id` counts with kAddFrame only.
   Result<pb::QueryPlaceResponse> QueryPlace(const std::string& map, const pb::Frame& frame,
                                             QueryMode mode = QueryMode::kRelocalise,
-                                            const pb::ResultOptions& result_options = {});
+                                            const pb::ResultOptions& result_options = {},
+                                            const std::string& request_id = {});
   // Removes frame `frame_id` from a map (keyframe culling); returns {frame_id}. NOT_FOUND for an
   // unknown map or frame.
-  Result<std::vector<uint64_t>> RemoveFrame(const std::string& map, uint64_t frame_id);
+  Result<std::vector<uint64_t>> RemoveFrame(const std::string& map, uint64_t frame_id,
+                                            const std::string& request_id = {});
   // Removes every frame added with `client_frame_id` and returns their ids. NOT_FOUND for an
   // unknown map or when no frame has that client id.
   Result<std::vector<uint64_t>> RemoveFramesByClientId(const std::string& map,
-                                                       const std::string& client_frame_id);
+                                                       const std::string& client_frame_id,
+                                                       const std::string& request_id = {});
 
   // --- Objects ---
 
@@ -141,10 +153,12 @@ class RecognitionClient {
   // Uploads a model file (.robj) as a new version of `name` ("" = the name inside the file),
   // with `tags`; returns the version created. INVALID_ARGUMENT for an empty file.
   Result<pb::ModelInfo> UploadModel(std::string_view file_bytes, const std::string& name = {},
-                                    const std::vector<std::string>& tags = {});
+                                    const std::vector<std::string>& tags = {},
+                                    const std::string& request_id = {});
   // The same for a file on disk (read whole: models are at most 256 MiB). NOT_FOUND.
   Result<pb::ModelInfo> UploadModelFile(const std::string& path, const std::string& name = {},
-                                        const std::vector<std::string>& tags = {});
+                                        const std::vector<std::string>& tags = {},
+                                        const std::string& request_id = {});
   // Downloads `version` of a model (0 = the latest) to `path` (replaced if it exists), verified
   // and resumable as the header comment describes; returns the version's info. NOT_FOUND,
   // DATA_LOSS when the file does not verify even when fetched from the start,
@@ -154,7 +168,7 @@ class RecognitionClient {
   // The latest version of every model that passes the filter, by name (all pages).
   Result<std::vector<pb::ModelInfo>> ListModels(const ModelFilter& filter = {});
   // Deletes every version of a model; returns how many there were. NOT_FOUND.
-  Result<uint32_t> DeleteModel(const std::string& name);
+  Result<uint32_t> DeleteModel(const std::string& name, const std::string& request_id = {});
   // Streams every change to the models whose names start with `name_prefix` ("" = all) from now
   // on: `on_change` gets each upload and deletion, in order. The server registers the watcher
   // shortly after the call starts; changes before that are not reported, unless
@@ -185,25 +199,21 @@ class RecognitionClient {
   template <class Rpc>
   friend class BasicFrameStream;
   using Deadline = std::chrono::system_clock::time_point;
-  using Attempt = std::function<grpc::Status(grpc::ClientContext&)>;
 
   RecognitionClient(const ClientOptions& options, std::string token,
                     std::shared_ptr<grpc::Channel> channel);
 
   // RemoveFrame and RemoveFramesByClientId.
-  Result<std::vector<uint64_t>> RemoveFrames(const pb::RemoveFrameRequest& request);
+  Result<std::vector<uint64_t>> RemoveFrames(pb::RemoveFrameRequest request,
+                                             const std::string& request_id);
   // Sets the bearer token and, when given, the deadline.
   void PrepareContext(grpc::ClientContext& context, const Deadline* deadline) const;
-  // Runs `attempt` with a fresh prepared context until it succeeds, or fails in a way the retry
-  // rule does not retry, or the attempts or the deadline run out.
-  grpc::Status Run(internal::CallKind kind, Deadline deadline, const Attempt& attempt) const;
-  // OK once the channel is connected; UNAVAILABLE as soon as connecting failed,
-  // DEADLINE_EXCEEDED when `deadline` passed first.
-  grpc::Status WaitForConnection(Deadline deadline) const;
-  Deadline UnaryDeadline() const;
-  // Waits before a retry; false when the delay would end after `deadline`.
-  bool Backoff(int retry, std::optional<std::chrono::milliseconds> retry_after,
-               Deadline deadline) const;
+  // A prepared context for one unary call, with the unary deadline and, when `map` is given, the
+  // routing header of that place map (wire/routing.h).
+  std::unique_ptr<grpc::ClientContext> UnaryContext(const std::string* map = nullptr) const;
+  // Whether a transfer stream that failed with `status` after data flowed may be resumed or
+  // restarted: UNAVAILABLE (the connection broke, the server went away).
+  static bool Resumable(const grpc::Status& status);
 
   const ClientOptions options_;
   const std::string token_;  // the bearer token from options_.token or token_file; "" = none

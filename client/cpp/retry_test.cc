@@ -1,6 +1,6 @@
-// Tests of the retry rule (client_options.h) and of resumed downloads: the pure delay and
-// decision functions, then RecognitionClient against small scripted gRPC servers that refuse,
-// fail or break calls on purpose and count what reaches them.
+// Tests of the client's retries (gRPC's own, by proto/service_config.json; client_options.h), its
+// request ids and its resumed downloads: RecognitionClient against small scripted gRPC servers
+// that refuse, fail or break calls on purpose and record what reaches them.
 #include <arpa/inet.h>
 #include <netinet/in.h>
 #include <sys/socket.h>
@@ -18,7 +18,7 @@
 #include <gtest/gtest.h>
 
 #include "client/cpp/recognition_client.h"
-#include "client/cpp/retry.h"
+#include "client/cpp/service_config.h"
 #include "client/cpp/sha256.h"
 #include "tests/testing/free_port.h"
 #include "wire/sha256.h"
@@ -28,44 +28,6 @@ namespace {
 
 using std::chrono::milliseconds;
 using Clock = std::chrono::steady_clock;
-
-TEST(RetryDelayTest, DelaysGrowByTheMultiplierUpToTheCapWithinTheJitter) {
-  const RetryPolicy policy;  // 100 ms, x2, 5 s, jitter 0.2
-  EXPECT_EQ(internal::RetryDelay(policy, 1, 0.5, std::nullopt), milliseconds(100));
-  EXPECT_EQ(internal::RetryDelay(policy, 2, 0.5, std::nullopt), milliseconds(200));
-  EXPECT_EQ(internal::RetryDelay(policy, 3, 0.5, std::nullopt), milliseconds(400));
-  EXPECT_EQ(internal::RetryDelay(policy, 7, 0.5, std::nullopt), milliseconds(5000));
-  EXPECT_EQ(internal::RetryDelay(policy, 99, 0.5, std::nullopt), milliseconds(5000));
-  EXPECT_EQ(internal::RetryDelay(policy, 1, 0.0, std::nullopt), milliseconds(80));
-  EXPECT_EQ(internal::RetryDelay(policy, 1, 0.999999, std::nullopt), milliseconds(120));
-}
-
-TEST(RetryDelayTest, TheServersHintIsTheShortestDelay) {
-  const RetryPolicy policy;
-  EXPECT_EQ(internal::RetryDelay(policy, 1, 0.5, milliseconds(300)), milliseconds(300));
-  EXPECT_EQ(internal::RetryDelay(policy, 3, 0.5, milliseconds(50)), milliseconds(400));
-  EXPECT_EQ(internal::RetryDelay(policy, 9, 0.5, milliseconds(60000)), milliseconds(60000));
-}
-
-TEST(ShouldRetryTest, OnlyRefusalsWithAHintAndFailuresThatCannotHaveBeenAppliedAreRetried) {
-  using internal::CallKind;
-  const grpc::Status busy(grpc::StatusCode::RESOURCE_EXHAUSTED, "busy");
-  const grpc::Status down(grpc::StatusCode::UNAVAILABLE, "down");
-  const std::optional<milliseconds> hint = milliseconds(100), none;
-  for (const CallKind kind : {CallKind::kRepeatable, CallKind::kChanging}) {
-    EXPECT_TRUE(internal::ShouldRetry(busy, kind, true, hint));
-    EXPECT_FALSE(internal::ShouldRetry(busy, kind, true, none));  // e.g. a message too large
-    EXPECT_TRUE(internal::ShouldRetry(down, kind, false, none));  // nothing was sent
-    for (const grpc::StatusCode code :
-         {grpc::StatusCode::INVALID_ARGUMENT, grpc::StatusCode::NOT_FOUND,
-          grpc::StatusCode::DEADLINE_EXCEEDED, grpc::StatusCode::CANCELLED,
-          grpc::StatusCode::UNAUTHENTICATED, grpc::StatusCode::INTERNAL}) {
-      EXPECT_FALSE(internal::ShouldRetry({code, ""}, kind, true, hint)) << int(code);
-    }
-  }
-  EXPECT_TRUE(internal::ShouldRetry(down, CallKind::kRepeatable, true, none));
-  EXPECT_FALSE(internal::ShouldRetry(down, CallKind::kChanging, true, none));  // maybe applied
-}
 
 // A gRPC server in this process serving one service on a loopback port (0 = any).
 class FakeServer {
@@ -85,164 +47,155 @@ class FakeServer {
   std::unique_ptr<grpc::Server> server_;
 };
 
-// Answers CreateMap, GetMap and AddFrame with the scripted failures, in order, then OK; counts
-// the calls that reach it.
+// Answers CreateMap, GetMap and AddFrame with the scripted failures, in order, then OK; records
+// the request_id of every call that reaches it ("" for GetMap).
 class ScriptedPlaces final : public pb::PlaceRecognition::Service {
  public:
   struct Failure {
     grpc::StatusCode code;
-    std::optional<int> retry_after_ms;  // sent as the `retry-after-ms` trailer
+    std::optional<int> pushback_ms;  // sent as the `grpc-retry-pushback-ms` trailer
   };
   explicit ScriptedPlaces(std::vector<Failure> script = {}) : script_(std::move(script)) {}
 
-  int calls() const {
+  std::vector<std::string> request_ids() const {
     std::lock_guard lock(mutex_);
-    return calls_;
+    return request_ids_;
   }
+  int calls() const { return int(request_ids().size()); }
 
-  grpc::Status CreateMap(grpc::ServerContext* context, const pb::CreateMapRequest*,
+  grpc::Status CreateMap(grpc::ServerContext* context, const pb::CreateMapRequest* request,
                          pb::CreateMapResponse*) override {
-    return Next(context);
+    return Next(context, request->request_id());
   }
   grpc::Status GetMap(grpc::ServerContext* context, const pb::GetMapRequest*,
                       pb::GetMapResponse*) override {
-    return Next(context);
+    return Next(context, "");
   }
-  grpc::Status AddFrame(grpc::ServerContext* context, const pb::AddFrameRequest*,
+  grpc::Status AddFrame(grpc::ServerContext* context, const pb::AddFrameRequest* request,
                         pb::AddFrameResponse*) override {
-    return Next(context);
+    return Next(context, request->request_id());
   }
 
  private:
-  grpc::Status Next(grpc::ServerContext* context) {
+  grpc::Status Next(grpc::ServerContext* context, const std::string& request_id) {
     std::lock_guard lock(mutex_);
-    const size_t index = size_t(calls_++);
+    const size_t index = request_ids_.size();
+    request_ids_.push_back(request_id);
     if (index >= script_.size()) return grpc::Status::OK;
     const Failure& failure = script_[index];
-    if (failure.retry_after_ms.has_value()) {
-      context->AddTrailingMetadata("retry-after-ms", std::to_string(*failure.retry_after_ms));
+    if (failure.pushback_ms.has_value()) {
+      context->AddTrailingMetadata("grpc-retry-pushback-ms", std::to_string(*failure.pushback_ms));
     }
     return {failure.code, "scripted failure"};
   }
 
   const std::vector<Failure> script_;
   mutable std::mutex mutex_;
-  int calls_ = 0;
+  std::vector<std::string> request_ids_;
 };
 
 class ScriptedClientTest : public ::testing::Test {
  protected:
-  // Options for `target` with short backoffs, so that the tests take milliseconds.
-  static ClientOptions FastRetries(const std::string& target) {
+  static std::unique_ptr<RecognitionClient> Connect(const std::string& target,
+                                                    bool retries = true) {
     ClientOptions options;
     options.target = target;
-    options.retry.initial_backoff = milliseconds(5);
-    options.retry.max_backoff = milliseconds(20);
-    return options;
-  }
-  static std::unique_ptr<RecognitionClient> Connect(const ClientOptions& options) {
+    options.retries = retries;
     auto client = RecognitionClient::Connect(options);
     EXPECT_TRUE(client.ok()) << client.status().error_message();
     return client.ok() ? std::move(client).value() : nullptr;
   }
 };
 
-TEST_F(ScriptedClientTest, ABusyRefusalIsRetriedAfterTheServersHintEvenForAChangingCall) {
+TEST_F(ScriptedClientTest, ABusyRefusalIsRetriedAfterTheServersPushbackWithTheSameRequestId) {
   ScriptedPlaces places(
       {{grpc::StatusCode::RESOURCE_EXHAUSTED, 150}, {grpc::StatusCode::RESOURCE_EXHAUSTED, 150}});
   FakeServer server(&places);
-  auto client = Connect(FastRetries(server.target()));
+  auto client = Connect(server.target());
   ASSERT_NE(client, nullptr);
   const auto start = Clock::now();
-  EXPECT_TRUE(client->AddFrame("m", pb::Frame()).ok());
-  EXPECT_GE(Clock::now() - start, milliseconds(300));  // the hint, not the 5 ms backoff
-  EXPECT_EQ(places.calls(), 3);
+  const grpc::Status status = client->AddFrame("m", pb::Frame()).status();
+  EXPECT_TRUE(status.ok()) << status.error_message();
+  EXPECT_GE(Clock::now() - start, milliseconds(300));  // the pushback, not the policy's backoff
+  const std::vector<std::string> ids = places.request_ids();
+  ASSERT_EQ(ids.size(), 3u);
+  EXPECT_EQ(ids[0].size(), 36u);  // a UUID
+  EXPECT_EQ(ids[1], ids[0]);      // gRPC resends the same message: the server can deduplicate
+  EXPECT_EQ(ids[2], ids[0]);
 }
 
-TEST_F(ScriptedClientTest, ARefusalWithoutAHintIsFinal) {
-  ScriptedPlaces places({{grpc::StatusCode::RESOURCE_EXHAUSTED, std::nullopt}});
+TEST_F(ScriptedClientTest, ANegativePushbackMakesARefusalFinal) {
+  ScriptedPlaces places({{grpc::StatusCode::RESOURCE_EXHAUSTED, -1}});
   FakeServer server(&places);
-  auto client = Connect(FastRetries(server.target()));
+  auto client = Connect(server.target());
   ASSERT_NE(client, nullptr);
-  EXPECT_EQ(client->GetMap("m").status().error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
+  EXPECT_EQ(client->AddFrame("m", pb::Frame()).status().error_code(),
+            grpc::StatusCode::RESOURCE_EXHAUSTED);
   EXPECT_EQ(places.calls(), 1);
 }
 
-TEST_F(ScriptedClientTest, UnavailableAfterSendingIsRetriedOnlyForCallsThatChangeNothing) {
-  const std::vector<ScriptedPlaces::Failure> twice_down = {
-      {grpc::StatusCode::UNAVAILABLE, std::nullopt}, {grpc::StatusCode::UNAVAILABLE, std::nullopt}};
-  {
-    ScriptedPlaces places(twice_down);
-    FakeServer server(&places);
-    auto client = Connect(FastRetries(server.target()));
-    ASSERT_NE(client, nullptr);
-    EXPECT_TRUE(client->GetMap("m").ok());
-    EXPECT_EQ(places.calls(), 3);
-  }
-  for (const bool create : {false, true}) {
-    ScriptedPlaces places(twice_down);
-    FakeServer server(&places);
-    auto client = Connect(FastRetries(server.target()));
-    ASSERT_NE(client, nullptr);
-    const grpc::Status status =
-        create ? client->CreateMap("m").status() : client->AddFrame("m", pb::Frame()).status();
-    EXPECT_EQ(status.error_code(), grpc::StatusCode::UNAVAILABLE);
-    EXPECT_EQ(places.calls(), 1);  // the server may have applied it: not sent again
-  }
+TEST_F(ScriptedClientTest, UnavailableIsRetriedForChangingCallsTooEachCallWithItsOwnId) {
+  ScriptedPlaces places({{grpc::StatusCode::UNAVAILABLE, std::nullopt},
+                         {grpc::StatusCode::UNAVAILABLE, std::nullopt}});
+  FakeServer server(&places);
+  auto client = Connect(server.target());
+  ASSERT_NE(client, nullptr);
+  EXPECT_TRUE(client->AddFrame("m", pb::Frame()).ok());
+  EXPECT_TRUE(client->AddFrame("m", pb::Frame()).ok());
+  EXPECT_TRUE(client->CreateMap("m", {}, "my-own-id").ok());
+  const std::vector<std::string> ids = places.request_ids();
+  ASSERT_EQ(ids.size(), 5u);
+  EXPECT_EQ(ids[1], ids[0]);
+  EXPECT_EQ(ids[2], ids[0]);
+  EXPECT_NE(ids[3], ids[0]);  // the next call has a fresh id
+  EXPECT_EQ(ids[4], "my-own-id");
 }
 
-TEST_F(ScriptedClientTest, AttemptsStopAtTheLimitAndOtherErrorsAreNeverRetried) {
+TEST_F(ScriptedClientTest, AttemptsStopAtThePolicysLimitAndOtherErrorsAreNeverRetried) {
   std::vector<ScriptedPlaces::Failure> always_down(10, {grpc::StatusCode::UNAVAILABLE, {}});
   ScriptedPlaces down(always_down);
   FakeServer down_server(&down);
-  auto client = Connect(FastRetries(down_server.target()));
+  auto client = Connect(down_server.target());
   ASSERT_NE(client, nullptr);
   EXPECT_EQ(client->GetMap("m").status().error_code(), grpc::StatusCode::UNAVAILABLE);
-  EXPECT_EQ(down.calls(), 5);  // max_attempts
+  EXPECT_EQ(down.calls(), internal::kMaxAttempts);
 
   ScriptedPlaces invalid({{grpc::StatusCode::INVALID_ARGUMENT, 100}});
   FakeServer invalid_server(&invalid);
-  auto other = Connect(FastRetries(invalid_server.target()));
+  auto other = Connect(invalid_server.target());
   ASSERT_NE(other, nullptr);
   EXPECT_EQ(other->GetMap("m").status().error_code(), grpc::StatusCode::INVALID_ARGUMENT);
   EXPECT_EQ(invalid.calls(), 1);
 }
 
+TEST_F(ScriptedClientTest, WithRetriesOffEveryCallIsOneAttempt) {
+  ScriptedPlaces places({{grpc::StatusCode::RESOURCE_EXHAUSTED, 10}});
+  FakeServer server(&places);
+  auto client = Connect(server.target(), /*retries=*/false);
+  ASSERT_NE(client, nullptr);
+  EXPECT_EQ(client->AddFrame("m", pb::Frame()).status().error_code(),
+            grpc::StatusCode::RESOURCE_EXHAUSTED);
+  EXPECT_EQ(places.calls(), 1);
+}
+
 TEST_F(ScriptedClientTest, NoRetryStartsAfterTheDeadline) {
   ScriptedPlaces places({{grpc::StatusCode::RESOURCE_EXHAUSTED, 5000}});
   FakeServer server(&places);
-  ClientOptions options = FastRetries(server.target());
+  ClientOptions options;
+  options.target = server.target();
   options.deadline = milliseconds(500);
-  auto client = Connect(options);
-  ASSERT_NE(client, nullptr);
+  auto connected = RecognitionClient::Connect(options);
+  ASSERT_TRUE(connected.ok());
   const auto start = Clock::now();
-  EXPECT_EQ(client->AddFrame("m", pb::Frame()).status().error_code(),
-            grpc::StatusCode::RESOURCE_EXHAUSTED);
+  // gRPC waits for the pushback; the deadline ends the call while it waits.
+  EXPECT_EQ((*connected)->AddFrame("m", pb::Frame()).status().error_code(),
+            grpc::StatusCode::DEADLINE_EXCEEDED);
   EXPECT_LT(Clock::now() - start, milliseconds(2000));
   EXPECT_EQ(places.calls(), 1);
 }
 
-TEST_F(ScriptedClientTest, AChangingCallIsSentOnceTheServerComesUp) {
-  const int port = recog::testing::FreePort();
-  ScriptedPlaces places;
-  std::unique_ptr<FakeServer> server;
-  std::thread late([&] {
-    std::this_thread::sleep_for(milliseconds(300));
-    server = std::make_unique<FakeServer>(&places, port);
-  });
-  ClientOptions options = FastRetries("127.0.0.1:" + std::to_string(port));
-  options.retry.max_attempts = 100;
-  auto client = Connect(options);
-  ASSERT_NE(client, nullptr);
-  const grpc::Status status = client->AddFrame("m", pb::Frame()).status();
-  late.join();
-  EXPECT_TRUE(status.ok()) << status.error_message();
-  EXPECT_EQ(places.calls(), 1);  // the failed connection attempts sent nothing
-}
-
 TEST_F(ScriptedClientTest, AServerThatNeverComesUpIsReportedUnavailable) {
-  ClientOptions options = FastRetries("127.0.0.1:" + std::to_string(recog::testing::FreePort()));
-  auto client = Connect(options);
+  auto client = Connect("127.0.0.1:" + std::to_string(recog::testing::FreePort()));
   ASSERT_NE(client, nullptr);
   EXPECT_EQ(client->AddFrame("m", pb::Frame()).status().error_code(),
             grpc::StatusCode::UNAVAILABLE);
@@ -300,7 +253,7 @@ TEST_F(ScriptedClientTest, ABrokenDownloadResumesFromTheBytesItHasOfTheSameVersi
   for (char& c : file) c = char(random());
   BreakingRepository repository(file);
   FakeServer server(&repository);
-  auto client = Connect(FastRetries(server.target()));
+  auto client = Connect(server.target());
   ASSERT_NE(client, nullptr);
   const std::string path = std::filesystem::temp_directory_path() /
                            ("recog_client_resume_" + std::to_string(getpid()) + ".robj");

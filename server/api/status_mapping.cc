@@ -25,6 +25,7 @@ grpc::StatusCode ToGrpcCode(StatusCode code) {
     case StatusCode::kPermissionDenied:
       return grpc::StatusCode::PERMISSION_DENIED;
     case StatusCode::kDataLoss:
+      return grpc::StatusCode::DATA_LOSS;
     case StatusCode::kInternal:
       return grpc::StatusCode::INTERNAL;
   }
@@ -34,9 +35,11 @@ grpc::StatusCode ToGrpcCode(StatusCode code) {
 grpc::Status ToGrpcStatus(const Status& status, std::string_view request_id) {
   const grpc::StatusCode code = ToGrpcCode(status.code());
   if (code == grpc::StatusCode::OK) return grpc::Status::OK;
-  if (code == grpc::StatusCode::INTERNAL) {
-    spdlog::error("request={} internal error: {}", request_id, status.ToString());
-    return {code, "internal error (request " + std::string(request_id) +
+  if (code == grpc::StatusCode::INTERNAL || code == grpc::StatusCode::DATA_LOSS) {
+    const char* what =
+        code == grpc::StatusCode::DATA_LOSS ? "corrupt stored data" : "internal error";
+    spdlog::error("request={} {}: {}", request_id, what, status.ToString());
+    return {code, std::string(what) + " (request " + std::string(request_id) +
                       "; the server log has the details)"};
   }
   return {code, status.message()};

@@ -1,8 +1,9 @@
 // The one place where core statuses become gRPC statuses.
 //
-// Every code of core's Status maps to the canonical gRPC code of the same name, except DATA_LOSS
-// (corrupt stored data): the client gets INTERNAL with a sanitised message, and the details go to
-// the server log with the request id. An INTERNAL status is sanitised the same way.
+// Every code of core's Status maps to the canonical gRPC code of the same name. The two that say
+// the server itself failed are sanitised: DATA_LOSS (corrupt stored data) and INTERNAL (a bug)
+// reach the client with their code and a message naming the request id only; the details go to
+// the server log with the request id.
 #pragma once
 
 #include <string_view>

@@ -24,6 +24,7 @@ namespace {
 
 constexpr uint32_t kMinMessageBytes = 1u << 20;
 constexpr uint32_t kMaxWorkers = 1024;
+constexpr uint32_t kMaxRequestLogEntries = 1000000;
 constexpr uint32_t kMaxGroupSyncIntervalMs = 60000;
 constexpr uint64_t kMaxBlockCacheMb = uint64_t{1} << 20;  // 1 TiB
 
@@ -130,6 +131,7 @@ Status ReadConfig(const YAML::Node& root, ServerConfig* config) {
   RECOG_RETURN_IF_ERROR(top.Read("workers", &config->workers));
   RECOG_RETURN_IF_ERROR(top.Read("queue_capacity", &config->queue_capacity));
   RECOG_RETURN_IF_ERROR(top.Read("retry_after_ms", &config->retry_after_ms));
+  RECOG_RETURN_IF_ERROR(top.Read("request_log_entries", &config->request_log_entries));
   RECOG_RETURN_IF_ERROR(top.Read("max_message_bytes", &config->max_message_bytes));
   RECOG_RETURN_IF_ERROR(top.Read("token_file", &config->token_file));
   RECOG_RETURN_IF_ERROR(top.Read("metrics_listen", &config->metrics_listen));
@@ -253,6 +255,11 @@ Status ServerConfig::Validate() const {
                                    " (0 = one per available CPU), got " + std::to_string(workers));
   }
   if (queue_capacity < 1) return Status::InvalidArgument("queue_capacity must be at least 1");
+  if (request_log_entries > kMaxRequestLogEntries) {
+    return Status::InvalidArgument("request_log_entries must be at most " +
+                                   std::to_string(kMaxRequestLogEntries) + ", got " +
+                                   std::to_string(request_log_entries));
+  }
   if (max_message_bytes < kMinMessageBytes || max_message_bytes > INT_MAX) {
     return Status::InvalidArgument("max_message_bytes must be between 1 MiB (1048576) and " +
                                    std::to_string(INT_MAX) + ", got " +

@@ -105,8 +105,13 @@ struct ServerConfig {
   // Default 64: tasks that may wait for a worker; beyond that, calls fail with
   // RESOURCE_EXHAUSTED. At least 1.
   uint32_t queue_capacity = 64;
-  // Default 100: the retry delay (ms) suggested to clients with RESOURCE_EXHAUSTED.
+  // Default 100: the retry delay (ms) suggested to clients with RESOURCE_EXHAUSTED (and with
+  // UNAVAILABLE while starting or draining), sent as gRPC's `grpc-retry-pushback-ms` trailer.
   uint32_t retry_after_ms = 100;
+  // Default 10000: answers of mutating calls remembered by their request_id (for 10 minutes each,
+  // the oldest forgotten first) so that a retried call is not applied twice; at most 1000000;
+  // 0 = none (request ids are still checked). Per process: a restart forgets them.
+  uint32_t request_log_entries = 10000;
   // Default 32 MiB: the largest request or response, enough for a 1920x1080 PNG or raw BGR
   // frame. 1 MiB to 2 GiB - 1 (gRPC's limit).
   uint32_t max_message_bytes = 32u << 20;

@@ -58,6 +58,7 @@ TEST_F(ServerConfigTest, DefaultsAreValidAndAsDocumented) {
   EXPECT_EQ(config.workers, 0u);
   EXPECT_EQ(config.queue_capacity, 64u);
   EXPECT_EQ(config.retry_after_ms, 100u);
+  EXPECT_EQ(config.request_log_entries, 10000u);
   EXPECT_EQ(config.max_message_bytes, 32u * 1024 * 1024);
   EXPECT_EQ(config.keepalive.time_ms, 20000u);
   EXPECT_EQ(config.keepalive.timeout_ms, 10000u);
@@ -168,6 +169,7 @@ object_vocabulary: /voc/object.rvoc
 workers: 6
 queue_capacity: 10
 retry_after_ms: 250
+request_log_entries: 0
 max_message_bytes: 2097152
 keepalive:
   time_ms: 30000
@@ -209,6 +211,7 @@ place:
   EXPECT_EQ(config->workers, 6u);
   EXPECT_EQ(config->queue_capacity, 10u);
   EXPECT_EQ(config->retry_after_ms, 250u);
+  EXPECT_EQ(config->request_log_entries, 0u);
   EXPECT_EQ(config->max_message_bytes, 2097152u);
   EXPECT_EQ(config->keepalive.time_ms, 30000u);
   EXPECT_EQ(config->keepalive.timeout_ms, 5000u);
@@ -330,6 +333,7 @@ TEST_F(ServerConfigTest, ValidateNamesTheBadField) {
       {[](ServerConfig& c) { c.data_dir = ""; }, "data_dir"},
       {[](ServerConfig& c) { c.workers = 100000; }, "workers"},
       {[](ServerConfig& c) { c.queue_capacity = 0; }, "queue_capacity"},
+      {[](ServerConfig& c) { c.request_log_entries = 1000001; }, "request_log_entries"},
       {[](ServerConfig& c) { c.max_message_bytes = 1000; }, "max_message_bytes"},
       {[](ServerConfig& c) { c.max_message_bytes = 3u << 30; }, "max_message_bytes"},
       {[](ServerConfig& c) { c.keepalive.time_ms = 0; }, "keepalive.time_ms"},

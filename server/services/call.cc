@@ -1,7 +1,9 @@
 #include "server/services/call.h"
 
+#include <algorithm>
 #include <atomic>
 #include <cstdio>
+#include <optional>
 
 #include <spdlog/spdlog.h>
 
@@ -10,7 +12,9 @@
 namespace recog::server {
 namespace {
 
-constexpr size_t kMaxRequestIdBytes = 64;
+constexpr size_t kMaxRequestIdBytes = 64;  // of the x-request-id header (log correlation)
+// gRFC A6: how long (ms) gRPC's retry waits before the next attempt; negative = do not retry.
+constexpr char kPushback[] = "grpc-retry-pushback-ms";
 
 std::string MakeRequestId() {
   static std::atomic<uint64_t> next{1};
@@ -47,11 +51,11 @@ grpc::Status BeginCall(ServerState& state, grpc::CallbackServerContext* context,
   // Refusals that nothing was applied for carry the retry hint, so that clients may retry even
   // calls that change the server.
   if (state.draining.load()) {
-    context->AddTrailingMetadata("retry-after-ms", std::to_string(state.config.retry_after_ms));
+    context->AddTrailingMetadata(kPushback, std::to_string(state.config.retry_after_ms));
     return {grpc::StatusCode::UNAVAILABLE, "the server is shutting down"};
   }
   if (!state.ready.load()) {
-    context->AddTrailingMetadata("retry-after-ms", std::to_string(state.config.retry_after_ms));
+    context->AddTrailingMetadata(kPushback, std::to_string(state.config.retry_after_ms));
     return {grpc::StatusCode::UNAVAILABLE, "the server is starting (opening its store)"};
   }
   return grpc::Status::OK;
@@ -63,9 +67,11 @@ void EndCall(ServerState& state, const CallInfo& call, const grpc::Status& statu
   const std::string_view code = GrpcCodeName(status.error_code());
   state.metrics.ObserveRpc(call.method, code, seconds);
   SampleWorkerGauges(state);
-  const auto level = status.ok()                                         ? spdlog::level::debug
-                     : status.error_code() == grpc::StatusCode::INTERNAL ? spdlog::level::err
-                                                                         : spdlog::level::info;
+  const bool server_fault = status.error_code() == grpc::StatusCode::INTERNAL ||
+                            status.error_code() == grpc::StatusCode::DATA_LOSS;
+  const auto level = status.ok()    ? spdlog::level::debug
+                     : server_fault ? spdlog::level::err
+                                    : spdlog::level::info;
   spdlog::log(level, "request={} method={} caller={} map={} code={} ms={:.2f}{}{}", call.request_id,
               call.method, call.caller.name, call.map, code, seconds * 1e3,
               status.ok() ? "" : " error=", status.error_message());
@@ -86,11 +92,70 @@ grpc::Status CheckStillWanted(grpc::CallbackServerContext* context) {
 }
 
 grpc::Status Busy(ServerState& state, grpc::CallbackServerContext* context) {
-  context->AddTrailingMetadata("retry-after-ms", std::to_string(state.config.retry_after_ms));
+  context->AddTrailingMetadata(kPushback, std::to_string(state.config.retry_after_ms));
   return {grpc::StatusCode::RESOURCE_EXHAUSTED,
           "the server is busy (" + std::to_string(state.pool->capacity()) +
               " calls waiting); retry after " + std::to_string(state.config.retry_after_ms) +
               " ms"};
+}
+
+grpc::Status Final(grpc::CallbackServerContext* context, grpc::Status status) {
+  if (status.error_code() == grpc::StatusCode::RESOURCE_EXHAUSTED) {
+    context->AddTrailingMetadata(kPushback, "-1");
+  }
+  return status;
+}
+
+grpc::Status CheckRequestId(const std::string& request_id) {
+  if (request_id.empty() || RequestLog::ValidRequestId(request_id)) return grpc::Status::OK;
+  return {grpc::StatusCode::INVALID_ARGUMENT, "request_id must have 1 to " +
+                                                  std::to_string(RequestLog::kMaxRequestIdBytes) +
+                                                  " printable ASCII characters"};
+}
+
+grpc::Status RunOnce(ServerState& state, grpc::CallbackServerContext* context, const CallInfo& call,
+                     const std::string& request_id, google::protobuf::Message* response,
+                     const std::function<grpc::Status()>& work) {
+  if (grpc::Status checked = CheckRequestId(request_id); !checked.ok()) return checked;
+  if (request_id.empty()) return work();
+  // The caller is part of the key: one client cannot read another's answers by guessing ids.
+  const std::string key = call.method + '\n' + call.caller.name + '\n' + request_id;
+  const auto now = RequestLog::Clock::now();
+  // Wait for a running duplicate at most until this call's deadline (and the log's window).
+  const auto left = std::min<std::chrono::system_clock::duration>(
+      context->deadline() - std::chrono::system_clock::now(), RequestLog::kWindow);
+  const RequestLog::Claim claim = state.requests.Begin(key, now, now + left);
+  switch (claim.kind) {
+    case RequestLog::Claim::Kind::kRepeat:
+      spdlog::info("request={} method={} request_id={}: a repeat, answered from the request log",
+                   call.request_id, call.method, request_id);
+      if (!response->ParseFromString(claim.answer)) {
+        return {grpc::StatusCode::INTERNAL, "the stored answer does not parse"};
+      }
+      return grpc::Status::OK;
+    case RequestLog::Claim::Kind::kTimedOut:
+      return {grpc::StatusCode::ABORTED,
+              "a call with the same request_id is still running; its answer was not ready "
+              "before this call's deadline"};
+    case RequestLog::Claim::Kind::kRun:
+      break;
+  }
+  const grpc::Status status = work();
+  state.requests.End(
+      key, status.ok() ? std::optional<std::string>(response->SerializeAsString()) : std::nullopt,
+      RequestLog::Clock::now());
+  return status;
+}
+
+grpc::ServerUnaryReactor* RunUnary(ServerState& state, grpc::CallbackServerContext* context,
+                                   std::string_view method, Right right, std::string request_id,
+                                   google::protobuf::Message* response, UnaryWork work) {
+  return RunUnary(state, context, method, right,
+                  [&state, context, request_id = std::move(request_id), response,
+                   work = std::move(work)](CallInfo& call, WorkerContext& worker) {
+                    return RunOnce(state, context, call, request_id, response,
+                                   [&] { return work(call, worker); });
+                  });
 }
 
 grpc::ServerUnaryReactor* RunUnary(ServerState& state, grpc::CallbackServerContext* context,
@@ -105,7 +170,7 @@ grpc::ServerUnaryReactor* RunUnary(ServerState& state, grpc::CallbackServerConte
                                std::chrono::steady_clock::now() - call->start)
                                .count();
           grpc::Status result = CheckStillWanted(context);
-          if (result.ok()) result = work(*call, worker);
+          if (result.ok()) result = Final(context, work(*call, worker));
           EndCall(state, *call, result);
           reactor->Finish(result);
         });

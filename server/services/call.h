@@ -2,8 +2,12 @@
 // hand-over to the worker pool, metrics and one log line.
 //
 // RunUnary is the whole life of a unary call: checks on the gRPC thread (cheap), then `work` on a
-// worker; a full queue answers RESOURCE_EXHAUSTED with a `retry-after-ms` trailer, a call whose
-// client cancelled or whose deadline passed while it waited is finished without running `work`.
+// worker; a full queue answers RESOURCE_EXHAUSTED with gRPC's `grpc-retry-pushback-ms` trailer
+// (gRFC A6: gRPC's own retry waits that long), a call whose client cancelled or whose deadline
+// passed while it waited is finished without running `work`. Any other RESOURCE_EXHAUSTED (disk
+// full, a map full, a model too large) is final and says so with a pushback of -1, which stops
+// gRPC's retries. Mutating calls pass their request's `request_id` and response: RunOnce answers
+// a repeat from the server's RequestLog (server/runtime/request_log.h).
 // Streaming reactors use BeginCall/EndCall and the pool themselves.
 #pragma once
 
@@ -12,6 +16,7 @@
 #include <string>
 #include <string_view>
 
+#include <google/protobuf/message.h>
 #include <grpcpp/grpcpp.h>
 
 #include "server/auth/token_auth.h"
@@ -41,8 +46,25 @@ void SampleWorkerGauges(ServerState& state);
 // Not OK when the call should not run: its client cancelled or its deadline passed.
 grpc::Status CheckStillWanted(grpc::CallbackServerContext* context);
 
-// RESOURCE_EXHAUSTED with the retry hint added to the call's trailing metadata.
+// RESOURCE_EXHAUSTED with the retry hint (`grpc-retry-pushback-ms`) added to the call's trailing
+// metadata.
 grpc::Status Busy(ServerState& state, grpc::CallbackServerContext* context);
+
+// `status` unchanged; when it is RESOURCE_EXHAUSTED, a pushback of -1 is added to the call's
+// trailing metadata so that gRPC does not retry it (for refusals that a retry cannot cure).
+grpc::Status Final(grpc::CallbackServerContext* context, grpc::Status status);
+
+// OK for an empty or valid request_id (RequestLog::ValidRequestId), INVALID_ARGUMENT otherwise.
+grpc::Status CheckRequestId(const std::string& request_id);
+
+// Runs `work` (which fills `response`) at most once per (caller, method, `request_id`) within the
+// request log's window: a repeat gets the first call's response without running `work`, and a
+// repeat that arrives while the first still runs waits for it (ABORTED when the call's deadline
+// passes first). Only successful answers are remembered; a repeat of a failed call runs again.
+// An empty `request_id` just runs `work`; an invalid one is INVALID_ARGUMENT.
+grpc::Status RunOnce(ServerState& state, grpc::CallbackServerContext* context, const CallInfo& call,
+                     const std::string& request_id, google::protobuf::Message* response,
+                     const std::function<grpc::Status()>& work);
 
 // OK when this server serves place map `map`: always without a shard configuration; with one,
 // when the placement table gives the map to this shard. FAILED_PRECONDITION naming the owner (or
@@ -53,5 +75,9 @@ grpc::Status CheckMapOwner(const ServerState& state, const std::string& map);
 using UnaryWork = std::function<grpc::Status(CallInfo&, WorkerContext&)>;
 grpc::ServerUnaryReactor* RunUnary(ServerState& state, grpc::CallbackServerContext* context,
                                    std::string_view method, Right right, UnaryWork work);
+// A mutating call: RunUnary with `work` inside RunOnce (`response` lives as long as the call).
+grpc::ServerUnaryReactor* RunUnary(ServerState& state, grpc::CallbackServerContext* context,
+                                   std::string_view method, Right right, std::string request_id,
+                                   google::protobuf::Message* response, UnaryWork work);
 
 }  // namespace recog::server

@@ -174,7 +174,7 @@ grpc::ServerUnaryReactor* PlaceService::CreateMap(grpc::CallbackServerContext* c
                                                   const pb::CreateMapRequest* request,
                                                   pb::CreateMapResponse* response) {
   return RunUnary(
-      state_, context, Method("CreateMap"), Right::kWrite,
+      state_, context, Method("CreateMap"), Right::kWrite, request->request_id(), response,
       [=, this](CallInfo& call, WorkerContext&) {
         RECOG_RETURN_IF_ERROR_AS_GRPC(ScopeCall(state_, call, request->name()), call.request_id);
         LoopDetectorParams params = state_.config.place;
@@ -225,8 +225,8 @@ grpc::ServerUnaryReactor* PlaceService::ListMaps(grpc::CallbackServerContext* co
 grpc::ServerUnaryReactor* PlaceService::DeleteMap(grpc::CallbackServerContext* context,
                                                   const pb::DeleteMapRequest* request,
                                                   pb::DeleteMapResponse* response) {
-  return RunUnary(state_, context, Method("DeleteMap"), Right::kWrite,
-                  [=, this](CallInfo& call, WorkerContext&) {
+  return RunUnary(state_, context, Method("DeleteMap"), Right::kWrite, request->request_id(),
+                  response, [=, this](CallInfo& call, WorkerContext&) {
                     RECOG_RETURN_IF_ERROR_AS_GRPC(ScopeCall(state_, call, request->name()),
                                                   call.request_id);
                     StatusOr<size_t> frames = state_.maps->Delete(request->name());
@@ -241,7 +241,7 @@ grpc::ServerUnaryReactor* PlaceService::AddFrame(grpc::CallbackServerContext* co
                                                  const pb::AddFrameRequest* request,
                                                  pb::AddFrameResponse* response) {
   return RunUnary(
-      state_, context, Method("AddFrame"), Right::kWrite,
+      state_, context, Method("AddFrame"), Right::kWrite, request->request_id(), response,
       [=, this](CallInfo& call, WorkerContext& worker) {
         StatusOr<std::shared_ptr<PlaceMap>> map = CallMap(state_, call, request->map());
         if (!map.ok()) return ToGrpcStatus(map.status(), call.request_id);
@@ -265,6 +265,8 @@ grpc::ServerUnaryReactor* PlaceService::QueryPlace(grpc::CallbackServerContext* 
   const Right right = request->add_frame() ? Right::kWrite : Right::kRead;
   return RunUnary(
       state_, context, Method("QueryPlace"), right,
+      // Only a query that adds its frame changes the map: a relocalisation query just runs again.
+      request->add_frame() ? request->request_id() : std::string(), response,
       [=, this](CallInfo& call, WorkerContext& worker) {
         StatusOr<std::shared_ptr<PlaceMap>> map = CallMap(state_, call, request->map());
         if (!map.ok()) return ToGrpcStatus(map.status(), call.request_id);
@@ -283,7 +285,7 @@ grpc::ServerUnaryReactor* PlaceService::RemoveFrame(grpc::CallbackServerContext*
                                                     const pb::RemoveFrameRequest* request,
                                                     pb::RemoveFrameResponse* response) {
   return RunUnary(
-      state_, context, Method("RemoveFrame"), Right::kWrite,
+      state_, context, Method("RemoveFrame"), Right::kWrite, request->request_id(), response,
       [=, this](CallInfo& call, WorkerContext&) {
         StatusOr<std::shared_ptr<PlaceMap>> map = CallMap(state_, call, request->map());
         if (!map.ok()) return ToGrpcStatus(map.status(), call.request_id);

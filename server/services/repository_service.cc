@@ -58,7 +58,10 @@ class ModelUpload final : public grpc::ServerReadReactor<pb::PutModelRequest> {
     if (!ok) {  // the client sent everything
       if (!has_header_) {
         End({grpc::StatusCode::FAILED_PRECONDITION, "PutModel needs a PutModelHeader first"});
-      } else if (!state_.pool->TrySubmit([this](WorkerContext&) { End(Store()); })) {
+      } else if (!state_.pool->TrySubmit([this](WorkerContext&) {
+                   End(RunOnce(state_, context_, call_, header_.request_id(), response_,
+                               [this] { return Store(); }));
+                 })) {
         End(Busy(state_, context_));
       }
       return;
@@ -82,10 +85,14 @@ class ModelUpload final : public grpc::ServerReadReactor<pb::PutModelRequest> {
       return {grpc::StatusCode::INVALID_ARGUMENT, "header.size_bytes is required"};
     }
     if (header_.size_bytes() > RepositoryService::kMaxModelBytes) {
-      return {grpc::StatusCode::RESOURCE_EXHAUSTED,
-              "the model file has " + std::to_string(header_.size_bytes()) +
-                  " bytes; the server takes at most " +
-                  std::to_string(RepositoryService::kMaxModelBytes)};
+      return Final(context_, {grpc::StatusCode::RESOURCE_EXHAUSTED,
+                              "the model file has " + std::to_string(header_.size_bytes()) +
+                                  " bytes; the server takes at most " +
+                                  std::to_string(RepositoryService::kMaxModelBytes)});
+    }
+    // Before the file is sent, not after.
+    if (grpc::Status checked = CheckRequestId(header_.request_id()); !checked.ok()) {
+      return checked;
     }
     if (!IsSha256Hex(header_.sha256())) {
       return {grpc::StatusCode::INVALID_ARGUMENT,
@@ -429,8 +436,8 @@ grpc::ServerUnaryReactor* RepositoryService::ListModels(grpc::CallbackServerCont
 grpc::ServerUnaryReactor* RepositoryService::DeleteModel(grpc::CallbackServerContext* context,
                                                          const pb::DeleteModelRequest* request,
                                                          pb::DeleteModelResponse* response) {
-  return RunUnary(state_, context, Method("DeleteModel"), Right::kWrite,
-                  [=, this](CallInfo& call, WorkerContext&) {
+  return RunUnary(state_, context, Method("DeleteModel"), Right::kWrite, request->request_id(),
+                  response, [=, this](CallInfo& call, WorkerContext&) {
                     call.map = request->name();
                     if (grpc::Status refused = RefuseOnReplica(state_); !refused.ok())
                       return refused;

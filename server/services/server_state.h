@@ -21,6 +21,7 @@
 #include "server/config/placement_table.h"
 #include "server/config/server_config.h"
 #include "server/metrics/metrics.h"
+#include "server/runtime/request_log.h"
 #include "server/runtime/worker_pool.h"
 #include "server/services/worker_context.h"
 
@@ -28,10 +29,14 @@ namespace recog::server {
 
 struct ServerState {
   ServerState(ServerConfig config, TokenAuthenticator authenticator)
-      : config(std::move(config)), auth(std::move(authenticator)) {}
+      : config(std::move(config)),
+        auth(std::move(authenticator)),
+        requests(this->config.request_log_entries) {}
 
   const ServerConfig config;
   const TokenAuthenticator auth;
+  // The answers of recent mutating calls by request_id (RunOnce in call.h).
+  RequestLog requests;
   ServerMetrics metrics;
   std::unique_ptr<WorkerPool<WorkerContext>> pool;  // its contexts read this state
   std::atomic<bool> ready{false};

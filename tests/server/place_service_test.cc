@@ -413,7 +413,7 @@ TEST_F(PlaceServiceTest, RemovedFramesAreNeverCandidatesAgainAcrossARestart) {
   EXPECT_EQ(response.result().match_client_frame_id(), "kf-20");
 }
 
-TEST_F(PlaceServiceTest, AFullQueueAnswersResourceExhaustedWithARetryHint) {
+TEST_F(PlaceServiceTest, AFullQueueAnswersResourceExhaustedWithGrpcsRetryPushback) {
   StopServer();
   config().workers = 1;
   config().queue_capacity = 1;
@@ -440,8 +440,9 @@ TEST_F(PlaceServiceTest, AFullQueueAnswersResourceExhaustedWithARetryHint) {
                                  if (status.ok()) ++ok;
                                  if (status.error_code() == grpc::StatusCode::RESOURCE_EXHAUSTED) {
                                    ++busy;
-                                   if (context->GetServerTrailingMetadata().count("retry-after-ms"))
-                                     ++hinted;
+                                   const auto& trailers = context->GetServerTrailingMetadata();
+                                   const auto hint = trailers.find("grpc-retry-pushback-ms");
+                                   if (hint != trailers.end() && hint->second == "100") ++hinted;
                                  }
                                  ++finished;
                                  done.notify_all();
@@ -456,6 +457,84 @@ TEST_F(PlaceServiceTest, AFullQueueAnswersResourceExhaustedWithARetryHint) {
   pb::MapInfo info;
   ASSERT_TRUE(GetMap("busy", &info).ok());
   EXPECT_EQ(info.frames(), uint64_t(ok));  // refused calls added nothing
+}
+
+TEST_F(PlaceServiceTest, ARepeatedRequestIdIsAnsweredWithTheFirstAnswerAndChangesNothing) {
+  ASSERT_TRUE(CreateMap("idem").ok());
+  pb::AddFrameRequest request;
+  request.set_map("idem");
+  *request.mutable_frame() = JpegFrame(CorridorJpeg(1));
+  request.set_request_id("7f0c1c62-3d5e-4b8a-9d0e-2b4f6a1c9e01");
+  pb::AddFrameResponse first, repeat, other;
+  ASSERT_TRUE(places_->AddFrame(Context().get(), request, &first).ok());
+  ASSERT_TRUE(places_->AddFrame(Context().get(), request, &repeat).ok());
+  EXPECT_EQ(repeat.SerializeAsString(), first.SerializeAsString());  // the same frame_id, timing
+  pb::MapInfo info;
+  ASSERT_TRUE(GetMap("idem", &info).ok());
+  EXPECT_EQ(info.frames(), 1u);
+
+  request.set_request_id("another id");
+  ASSERT_TRUE(places_->AddFrame(Context().get(), request, &other).ok());
+  EXPECT_NE(other.frame_id(), first.frame_id());
+  request.clear_request_id();  // no id: every call applies
+  ASSERT_TRUE(places_->AddFrame(Context().get(), request, &other).ok());
+  ASSERT_TRUE(GetMap("idem", &info).ok());
+  EXPECT_EQ(info.frames(), 3u);
+
+  // QueryPlace with add_frame is remembered; a relocalisation query just runs again.
+  pb::QueryPlaceRequest query;
+  query.set_map("idem");
+  *query.mutable_frame() = JpegFrame(CorridorJpeg(20));
+  query.set_add_frame(true);
+  query.set_request_id("query-1");
+  pb::QueryPlaceResponse queried, requeried;
+  const grpc::Status queried_status = places_->QueryPlace(Context().get(), query, &queried);
+  ASSERT_TRUE(queried_status.ok()) << queried_status.error_message();
+  ASSERT_TRUE(places_->QueryPlace(Context().get(), query, &requeried).ok());
+  EXPECT_EQ(requeried.result().frame_id(), queried.result().frame_id());
+  ASSERT_TRUE(GetMap("idem", &info).ok());
+  EXPECT_EQ(info.frames(), 4u);
+
+  // The repeat of a deletion or a creation gets the first answer, not NOT_FOUND or
+  // ALREADY_EXISTS.
+  pb::DeleteMapRequest remove;
+  remove.set_name("idem");
+  remove.set_request_id("delete-1");
+  pb::DeleteMapResponse removed, removed_again;
+  ASSERT_TRUE(places_->DeleteMap(Context().get(), remove, &removed).ok());
+  ASSERT_TRUE(places_->DeleteMap(Context().get(), remove, &removed_again).ok());
+  EXPECT_EQ(removed_again.frames_deleted(), 4u);
+  pb::CreateMapRequest create;
+  create.set_name("idem2");
+  create.set_request_id("create-1");
+  pb::CreateMapResponse created, created_again;
+  ASSERT_TRUE(places_->CreateMap(Context().get(), create, &created).ok());
+  ASSERT_TRUE(places_->CreateMap(Context().get(), create, &created_again).ok());
+  EXPECT_EQ(created_again.map().id(), created.map().id());
+  create.set_request_id("create-2");  // a new id is a new call
+  EXPECT_EQ(places_->CreateMap(Context().get(), create, &created_again).error_code(),
+            grpc::StatusCode::ALREADY_EXISTS);
+}
+
+TEST_F(PlaceServiceTest, AFailedCallIsNotRememberedAndBadRequestIdsAreRefused) {
+  pb::AddFrameRequest request;
+  request.set_map("later");
+  *request.mutable_frame() = JpegFrame(CorridorJpeg(1));
+  request.set_request_id("retry-me");
+  pb::AddFrameResponse response;
+  EXPECT_EQ(places_->AddFrame(Context().get(), request, &response).error_code(),
+            grpc::StatusCode::NOT_FOUND);
+  ASSERT_TRUE(CreateMap("later").ok());
+  EXPECT_TRUE(places_->AddFrame(Context().get(), request, &response).ok());  // runs again
+
+  for (const std::string& bad : {std::string(129, 'x'), std::string("line\nbreak")}) {
+    request.set_request_id(bad);
+    EXPECT_EQ(places_->AddFrame(Context().get(), request, &response).error_code(),
+              grpc::StatusCode::INVALID_ARGUMENT);
+  }
+  pb::MapInfo info;
+  ASSERT_TRUE(GetMap("later", &info).ok());
+  EXPECT_EQ(info.frames(), 1u);
 }
 
 }  // namespace

@@ -36,7 +36,7 @@ bool Eventually(const std::function<bool()>& condition) {
 std::unique_ptr<client::RecognitionClient> ClientOf(const std::string& target) {
   client::ClientOptions options;
   options.target = target;
-  options.retry.max_attempts = 1;  // a test polls; it wants answers, not retries
+  options.retries = false;  // a test polls; it wants answers, not retries
   auto connected = client::RecognitionClient::Connect(options);
   EXPECT_TRUE(connected.ok()) << connected.status().error_message();
   return connected.ok() ? std::move(*connected) : nullptr;

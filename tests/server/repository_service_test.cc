@@ -211,6 +211,34 @@ TEST_F(RepositoryServiceTest, EveryUploadIsANewVersionAndTheLatestIsRecognisedAt
   EXPECT_EQ(seen.objects(0).version(), 2u);
 }
 
+TEST_F(RepositoryServiceTest, ARepeatedRequestIdStoresNoSecondVersionAndDeletesOnce) {
+  const std::string file = PosterModelFile("poster", 1, "poster");
+  pb::PutModelHeader header = HeaderOf(file, 0);
+  header.set_request_id("upload-1");
+  pb::ModelInfo first, repeat;
+  ASSERT_TRUE(Upload(header, file, &first).ok());
+  ASSERT_TRUE(Upload(header, file, &repeat).ok());
+  EXPECT_EQ(repeat.version(), first.version());
+  header.set_request_id("upload-2");  // a new id: a new version
+  pb::ModelInfo second;
+  ASSERT_TRUE(Upload(header, file, &second).ok());
+  EXPECT_EQ(second.version(), first.version() + 1);
+
+  header.set_request_id(std::string(129, 'x'));
+  EXPECT_EQ(Upload(header, file, nullptr).error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+
+  pb::DeleteModelRequest remove;
+  remove.set_name("poster");
+  remove.set_request_id("delete-1");
+  pb::DeleteModelResponse removed, removed_again;
+  ASSERT_TRUE(models_->DeleteModel(Context().get(), remove, &removed).ok());
+  ASSERT_TRUE(models_->DeleteModel(Context().get(), remove, &removed_again).ok());
+  EXPECT_EQ(removed_again.versions_deleted(), 2u);  // the first answer, not NOT_FOUND
+  remove.set_request_id("delete-2");
+  EXPECT_EQ(models_->DeleteModel(Context().get(), remove, &removed).error_code(),
+            grpc::StatusCode::NOT_FOUND);
+}
+
 TEST_F(RepositoryServiceTest, ADownloadFromAnOffsetSendsTheTailAndOneBeyondTheEndIsOutOfRange) {
   const std::string file = PosterModelFile("poster", 1, "poster");
   ASSERT_GT(file.size(), 60000u);  // more than one 50000-byte chunk

@@ -4,6 +4,9 @@
 // more is forwarded upstream) for kStallBeforeCut, then shuts both sockets down, as when a network
 // link fails. The stall lets the server take in what it received before the connection dies, so
 // that tests do not race with its reading. Later connections are forwarded untouched.
+// CutAtNextAnswer() loses an answer instead: the server's bytes are forwarded an HTTP/2 frame at a
+// time, and the next HEADERS frame of a stream (the start of a call's answer, sent once the server
+// has done the call's work) is not forwarded: that connection is cut there.
 #pragma once
 
 #include <arpa/inet.h>
@@ -16,6 +19,7 @@
 #include <cstdint>
 #include <memory>
 #include <mutex>
+#include <string>
 #include <thread>
 #include <vector>
 
@@ -57,6 +61,10 @@ class TcpProxy {
   TcpProxy& operator=(const TcpProxy&) = delete;
 
   int port() const { return port_; }
+  // Arms the cut of the connection that carries the next answer (see the header comment).
+  void CutAtNextAnswer() { cut_at_answer_ = true; }
+  // Answers lost by CutAtNextAnswer so far.
+  int answers_cut() const { return answers_cut_; }
   // Bytes sent upstream by each connection so far, in the order they were accepted.
   std::vector<uint64_t> upstream_bytes() const {
     std::lock_guard lock(mutex_);
@@ -98,19 +106,20 @@ class TcpProxy {
       c->server = server;
       c->cut_after = connections_.empty() ? cut_first_after_ : 0;
       Connection* raw = c.get();
-      c->upstream = std::thread([raw] { Pump(raw, raw->client, raw->server, true); });
-      c->downstream = std::thread([raw] { Pump(raw, raw->server, raw->client, false); });
+      c->upstream = std::thread([raw] { PumpRequests(raw); });
+      c->downstream = std::thread([this, raw] { PumpAnswers(raw); });
       connections_.push_back(std::move(c));
     }
   }
 
-  // Copies from `from` to `to` until either side closes (or the connection is cut).
-  static void Pump(Connection* c, int from, int to, bool counting) {
+  // Copies from the client to the server until either side closes (or the connection is cut).
+  static void PumpRequests(Connection* c) {
+    const int from = c->client, to = c->server;
     char buffer[16384];
     for (;;) {
       ssize_t n = read(from, buffer, sizeof(buffer));
       if (n <= 0) break;
-      if (counting && c->cut_after > 0) {
+      if (c->cut_after > 0) {
         const uint64_t room = c->cut_after - c->sent_upstream.load();
         if (uint64_t(n) >= room) {
           if (room > 0) (void)!write(to, buffer, size_t(room));
@@ -124,7 +133,41 @@ class TcpProxy {
         if (w <= 0) goto done;
         at += w;
       }
-      if (counting) c->sent_upstream += uint64_t(n);
+      c->sent_upstream += uint64_t(n);
+    }
+  done:
+    shutdown(c->client, SHUT_RDWR);
+    shutdown(c->server, SHUT_RDWR);
+  }
+
+  // Copies from the server to the client an HTTP/2 frame at a time (9-byte header: 24-bit length,
+  // type, flags, 31-bit stream id), cutting the connection at an answer when armed.
+  void PumpAnswers(Connection* c) {
+    constexpr unsigned char kHeaders = 0x1;
+    std::string pending;
+    char buffer[16384];
+    for (;;) {
+      const ssize_t n = read(c->server, buffer, sizeof(buffer));
+      if (n <= 0) break;
+      pending.append(buffer, size_t(n));
+      size_t at = 0;
+      while (pending.size() - at >= 9) {
+        const auto* frame = reinterpret_cast<const unsigned char*>(pending.data() + at);
+        const size_t length = size_t(frame[0]) << 16 | size_t(frame[1]) << 8 | frame[2];
+        if (pending.size() - at < 9 + length) break;
+        const bool on_stream = ((frame[5] & 0x7f) | frame[6] | frame[7] | frame[8]) != 0;
+        if (frame[3] == kHeaders && on_stream && cut_at_answer_.exchange(false)) {
+          ++answers_cut_;
+          goto done;
+        }
+        for (size_t w = 0; w < 9 + length;) {
+          const ssize_t written = write(c->client, pending.data() + at + w, 9 + length - w);
+          if (written <= 0) goto done;
+          w += size_t(written);
+        }
+        at += 9 + length;
+      }
+      pending.erase(0, at);
     }
   done:
     shutdown(c->client, SHUT_RDWR);
@@ -133,6 +176,8 @@ class TcpProxy {
 
   const int upstream_port_;
   const uint64_t cut_first_after_;
+  std::atomic<bool> cut_at_answer_{false};
+  std::atomic<int> answers_cut_{0};
   int listener_ = -1;
   int port_ = 0;
   std::thread acceptor_;

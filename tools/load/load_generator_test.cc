@@ -183,7 +183,9 @@ TEST_F(LoadGeneratorTest, EveryKthFrameIsAlsoSentToObjectRecognition) {
 TEST_F(LoadGeneratorTest, AnUnreachableServerGivesCountedErrorsWithinTheDeadline) {
   client::ClientOptions options = Options();
   StopServer();  // nothing listens on its port any more
-  options.deadline = std::chrono::seconds(1);
+  // Long enough for gRPC's five attempts (proto/service_config.json: at most 1.5 s of backoff),
+  // so that the calls end UNAVAILABLE rather than at their deadline.
+  options.deadline = std::chrono::seconds(5);
   const auto start = Clock::now();
   const StatusOr<LoadReport> report = Run(CorridorLoad(2, 6), options);
   ASSERT_TRUE(report.ok()) << report.status().ToString();

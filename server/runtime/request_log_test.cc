@@ -1,0 +1,113 @@
+// RequestLog: answers remembered and repeated, failures forgotten, expiry, the entry bound, the
+// request id rule, and a concurrent duplicate waiting for the first call.
+#include "server/runtime/request_log.h"
+
+#include <atomic>
+#include <thread>
+
+#include <gtest/gtest.h>
+
+namespace recog::server {
+namespace {
+
+using std::chrono::milliseconds;
+using std::chrono::minutes;
+using Kind = RequestLog::Claim::Kind;
+using Clock = RequestLog::Clock;
+
+const Clock::time_point kStart{};
+
+TEST(RequestLogTest, ASuccessfulAnswerIsRepeatedForTheSameKeyOnly) {
+  RequestLog log(10);
+  EXPECT_EQ(log.Begin("a", kStart, kStart).kind, Kind::kRun);
+  log.End("a", "answer a", kStart);
+  const RequestLog::Claim repeat = log.Begin("a", kStart + minutes(1), kStart);
+  EXPECT_EQ(repeat.kind, Kind::kRepeat);
+  EXPECT_EQ(repeat.answer, "answer a");
+  EXPECT_EQ(log.Begin("b", kStart, kStart).kind, Kind::kRun);
+  EXPECT_EQ(log.size(), 1u);
+}
+
+TEST(RequestLogTest, AFailedCallIsForgottenSoItsRepeatRunsAgain) {
+  RequestLog log(10);
+  ASSERT_EQ(log.Begin("a", kStart, kStart).kind, Kind::kRun);
+  log.End("a", std::nullopt, kStart);
+  EXPECT_EQ(log.Begin("a", kStart, kStart).kind, Kind::kRun);
+  EXPECT_EQ(log.size(), 0u);
+}
+
+TEST(RequestLogTest, AnswersExpireAfterTheWindow) {
+  RequestLog log(10, minutes(10));
+  ASSERT_EQ(log.Begin("a", kStart, kStart).kind, Kind::kRun);
+  log.End("a", "x", kStart);
+  EXPECT_EQ(log.Begin("a", kStart + minutes(10) - milliseconds(1), kStart).kind, Kind::kRepeat);
+  EXPECT_EQ(log.Begin("a", kStart + minutes(10), kStart).kind, Kind::kRun);
+  EXPECT_EQ(log.size(), 0u);
+}
+
+TEST(RequestLogTest, TheOldestAnswersAreForgottenBeyondTheCapacity) {
+  RequestLog log(2);
+  for (const char* key : {"a", "b", "c"}) {
+    ASSERT_EQ(log.Begin(key, kStart, kStart).kind, Kind::kRun);
+    log.End(key, key, kStart);
+  }
+  EXPECT_EQ(log.size(), 2u);
+  EXPECT_EQ(log.Begin("b", kStart, kStart).kind, Kind::kRepeat);
+  EXPECT_EQ(log.Begin("c", kStart, kStart).kind, Kind::kRepeat);
+  EXPECT_EQ(log.Begin("a", kStart, kStart).kind, Kind::kRun);  // forgotten
+}
+
+TEST(RequestLogTest, CapacityZeroRemembersNothing) {
+  RequestLog log(0);
+  ASSERT_EQ(log.Begin("a", kStart, kStart).kind, Kind::kRun);
+  log.End("a", "x", kStart);
+  EXPECT_EQ(log.Begin("a", kStart, kStart).kind, Kind::kRun);
+  EXPECT_EQ(log.size(), 0u);
+}
+
+TEST(RequestLogTest, RequestIdsAreOneTo128PrintableCharacters) {
+  EXPECT_TRUE(RequestLog::ValidRequestId("2f1c9a7e-4b1d-4c5e-9f3a-0d6b8e2a1c44"));
+  EXPECT_TRUE(RequestLog::ValidRequestId("a b~"));
+  EXPECT_TRUE(RequestLog::ValidRequestId(std::string(128, 'x')));
+  EXPECT_FALSE(RequestLog::ValidRequestId(""));
+  EXPECT_FALSE(RequestLog::ValidRequestId(std::string(129, 'x')));
+  EXPECT_FALSE(RequestLog::ValidRequestId("tab\there"));
+  EXPECT_FALSE(RequestLog::ValidRequestId("new\nline"));
+  EXPECT_FALSE(RequestLog::ValidRequestId("\x7f"));
+  EXPECT_FALSE(RequestLog::ValidRequestId("caf\xc3\xa9"));
+}
+
+TEST(RequestLogTest, AConcurrentDuplicateWaitsForTheFirstCallAndGetsItsAnswer) {
+  RequestLog log(10);
+  ASSERT_EQ(log.Begin("a", Clock::now(), Clock::now()).kind, Kind::kRun);
+  std::atomic<bool> ended{false};
+  RequestLog::Claim duplicate;
+  std::thread waiter([&] {
+    duplicate = log.Begin("a", Clock::now(), Clock::now() + std::chrono::seconds(30));
+    EXPECT_TRUE(ended.load());  // it returned only after End
+  });
+  std::this_thread::sleep_for(milliseconds(50));
+  ended = true;
+  log.End("a", "first", Clock::now());
+  waiter.join();
+  EXPECT_EQ(duplicate.kind, Kind::kRepeat);
+  EXPECT_EQ(duplicate.answer, "first");
+}
+
+TEST(RequestLogTest, ADuplicateOfAFailedCallRunsItselfAndOneStillRunningTimesOut) {
+  RequestLog log(10);
+  ASSERT_EQ(log.Begin("a", Clock::now(), Clock::now()).kind, Kind::kRun);
+  EXPECT_EQ(log.Begin("a", Clock::now(), Clock::now() + milliseconds(20)).kind, Kind::kTimedOut);
+  RequestLog::Claim duplicate;
+  std::thread waiter(
+      [&] { duplicate = log.Begin("a", Clock::now(), Clock::now() + std::chrono::seconds(30)); });
+  std::this_thread::sleep_for(milliseconds(50));
+  log.End("a", std::nullopt, Clock::now());
+  waiter.join();
+  EXPECT_EQ(duplicate.kind, Kind::kRun);  // the first failed: the duplicate is the call now
+  log.End("a", "second", Clock::now());
+  EXPECT_EQ(log.Begin("a", Clock::now(), Clock::now()).answer, "second");
+}
+
+}  // namespace
+}  // namespace recog::server
