@@ -4,6 +4,7 @@
 # nothing. CI runs it after the tests. Exit 1 with the steps that ran otherwise.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+start=$SECONDS
 out=$(env -u RECOG_BUILD_DIR -u RECOG_CMAKE_ARGS bash scripts/build.sh 2>&1)
 # The build-info step runs every time (it rewrites its header only when the commit changes).
 steps=$(grep -E '^\[[0-9]+/[0-9]+\] (Building|Linking)' <<<"$out" || true)
@@ -12,4 +13,4 @@ if [ -n "$steps" ]; then
   head -20 <<<"$steps"
   exit 1
 fi
-echo "check_no_rebuild: scripts/run.sh's build after scripts/test.sh: nothing to compile or link"
+echo "check_no_rebuild: scripts/run.sh's build after scripts/test.sh: nothing to compile or link ($((SECONDS - start)) s)"
