@@ -24,6 +24,7 @@
 #include "server/api/converters.h"
 #include "tests/server/server_fixture.h"
 #include "tests/testing/free_port.h"
+#include "tests/testing/metrics_scrape.h"
 #include "tests/testing/test_data.h"
 #include "tools/evaluation/ground_truth.h"
 #include "tools/evaluation/place_evaluation.h"
@@ -32,6 +33,8 @@ extern char** environ;
 
 namespace recog::server::testing {
 namespace {
+
+using recog::testing::FetchMetrics;
 
 constexpr char kRobotToken[] = "robot-token-0123456789";
 constexpr char kOperatorToken[] = "operator-token-0123456789";
@@ -106,25 +109,6 @@ class HealthWatch {
   grpc::Status status_;
   bool started_ = false;
 };
-
-// GET http://127.0.0.1:<port>/metrics with a plain socket.
-std::string FetchMetrics(int port) {
-  const int fd = socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in address{};
-  address.sin_family = AF_INET;
-  address.sin_port = htons(uint16_t(port));
-  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  std::string body;
-  if (connect(fd, reinterpret_cast<sockaddr*>(&address), sizeof(address)) == 0) {
-    const std::string request = "GET /metrics HTTP/1.0\r\nHost: localhost\r\n\r\n";
-    if (write(fd, request.data(), request.size()) == ssize_t(request.size())) {
-      char buffer[4096];
-      for (ssize_t n; (n = read(fd, buffer, sizeof(buffer))) > 0;) body.append(buffer, size_t(n));
-    }
-  }
-  close(fd);
-  return body;
-}
 
 class ServerLifecycleTest : public ServerFixture {};
 

@@ -20,11 +20,14 @@
 #include "server/app/server_tls.h"
 #include "tests/server/server_fixture.h"
 #include "tests/testing/free_port.h"
+#include "tests/testing/metrics_scrape.h"
 
 extern char** environ;
 
 namespace recog::server::testing {
 namespace {
+
+using recog::testing::FetchMetrics;
 
 namespace fs = std::filesystem;
 using ::testing::HasSubstr;
@@ -43,25 +46,6 @@ std::string TlsData(const std::string& name) {
 
 void WriteText(const fs::path& path, const std::string& text) {
   std::ofstream(path, std::ios::binary | std::ios::trunc) << text;
-}
-
-// GET http://127.0.0.1:<port>/metrics with a plain socket.
-std::string FetchMetrics(int port) {
-  const int fd = socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in address{};
-  address.sin_family = AF_INET;
-  address.sin_port = htons(uint16_t(port));
-  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  std::string body;
-  if (connect(fd, reinterpret_cast<sockaddr*>(&address), sizeof(address)) == 0) {
-    const std::string request = "GET /metrics HTTP/1.0\r\nHost: localhost\r\n\r\n";
-    if (write(fd, request.data(), request.size()) == ssize_t(request.size())) {
-      char buffer[4096];
-      for (ssize_t n; (n = read(fd, buffer, sizeof(buffer))) > 0;) body.append(buffer, size_t(n));
-    }
-  }
-  close(fd);
-  return body;
 }
 
 class ServerReloadTest : public ServerFixture {
