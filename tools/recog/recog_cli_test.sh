@@ -158,6 +158,8 @@ assert d['parameters']['mode'] == 'thesis' and not d['parameters']['strong_accep
 assert all(l['acceptance'] != 'strong_evidence' for l in d['loops']), d['loops']" \
   && pass || fail "eval place --mode thesis turns strong acceptance off"
 [ -s "$tmp/pr.png" ] && [ -d "$tmp/draw" ] && pass || fail "eval place writes the PR plot and the draw folder"
+expect_error "eval place --plot naming a .csv" "INVALID_ARGUMENT.*another extension" "$recog" eval place \
+  --images "$images" --ground-truth "$tmp/gt4.txt" --vocab "$tmp/v.rvoc" -q --sweep alpha --plot "$tmp/pr.csv"
 expect_error "eval place without ground truth file" "NOT_FOUND" "$recog" eval place --images "$images" \
   --ground-truth "$tmp/none.txt" -q
 printf '0 0\n1 0\n' >"$tmp/gt2.txt"
