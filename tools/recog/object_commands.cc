@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <map>
 #include <memory>
 #include <optional>
 #include <set>
@@ -26,6 +27,7 @@
 #include "tools/common/cli_support.h"
 #include "tools/common/remote_support.h"
 #include "tools/common/server_flags.h"
+#include "tools/evaluation/frame_poses.h"
 #include "tools/evaluation/object_evaluation.h"
 #include "tools/evaluation/place_evaluation.h"
 #include "tools/evaluation/visp_files.h"
@@ -118,8 +120,7 @@ StatusOr<RigidTransform> ParseDepthFromColor(const std::string& text) {
   RigidTransform transform;
   for (int k = 0; k < 9; ++k) transform.R.val[k] = v[size_t(k)];
   transform.t = {v[9], v[10], v[11]};
-  if (cv::norm(transform.R.t() * transform.R - cv::Matx33d::eye()) > 1e-3 ||
-      cv::determinant(transform.R) <= 0) {
+  if (!IsRotationMatrix(transform.R)) {
     return Status::InvalidArgument("--depth-from-color: R is not a rotation matrix");
   }
   return transform;
@@ -442,8 +443,9 @@ struct EvalSequenceArgs {
   std::vector<std::string> models;
   std::string images, camera, expect, draw, vocabulary;
   std::string truth, size_recall = "size_recall";  // --truth, --size-recall
-  SizeRecallOptions size_options;
-  std::vector<std::string> exclude;  // frames (file stems) processed but not counted
+  std::string poses, pose_errors = "pose_errors";  // --poses, --pose-errors
+  SizeRecallOptions size_options;                  // its pose limits serve --poses too
+  std::vector<std::string> exclude;                // frames (file stems) processed but not counted
   bool json = false, quiet = false;
   bool track = false;  // follow the object with an ObjectTracker, as a stream does
 };
@@ -526,13 +528,76 @@ class SizeRecallReport {
   std::vector<TruthFrameScore> scores_;
 };
 
+// --poses: the pose error of every frame with a pose in the list (CSV + PNG + JSON + a line).
+class PoseErrorReport {
+ public:
+  Status Open(const EvalSequenceArgs& args) {
+    if (args.poses.empty()) return Status::Ok();
+    RECOG_ASSIGN_OR_RETURN(poses_, ReadFramePoses(args.poses));
+    return Status::Ok();
+  }
+  bool enabled() const { return !poses_.empty(); }
+
+  // A frame that counts (not excluded by --exclude).
+  void Add(const EvalSequenceArgs& args, const std::string& image,
+           const std::vector<Detection>& detections, json* frame) {
+    if (!enabled()) return;
+    const std::optional<FramePoseScore> s =
+        ScoreFramePose(poses_, image, args.expect, detections, args.size_options);
+    if (!s) {
+      ++frames_without_pose_;
+      return;
+    }
+    scores_.push_back(*s);
+    if (!s->score.found) return;
+    (*frame)["rotation_error_deg"] = s->score.rotation_error_deg;
+    (*frame)["translation_error_m"] = s->score.translation_error_m;
+  }
+
+  Status Finish(const EvalSequenceArgs& args, json* out) {
+    if (!enabled()) return Status::Ok();
+    const PoseErrorSummary r = SummarisePoseErrors(scores_);
+    const std::string csv = args.pose_errors + ".csv", png = args.pose_errors + ".png";
+    RECOG_RETURN_IF_ERROR(WritePoseErrorCsv(scores_, csv));
+    RECOG_RETURN_IF_ERROR(
+        WritePoseErrorPlot(scores_, "Pose errors of '" + args.expect + "' on " + args.images, png));
+    (*out)["poses"] = {{"frames_with_pose", r.frames_with_pose},
+                       {"frames_without_pose", frames_without_pose_},
+                       {"found", r.found},
+                       {"recall", r.recall},
+                       {"wrong_objects", r.wrong_objects},
+                       {"median_rotation_error_deg", r.median_rotation_error_deg},
+                       {"median_translation_error_m", r.median_translation_error_m},
+                       {"correct_pose", r.correct_pose},
+                       {"max_rotation_error_deg", args.size_options.max_rotation_error_deg},
+                       {"max_translation_error", args.size_options.max_translation_error},
+                       {"csv", csv},
+                       {"plot", png}};
+    if (args.json) return Status::Ok();
+    std::printf(
+        "frames with a pose %zu (%zu without): found in %zu (recall %.1f %%), correct pose in %zu "
+        "(<= %.1f deg, <= %.0f %% of the distance), median errors %.2f deg, %.2f cm; %zu wrong "
+        "objects\n",
+        r.frames_with_pose, frames_without_pose_, r.found, 100 * r.recall, r.correct_pose,
+        args.size_options.max_rotation_error_deg, 100 * args.size_options.max_translation_error,
+        r.median_rotation_error_deg, 100 * r.median_translation_error_m, r.wrong_objects);
+    std::printf("pose errors: %s, %s\n", csv.c_str(), png.c_str());
+    return Status::Ok();
+  }
+
+ private:
+  std::map<int, RigidTransform> poses_;
+  std::vector<FramePoseScore> scores_;
+  size_t frames_without_pose_ = 0;
+};
+
 // Recognises every frame of a sequence in which one known object (--expect) is visible: recall
 // is the fraction of frames where it is found; any other object reported is a false positive.
 // With --track the frames go through an ObjectTracker (object_tracker.h) as in a stream: each
 // frame is either recognised (the full search ran) or only tracked, and the medians of both kinds
 // of frame are reported, with the tracking time per tracked object. Frames named by --exclude
 // (e.g. the model's own training views) are processed like the others, so that tracking sees
-// the same stream, but left out of recall and false positives.
+// the same stream, but left out of recall and false positives (and of the --poses report).
 int RunEvalSequence(const EvalSequenceArgs& args) {
   auto camera = ParseCamera(args.camera);
   if (!camera.ok()) return Fail("eval sequence", camera.status());
@@ -558,6 +623,8 @@ int RunEvalSequence(const EvalSequenceArgs& args) {
   }
   SizeRecallReport size_recall;
   if (Status s = size_recall.Open(args); !s.ok()) return Fail("eval sequence", s);
+  PoseErrorReport pose_errors;
+  if (Status s = pose_errors.Open(args); !s.ok()) return Fail("eval sequence", s);
   if (!args.draw.empty()) fs::create_directories(args.draw);
   ObjectRecognizer recognizer(database);
   ObjectTracker tracker(database);
@@ -617,6 +684,7 @@ int RunEvalSequence(const EvalSequenceArgs& args) {
     if (Status s = size_recall.Add(args, (*frames)[i], detections, &frame); !s.ok()) {
       return Fail("eval sequence", s);
     }
+    if (count) pose_errors.Add(args, (*frames)[i], detections, &frame);
     per_frame.push_back(std::move(frame));
     if (!args.draw.empty() && !detections.empty()) {
       cv::Mat canvas;
@@ -652,6 +720,7 @@ int RunEvalSequence(const EvalSequenceArgs& args) {
   }
   if (args.json) {
     if (Status s = size_recall.Finish(args, &out); !s.ok()) return Fail("eval sequence", s);
+    if (Status s = pose_errors.Finish(args, &out); !s.ok()) return Fail("eval sequence", s);
     std::printf("%s\n", out.dump(2).c_str());
   } else {
     const std::string left_out =
@@ -668,6 +737,7 @@ int RunEvalSequence(const EvalSequenceArgs& args) {
           Median(tracked_totals), Median(per_object));
     }
     if (Status s = size_recall.Finish(args, &out); !s.ok()) return Fail("eval sequence", s);
+    if (Status s = pose_errors.Finish(args, &out); !s.ok()) return Fail("eval sequence", s);
   }
   return 0;
 }
@@ -909,26 +979,39 @@ void AddEvalObjectsCommand(CLI::App& eval, int* exit_code) {
   sequence->add_option("--vocab", sequence_args->vocabulary, "Vocabulary");
   sequence->add_flag("--track", sequence_args->track,
                      "Track the objects from frame to frame (as StreamRecognizeObjects does)");
-  sequence->add_option("--truth", sequence_args->truth,
-                       "Ground truth of recog seqgen objects (truth.txt): pose errors per frame "
-                       "and recall against object size");
+  CLI::Option* truth =
+      sequence->add_option("--truth", sequence_args->truth,
+                           "Ground truth of recog seqgen objects (truth.txt): pose errors per "
+                           "frame and recall against object size");
   sequence
       ->add_option("--size-recall", sequence_args->size_recall,
                    "With --truth: write PREFIX.csv and PREFIX.png")
       ->capture_default_str();
   sequence
+      ->add_option("--poses", sequence_args->poses,
+                   "The object's pose per frame (lines 'NNNN r11..r33 tx ty tz', T_camera<-object, "
+                   "metres, '#' comments; a frame is the line of the number ending its file "
+                   "name): recall over the frames with a pose and the pose error of each")
+      ->excludes(truth);
+  sequence
+      ->add_option("--pose-errors", sequence_args->pose_errors,
+                   "With --poses: write PREFIX.csv (a line per frame with a pose) and PREFIX.png "
+                   "(the errors over the frames)")
+      ->capture_default_str();
+  sequence
       ->add_option("--max-rotation-error", sequence_args->size_options.max_rotation_error_deg,
-                   "With --truth: largest rotation error of a right pose, degrees")
+                   "With --truth or --poses: largest rotation error of a right pose, degrees")
       ->capture_default_str();
   sequence
       ->add_option("--max-translation-error", sequence_args->size_options.max_translation_error,
-                   "With --truth: largest translation error of a right pose, fraction of the "
-                   "distance")
+                   "With --truth or --poses: largest translation error of a right pose, "
+                   "fraction of the distance")
       ->capture_default_str();
   sequence
       ->add_option("--exclude", sequence_args->exclude,
                    "Frames (file names without extension, comma-separated) processed but "
-                   "left out of recall and false positives, e.g. the model's training views")
+                   "left out of recall, false positives and --poses, e.g. the model's training "
+                   "views")
       ->delimiter(',');
   sequence->add_flag("--json", sequence_args->json, "Print JSON");
   sequence->add_flag("-q,--quiet", sequence_args->quiet, "No progress output");
