@@ -10,6 +10,7 @@
 #include "tools/common/cli_support.h"
 #include "tools/evaluation/place_evaluation.h"
 #include "tools/evaluation/plot.h"
+#include "tools/evaluation/visp_files.h"
 
 namespace recog::cli {
 
@@ -71,6 +72,23 @@ StatusOr<std::map<int, RigidTransform>> ReadFramePoses(const std::string& path) 
   }
   if (poses.empty()) return Status::InvalidArgument("pose list '" + path + "' holds no pose");
   return poses;
+}
+
+StatusOr<RigidTransform> ReadPoseOfFrame(const std::string& pose_path,
+                                         const std::string& image_path) {
+  if (fs::path(pose_path).extension() == ".pos") return ReadVispPose(pose_path);
+  const std::optional<int> frame = FrameNumber(image_path);
+  if (!frame) {
+    return Status::InvalidArgument("'" + image_path + "' has no frame number to look up in '" +
+                                   pose_path + "'");
+  }
+  RECOG_ASSIGN_OR_RETURN(const auto poses, ReadFramePoses(pose_path));
+  const auto pose = poses.find(*frame);
+  if (pose == poses.end()) {
+    return Status::NotFound("pose list '" + pose_path + "' has no line for frame " +
+                            std::to_string(*frame) + " ('" + image_path + "')");
+  }
+  return pose->second;
 }
 
 std::optional<FramePoseScore> ScoreFramePose(const std::map<int, RigidTransform>& poses,

@@ -35,6 +35,13 @@ std::optional<int> FrameNumber(const std::string& path);
 // without a pose.
 StatusOr<std::map<int, RigidTransform>> ReadFramePoses(const std::string& path);
 
+// The object's pose in the frame of `image_path` (e.g. the first frame of a recording): the pose
+// of a ViSP .pos file (ReadVispPose) when `pose_path` ends in .pos, else the line of that frame's
+// number in a pose list (ReadFramePoses's errors; INVALID_ARGUMENT when the image's name has no
+// number, NOT_FOUND when the list has no line for it).
+StatusOr<RigidTransform> ReadPoseOfFrame(const std::string& pose_path,
+                                         const std::string& image_path);
+
 struct FramePoseScore {
   int frame = 0;          // the image's number
   size_t inliers = 0;     // of the expected object's detection, when found

@@ -98,6 +98,23 @@ TEST_F(FramePosesTest, AMalformedLineIsAnErrorNamingTheFileAndLine) {
   EXPECT_EQ(ReadFramePoses(dir_.string()).status().code(), StatusCode::kNotFound);  // a folder
 }
 
+TEST_F(FramePosesTest, ThePoseOfAFrameComesFromAListOrAVispPoseFile) {
+  const std::string list = Write("poses.txt", "3 " + std::string(kIdentity) + " 0 0 0.5\n");
+  auto pose = ReadPoseOfFrame(list, "rec/images/color_image_0003.png");
+  ASSERT_TRUE(pose.ok()) << pose.status().ToString();
+  EXPECT_EQ(pose->t, cv::Vec3d(0, 0, 0.5));
+  EXPECT_EQ(ReadPoseOfFrame(list, "rec/images/color_image_0004.png").status().code(),
+            StatusCode::kNotFound);
+  EXPECT_EQ(ReadPoseOfFrame(list, "rec/images/first.png").status().code(),
+            StatusCode::kInvalidArgument);
+  // A ViSP .pos file (tx ty tz thetaux thetauy thetauz) is the pose whatever the frame.
+  const std::string visp = Write("first.pos", "0.1 0.2 0.7 0 0 1.5707963267948966\n");
+  pose = ReadPoseOfFrame(visp, "rec/images/first.png");
+  ASSERT_TRUE(pose.ok()) << pose.status().ToString();
+  EXPECT_EQ(pose->t, cv::Vec3d(0.1, 0.2, 0.7));
+  EXPECT_LT(cv::norm(pose->R - cv::Matx33d(0, -1, 0, 1, 0, 0, 0, 0, 1)), 1e-9);
+}
+
 TEST_F(FramePosesTest, FramesAreMatchedByNumberAndScored) {
   RigidTransform truth;
   truth.t = {0, 0, 0.5};

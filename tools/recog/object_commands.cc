@@ -30,6 +30,7 @@
 #include "tools/evaluation/frame_poses.h"
 #include "tools/evaluation/object_evaluation.h"
 #include "tools/evaluation/place_evaluation.h"
+#include "tools/evaluation/rgbd_recording.h"
 #include "tools/evaluation/visp_files.h"
 #include "tools/recog/commands.h"
 
@@ -63,11 +64,12 @@ json TimingJson(const RecognitionTiming& t) {
 // ---- recog model build / info ----
 
 struct ModelBuildArgs {
-  std::string roboearth, planar, rgbd, cad, output, name, vocabulary;
-  std::string pose, image, camera, recording;  // with --cad
+  std::string roboearth, planar, rgbd, cad, rgbd_recording, output, name, vocabulary;
+  std::string pose, image, camera, recording;  // with --cad (--pose, --camera: --rgbd-recording)
   double view_angle = RecordingLearningOptions().min_view_angle_deg;
-  std::string box, depth_camera, depth_from_color;  // with --rgbd
-  std::vector<std::string> faces;                   // side=IMAGE
+  std::string box, depth_camera, depth_from_color;          // with --rgbd (--box: --rgbd-recording)
+  double depth_scale = RgbdRecordingOptions().depth_scale;  // with --rgbd-recording
+  std::vector<std::string> faces;                           // side=IMAGE
   double width = 0, height = 0, depth = 0;
   bool no_images = false, quiet = false;
 };
@@ -126,6 +128,15 @@ StatusOr<RigidTransform> ParseDepthFromColor(const std::string& text) {
   return transform;
 }
 
+// Prints the views learned from a recording of `frames` frames after the first one.
+void PrintLearnedViews(const LearnedModel& learned, size_t frames) {
+  std::string names;
+  for (const PosedImage& view : learned.views) names += (names.empty() ? "" : ",") + view.name;
+  std::printf("%zu views (%s); the object was found in %zu of the %zu frames that follow %s\n",
+              learned.views.size(), names.c_str(), learned.frames_found, frames,
+              learned.views.front().name.c_str());
+}
+
 // A model from a CAD file of planar faces and one registered image (--cad --pose --image
 // --camera), e.g. the visp-cube; with --recording, the frames of the recording that follow the
 // image are followed and more views learned from them (recording_learner.h).
@@ -165,11 +176,40 @@ StatusOr<ObjectModel> BuildFromCad(const ModelBuildArgs& args, ModelBuilder* bui
                                               progress.Update("frames", done, total);
                                             }));
   progress.Finish();
-  std::string names;
-  for (const PosedImage& view : learned.views) names += (names.empty() ? "" : ",") + view.name;
-  std::printf("%zu views (%s); the object was found in %zu of the %zu frames that follow %s\n",
-              learned.views.size(), names.c_str(), learned.frames_found, frames.size(),
-              first.name.c_str());
+  PrintLearnedViews(learned, frames.size());
+  return std::move(learned.model);
+}
+
+// A model learned from an RGB-D recording (--rgbd-recording DIR with images/ and depth/) given
+// the first frame's pose (--pose: a ViSP .pos file or a pose list) and the object's box (--box);
+// see rgbd_recording.h.
+StatusOr<ObjectModel> BuildFromRgbdRecording(const ModelBuildArgs& args, ModelBuilder* builder) {
+  if (args.camera.empty() || args.pose.empty() || args.box.empty()) {
+    return Status::InvalidArgument("--rgbd-recording needs --camera, --pose and --box");
+  }
+  if (!args.image.empty() || !args.recording.empty()) {
+    return Status::InvalidArgument(
+        "--image and --recording go with --cad (--rgbd-recording starts at its first frame)");
+  }
+  RECOG_ASSIGN_OR_RETURN(const std::vector<RgbdRecordingFrame> frames,
+                         ListRgbdRecording(args.rgbd_recording));
+  RgbdRecordingOptions options;
+  fs::path folder = fs::path(args.rgbd_recording).lexically_normal();
+  if (!folder.has_filename()) folder = folder.parent_path();
+  options.name = args.name.empty() ? folder.filename().string() : args.name;
+  RECOG_ASSIGN_OR_RETURN(options.camera, ParseCamera(args.camera));
+  RECOG_ASSIGN_OR_RETURN(options.first_pose, ReadPoseOfFrame(args.pose, frames.front().image));
+  RECOG_ASSIGN_OR_RETURN(options.box, ParseBox(args.box));
+  options.depth_scale = args.depth_scale;
+  options.learning.min_view_angle_deg = args.view_angle;
+  ProgressBar progress(!args.quiet);
+  RECOG_ASSIGN_OR_RETURN(LearnedModel learned,
+                         LearnFromRgbdRecording(builder, frames, options,
+                                                [&](size_t done, size_t total, size_t /*views*/) {
+                                                  progress.Update("frames", done, total);
+                                                }));
+  progress.Finish();
+  PrintLearnedViews(learned, frames.size() - 1);
   return std::move(learned.model);
 }
 
@@ -198,17 +238,20 @@ StatusOr<ObjectModel> BuildFromRgbd(const ModelBuildArgs& args, ModelBuilder* bu
 }
 
 int RunModelBuild(const ModelBuildArgs& args) {
-  if (args.rgbd.empty() &&
-      !(args.box.empty() && args.depth_camera.empty() && args.depth_from_color.empty())) {
-    return Fail("model build", Status::InvalidArgument(
-                                   "--box, --depth-camera and --depth-from-color need --rgbd"));
+  if (args.rgbd.empty() && args.rgbd_recording.empty() && !args.box.empty()) {
+    return Fail("model build", Status::InvalidArgument("--box needs --rgbd or --rgbd-recording"));
+  }
+  if (args.rgbd.empty() && !(args.depth_camera.empty() && args.depth_from_color.empty())) {
+    return Fail("model build",
+                Status::InvalidArgument("--depth-camera and --depth-from-color need --rgbd"));
   }
   const int sources = int(!args.roboearth.empty()) +
                       int(!args.planar.empty() || !args.faces.empty()) + int(!args.rgbd.empty()) +
-                      int(!args.cad.empty());
+                      int(!args.cad.empty()) + int(!args.rgbd_recording.empty());
   if (sources != 1) {
-    return Fail("model build", Status::InvalidArgument("give exactly one of --roboearth, "
-                                                       "--planar/--face, --rgbd or --cad"));
+    return Fail("model build",
+                Status::InvalidArgument("give exactly one of --roboearth, --planar/--face, "
+                                        "--rgbd, --rgbd-recording or --cad"));
   }
   auto vocabulary = LoadObjectVocabulary(args.vocabulary);
   if (!vocabulary.ok()) return Fail("model build", vocabulary.status());
@@ -222,6 +265,8 @@ int RunModelBuild(const ModelBuildArgs& args) {
     model = BuildFromCad(args, &builder);
   } else if (!args.rgbd.empty()) {
     model = BuildFromRgbd(args, &builder);
+  } else if (!args.rgbd_recording.empty()) {
+    model = BuildFromRgbdRecording(args, &builder);
   } else {
     std::vector<FaceImage> faces;
     std::vector<std::string> specs = args.faces;
@@ -862,12 +907,23 @@ void AddObjectCommands(CLI::App& app, int* exit_code) {
   build->add_option("--rgbd", build_args->rgbd,
                     "RGB-D view list: lines 'rgb depth fx fy cx cy depth_scale r11..r33 t1 t2 t3 "
                     "[mask]' (pose T_camera<-object, paths relative to the list)");
+  CLI::Option* rgbd_recording = build->add_option(
+      "--rgbd-recording", build_args->rgbd_recording,
+      "Folder of an RGB-D recording: images/ (colour) and depth/ (16-bit, registered to colour), "
+      "paired by the number ending each file name; the object is followed from the first frame "
+      "(its pose: --pose) and views from new directions are learned (with --camera, --box)");
   build
       ->add_option("--box", build_args->box,
-                   "With --rgbd: the object's box W,H,D[,CX,CY,CZ] (metres, object frame, "
-                   "centred on CX,CY,CZ, default 0,0,0), projected into views without a mask; "
-                   "points outside it are dropped")
+                   "With --rgbd or --rgbd-recording: the object's box W,H,D[,CX,CY,CZ] (metres, "
+                   "object frame, centred on CX,CY,CZ, default 0,0,0), projected into views "
+                   "without a mask; points outside it are dropped")
       ->check(Accepts(ParseBox));
+  build
+      ->add_option("--depth-scale", build_args->depth_scale,
+                   "With --rgbd-recording: raw depth units per metre (1000: millimetres)")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber)
+      ->needs(rgbd_recording);
   build
       ->add_option("--depth-camera", build_args->depth_camera,
                    "With --rgbd: the depth images come from their own camera "
@@ -880,17 +936,22 @@ void AddObjectCommands(CLI::App& app, int* exit_code) {
       ->check(Accepts(ParseDepthFromColor));
   build->add_option("--cad", build_args->cad,
                     "ViSP .cao model of planar faces (with --pose, --image, --camera)");
-  build->add_option("--pose", build_args->pose, "ViSP .pos pose of the object in --image");
+  build->add_option("--pose", build_args->pose,
+                    "The object's pose: with --cad in --image, a ViSP .pos file; with "
+                    "--rgbd-recording in its first frame, a .pos file or a pose list (lines "
+                    "'NNNN r11..r33 tx ty tz', T_camera<-object, metres; the line of the first "
+                    "frame's number is used)");
   build->add_option("--image", build_args->image, "Registered image for --cad");
-  build->add_option("--camera", build_args->camera, "fx,fy,cx,cy of --image");
+  build->add_option("--camera", build_args->camera,
+                    "fx,fy,cx,cy of --image (--cad) or of the recording (--rgbd-recording)");
   build->add_option("--recording", build_args->recording,
                     "With --cad: folder of the recording --image belongs to; the object is "
                     "followed through the frames after --image and views from new directions "
                     "are added to the model");
   build
       ->add_option("--view-angle", build_args->view_angle,
-                   "With --recording: a frame becomes a view when it sees the object from a "
-                   "direction this far (degrees) from every view's")
+                   "With --recording or --rgbd-recording: a frame becomes a view when it sees "
+                   "the object from a direction this far (degrees) from every view's")
       ->capture_default_str()
       ->check(CLI::Range(1.0, 179.0));
   build->add_option("--name", build_args->name, "Object name (default: from the source)");
