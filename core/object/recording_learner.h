@@ -53,7 +53,9 @@ struct RecordingFrame {
 };
 
 // The model of a set of registered views (e.g. ModelBuilder::FromPosedPolygons with the object's
-// faces). Errors abort the learning.
+// faces). Each view keeps the name of its frame (`first`'s, or the RecordingFrame's), by which
+// the builder can find what else it has of that frame, e.g. its depth image for
+// ModelBuilder::FromRgbd. Errors abort the learning.
 using ModelFromViews = std::function<StatusOr<ObjectModel>(const std::vector<PosedImage>& views)>;
 
 // Called after every frame: frames done, frames in all, views chosen so far.

@@ -170,6 +170,10 @@ double RotationErrorDeg(const cv::Matx33d& a, const cv::Matx33d& b) {
   return std::acos(c) * 180.0 / CV_PI;
 }
 
+bool IsRotationMatrix(const cv::Matx33d& R) {
+  return cv::norm(R.t() * R - cv::Matx33d::eye()) <= 1e-3 && cv::determinant(R) > 0;
+}
+
 StatusOr<CameraIntrinsics> ParseCamera(const std::string& text) {
   RECOG_ASSIGN_OR_RETURN(const std::vector<double> values, ParseNumbers("--camera", text));
   if (values.size() != 4 && values.size() != 8 && values.size() != 9) {

@@ -44,6 +44,10 @@ void TransformView(ImageTransform transform, cv::Mat* image, CameraIntrinsics* c
 // Angle of R_a R_b^T in degrees.
 double RotationErrorDeg(const cv::Matx33d& a, const cv::Matx33d& b);
 
+// Whether R is a rotation matrix: R^T R = I within 1e-3 (norm of the difference) and det R > 0,
+// as a matrix written to a text file with a few decimals still is.
+bool IsRotationMatrix(const cv::Matx33d& R);
+
 enum class ObjectEvaluationMethod { kMerged, kIndependentViews };
 std::string_view ObjectEvaluationMethodName(ObjectEvaluationMethod method);  // "merged", ...
 StatusOr<ObjectEvaluationMethod> ParseObjectEvaluationMethod(std::string_view name);

@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <map>
 #include <memory>
 #include <optional>
 #include <set>
@@ -26,8 +27,10 @@
 #include "tools/common/cli_support.h"
 #include "tools/common/remote_support.h"
 #include "tools/common/server_flags.h"
+#include "tools/evaluation/frame_poses.h"
 #include "tools/evaluation/object_evaluation.h"
 #include "tools/evaluation/place_evaluation.h"
+#include "tools/evaluation/rgbd_recording.h"
 #include "tools/evaluation/visp_files.h"
 #include "tools/recog/commands.h"
 
@@ -61,11 +64,12 @@ json TimingJson(const RecognitionTiming& t) {
 // ---- recog model build / info ----
 
 struct ModelBuildArgs {
-  std::string roboearth, planar, rgbd, cad, output, name, vocabulary;
-  std::string pose, image, camera, recording;  // with --cad
+  std::string roboearth, planar, rgbd, cad, rgbd_recording, output, name, vocabulary;
+  std::string pose, image, camera, recording;  // with --cad (--pose, --camera: --rgbd-recording)
   double view_angle = RecordingLearningOptions().min_view_angle_deg;
-  std::string box, depth_camera, depth_from_color;  // with --rgbd
-  std::vector<std::string> faces;                   // side=IMAGE
+  std::string box, depth_camera, depth_from_color;          // with --rgbd (--box: --rgbd-recording)
+  double depth_scale = RgbdRecordingOptions().depth_scale;  // with --rgbd-recording
+  std::vector<std::string> faces;                           // side=IMAGE
   double width = 0, height = 0, depth = 0;
   bool no_images = false, quiet = false;
 };
@@ -118,11 +122,19 @@ StatusOr<RigidTransform> ParseDepthFromColor(const std::string& text) {
   RigidTransform transform;
   for (int k = 0; k < 9; ++k) transform.R.val[k] = v[size_t(k)];
   transform.t = {v[9], v[10], v[11]};
-  if (cv::norm(transform.R.t() * transform.R - cv::Matx33d::eye()) > 1e-3 ||
-      cv::determinant(transform.R) <= 0) {
+  if (!IsRotationMatrix(transform.R)) {
     return Status::InvalidArgument("--depth-from-color: R is not a rotation matrix");
   }
   return transform;
+}
+
+// Prints the views learned from a recording of `frames` frames after the first one.
+void PrintLearnedViews(const LearnedModel& learned, size_t frames) {
+  std::string names;
+  for (const PosedImage& view : learned.views) names += (names.empty() ? "" : ",") + view.name;
+  std::printf("%zu views (%s); the object was found in %zu of the %zu frames that follow %s\n",
+              learned.views.size(), names.c_str(), learned.frames_found, frames,
+              learned.views.front().name.c_str());
 }
 
 // A model from a CAD file of planar faces and one registered image (--cad --pose --image
@@ -164,11 +176,40 @@ StatusOr<ObjectModel> BuildFromCad(const ModelBuildArgs& args, ModelBuilder* bui
                                               progress.Update("frames", done, total);
                                             }));
   progress.Finish();
-  std::string names;
-  for (const PosedImage& view : learned.views) names += (names.empty() ? "" : ",") + view.name;
-  std::printf("%zu views (%s); the object was found in %zu of the %zu frames that follow %s\n",
-              learned.views.size(), names.c_str(), learned.frames_found, frames.size(),
-              first.name.c_str());
+  PrintLearnedViews(learned, frames.size());
+  return std::move(learned.model);
+}
+
+// A model learned from an RGB-D recording (--rgbd-recording DIR with images/ and depth/) given
+// the first frame's pose (--pose: a ViSP .pos file or a pose list) and the object's box (--box);
+// see rgbd_recording.h.
+StatusOr<ObjectModel> BuildFromRgbdRecording(const ModelBuildArgs& args, ModelBuilder* builder) {
+  if (args.camera.empty() || args.pose.empty() || args.box.empty()) {
+    return Status::InvalidArgument("--rgbd-recording needs --camera, --pose and --box");
+  }
+  if (!args.image.empty() || !args.recording.empty()) {
+    return Status::InvalidArgument(
+        "--image and --recording go with --cad (--rgbd-recording starts at its first frame)");
+  }
+  RECOG_ASSIGN_OR_RETURN(const std::vector<RgbdRecordingFrame> frames,
+                         ListRgbdRecording(args.rgbd_recording));
+  RgbdRecordingOptions options;
+  fs::path folder = fs::path(args.rgbd_recording).lexically_normal();
+  if (!folder.has_filename()) folder = folder.parent_path();
+  options.name = args.name.empty() ? folder.filename().string() : args.name;
+  RECOG_ASSIGN_OR_RETURN(options.camera, ParseCamera(args.camera));
+  RECOG_ASSIGN_OR_RETURN(options.first_pose, ReadPoseOfFrame(args.pose, frames.front().image));
+  RECOG_ASSIGN_OR_RETURN(options.box, ParseBox(args.box));
+  options.depth_scale = args.depth_scale;
+  options.learning.min_view_angle_deg = args.view_angle;
+  ProgressBar progress(!args.quiet);
+  RECOG_ASSIGN_OR_RETURN(LearnedModel learned,
+                         LearnFromRgbdRecording(builder, frames, options,
+                                                [&](size_t done, size_t total, size_t /*views*/) {
+                                                  progress.Update("frames", done, total);
+                                                }));
+  progress.Finish();
+  PrintLearnedViews(learned, frames.size() - 1);
   return std::move(learned.model);
 }
 
@@ -197,17 +238,20 @@ StatusOr<ObjectModel> BuildFromRgbd(const ModelBuildArgs& args, ModelBuilder* bu
 }
 
 int RunModelBuild(const ModelBuildArgs& args) {
-  if (args.rgbd.empty() &&
-      !(args.box.empty() && args.depth_camera.empty() && args.depth_from_color.empty())) {
-    return Fail("model build", Status::InvalidArgument(
-                                   "--box, --depth-camera and --depth-from-color need --rgbd"));
+  if (args.rgbd.empty() && args.rgbd_recording.empty() && !args.box.empty()) {
+    return Fail("model build", Status::InvalidArgument("--box needs --rgbd or --rgbd-recording"));
+  }
+  if (args.rgbd.empty() && !(args.depth_camera.empty() && args.depth_from_color.empty())) {
+    return Fail("model build",
+                Status::InvalidArgument("--depth-camera and --depth-from-color need --rgbd"));
   }
   const int sources = int(!args.roboearth.empty()) +
                       int(!args.planar.empty() || !args.faces.empty()) + int(!args.rgbd.empty()) +
-                      int(!args.cad.empty());
+                      int(!args.cad.empty()) + int(!args.rgbd_recording.empty());
   if (sources != 1) {
-    return Fail("model build", Status::InvalidArgument("give exactly one of --roboearth, "
-                                                       "--planar/--face, --rgbd or --cad"));
+    return Fail("model build",
+                Status::InvalidArgument("give exactly one of --roboearth, --planar/--face, "
+                                        "--rgbd, --rgbd-recording or --cad"));
   }
   auto vocabulary = LoadObjectVocabulary(args.vocabulary);
   if (!vocabulary.ok()) return Fail("model build", vocabulary.status());
@@ -221,6 +265,8 @@ int RunModelBuild(const ModelBuildArgs& args) {
     model = BuildFromCad(args, &builder);
   } else if (!args.rgbd.empty()) {
     model = BuildFromRgbd(args, &builder);
+  } else if (!args.rgbd_recording.empty()) {
+    model = BuildFromRgbdRecording(args, &builder);
   } else {
     std::vector<FaceImage> faces;
     std::vector<std::string> specs = args.faces;
@@ -442,8 +488,9 @@ struct EvalSequenceArgs {
   std::vector<std::string> models;
   std::string images, camera, expect, draw, vocabulary;
   std::string truth, size_recall = "size_recall";  // --truth, --size-recall
-  SizeRecallOptions size_options;
-  std::vector<std::string> exclude;  // frames (file stems) processed but not counted
+  std::string poses, pose_errors = "pose_errors";  // --poses, --pose-errors
+  SizeRecallOptions size_options;                  // its pose limits serve --poses too
+  std::vector<std::string> exclude;                // frames (file stems) processed but not counted
   bool json = false, quiet = false;
   bool track = false;  // follow the object with an ObjectTracker, as a stream does
 };
@@ -526,13 +573,76 @@ class SizeRecallReport {
   std::vector<TruthFrameScore> scores_;
 };
 
+// --poses: the pose error of every frame with a pose in the list (CSV + PNG + JSON + a line).
+class PoseErrorReport {
+ public:
+  Status Open(const EvalSequenceArgs& args) {
+    if (args.poses.empty()) return Status::Ok();
+    RECOG_ASSIGN_OR_RETURN(poses_, ReadFramePoses(args.poses));
+    return Status::Ok();
+  }
+  bool enabled() const { return !poses_.empty(); }
+
+  // A frame that counts (not excluded by --exclude).
+  void Add(const EvalSequenceArgs& args, const std::string& image,
+           const std::vector<Detection>& detections, json* frame) {
+    if (!enabled()) return;
+    const std::optional<FramePoseScore> s =
+        ScoreFramePose(poses_, image, args.expect, detections, args.size_options);
+    if (!s) {
+      ++frames_without_pose_;
+      return;
+    }
+    scores_.push_back(*s);
+    if (!s->score.found) return;
+    (*frame)["rotation_error_deg"] = s->score.rotation_error_deg;
+    (*frame)["translation_error_m"] = s->score.translation_error_m;
+  }
+
+  Status Finish(const EvalSequenceArgs& args, json* out) {
+    if (!enabled()) return Status::Ok();
+    const PoseErrorSummary r = SummarisePoseErrors(scores_);
+    const std::string csv = args.pose_errors + ".csv", png = args.pose_errors + ".png";
+    RECOG_RETURN_IF_ERROR(WritePoseErrorCsv(scores_, csv));
+    RECOG_RETURN_IF_ERROR(
+        WritePoseErrorPlot(scores_, "Pose errors of '" + args.expect + "' on " + args.images, png));
+    (*out)["poses"] = {{"frames_with_pose", r.frames_with_pose},
+                       {"frames_without_pose", frames_without_pose_},
+                       {"found", r.found},
+                       {"recall", r.recall},
+                       {"wrong_objects", r.wrong_objects},
+                       {"median_rotation_error_deg", r.median_rotation_error_deg},
+                       {"median_translation_error_m", r.median_translation_error_m},
+                       {"correct_pose", r.correct_pose},
+                       {"max_rotation_error_deg", args.size_options.max_rotation_error_deg},
+                       {"max_translation_error", args.size_options.max_translation_error},
+                       {"csv", csv},
+                       {"plot", png}};
+    if (args.json) return Status::Ok();
+    std::printf(
+        "frames with a pose %zu (%zu without): found in %zu (recall %.1f %%), correct pose in %zu "
+        "(<= %.1f deg, <= %.0f %% of the distance), median errors %.2f deg, %.2f cm; %zu wrong "
+        "objects\n",
+        r.frames_with_pose, frames_without_pose_, r.found, 100 * r.recall, r.correct_pose,
+        args.size_options.max_rotation_error_deg, 100 * args.size_options.max_translation_error,
+        r.median_rotation_error_deg, 100 * r.median_translation_error_m, r.wrong_objects);
+    std::printf("pose errors: %s, %s\n", csv.c_str(), png.c_str());
+    return Status::Ok();
+  }
+
+ private:
+  std::map<int, RigidTransform> poses_;
+  std::vector<FramePoseScore> scores_;
+  size_t frames_without_pose_ = 0;
+};
+
 // Recognises every frame of a sequence in which one known object (--expect) is visible: recall
 // is the fraction of frames where it is found; any other object reported is a false positive.
 // With --track the frames go through an ObjectTracker (object_tracker.h) as in a stream: each
 // frame is either recognised (the full search ran) or only tracked, and the medians of both kinds
 // of frame are reported, with the tracking time per tracked object. Frames named by --exclude
 // (e.g. the model's own training views) are processed like the others, so that tracking sees
-// the same stream, but left out of recall and false positives.
+// the same stream, but left out of recall and false positives (and of the --poses report).
 int RunEvalSequence(const EvalSequenceArgs& args) {
   auto camera = ParseCamera(args.camera);
   if (!camera.ok()) return Fail("eval sequence", camera.status());
@@ -558,6 +668,8 @@ int RunEvalSequence(const EvalSequenceArgs& args) {
   }
   SizeRecallReport size_recall;
   if (Status s = size_recall.Open(args); !s.ok()) return Fail("eval sequence", s);
+  PoseErrorReport pose_errors;
+  if (Status s = pose_errors.Open(args); !s.ok()) return Fail("eval sequence", s);
   if (!args.draw.empty()) fs::create_directories(args.draw);
   ObjectRecognizer recognizer(database);
   ObjectTracker tracker(database);
@@ -617,6 +729,7 @@ int RunEvalSequence(const EvalSequenceArgs& args) {
     if (Status s = size_recall.Add(args, (*frames)[i], detections, &frame); !s.ok()) {
       return Fail("eval sequence", s);
     }
+    if (count) pose_errors.Add(args, (*frames)[i], detections, &frame);
     per_frame.push_back(std::move(frame));
     if (!args.draw.empty() && !detections.empty()) {
       cv::Mat canvas;
@@ -652,6 +765,7 @@ int RunEvalSequence(const EvalSequenceArgs& args) {
   }
   if (args.json) {
     if (Status s = size_recall.Finish(args, &out); !s.ok()) return Fail("eval sequence", s);
+    if (Status s = pose_errors.Finish(args, &out); !s.ok()) return Fail("eval sequence", s);
     std::printf("%s\n", out.dump(2).c_str());
   } else {
     const std::string left_out =
@@ -668,6 +782,7 @@ int RunEvalSequence(const EvalSequenceArgs& args) {
           Median(tracked_totals), Median(per_object));
     }
     if (Status s = size_recall.Finish(args, &out); !s.ok()) return Fail("eval sequence", s);
+    if (Status s = pose_errors.Finish(args, &out); !s.ok()) return Fail("eval sequence", s);
   }
   return 0;
 }
@@ -792,12 +907,23 @@ void AddObjectCommands(CLI::App& app, int* exit_code) {
   build->add_option("--rgbd", build_args->rgbd,
                     "RGB-D view list: lines 'rgb depth fx fy cx cy depth_scale r11..r33 t1 t2 t3 "
                     "[mask]' (pose T_camera<-object, paths relative to the list)");
+  CLI::Option* rgbd_recording = build->add_option(
+      "--rgbd-recording", build_args->rgbd_recording,
+      "Folder of an RGB-D recording: images/ (colour) and depth/ (16-bit, registered to colour), "
+      "paired by the number ending each file name; the object is followed from the first frame "
+      "(its pose: --pose) and views from new directions are learned (with --camera, --box)");
   build
       ->add_option("--box", build_args->box,
-                   "With --rgbd: the object's box W,H,D[,CX,CY,CZ] (metres, object frame, "
-                   "centred on CX,CY,CZ, default 0,0,0), projected into views without a mask; "
-                   "points outside it are dropped")
+                   "With --rgbd or --rgbd-recording: the object's box W,H,D[,CX,CY,CZ] (metres, "
+                   "object frame, centred on CX,CY,CZ, default 0,0,0), projected into views "
+                   "without a mask; points outside it are dropped")
       ->check(Accepts(ParseBox));
+  build
+      ->add_option("--depth-scale", build_args->depth_scale,
+                   "With --rgbd-recording: raw depth units per metre (1000: millimetres)")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber)
+      ->needs(rgbd_recording);
   build
       ->add_option("--depth-camera", build_args->depth_camera,
                    "With --rgbd: the depth images come from their own camera "
@@ -810,17 +936,22 @@ void AddObjectCommands(CLI::App& app, int* exit_code) {
       ->check(Accepts(ParseDepthFromColor));
   build->add_option("--cad", build_args->cad,
                     "ViSP .cao model of planar faces (with --pose, --image, --camera)");
-  build->add_option("--pose", build_args->pose, "ViSP .pos pose of the object in --image");
+  build->add_option("--pose", build_args->pose,
+                    "The object's pose: with --cad in --image, a ViSP .pos file; with "
+                    "--rgbd-recording in its first frame, a .pos file or a pose list (lines "
+                    "'NNNN r11..r33 tx ty tz', T_camera<-object, metres; the line of the first "
+                    "frame's number is used)");
   build->add_option("--image", build_args->image, "Registered image for --cad");
-  build->add_option("--camera", build_args->camera, "fx,fy,cx,cy of --image");
+  build->add_option("--camera", build_args->camera,
+                    "fx,fy,cx,cy of --image (--cad) or of the recording (--rgbd-recording)");
   build->add_option("--recording", build_args->recording,
                     "With --cad: folder of the recording --image belongs to; the object is "
                     "followed through the frames after --image and views from new directions "
                     "are added to the model");
   build
       ->add_option("--view-angle", build_args->view_angle,
-                   "With --recording: a frame becomes a view when it sees the object from a "
-                   "direction this far (degrees) from every view's")
+                   "With --recording or --rgbd-recording: a frame becomes a view when it sees "
+                   "the object from a direction this far (degrees) from every view's")
       ->capture_default_str()
       ->check(CLI::Range(1.0, 179.0));
   build->add_option("--name", build_args->name, "Object name (default: from the source)");
@@ -909,26 +1040,39 @@ void AddEvalObjectsCommand(CLI::App& eval, int* exit_code) {
   sequence->add_option("--vocab", sequence_args->vocabulary, "Vocabulary");
   sequence->add_flag("--track", sequence_args->track,
                      "Track the objects from frame to frame (as StreamRecognizeObjects does)");
-  sequence->add_option("--truth", sequence_args->truth,
-                       "Ground truth of recog seqgen objects (truth.txt): pose errors per frame "
-                       "and recall against object size");
+  CLI::Option* truth =
+      sequence->add_option("--truth", sequence_args->truth,
+                           "Ground truth of recog seqgen objects (truth.txt): pose errors per "
+                           "frame and recall against object size");
   sequence
       ->add_option("--size-recall", sequence_args->size_recall,
                    "With --truth: write PREFIX.csv and PREFIX.png")
       ->capture_default_str();
   sequence
+      ->add_option("--poses", sequence_args->poses,
+                   "The object's pose per frame (lines 'NNNN r11..r33 tx ty tz', T_camera<-object, "
+                   "metres, '#' comments; a frame is the line of the number ending its file "
+                   "name): recall over the frames with a pose and the pose error of each")
+      ->excludes(truth);
+  sequence
+      ->add_option("--pose-errors", sequence_args->pose_errors,
+                   "With --poses: write PREFIX.csv (a line per frame with a pose) and PREFIX.png "
+                   "(the errors over the frames)")
+      ->capture_default_str();
+  sequence
       ->add_option("--max-rotation-error", sequence_args->size_options.max_rotation_error_deg,
-                   "With --truth: largest rotation error of a right pose, degrees")
+                   "With --truth or --poses: largest rotation error of a right pose, degrees")
       ->capture_default_str();
   sequence
       ->add_option("--max-translation-error", sequence_args->size_options.max_translation_error,
-                   "With --truth: largest translation error of a right pose, fraction of the "
-                   "distance")
+                   "With --truth or --poses: largest translation error of a right pose, "
+                   "fraction of the distance")
       ->capture_default_str();
   sequence
       ->add_option("--exclude", sequence_args->exclude,
                    "Frames (file names without extension, comma-separated) processed but "
-                   "left out of recall and false positives, e.g. the model's training views")
+                   "left out of recall, false positives and --poses, e.g. the model's training "
+                   "views")
       ->delimiter(',');
   sequence->add_flag("--json", sequence_args->json, "Print JSON");
   sequence->add_flag("-q,--quiet", sequence_args->quiet, "No progress output");

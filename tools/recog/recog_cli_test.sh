@@ -118,6 +118,82 @@ assert set(d['per_frame'][0]['truth']) == {'visible', 'area_fraction', 'found', 
 assert open('$tmp/size.csv').readline().startswith('area_lo,area_hi,median_area,frames,found,correct,recall')
 assert open('$tmp/size.png', 'rb').read(4) == b'\x89PNG'
 " && pass || fail "eval sequence --truth reports recall per size bin (JSON, CSV, PNG)"
+# eval sequence --poses: a pose list of frames 1-5 made from the truth (frame 6 has no pose),
+# frame 2 excluded.
+awk '$1 == "frame" && $2 != "000006.png" {
+  sub(/[.]png$/, "", $2); line = $2; for (i = 6; i <= 17; ++i) line = line " " $i; print line }' \
+  "$tmp/objseq/truth.txt" >"$tmp/objseq-poses.txt"
+expect_ok "eval sequence --poses --json" "$recog" eval sequence --models "$tmp/objseq.robj" \
+  --images "$tmp/objseq/images" --camera 525,525,319.5,239.5 --expect synthetic-poster \
+  --poses "$tmp/objseq-poses.txt" --pose-errors "$tmp/pose_errors" --exclude 000002 --json -q
+json_check "eval sequence --poses reports recall and pose errors over the frames with a pose" "
+import csv
+p = d['poses']
+assert set(p) == {'frames_with_pose', 'frames_without_pose', 'found', 'recall', 'wrong_objects',
+                  'median_rotation_error_deg', 'median_translation_error_m', 'correct_pose',
+                  'max_rotation_error_deg', 'max_translation_error', 'csv', 'plot'}, p
+assert p['frames_with_pose'] == 4 and p['frames_without_pose'] == 1, p
+scored = [f for f in d['per_frame'] if not f.get('excluded') and f['frame'] != '000006.png']
+found = [f for f in scored if 'synthetic-poster' in f['objects']]
+assert p['found'] == len(found) and 0 <= p['correct_pose'] <= p['found'], p
+assert abs(p['recall'] - p['found'] / 4) < 1e-12, p
+assert p['wrong_objects'] == sum(o != 'synthetic-poster' for f in scored for o in f['objects']), p
+assert all('rotation_error_deg' in f and 'translation_error_m' in f for f in found), found
+assert all('rotation_error_deg' not in f for f in d['per_frame'] if f not in found), d['per_frame']
+rows = list(csv.DictReader(open('$tmp/pose_errors.csv')))
+assert [r['frame'] for r in rows] == ['1', '3', '4', '5'], rows
+assert sum(r['found'] == '1' for r in rows) == p['found'], rows
+assert sum(int(r['wrong_objects']) for r in rows) == p['wrong_objects'], rows
+assert p['csv'] == '$tmp/pose_errors.csv' and open(p['plot'], 'rb').read(4) == b'\x89PNG', p
+"
+printf '# frame pose\n1 1 0 0 0 1 0 0 0 1 0 0\n' >"$tmp/garbage-poses.txt"
+expect_error "eval sequence --poses of a malformed list" "INVALID_ARGUMENT.*garbage-poses.txt:2: .*12 fields" \
+  "$recog" eval sequence --models "$tmp/objseq.robj" --images "$tmp/objseq/images" \
+  --camera 525,525,319.5,239.5 --expect synthetic-poster --poses "$tmp/garbage-poses.txt" -q
+expect_error "eval sequence --poses of a missing file" "NOT_FOUND" "$recog" eval sequence \
+  --models "$tmp/objseq.robj" --images "$tmp/objseq/images" --camera 525,525,319.5,239.5 \
+  --expect synthetic-poster --poses "$tmp/none.txt" -q
+expect_usage_error "eval sequence with --poses and --truth" "excludes" "$recog" eval sequence \
+  --models "$tmp/objseq.robj" --images "$tmp/objseq/images" --camera 525,525,319.5,239.5 \
+  --expect synthetic-poster --poses "$tmp/objseq-poses.txt" --truth "$tmp/objseq/truth.txt" -q
+# model build --rgbd-recording: the sequence's images/ and depth/, from frame 1's pose.
+rec_args=(--camera 525,525,319.5,239.5 --box 0.3,0.21,0.02 --name synthetic-poster --no-images -q)
+expect_ok "model build --rgbd-recording" "$recog" model build --rgbd-recording "$tmp/objseq" \
+  --pose "$tmp/objseq-poses.txt" "${rec_args[@]}" -o "$tmp/rec.robj"
+grep -Eq "^[1-9][0-9]* views \(000001[,0-9]*\); the object was found in [0-5] of the 5 frames that follow 000001\$" "$tmp/out" \
+  && grep -q "^synthetic-poster: 3D object" "$tmp/out" && pass \
+  || fail "model build --rgbd-recording prints the views it chose: $(cat "$tmp/out")"
+mkdir -p "$tmp/rec-bad"
+cp -r "$tmp/objseq/images" "$tmp/objseq/depth" "$tmp/rec-bad/"
+rm "$tmp/rec-bad/depth/000003.png"
+expect_error "model build --rgbd-recording with a frame without depth" "NOT_FOUND.*no depth image of frame 3" \
+  "$recog" model build --rgbd-recording "$tmp/rec-bad" --pose "$tmp/objseq-poses.txt" "${rec_args[@]}" -o "$tmp/m.robj"
+cp "$tmp/objseq/depth/000003.png" "$tmp/rec-bad/depth/"
+cp "$tmp/objseq/masks/000001.png" "$tmp/rec-bad/depth/000001.png"
+expect_error "model build --rgbd-recording with an 8-bit depth image" "INVALID_ARGUMENT.*must be CV_16UC1" \
+  "$recog" model build --rgbd-recording "$tmp/rec-bad" --pose "$tmp/objseq-poses.txt" "${rec_args[@]}" -o "$tmp/m.robj"
+expect_error "model build --rgbd-recording of a missing folder" "NOT_FOUND" "$recog" model build \
+  --rgbd-recording "$tmp/none" --pose "$tmp/objseq-poses.txt" "${rec_args[@]}" -o "$tmp/m.robj"
+expect_error "model build --rgbd-recording with a missing pose file" "NOT_FOUND" "$recog" model build \
+  --rgbd-recording "$tmp/objseq" --pose "$tmp/none.txt" "${rec_args[@]}" -o "$tmp/m.robj"
+expect_error "model build --rgbd-recording with a malformed pose file" "garbage-poses.txt:2: " "$recog" model build \
+  --rgbd-recording "$tmp/objseq" --pose "$tmp/garbage-poses.txt" "${rec_args[@]}" -o "$tmp/m.robj"
+grep -v '^000001 ' "$tmp/objseq-poses.txt" >"$tmp/later-poses.txt"
+expect_error "model build --rgbd-recording without the first frame's pose" "NOT_FOUND.*no line for frame 1" \
+  "$recog" model build --rgbd-recording "$tmp/objseq" --pose "$tmp/later-poses.txt" "${rec_args[@]}" -o "$tmp/m.robj"
+expect_error "model build --rgbd-recording without --box" "needs --camera, --pose and --box" "$recog" model build \
+  --rgbd-recording "$tmp/objseq" --pose "$tmp/objseq-poses.txt" --camera 525,525,319.5,239.5 -o "$tmp/m.robj"
+expect_error "model build --rgbd-recording with --image" "go with --cad" "$recog" model build \
+  --rgbd-recording "$tmp/objseq" --pose "$tmp/objseq-poses.txt" "${rec_args[@]}" \
+  --image "$tmp/objseq/images/000001.png" -o "$tmp/m.robj"
+expect_error "model build --rgbd-recording with --cad" "exactly one of" "$recog" model build \
+  --rgbd-recording "$tmp/objseq" --cad "$tmp/none.cao" --pose "$tmp/objseq-poses.txt" "${rec_args[@]}" -o "$tmp/m.robj"
+expect_error "model build --rgbd-recording with --depth-camera" "need --rgbd" "$recog" model build \
+  --rgbd-recording "$tmp/objseq" --pose "$tmp/objseq-poses.txt" "${rec_args[@]}" \
+  --depth-camera 525,525,319.5,239.5 --depth-from-color 1,0,0,0,1,0,0,0,1,0,0,0 -o "$tmp/m.robj"
+expect_usage_error "model build --depth-scale without --rgbd-recording" "--depth-scale" "$recog" model build \
+  --planar "$images/1.jpg" --width 0.64 --height 0.48 --depth-scale 1000 -o "$tmp/m.robj"
+[ ! -e "$tmp/m.robj" ] && pass || fail "model build --rgbd-recording writes nothing on bad input"
 expect_error "seqgen objects from a missing folder" "NOT_FOUND" "$recog" seqgen objects --object-photos "$tmp/none" \
   --background-photos "$tmp/background_photos" -o "$tmp/objseq2"
 expect_error "seqgen objects with a bad size" "object width" "$recog" seqgen objects --object-photos "$tmp/object_photos" \
@@ -254,7 +330,7 @@ cp "$images/1.jpg" "$tmp/rgb.jpg"
 echo "rgb.jpg depth.png 500 500 256 192 1000 1 0 0 0 1 0 0 0 1 0 0 1 black.png" >"$tmp/rgbd.txt"
 expect_error "model build of RGB-D views with a black mask" "'rgb' gives no object point" \
   "$recog" model build --rgbd "$tmp/rgbd.txt" -o "$tmp/m.robj"
-expect_error "model build --box without --rgbd" "need --rgbd" "$recog" model build \
+expect_error "model build --box without --rgbd" "--box needs --rgbd or --rgbd-recording" "$recog" model build \
   --planar "$images/1.jpg" --width 0.64 --height 0.48 --box 0.1,0.1,0.1 -o "$tmp/m.robj"
 expect_usage_error "model build with a bad --box" "--box" "$recog" model build \
   --rgbd "$tmp/rgbd.txt" --box 0.1,-0.1,0.1 -o "$tmp/m.robj"
