@@ -133,6 +133,10 @@ Status ValidateOrb(const OrbOptions& o) {
   }
   RECOG_RETURN_IF_ERROR(CheckIntRange("orb.grid_rows", o.grid_rows, 0, kMaxGridSide));
   RECOG_RETURN_IF_ERROR(CheckIntRange("orb.grid_cols", o.grid_cols, 0, kMaxGridSide));
+  if (!(std::isfinite(o.grid_fill_cap) && o.grid_fill_cap >= 0)) {
+    return Status::InvalidArgument(OutOfRange(
+        "orb.grid_fill_cap", "0 (no fill) or a positive number", ToText(o.grid_fill_cap)));
+  }
   return Status::Ok();
 }
 
@@ -219,9 +223,10 @@ class OrbExtractor final : public FeatureExtractor {
   }
 
   // Keeps, in each grid cell, its strongest max_features / cells candidates. The remainder of
-  // that division goes one keypoint each to the cells whose next candidate is strongest, so no
-  // cell ever holds more than ceil(max_features / cells) and the total never exceeds
-  // max_features.
+  // that division goes one keypoint each to the cells whose next candidate is strongest. With
+  // grid_fill_cap, the share that cells short of corners leave unused goes to the strongest
+  // candidates left, each cell holding at most grid_fill_cap x max_features / cells in all. The
+  // total never exceeds max_features.
   void BucketByGrid(cv::Size size) {
     const int rows = options_.grid_rows;
     const int cols = options_.grid_cols;
@@ -237,19 +242,38 @@ class OrbExtractor final : public FeatureExtractor {
       cell_members_[size_t(r * cols + c)].push_back(i);  // strongest first within the cell
     }
 
-    const size_t base = size_t(options_.max_features / cells);
-    size_t extra = size_t(options_.max_features % cells);
+    const size_t budget = size_t(options_.max_features);
+    const size_t base = budget / size_t(cells);
+    taken_.assign(size_t(cells), 0);
     selected_.clear();
-    std::vector<size_t> runners_up;  // next-best candidate of each cell with one to spare
-    for (const auto& members : cell_members_) {
-      const size_t take = std::min(base, members.size());
-      selected_.insert(selected_.end(), members.begin(), members.begin() + ptrdiff_t(take));
-      if (members.size() > base) runners_up.push_back(members[base]);
+    std::vector<std::pair<size_t, size_t>> runners_up;  // (candidate, cell) with one to spare
+    for (size_t c = 0; c < cell_members_.size(); ++c) {
+      const auto& members = cell_members_[c];
+      taken_[c] = std::min(base, members.size());
+      selected_.insert(selected_.end(), members.begin(), members.begin() + ptrdiff_t(taken_[c]));
+      if (members.size() > base) runners_up.emplace_back(members[base], c);
     }
     // Candidate indices follow StrongerFirst order, so the smallest index is the strongest.
     std::sort(runners_up.begin(), runners_up.end());
-    extra = std::min(extra, runners_up.size());
-    selected_.insert(selected_.end(), runners_up.begin(), runners_up.begin() + ptrdiff_t(extra));
+    const size_t extra = std::min(budget % size_t(cells), runners_up.size());
+    for (size_t k = 0; k < extra; ++k) {
+      selected_.push_back(runners_up[k].first);
+      ++taken_[runners_up[k].second];
+    }
+
+    if (options_.grid_fill_cap > 0 && selected_.size() < budget) {
+      const size_t cap = size_t(options_.grid_fill_cap * double(budget) / double(cells));
+      fill_.clear();
+      for (size_t c = 0; c < cell_members_.size(); ++c) {
+        const auto& members = cell_members_[c];
+        const size_t end = std::min(members.size(), std::max(cap, taken_[c]));
+        fill_.insert(fill_.end(), members.begin() + ptrdiff_t(taken_[c]),
+                     members.begin() + ptrdiff_t(end));
+      }
+      std::sort(fill_.begin(), fill_.end());
+      const size_t more = std::min(budget - selected_.size(), fill_.size());
+      selected_.insert(selected_.end(), fill_.begin(), fill_.begin() + ptrdiff_t(more));
+    }
 
     std::sort(selected_.begin(), selected_.end());
     std::vector<cv::KeyPoint> kept;
@@ -267,6 +291,8 @@ class OrbExtractor final : public FeatureExtractor {
   std::vector<cv::KeyPoint> keypoints_;
   std::vector<std::vector<size_t>> cell_members_;
   std::vector<size_t> selected_;
+  std::vector<size_t> taken_;  // per cell: candidates selected
+  std::vector<size_t> fill_;   // candidates that may fill the unused share
 };
 
 // ---------------------------------------------------------------------------------------------

@@ -3,8 +3,11 @@
 // Three extractors share one interface:
 //  - ORB (OpenCV): the default for places and objects. Optional grid bucketing spreads the
 //    features over the image: the image is cut into grid_rows x grid_cols cells and each cell
-//    keeps its strongest max_features / cells keypoints (cells short of corners leave their share
-//    unused), so a textured corner cannot take every feature.
+//    keeps its strongest max_features / cells keypoints, so a textured corner cannot take every
+//    feature. The share that cells short of corners leave is unused, or, with grid_fill_cap,
+//    goes to the strongest keypoints left in cells that hold fewer than grid_fill_cap times a
+//    cell's share (an object on a plain background keeps its features; clutter cannot take
+//    them all).
 //  - FAST + BRIEF as in thesis §4.2: FAST-9 corners, 256 intensity tests in a 48x48 patch of the
 //    Gaussian-smoothed image, with the "close pairs" pattern (a ~ N(0, S^2/25),
 //    b ~ N(a, 4 S^2/625)) drawn once from a fixed seed. No orientation, one scale.
@@ -40,6 +43,9 @@ struct OrbOptions {
   int edge_threshold = 31;    // border without features, in pixels (>= patch size 31)
   int grid_rows = 0;          // 0 = no bucketing
   int grid_cols = 0;
+  // With a grid: 0 = a cell's unused share stays unused; > 0 = it goes to the strongest keypoints
+  // left in cells holding fewer than grid_fill_cap x max_features / cells.
+  double grid_fill_cap = 0;
 };
 
 struct BriefOptions {

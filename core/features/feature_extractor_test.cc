@@ -173,6 +173,8 @@ TEST(FeatureOptionsTest, ValidateRejectsEachOutOfRangeValueNamingTheField) {
          o.orb.grid_rows = 4;
          o.orb.grid_cols = 257;
        }},
+      {"orb.grid_fill_cap", [](FeatureOptions& o) { o.orb.grid_fill_cap = -1; }},
+      {"orb.grid_fill_cap", [](FeatureOptions& o) { o.orb.grid_fill_cap = std::nan(""); }},
       {"orb.max_features", [](FeatureOptions& o) { o.orb.max_features = 2'000'000; }},
       {"brief.max_features", [](FeatureOptions& o) { o.brief.max_features = 0; }},
       {"brief.fast_threshold", [](FeatureOptions& o) { o.brief.fast_threshold = 0; }},
@@ -462,6 +464,33 @@ TEST(OrbTest, GridSpreadsFeaturesOverMoreOfTheImage) {
   EXPECT_LT(double(busiest_grid) / double(with_grid.size()),
             double(busiest_plain) / double(without_grid.size()));
   EXPECT_GT(OccupiedCells(cells_grid), OccupiedCells(cells_plain));
+}
+
+TEST(OrbTest, GridFillGivesTheShareOfPlainCellsToTexturedOnesUpToTheCap) {
+  // The corridor frame with its left half blanked: the plain cells find no corner, so a plain
+  // grid leaves their share unused; the fill hands it to the textured cells, none beyond the cap.
+  cv::Mat image = LoadGray("1.jpg").clone();
+  image(cv::Rect(0, 0, image.cols / 2, image.rows)).setTo(128);
+  FeatureOptions plain = OptionsFor(FeatureType::kOrb);
+  plain.orb.max_features = 320;
+  plain.orb.grid_rows = plain.orb.grid_cols = 4;  // a share of 20 a cell
+  FeatureOptions filled = plain;
+  filled.orb.grid_fill_cap = 2;
+  const FeatureSet without_fill = ExtractOrDie(plain, image);
+  const FeatureSet with_fill = ExtractOrDie(filled, image);
+  EXPECT_LE(without_fill.size(), 160u);  // the 8 textured cells, 20 each at most
+  EXPECT_GT(with_fill.size(), without_fill.size() + 40);
+  EXPECT_LE(with_fill.size(), 320u);
+  EXPECT_TRUE(SortedByDecreasingResponse(with_fill));
+  EXPECT_EQ(with_fill.descriptors.rows, int(with_fill.size()));
+  const std::vector<int> cells = CellCounts(with_fill, image.size(), 4, 4);
+  for (int count : cells) EXPECT_LE(count, 40);  // 2 shares
+  // Every feature the plain grid kept is kept with the fill (it only adds).
+  for (const cv::KeyPoint& kept : without_fill.keypoints) {
+    EXPECT_TRUE(std::any_of(with_fill.keypoints.begin(), with_fill.keypoints.end(),
+                            [&](const cv::KeyPoint& k) { return k.pt == kept.pt; }))
+        << kept.pt;
+  }
 }
 
 TEST(OrbTest, GridWithMoreCellsThanFeaturesGivesTheStrongestCellsOneEach) {
