@@ -67,12 +67,14 @@ RigidTransform RefinePose(const cv::Matx33d& K, const RigidTransform& pose,
 bool RansacPnp(const cv::Matx33d& K, const std::vector<cv::Point3f>& object,
                const std::vector<cv::Point2f>& image, int iterations, double threshold_px,
                uint64_t seed, RigidTransform* pose, std::vector<uint32_t>* inliers) {
-  constexpr int kSample = 5;
+  constexpr int kSample = 3;
+  constexpr size_t kMinInliers = 5;
   const size_t n = object.size();
-  if (n < kSample) return false;
+  if (n < kMinInliers) return false;
   std::mt19937_64 rng(seed);
   std::vector<cv::Point3f> sample_object(kSample);
   std::vector<cv::Point2f> sample_image(kSample);
+  std::vector<cv::Mat> rvecs, tvecs;
   std::vector<uint32_t> candidate;
   inliers->clear();
   // Adaptive stop: enough iterations to draw, with 99 % confidence, one all-inlier sample at the
@@ -89,21 +91,27 @@ bool RansacPnp(const cv::Matx33d& K, const std::vector<cv::Point3f>& object,
       sample_object[k] = object[picked[k]];
       sample_image[k] = image[picked[k]];
     }
-    cv::Vec3d rvec, tvec;
     try {
-      if (!cv::solvePnP(sample_object, sample_image, K, cv::noArray(), rvec, tvec, false,
-                        cv::SOLVEPNP_EPNP)) {
+      if (cv::solveP3P(sample_object, sample_image, K, cv::noArray(), rvecs, tvecs,
+                       cv::SOLVEPNP_P3P) == 0) {
         continue;
       }
     } catch (const cv::Exception&) {
       continue;  // a degenerate sample
     }
-    if (!std::isfinite(rvec[0] + rvec[1] + rvec[2] + tvec[0] + tvec[1] + tvec[2])) continue;
-    const RigidTransform hypothesis = PoseFromRodrigues(rvec, tvec);
-    ReprojectionInliers(K, hypothesis, object, image, threshold_px, &candidate);
-    if (candidate.size() > inliers->size()) {
-      inliers->swap(candidate);
-      *pose = hypothesis;
+    bool improved = false;
+    for (size_t s = 0; s < rvecs.size(); ++s) {
+      const cv::Vec3d rvec(rvecs[s]), tvec(tvecs[s]);
+      if (!std::isfinite(rvec[0] + rvec[1] + rvec[2] + tvec[0] + tvec[1] + tvec[2])) continue;
+      const RigidTransform hypothesis = PoseFromRodrigues(rvec, tvec);
+      ReprojectionInliers(K, hypothesis, object, image, threshold_px, &candidate);
+      if (candidate.size() > inliers->size()) {
+        inliers->swap(candidate);
+        *pose = hypothesis;
+        improved = true;
+      }
+    }
+    if (improved) {
       const double all_inliers = std::pow(double(inliers->size()) / double(n), kSample);
       if (all_inliers >= 1.0) break;
       // In doubles first: with a handful of inliers the count overflows an int.
@@ -111,7 +119,7 @@ bool RansacPnp(const cv::Matx33d& K, const std::vector<cv::Point3f>& object,
           int(std::min(double(iterations), std::ceil(std::log(0.01) / std::log1p(-all_inliers))));
     }
   }
-  if (inliers->size() < kSample) return false;
+  if (inliers->size() < kMinInliers) return false;
   // Refine on the inliers, then once more on the inliers of the refined pose.
   for (int round = 0; round < 2; ++round) {
     const RigidTransform refined =

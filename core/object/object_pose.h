@@ -1,5 +1,5 @@
 // Pose solving shared by the object recogniser and the object tracker: reprojection errors, the
-// RANSAC PnP of 3D objects (EPnP on minimal samples, seeded, then Levenberg-Marquardt on the
+// RANSAC PnP of 3D objects (P3P on minimal samples, seeded, then Levenberg-Marquardt on the
 // inliers) and the detection's fields that follow from a solved pose (inliers, mean error,
 // optional 2D-3D inliers and covariance, outline).
 //
@@ -12,8 +12,8 @@
 
 #include <opencv2/core.hpp>
 
+#include "core/object/detection.h"
 #include "core/object/object_database.h"
-#include "core/object/object_recognizer.h"
 
 namespace recog {
 
@@ -35,9 +35,11 @@ RigidTransform RefinePose(const cv::Matx33d& K, const RigidTransform& pose,
                           const std::vector<cv::Point3f>& object,
                           const std::vector<cv::Point2f>& image);
 
-// RANSAC over EPnP on minimal samples of 5 correspondences, seeded, stopping adaptively (99 %
-// confidence) and after `iterations` at most; then LM on the inliers, twice. False with fewer than
-// 5 inliers.
+// RANSAC over P3P on minimal samples of 3 correspondences (every solution of a sample is scored),
+// seeded, stopping adaptively (99 % confidence) and after `iterations` at most; then LM on the
+// inliers, twice. False with fewer than 5 inliers. P3P rather than the thesis's EPnP: a hypothesis
+// costs ~11 us against ~55 us (OpenCV 4.6), and a 3-point sample is all inliers far more often
+// (at 30 % inliers, 2.7 % of samples against 0.24 %), which is what a small object in clutter has.
 bool RansacPnp(const cv::Matx33d& K, const std::vector<cv::Point3f>& object,
                const std::vector<cv::Point2f>& image, int iterations, double threshold_px,
                uint64_t seed, RigidTransform* pose, std::vector<uint32_t>* inliers);

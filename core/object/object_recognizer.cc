@@ -77,7 +77,10 @@ bool HomographyPose(const cv::Matx33d& K, const IndexedObject& object,
 // inliers lie inside the outline of a kept detection of another object with more inliers: that
 // part of the image is explained by the stronger object (a few of its features fitted by another
 // model, e.g. a label printed on two products).
-void SortDetections(bool duplicates, std::vector<Detection>* detections) {
+// The ids of the detections dropped as covered go to *suppressed.
+void SortDetections(bool duplicates, std::vector<Detection>* detections,
+                    std::vector<EntryId>* suppressed) {
+  suppressed->clear();
   if (!duplicates) {
     std::stable_sort(detections->begin(), detections->end(),
                      [](const Detection& a, const Detection& b) {
@@ -107,12 +110,32 @@ void SortDetections(bool duplicates, std::vector<Detection>* detections) {
                                }));
       return 2 * inside > detection.inlier_pixels.size();
     });
-    if (!covered) kept.push_back(std::move(detection));
+    if (covered) {
+      suppressed->push_back(detection.id);
+    } else {
+      kept.push_back(std::move(detection));
+    }
   }
   detections->swap(kept);
 }
 
 }  // namespace
+
+std::string_view ObjectOutcomeName(ObjectOutcome outcome) {
+  switch (outcome) {
+    case ObjectOutcome::kNotProposed:
+      return "not_proposed";
+    case ObjectOutcome::kFewCorrespondences:
+      return "few_correspondences";
+    case ObjectOutcome::kFewInliers:
+      return "few_inliers";
+    case ObjectOutcome::kSuppressed:
+      return "suppressed";
+    case ObjectOutcome::kDetected:
+      return "detected";
+  }
+  return "unknown";
+}
 
 bool ObjectFilter::Passes(const ObjectMetadata& object) const {
   if (names.empty() && classes.empty()) return true;
@@ -122,14 +145,21 @@ bool ObjectFilter::Passes(const ObjectMetadata& object) const {
 
 ObjectRecognizer::ObjectRecognizer(std::shared_ptr<const ObjectDatabase> database,
                                    RecognitionOptions options)
-    : database_(std::move(database)), options_(std::move(options)), clusterer_(options_.roi) {}
+    : database_(std::move(database)),
+      options_(std::move(options)),
+      clusterer_(options_.roi),
+      refiner_(options_.refinement.matching) {}
 
 Status ObjectRecognizer::Recognize(const cv::Mat& image, const CameraIntrinsics& camera,
                                    std::vector<Detection>* detections, RecognitionTiming* timing,
-                                   const ObjectFilter& filter, const DetectionOptions& extras) {
+                                   const ObjectFilter& filter, const DetectionOptions& extras,
+                                   std::vector<ObjectExplanation>* explanation) {
   const auto start = Clock::now();
   detections->clear();
+  if (explanation != nullptr) explanation->clear();
   RECOG_RETURN_IF_ERROR(camera.Validate());
+  explaining_ = explanation != nullptr;
+  explained_.clear();
   if (!extractor_) {
     FeatureOptions feature_options;
     feature_options.orb = options_.orb;
@@ -146,8 +176,12 @@ Status ObjectRecognizer::Recognize(const cv::Mat& image, const CameraIntrinsics&
     RECOG_RETURN_IF_ERROR(SecondPass(image, camera, filter, extras, revisits_, detections, t));
     t->second_pass = MillisecondsSince(phase);
   }
-  SortDetections(options_.report_duplicates, detections);
+  SortDetections(options_.report_duplicates, detections, &suppressed_);
+  const auto phase = Clock::now();
+  Refine(image, nullptr, camera, extras, detections);
+  t->refinement = MillisecondsSince(phase);
   t->total = MillisecondsSince(start);
+  if (explaining_) Explain(*detections, suppressed_, filter, explanation);
   return Status::Ok();
 }
 
@@ -155,18 +189,26 @@ Status ObjectRecognizer::RecognizeFeatures(const FeatureSet& features,
                                            const CameraIntrinsics& camera,
                                            std::vector<Detection>* detections,
                                            RecognitionTiming* timing, const ObjectFilter& filter,
-                                           const DetectionOptions& extras) {
+                                           const DetectionOptions& extras,
+                                           std::vector<ObjectExplanation>* explanation) {
   const auto start = Clock::now();
   detections->clear();
+  if (explanation != nullptr) explanation->clear();
   RECOG_RETURN_IF_ERROR(camera.Validate());
+  explaining_ = explanation != nullptr;
+  explained_.clear();
   RECOG_RETURN_IF_ERROR(CheckFeatureSet(features, database_->vocabulary().info().descriptor)
                             .WithContext("query features"));
   RecognitionTiming local;
   RecognitionTiming* t = timing != nullptr ? timing : &local;
   *t = RecognitionTiming();
   RECOG_RETURN_IF_ERROR(Run(features, camera, filter, extras, detections, t, &revisits_));
-  SortDetections(options_.report_duplicates, detections);
+  SortDetections(options_.report_duplicates, detections, &suppressed_);
+  const auto phase = Clock::now();
+  Refine(cv::Mat(), &features, camera, extras, detections);
+  t->refinement = MillisecondsSince(phase);
   t->total = MillisecondsSince(start);
+  if (explaining_) Explain(*detections, suppressed_, filter, explanation);
   return Status::Ok();
 }
 
@@ -216,8 +258,9 @@ void ObjectRecognizer::VerifyCandidates(const std::vector<BcMatch>& candidates,
                                         const CameraIntrinsics& camera, const ObjectFilter& filter,
                                         const DetectionOptions& extras,
                                         std::vector<Detection>* detections, RecognitionTiming* t,
-                                        bool* weak) {
+                                        bool* weak, size_t* evidence) {
   *weak = false;
+  *evidence = 0;
   for (const BcMatch& candidate : candidates) {
     // Found already with enough inliers: a duplicate (skipped unless asked for). A weak earlier
     // detection does not stop a better one.
@@ -231,13 +274,28 @@ void ObjectRecognizer::VerifyCandidates(const std::vector<BcMatch>& candidates,
     if (!filter.Passes(object->metadata)) continue;
     ++t->verified;
     Detection detection;
-    if (Verify(*object, query, region, camera, extras, t, &detection)) {
+    const Verification verification = Verify(*object, query, region, camera, extras, t, &detection);
+    if (explaining_) {
+      ObjectExplanation& explained = explained_[object->metadata.name];
+      ++explained.regions;
+      explained.best_score = std::max(explained.best_score, candidate.chi_square);
+      explained.correspondences = std::max(explained.correspondences, verification.correspondences);
+      explained.inliers = std::max(explained.inliers, verification.inliers);
+    }
+    if (verification.detected) {
       detection.score = candidate.chi_square;
       detection.region = region_index;
-      *weak |= detection.inliers < options_.second_pass.weak_inliers;
+      if (detection.inliers < options_.second_pass.weak_inliers) {
+        *weak = true;
+        *evidence = std::max(*evidence, verification.correspondences);
+      }
       detections->push_back(std::move(detection));
     } else {
-      *weak = true;
+      // Too few correspondences for a pose: nothing of the object is there to look closer at.
+      if (verification.correspondences >= options_.second_pass.min_correspondences) {
+        *weak = true;
+        *evidence = std::max(*evidence, verification.correspondences);
+      }
     }
   }
 }
@@ -267,10 +325,14 @@ Status ObjectRecognizer::Run(const FeatureSet& features, const CameraIntrinsics&
     RECOG_RETURN_IF_ERROR(
         QueryRegion(query_, region.features, options_.candidates_per_roi, &candidates, t));
     bool weak = false;
+    size_t evidence = 0;
     VerifyCandidates(candidates, query_, region.features, int(r), camera, filter, extras,
-                     detections, t, &weak);
-    if (weak && !region.whole_image) revisits->push_back({r, region.bounds});
+                     detections, t, &weak, &evidence);
+    if (weak && !region.whole_image) revisits->push_back({r, region.bounds, evidence});
   }
+  // The regions with most correspondences first: the second pass looks at the best few.
+  std::stable_sort(revisits->begin(), revisits->end(),
+                   [](const Revisit& a, const Revisit& b) { return a.evidence > b.evidence; });
   return Status::Ok();
 }
 
@@ -321,17 +383,41 @@ Status ObjectRecognizer::SecondPass(const cv::Mat& image, const CameraIntrinsics
     std::iota(all.begin(), all.end(), 0u);
     RECOG_RETURN_IF_ERROR(QueryRegion(crop_query_, all, pass.candidates, &candidates, &stages));
     bool weak = false;
+    size_t evidence = 0;
     VerifyCandidates(candidates, crop_query_, all, int(revisits[i].region), camera, filter, extras,
-                     detections, &stages, &weak);
+                     detections, &stages, &weak, &evidence);
   }
   t->verified += stages.verified;
   return Status::Ok();
 }
 
-bool ObjectRecognizer::Verify(const IndexedObject& object, const QueryFeatures& query,
-                              const std::vector<uint32_t>& region, const CameraIntrinsics& camera,
-                              const DetectionOptions& extras, RecognitionTiming* timing,
-                              Detection* detection) {
+void ObjectRecognizer::Refine(const cv::Mat& image, const FeatureSet* features,
+                              const CameraIntrinsics& camera, const DetectionOptions& extras,
+                              std::vector<Detection>* detections) {
+  if (!options_.refinement.enabled || detections->empty()) return;
+  for (Detection& detection : *detections) {
+    const std::shared_ptr<const IndexedObject> object = database_->Find(detection.id);
+    if (!object) continue;  // removed meanwhile
+    Detection refined;
+    if (!refiner_.Match(*object, detection.camera_from_object, image, features, camera, extras,
+                        &refined) ||
+        refined.inliers <= detection.inliers) {
+      continue;
+    }
+    refined.score = detection.score;
+    refined.region = detection.region;
+    detection = std::move(refined);
+  }
+  // Refinement changes the inlier counts: best first again.
+  std::stable_sort(detections->begin(), detections->end(),
+                   [](const Detection& a, const Detection& b) { return a.inliers > b.inliers; });
+}
+
+ObjectRecognizer::Verification ObjectRecognizer::Verify(
+    const IndexedObject& object, const QueryFeatures& query, const std::vector<uint32_t>& region,
+    const CameraIntrinsics& camera, const DetectionOptions& extras, RecognitionTiming* timing,
+    Detection* detection) {
+  Verification verification;
   auto phase = Clock::now();
   const FeatureSet& features = *query.features;
   const int row_bytes = features.descriptors.cols;
@@ -349,7 +435,8 @@ bool ObjectRecognizer::Verify(const IndexedObject& object, const QueryFeatures& 
   const Status matched = MatchByDirectIndex(region_direct, region_descriptors, object.direct,
                                             object.descriptors, options_.match, &matches);
   timing->correspondences += MillisecondsSince(phase);
-  if (!matched.ok() || matches.size() < options_.min_inliers) return false;
+  verification.correspondences = matched.ok() ? matches.size() : 0;
+  if (verification.correspondences < options_.min_inliers) return verification;
 
   phase = Clock::now();
   std::vector<cv::Point3f> object_points(matches.size());
@@ -372,13 +459,45 @@ bool ObjectRecognizer::Verify(const IndexedObject& object, const QueryFeatures& 
   timing->ransac += MillisecondsSince(phase);
   const size_t needed = object.metadata.type == ObjectType::kPlanar ? options_.min_planar_inliers
                                                                     : options_.min_inliers;
-  if (!solved || inliers.size() < needed) return false;
+  verification.inliers = solved ? inliers.size() : 0;
+  if (!solved || inliers.size() < needed) return verification;
 
   std::vector<cv::Point2f> keypoints(matches.size());
   for (size_t i = 0; i < matches.size(); ++i) keypoints[i] = query.positions[region[matches[i].a]];
   CompleteDetection(object, camera, pose, inliers, model_features, object_points, image_points,
                     keypoints, extras, detection);
-  return true;
+  verification.detected = true;
+  return verification;
+}
+
+void ObjectRecognizer::Explain(const std::vector<Detection>& detections,
+                               const std::vector<EntryId>& suppressed, const ObjectFilter& filter,
+                               std::vector<ObjectExplanation>* explanation) const {
+  for (const ObjectMetadata& object : database_->List()) {
+    if (!filter.Passes(object)) continue;
+    const auto known = explained_.find(object.name);
+    ObjectExplanation entry = known != explained_.end() ? known->second : ObjectExplanation();
+    entry.name = object.name;
+    entry.min_inliers =
+        object.type == ObjectType::kPlanar ? options_.min_planar_inliers : options_.min_inliers;
+    const auto named = [&](const Detection& d) { return d.name == object.name; };
+    const bool was_suppressed = std::any_of(suppressed.begin(), suppressed.end(), [&](EntryId id) {
+      const std::shared_ptr<const IndexedObject> found = database_->Find(id);
+      return found && found->metadata.name == object.name;
+    });
+    if (std::any_of(detections.begin(), detections.end(), named)) {
+      entry.outcome = ObjectOutcome::kDetected;
+    } else if (was_suppressed) {
+      entry.outcome = ObjectOutcome::kSuppressed;
+    } else if (entry.regions == 0) {
+      entry.outcome = ObjectOutcome::kNotProposed;
+    } else if (entry.correspondences < options_.min_inliers) {
+      entry.outcome = ObjectOutcome::kFewCorrespondences;
+    } else {
+      entry.outcome = ObjectOutcome::kFewInliers;
+    }
+    explanation->push_back(std::move(entry));
+  }
 }
 
 }  // namespace recog

@@ -9,17 +9,24 @@
 //     matching (Bhattacharyya candidates within beta of the best, ranked by chi-square);
 //  4. correspondences between the region's features and the best object's descriptors through
 //     the direct index (same level-1 node, nearest-neighbour ratio test);
-//  5. geometric verification: 3D objects by RANSAC over EPnP on minimal samples (seeded, so the
+//  5. geometric verification: 3D objects by RANSAC over P3P on minimal samples (seeded, so the
 //     same input gives the same output) then Levenberg-Marquardt on the inliers; planar objects by
 //     a RANSAC homography on the face with most correspondences, the pose following from it
 //     (IPPE on the inliers). A detection needs at least `min_inliers` inliers (3D objects) or
 //     `min_planar_inliers` (planar ones).
 //  6. second pass (Recognize only, SecondPassOptions): a small object in a cluttered frame gets
-//     few of the image's features, so its region proposes it but its verification fails or is
-//     weak. Such regions (clusters, not the whole image) are cropped from the image with a
-//     margin, enlarged when small, and searched again with their own, denser ORB features
-//     (mapped back to image pixels): bag of words, BC matching, correspondences and verification
-//     as above. RecognizeFeatures has no image, so it runs steps 2-5 only.
+//     few of the image's features, so its region proposes it but its verification fails (with at
+//     least second_pass.min_correspondences correspondences: a region with fewer holds nothing of
+//     the object to look closer at) or is weak. Such regions (clusters, not the whole image) are
+//     cropped from the image with a margin, enlarged when small, and searched again with their own,
+//     denser ORB features (mapped back to image pixels): bag of words, BC matching, correspondences
+//     and verification as above. RecognizeFeatures has no image, so it runs steps 2-5 only.
+//  7. refinement (RefinementOptions): each detection is looked for again near its pose by guided
+//     matching (guided_matcher.h: ORB in the box of the projected model, every projected model
+//     feature matched to the keypoints around it, RANSAC PnP + LM); the refined pose replaces the
+//     first when it has more inliers. Matching by position finds several times the inliers that
+//     the direct index finds on a small object, and a pose resting on them is more accurate.
+//     RecognizeFeatures refines on the frame's own features.
 // Each object is reported once (its best detection) unless `report_duplicates` is set; detections
 // come best first: most inliers first, ties in the order they were found. A detection most of
 // whose inliers lie inside the outline of another object's detection with more inliers is
@@ -40,8 +47,10 @@
 // ObjectDatabase.
 #pragma once
 
+#include <map>
 #include <memory>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <opencv2/core.hpp>
@@ -50,6 +59,8 @@
 #include "core/features/feature_extractor.h"
 #include "core/geometry/correspondences.h"
 #include "core/geometry/pose_covariance.h"
+#include "core/object/detection.h"
+#include "core/object/guided_matcher.h"
 #include "core/object/object_database.h"
 #include "core/object/roi_clustering.h"
 
@@ -60,9 +71,14 @@ namespace recog {
 // no more; enlarging to 480 or 240 px, or 2 crop levels, found fewer.
 struct SecondPassOptions {
   bool enabled = true;
-  size_t max_regions = 4;  // regions re-examined per image, in the order they were searched
+  size_t max_regions = 4;  // regions re-examined per image, most correspondences first
   // A first-pass detection with fewer inliers than this is weak: its region is searched again.
   size_t weak_inliers = 20;
+  // A region whose candidate was not detected is searched again when the direct index found it at
+  // least this many correspondences. Measured on the real cluttered frames of visp-castle (no
+  // modelled object): the second pass costs a median 3 ms a frame with 8, 10 ms with 4 and 11 ms
+  // with 0; 0 is what a small object that got almost none of the first pass's features needs.
+  size_t min_correspondences = 8;
   double margin = 0.25;      // added to each side of the region's box, as a fraction of its size
   int min_margin_px = 16;    // and at least this many pixels
   int enlarge_to_px = 320;   // crops whose longer side is shorter are enlarged towards this...
@@ -76,6 +92,12 @@ struct SecondPassOptions {
     orb.levels = 4;
     return orb;
   }
+};
+
+// Step 7. Defaults measured on visp-rbt-cube (README, Evaluation).
+struct RefinementOptions {
+  bool enabled = true;
+  GuidedMatchOptions matching;
 };
 
 struct RecognitionOptions {
@@ -96,14 +118,22 @@ struct RecognitionOptions {
   uint64_t seed = 1;               // RANSAC sampling
   bool report_duplicates = false;  // report an object once per region instead of once per image
   SecondPassOptions second_pass;
+  RefinementOptions refinement;
 
-  // 1000 features over 3 levels at 1.2, no grid bucketing. Measured (README, Evaluation) against
-  // 1, 2 and 4 levels and 2x2 / 4x4 grids: 3 levels found most (2 nearly as many); the grids
-  // found fewer or let a wrong object through.
+  // 1300 features over 3 levels at 1.2, spread over the image by an 8x8 grid whose cells short
+  // of corners give their share to the strongest keypoints of cells holding fewer than 3 shares.
+  // ORB's own ranking is over the whole image: in a real cluttered scene the high-contrast
+  // clutter (a fiducial board, a keyboard) takes every feature and a small, softly textured
+  // object gets none (visp-rbt-cube's frame 0: 0 of 1000 features on the cube). A plain grid
+  // starves an object that fills a view on a plain background instead (RoboEarth: 75.9 % against
+  // 88.9 %); the capped fill serves both. Measured (README, Evaluation) against no grid, a plain
+  // grid, caps of 2 and no cap, and 1000 and 1500 features.
   static OrbOptions DefaultQueryOrb() {
     OrbOptions orb;
-    orb.max_features = 1000;
+    orb.max_features = 1300;
     orb.levels = 3;
+    orb.grid_rows = orb.grid_cols = 8;
+    orb.grid_fill_cap = 3;
     return orb;
   }
 };
@@ -116,54 +146,34 @@ struct ObjectFilter {
   bool Passes(const ObjectMetadata& object) const;
 };
 
-// What a call wants in each detection beyond its pose (both off = the plain detection).
-struct DetectionOptions {
-  bool include_inliers = false;     // Detection::inliers_2d3d
-  bool include_covariance = false;  // Detection::covariance
+// Where an object that a call considered dropped out (or that it was reported), for a user
+// whose object is not found: the recogniser's counterpart of the place side's query statuses.
+enum class ObjectOutcome {
+  kNotProposed,         // no region's BC matching made it a candidate
+  kFewCorrespondences,  // a candidate, but the direct index found fewer than min_inliers
+  kFewInliers,          // enough correspondences, but no pose with the minimum of inliers
+  kSuppressed,          // found, but most of its inliers lie in a stronger object's outline
+  kDetected,            // reported
 };
+std::string_view ObjectOutcomeName(ObjectOutcome outcome);  // "not_proposed", "detected", ...
 
-// One RANSAC inlier of a detection: an image keypoint and the model point it matched.
-struct InlierCorrespondence {
-  cv::Point2f pixel;  // the keypoint in the image (as detected, lens distortion included)
-  // The model feature that matched: a row of the model's descriptors (IndexedObject::points is
-  // indexed the same way). In the model file, that feature describes point
-  // points[point_of_feature[point_id]]; the features of one point share `point`.
-  uint32_t point_id = 0;
-  cv::Point3f point;  // the feature's 3D point, object frame, the model's units
-};
-
-struct Detection {
-  EntryId id = kInvalidEntryId;
-  // The recognised model's metadata (name, version, type, class, units).
+// One object of the database (that the call's filter lets through) and what became of it.
+struct ObjectExplanation {
   std::string name;
-  uint32_t version = 0;
-  ObjectType type = ObjectType::k3D;
-  std::string object_class;
-  std::string units;                  // of camera_from_object's translation
-  RigidTransform camera_from_object;  // X_camera = R X_object + t, in the model's units
-  size_t inliers = 0;
-  size_t correspondences = 0;
-  double reprojection_error_px = 0;        // mean over the inliers
-  double score = 0;                        // chi-square score of the region against the object
-  std::vector<cv::Point2f> outline;        // convex hull of the projected model, image pixels
-  std::vector<cv::Point2f> inlier_pixels;  // the image points of the inliers
-  int region = -1;                         // index of the region it was found in
-  // True when an ObjectTracker followed it from a previous frame's pose (object_tracker.h); false
-  // when it was recognised in this frame.
-  bool tracked = false;
-  // Only when DetectionOptions::include_inliers: every inlier, in no particular order.
-  std::vector<InlierCorrespondence> inliers_2d3d;
-  // Only when DetectionOptions::include_covariance: the 6×6 covariance of camera_from_object,
-  // row-major, rotation (rotation-vector perturbation of R, radians) first, then translation (the
-  // model's units). Empty when asked but the inliers are degenerate (e.g. all on one line).
-  std::vector<double> covariance;
+  ObjectOutcome outcome = ObjectOutcome::kNotProposed;
+  size_t regions = 0;          // regions (both passes) whose BC matching proposed it
+  double best_score = 0;       // its best chi-square score in them
+  size_t correspondences = 0;  // most correspondences in one verification
+  size_t inliers = 0;          // most RANSAC inliers in one verification (before refinement)
+  size_t min_inliers = 0;      // what a detection needs (min_inliers or min_planar_inliers)
 };
 
 // Milliseconds per stage for one image (thesis Table 5.6). The stages from orb to ransac are the
-// first pass's; second_pass is all of the second pass (crops, their ORB and every later step).
+// first pass's; second_pass is all of the second pass (crops, their ORB and every later step);
+// refinement is step 7 for every detection.
 struct RecognitionTiming {
   double orb = 0, clustering = 0, conversion = 0, query = 0, correspondences = 0, ransac = 0,
-         second_pass = 0, total = 0;
+         second_pass = 0, refinement = 0, total = 0;
   size_t regions = 0;
   size_t second_pass_regions = 0;  // regions re-examined by the second pass
   size_t verified = 0;             // candidate objects that went to geometric verification
@@ -174,15 +184,19 @@ class ObjectRecognizer {
   ObjectRecognizer(std::shared_ptr<const ObjectDatabase> database, RecognitionOptions options = {});
 
   // The objects of `filter` found in the image, best first, with the extras `extras` asks for.
+  // With `explanation`, also every object of the database that the filter lets through, by
+  // name, with where it dropped out (costs a little bookkeeping per verified candidate).
   // INVALID_ARGUMENT for an empty or non-8-bit image, or invalid intrinsics.
   Status Recognize(const cv::Mat& image, const CameraIntrinsics& camera,
                    std::vector<Detection>* detections, RecognitionTiming* timing = nullptr,
-                   const ObjectFilter& filter = {}, const DetectionOptions& extras = {});
+                   const ObjectFilter& filter = {}, const DetectionOptions& extras = {},
+                   std::vector<ObjectExplanation>* explanation = nullptr);
   // The same from features already extracted (with the database's descriptor format), without
   // the second pass (it needs the image).
   Status RecognizeFeatures(const FeatureSet& features, const CameraIntrinsics& camera,
                            std::vector<Detection>* detections, RecognitionTiming* timing = nullptr,
-                           const ObjectFilter& filter = {}, const DetectionOptions& extras = {});
+                           const ObjectFilter& filter = {}, const DetectionOptions& extras = {},
+                           std::vector<ObjectExplanation>* explanation = nullptr);
 
   const RecognitionOptions& options() const { return options_; }
 
@@ -196,10 +210,17 @@ class ObjectRecognizer {
     std::vector<cv::Point2f> positions;  // keypoint pixels
     std::vector<cv::Point2f> pinhole;    // the same without lens distortion
   };
+  // What one verification found.
+  struct Verification {
+    bool detected = false;
+    size_t correspondences = 0;  // from the direct index
+    size_t inliers = 0;          // of the best pose (0 when RANSAC did not run or found none)
+  };
   // A region whose first-pass search found nothing or only weak detections.
   struct Revisit {
     size_t region;
     cv::Rect2f bounds;
+    size_t evidence;  // most correspondences of its weak or failed candidates
   };
 
   // The pipeline after feature extraction; fills every field of *timing but orb, second_pass and
@@ -218,24 +239,38 @@ class ObjectRecognizer {
   Status QueryRegion(const QueryFeatures& query, const std::vector<uint32_t>& region,
                      size_t candidates, std::vector<BcMatch>* matches, RecognitionTiming* timing);
   // Verifies the candidates against a region: passing detections are appended, with `region` as
-  // their region. *weak is set when a candidate was not detected or only with fewer than
-  // second_pass.weak_inliers inliers.
+  // their region. *weak is set when a candidate was detected with fewer than
+  // second_pass.weak_inliers inliers, or not detected although it had
+  // second_pass.min_correspondences correspondences; *evidence is then the most correspondences
+  // of those candidates.
   void VerifyCandidates(const std::vector<BcMatch>& candidates, const QueryFeatures& query,
                         const std::vector<uint32_t>& region, int region_index,
                         const CameraIntrinsics& camera, const ObjectFilter& filter,
                         const DetectionOptions& extras, std::vector<Detection>* detections,
-                        RecognitionTiming* timing, bool* weak);
-  // Verifies one candidate object against a region; true and *detection filled when it passes.
-  bool Verify(const IndexedObject& object, const QueryFeatures& query,
-              const std::vector<uint32_t>& region, const CameraIntrinsics& camera,
-              const DetectionOptions& extras, RecognitionTiming* timing, Detection* detection);
+                        RecognitionTiming* timing, bool* weak, size_t* evidence);
+  // Step 7 on every detection, against `image` or, when it is empty, `features`.
+  void Refine(const cv::Mat& image, const FeatureSet* features, const CameraIntrinsics& camera,
+              const DetectionOptions& extras, std::vector<Detection>* detections);
+  // Verifies one candidate object against a region; *detection is filled when it passes.
+  Verification Verify(const IndexedObject& object, const QueryFeatures& query,
+                      const std::vector<uint32_t>& region, const CameraIntrinsics& camera,
+                      const DetectionOptions& extras, RecognitionTiming* timing,
+                      Detection* detection);
+  // The explanation of the call that just ran (explained_ and the suppressed objects), one entry
+  // per object of the database that `filter` lets through.
+  void Explain(const std::vector<Detection>& detections, const std::vector<EntryId>& suppressed,
+               const ObjectFilter& filter, std::vector<ObjectExplanation>* explanation) const;
 
   std::shared_ptr<const ObjectDatabase> database_;
   RecognitionOptions options_;
   std::unique_ptr<FeatureExtractor> extractor_;
   std::unique_ptr<FeatureExtractor> crop_extractor_;
   RoiClusterer clusterer_;
+  GuidedMatcher refiner_;
   // Scratch reused across images.
+  bool explaining_ = false;                             // the call asked for an explanation
+  std::map<std::string, ObjectExplanation> explained_;  // by name, filled while explaining_
+  std::vector<EntryId> suppressed_;                     // objects SortDetections dropped as covered
   FeatureSet features_;
   QueryFeatures query_;
   std::vector<RegionOfInterest> regions_;

@@ -4,15 +4,10 @@
 // Per frame, for every object being tracked:
 //  1. its pose is predicted: the last pose, moved by the last frame-to-frame motion (constant
 //     velocity) when the object was tracked in the two previous frames;
-//  2. every model feature is projected with the predicted pose; ORB features are extracted in the
-//     box of the projections grown by `region_margin_px` (only there, with their own budget, so a
-//     small object gets many features), or, for frames given as features, the frame's features
-//     are used;
-//  3. each projected feature is matched to the keypoints within `window_px` of it (a grid of the
-//     keypoints, Hamming distance on 64-bit popcounts, absolute bound and ratio test, then one
-//     model feature per keypoint: the closest);
-//  4. the pose is solved by RANSAC PnP with few iterations, then Levenberg-Marquardt (the
-//     recogniser's own, object_pose.h); with fewer than `min_inliers` inliers the object is lost.
+//  2. it is looked for near that pose by guided matching (guided_matcher.h: ORB in the box of the
+//     projected model, each projected model feature matched to the keypoints in a window around
+//     it, RANSAC PnP + Levenberg-Marquardt); with fewer than `matching.min_inliers` inliers the
+//     object is lost.
 //
 // Recognition policy: the ObjectRecognizer searches the whole frame (a) on every frame while
 // nothing is tracked, (b) on a frame where a tracked object was lost (so it is re-recognised at
@@ -33,31 +28,16 @@
 #include <opencv2/core.hpp>
 
 #include "core/common/status.h"
-#include "core/features/feature_extractor.h"
+#include "core/object/guided_matcher.h"
 #include "core/object/object_database.h"
 #include "core/object/object_recognizer.h"
 
 namespace recog {
 
 struct TrackingOptions {
-  OrbOptions orb = DefaultTrackingOrb();  // features in a tracked object's predicted box
-  double region_margin_px = 40;           // the box of the projected model grown by this
-  double window_px = 24;                  // a projected feature matches keypoints this close
-  uint32_t max_distance = 64;             // Hamming bound of a match (of 256 bits)
-  double ratio = 0.9;                     // best < ratio * second best in the window
-  int ransac_iterations = 30;
-  double reprojection_px = 4.0;   // inlier threshold
-  size_t min_inliers = 12;        // fewer: the object is lost
+  GuidedMatchOptions matching;    // how a tracked object is found near its predicted pose
   int recognition_interval = 10;  // full recognition every this many frames while tracking; 0 = off
   bool constant_velocity = true;  // predict with the last motion (else the last pose)
-  uint64_t seed = 1;              // RANSAC sampling
-
-  static OrbOptions DefaultTrackingOrb() {
-    OrbOptions orb;
-    orb.max_features = 500;
-    orb.levels = 3;
-    return orb;
-  }
 };
 
 // Milliseconds spent on one frame.
@@ -105,28 +85,12 @@ class ObjectTracker {
              const CameraIntrinsics& camera, const ObjectFilter& filter,
              const DetectionOptions& extras, std::vector<Detection>* detections,
              TrackingTiming* timing);
-  // Follows one object into this frame; true and *detection filled when it is still there.
-  bool Follow(const IndexedObject& object, const RigidTransform& predicted, const cv::Mat& image,
-              const FeatureSet* features, const CameraIntrinsics& camera,
-              const DetectionOptions& extras, Detection* detection);
-  // Model features of `object` matched to keypoints_ near their projections into *pairs
-  // (model feature, keypoint).
-  void MatchInWindows(const IndexedObject& object, const cv::Rect& box,
-                      std::vector<std::pair<uint32_t, uint32_t>>* pairs);
 
   std::shared_ptr<const ObjectDatabase> database_;
   TrackingOptions options_;
-  std::unique_ptr<FeatureExtractor> extractor_;
+  GuidedMatcher matcher_;
   std::vector<TrackedObject> tracks_;
   int frames_since_recognition_ = 0;
-  // Scratch reused across frames (no allocation per feature).
-  FeatureSet region_features_;
-  const FeatureSet* frame_features_ = nullptr;  // the keypoints being matched (this frame)
-  std::vector<cv::Point2f> pinhole_;            // their pixels without lens distortion
-  std::vector<cv::Point2f> projected_;          // per model feature
-  std::vector<uint32_t> visible_;               // model features projected inside the image
-  std::vector<uint32_t> cell_start_, cell_items_;
-  std::vector<uint32_t> best_distance_, best_feature_;  // per keypoint
 };
 
 }  // namespace recog

@@ -84,7 +84,7 @@ TEST_F(ObjectTrackerTest, RecognisesOnceThenTracksWithThePose) {
     EXPECT_EQ(d.tracked, i > 0) << "frame " << i;
     EXPECT_EQ(timing.recognized, i == 0) << "frame " << i;
     EXPECT_EQ(timing.tracked, i > 0 ? 1u : 0u);
-    EXPECT_GE(d.inliers, tracker.options().min_inliers);
+    EXPECT_GE(d.inliers, tracker.options().matching.min_inliers);
     // A poster seen nearly face-on constrains its tilt weakly: one frame may be a few degrees off
     // (frame 1, the first tracked, before any motion is known, is 6.4 degrees off), the typical
     // frame is not.
