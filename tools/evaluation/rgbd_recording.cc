@@ -1,5 +1,6 @@
 #include "tools/evaluation/rgbd_recording.h"
 
+#include <algorithm>
 #include <filesystem>
 #include <map>
 
@@ -100,6 +101,33 @@ StatusOr<LearnedModel> LearnFromRgbdRecording(ModelBuilder* builder,
     return builder->FromRgbd(options.name, rgbd, options.box);
   };
   return LearnFromRecording(build, builder->vocabulary(), first, later, options.learning, progress);
+}
+
+StatusOr<std::vector<RgbdView>> PosedRgbdViews(const std::vector<RgbdRecordingFrame>& frames,
+                                               const std::map<int, RigidTransform>& poses,
+                                               const CameraIntrinsics& camera, double depth_scale,
+                                               const std::vector<int>& numbers) {
+  if (!(depth_scale > 0)) return Status::InvalidArgument("depth scale must be positive");
+  std::vector<RgbdView> views;
+  for (int number : numbers) {
+    const auto frame = std::find_if(frames.begin(), frames.end(), [&](const RgbdRecordingFrame& f) {
+      return f.number == number;
+    });
+    const auto pose = poses.find(number);
+    if (frame == frames.end() || pose == poses.end()) {
+      return Status::NotFound("frame " + std::to_string(number) + " has no " +
+                              (frame == frames.end() ? "image" : "pose"));
+    }
+    RgbdView view;
+    view.view.name = fs::path(frame->image).stem().string();
+    RECOG_ASSIGN_OR_RETURN(view.view.image, ReadGrayImage(frame->image));
+    view.view.camera = camera;
+    view.view.camera_from_object = pose->second;
+    RECOG_ASSIGN_OR_RETURN(view.depth, ReadDepth(frame->depth, view.view.image.size()));
+    view.depth_scale = depth_scale;
+    views.push_back(std::move(view));
+  }
+  return views;
 }
 
 }  // namespace recog::cli

@@ -14,6 +14,7 @@
 // back-projected, points outside the box dropped.
 #pragma once
 
+#include <map>
 #include <string>
 #include <vector>
 
@@ -53,5 +54,14 @@ StatusOr<LearnedModel> LearnFromRgbdRecording(ModelBuilder* builder,
                                               const std::vector<RgbdRecordingFrame>& frames,
                                               const RgbdRecordingOptions& options,
                                               const LearningProgress& progress = {});
+
+// The frames numbered `numbers` as RGB-D views (grey image, depth, `camera`, the frame's pose of
+// `poses`), in that order, for ModelBuilder::FromRgbd: a model from chosen frames of a recording
+// whose every pose is known. NOT_FOUND for a number with no frame or no pose; the errors of
+// reading the images as LearnFromRgbdRecording's.
+StatusOr<std::vector<RgbdView>> PosedRgbdViews(const std::vector<RgbdRecordingFrame>& frames,
+                                               const std::map<int, RigidTransform>& poses,
+                                               const CameraIntrinsics& camera, double depth_scale,
+                                               const std::vector<int>& numbers);
 
 }  // namespace recog::cli

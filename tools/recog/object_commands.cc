@@ -69,7 +69,8 @@ struct ModelBuildArgs {
   double view_angle = RecordingLearningOptions().min_view_angle_deg;
   std::string box, depth_camera, depth_from_color;          // with --rgbd (--box: --rgbd-recording)
   double depth_scale = RgbdRecordingOptions().depth_scale;  // with --rgbd-recording
-  std::vector<std::string> faces;                           // side=IMAGE
+  std::string views;  // with --rgbd-recording: frame numbers posed by --pose, no learning
+  std::vector<std::string> faces;  // side=IMAGE
   double width = 0, height = 0, depth = 0;
   bool no_images = false, quiet = false;
 };
@@ -198,6 +199,23 @@ StatusOr<ObjectModel> BuildFromRgbdRecording(const ModelBuildArgs& args, ModelBu
   if (!folder.has_filename()) folder = folder.parent_path();
   options.name = args.name.empty() ? folder.filename().string() : args.name;
   RECOG_ASSIGN_OR_RETURN(options.camera, ParseCamera(args.camera));
+  if (!args.views.empty()) {
+    // Chosen frames whose poses are all known: a model of those views, nothing learned.
+    RECOG_ASSIGN_OR_RETURN(std::vector<double> numbers, ParseNumbers("--views", args.views));
+    std::vector<int> chosen;
+    for (double number : numbers) {
+      if (!(number >= 0 && number == std::floor(number))) {
+        return Status::InvalidArgument("--views takes frame numbers N,N,... (got '" + args.views +
+                                       "')");
+      }
+      chosen.push_back(int(number));
+    }
+    RECOG_ASSIGN_OR_RETURN(auto poses, ReadFramePoses(args.pose));
+    RECOG_ASSIGN_OR_RETURN(std::vector<RgbdView> views,
+                           PosedRgbdViews(frames, poses, options.camera, args.depth_scale, chosen));
+    RECOG_ASSIGN_OR_RETURN(const ObjectBox box, ParseBox(args.box));
+    return builder->FromRgbd(options.name, views, box);
+  }
   RECOG_ASSIGN_OR_RETURN(options.first_pose, ReadPoseOfFrame(args.pose, frames.front().image));
   RECOG_ASSIGN_OR_RETURN(options.box, ParseBox(args.box));
   options.depth_scale = args.depth_scale;
@@ -325,6 +343,7 @@ struct RecognizeArgs {
   std::vector<std::string> models;
   std::string image, camera, draw, vocabulary;
   DetectionOptions extras;  // --inliers, --covariance
+  bool explain = false;     // --explain: where each model dropped out (offline)
   ServerFlags server;  // --server "" (this command's default): offline; --json belongs here too
 };
 
@@ -343,10 +362,11 @@ Status LoadModels(const std::vector<std::string>& paths, ModelBuilder* builder,
   return Status::Ok();
 }
 
-// Recognises with the models of --models; `timing` gets the stages' milliseconds.
+// Recognises with the models of --models; `timing` gets the stages' milliseconds, and
+// `explanation` (with --explain) what became of every model.
 Status RecognizeOffline(const RecognizeArgs& args, const cv::Mat& image,
                         const CameraIntrinsics& camera, std::vector<Detection>* detections,
-                        json* timing) {
+                        json* timing, std::vector<ObjectExplanation>* explanation) {
   RECOG_ASSIGN_OR_RETURN(std::shared_ptr<const Vocabulary> vocabulary,
                          LoadObjectVocabulary(args.vocabulary));
   MemoryIndexStore store;
@@ -358,7 +378,8 @@ Status RecognizeOffline(const RecognizeArgs& args, const cv::Mat& image,
   RECOG_RETURN_IF_ERROR(LoadModels(args.models, &builder, database.get()));
   ObjectRecognizer recognizer(std::shared_ptr<const ObjectDatabase>(std::move(database)));
   RecognitionTiming stages;
-  RECOG_RETURN_IF_ERROR(recognizer.Recognize(image, camera, detections, &stages, {}, args.extras));
+  RECOG_RETURN_IF_ERROR(recognizer.Recognize(image, camera, detections, &stages, {}, args.extras,
+                                             args.explain ? explanation : nullptr));
   *timing = TimingJson(stages);
   return Status::Ok();
 }
@@ -423,16 +444,23 @@ int RunRecognize(const RecognizeArgs& args) {
     return Fail("recognize",
                 Status::InvalidArgument("give --models (recognise here) or --server (on recogd)"));
   }
+  if (remote && args.explain) {
+    return Fail("recognize", Status::InvalidArgument(
+                                 "--explain runs offline only (with --models): recogd does not "
+                                 "report explanations yet"));
+  }
   auto camera = ParseCamera(args.camera);
   if (!camera.ok()) return Fail("recognize", camera.status());
   auto image = ReadGrayImage(args.image);
   if (!image.ok()) return Fail("recognize", image.status());
   std::vector<Detection> detections;
+  std::vector<ObjectExplanation> explanation;
   json timing;
   if (remote) {
     const grpc::Status s = RecognizeOnServer(args, *image, *camera, &detections, &timing);
     if (!s.ok()) return Fail("recognize", s);
-  } else if (Status s = RecognizeOffline(args, *image, *camera, &detections, &timing); !s.ok()) {
+  } else if (Status s = RecognizeOffline(args, *image, *camera, &detections, &timing, &explanation);
+             !s.ok()) {
     return Fail("recognize", s);
   }
   json out = json::array();
@@ -470,7 +498,21 @@ int RunRecognize(const RecognizeArgs& args) {
     }
   }
   if (args.server.json) {
-    std::printf("%s\n", json({{"detections", out}, {"timing_ms", timing}}).dump(2).c_str());
+    json result = {{"detections", out}, {"timing_ms", timing}};
+    if (args.explain) {
+      json explained = json::array();
+      for (const ObjectExplanation& e : explanation) {
+        explained.push_back({{"name", e.name},
+                             {"outcome", ObjectOutcomeName(e.outcome)},
+                             {"regions", e.regions},
+                             {"best_score", e.best_score},
+                             {"correspondences", e.correspondences},
+                             {"inliers", e.inliers},
+                             {"min_inliers", e.min_inliers}});
+      }
+      result["explanation"] = explained;
+    }
+    std::printf("%s\n", result.dump(2).c_str());
   } else {
     for (const Detection& d : detections) {
       const cv::Vec3d& t = d.camera_from_object.t;
@@ -478,6 +520,13 @@ int RunRecognize(const RecognizeArgs& args) {
                   d.version, d.inliers, t[0], t[1], t[2], d.reprojection_error_px);
     }
     if (detections.empty()) std::printf("no object recognised\n");
+    for (const ObjectExplanation& e : explanation) {
+      std::printf(
+          "%s: %s (proposed by %zu regions, best score %.4f, %zu correspondences, %zu "
+          "inliers of %zu needed)\n",
+          e.name.c_str(), std::string(ObjectOutcomeName(e.outcome)).c_str(), e.regions,
+          e.best_score, e.correspondences, e.inliers, e.min_inliers);
+    }
   }
   return 0;
 }
@@ -919,6 +968,11 @@ void AddObjectCommands(CLI::App& app, int* exit_code) {
                    "without a mask; points outside it are dropped")
       ->check(Accepts(ParseBox));
   build
+      ->add_option("--views", build_args->views,
+                   "With --rgbd-recording: build from these frames N,N,... instead of learning, "
+                   "each posed by its line of --pose (a pose list)")
+      ->needs(rgbd_recording);
+  build
       ->add_option("--depth-scale", build_args->depth_scale,
                    "With --rgbd-recording: raw depth units per metre (1000: millimetres)")
       ->capture_default_str()
@@ -982,6 +1036,10 @@ void AddObjectCommands(CLI::App& app, int* exit_code) {
   recognize->add_option("--draw", recognize_args->draw, "PNG with outlines and axes");
   recognize->add_flag("--inliers", recognize_args->extras.include_inliers,
                       "With --json: each detection's inlier 2D-3D correspondences (inliers_2d3d)");
+  recognize->add_flag("--explain", recognize_args->explain,
+                      "Say for every model where it dropped out: not_proposed (no region's bag "
+                      "of words proposed it), few_correspondences, few_inliers, suppressed (by a "
+                      "stronger object's outline) or detected (offline, with --models)");
   recognize->add_flag("--covariance", recognize_args->extras.include_covariance,
                       "With --json: each detection's 6x6 pose covariance (row-major, rotation "
                       "first)");

@@ -181,6 +181,15 @@ expect_error "model build --rgbd-recording with a malformed pose file" "garbage-
 grep -v '^000001 ' "$tmp/objseq-poses.txt" >"$tmp/later-poses.txt"
 expect_error "model build --rgbd-recording without the first frame's pose" "NOT_FOUND.*no line for frame 1" \
   "$recog" model build --rgbd-recording "$tmp/objseq" --pose "$tmp/later-poses.txt" "${rec_args[@]}" -o "$tmp/m.robj"
+expect_ok "model build --rgbd-recording --views" "$recog" model build --rgbd-recording "$tmp/objseq" \
+  --pose "$tmp/objseq-poses.txt" --views 1,3 "${rec_args[@]}" -o "$tmp/views.robj"
+expect_ok "model info of the --views model" "$recog" model info "$tmp/views.robj" --json
+/usr/bin/python3 -c "import json; d=json.load(open('$tmp/out')); assert d['views']==2, d" \
+  && pass || fail "model build --rgbd-recording --views 1,3 builds from two views"
+expect_error "model build --rgbd-recording --views of a frame without a pose" "NOT_FOUND.*frame 1 has no pose" \
+  "$recog" model build --rgbd-recording "$tmp/objseq" --pose "$tmp/later-poses.txt" --views 1 "${rec_args[@]}" -o "$tmp/m.robj"
+expect_error "model build --rgbd-recording --views that are not frame numbers" "frame numbers" \
+  "$recog" model build --rgbd-recording "$tmp/objseq" --pose "$tmp/objseq-poses.txt" --views 1.5 "${rec_args[@]}" -o "$tmp/m.robj"
 expect_error "model build --rgbd-recording without --box" "needs --camera, --pose and --box" "$recog" model build \
   --rgbd-recording "$tmp/objseq" --pose "$tmp/objseq-poses.txt" --camera 525,525,319.5,239.5 -o "$tmp/m.robj"
 expect_error "model build --rgbd-recording with --image" "go with --cad" "$recog" model build \
@@ -306,6 +315,24 @@ expect_ok "recognize --inliers --covariance" "$recog" recognize --models "$tmp/p
   --image "$images/1.jpg" --camera 500,500,256,192 --json --inliers --covariance
 /usr/bin/python3 -c "import json; x=json.load(open('$tmp/out'))['detections'][0]; i=x['inliers_2d3d']; assert len(i)==x['inliers'] and all(len(c['pixel'])==2 and len(c['point'])==3 and c['point_id']>=0 for c in i) and len(x['covariance'])==36 and all(x['covariance'][k*7]>0 for k in range(6)), x" \
   && pass || fail "recognize --json --inliers --covariance reports inliers_2d3d and covariance"
+expect_ok "recognize --explain" "$recog" recognize --models "$tmp/poster.robj" \
+  --image "$images/1.jpg" --camera 500,500,256,192 --json --explain
+/usr/bin/python3 -c "import json; e=json.load(open('$tmp/out'))['explanation']; assert [(x['name'], x['outcome']) for x in e]==[('poster', 'detected')] and e[0]['inliers']>=e[0]['min_inliers'] and e[0]['regions']>=1, e" \
+  && pass || fail "recognize --json --explain says the poster was detected"
+/usr/bin/python3 -c "
+import struct, zlib
+w, h = 320, 240
+def chunk(kind, data):
+    return struct.pack('>I', len(data)) + kind + data + struct.pack('>I', zlib.crc32(kind + data))
+rows = b''.join(b'\\x00' + b'\\x80' * w for _ in range(h))
+open('$tmp/blank.png', 'wb').write(b'\\x89PNG\\r\\n\\x1a\\n' + chunk(b'IHDR', struct.pack('>IIBBBBB', w, h, 8, 0, 0, 0, 0))
+    + chunk(b'IDAT', zlib.compress(rows)) + chunk(b'IEND', b''))"
+expect_ok "recognize --explain of a blank image" "$recog" recognize --models "$tmp/poster.robj" \
+  --image "$tmp/blank.png" --camera 500,500,256,192 --explain
+grep -q "^no object recognised\$" "$tmp/out" && grep -q "^poster: not_proposed (proposed by 0 regions" "$tmp/out" \
+  && pass || fail "recognize --explain says why nothing was found: $(cat "$tmp/out")"
+expect_error "recognize --explain on a server" "offline only" "$recog" recognize --server 127.0.0.1:1 \
+  --image "$images/1.jpg" --camera 500,500,256,192 --explain
 expect_error "model build without a source" "exactly one of" "$recog" model build -o "$tmp/m.robj"
 expect_error "model build with two sources" "exactly one of" "$recog" model build --planar "$images/1.jpg" \
   --rgbd "$tmp/views.txt" --width 0.64 --height 0.48 -o "$tmp/m.robj"
