@@ -396,6 +396,7 @@ void ObjectRecognizer::Refine(const cv::Mat& image, const FeatureSet* features,
                               std::vector<Detection>* detections) {
   if (!options_.refinement.enabled || detections->empty()) return;
   for (Detection& detection : *detections) {
+    if (detection.inliers >= options_.refinement.max_inliers) continue;
     const std::shared_ptr<const IndexedObject> object = database_->Find(detection.id);
     if (!object) continue;  // removed meanwhile
     Detection refined;
