@@ -75,11 +75,12 @@ struct SecondPassOptions {
   // A first-pass detection with fewer inliers than this is weak: its region is searched again.
   size_t weak_inliers = 20;
   // A region whose candidate was not detected is searched again when the direct index found it at
-  // least this many correspondences. Measured: on the real cluttered frames of visp-castle (no
-  // modelled object) the second pass costs a median 3 ms a frame with 8, 10 ms with 4 and 11 ms
-  // with 0; RoboEarth leave-one-view-out finds 47 of 54 views with 8, 48 with 4 and with 0. 0 is
-  // what a small object that got almost none of the first pass's features needs.
-  size_t min_correspondences = 4;
+  // least this many correspondences. Measured (bench_objects, one run each): on the real
+  // cluttered frames the second pass costs a median 3.9 ms a frame with 8 and 14.3 ms with 4
+  // (RoboEarth views: 13.8 ms in all against 19.5); RoboEarth leave-one-view-out finds 47 of 54
+  // views with 8, 48 with 4 or 0. 0 is what a small object that got almost none of the first
+  // pass's features needs.
+  size_t min_correspondences = 8;
   double margin = 0.25;      // added to each side of the region's box, as a fraction of its size
   int min_margin_px = 16;    // and at least this many pixels
   int enlarge_to_px = 320;   // crops whose longer side is shorter are enlarged towards this...
