@@ -239,11 +239,12 @@ Result<std::vector<uint64_t>> RecognitionClient::RemoveFrames(pb::RemoveFrameReq
 
 Result<pb::RecognizeObjectsResponse> RecognitionClient::RecognizeObjects(
     const pb::Frame& frame, const pb::ObjectFilter& filter,
-    const pb::DetectionOptions& detection_options) {
+    const pb::DetectionOptions& detection_options, bool explain) {
   pb::RecognizeObjectsRequest request;
   *request.mutable_frame() = frame;
   *request.mutable_filter() = filter;
   *request.mutable_detection_options() = detection_options;
+  request.set_explain(explain);
   pb::RecognizeObjectsResponse response;
   const grpc::Status status = objects_->RecognizeObjects(UnaryContext().get(), request, &response);
   if (!status.ok()) return status;

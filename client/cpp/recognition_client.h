@@ -143,10 +143,11 @@ class RecognitionClient {
 
   // The known objects a frame shows (the frame needs intrinsics), best first. `detection_options`
   // asks each detection for its inlier 2D-3D correspondences and its pose covariance (for a SLAM
-  // that inserts objects as landmarks); by default neither.
+  // that inserts objects as landmarks); by default neither. With `explain`, the response's
+  // `explanations` say where every object of the filter dropped out.
   Result<pb::RecognizeObjectsResponse> RecognizeObjects(
       const pb::Frame& frame, const pb::ObjectFilter& filter = {},
-      const pb::DetectionOptions& detection_options = {});
+      const pb::DetectionOptions& detection_options = {}, bool explain = false);
 
   // --- Model repository ---
 

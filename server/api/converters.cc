@@ -496,6 +496,32 @@ void ToProto(const Detection& detection, pb::DetectedObject* out) {
   out->set_tracked(detection.tracked);
 }
 
+void ToProto(const ObjectExplanation& explanation, pb::ObjectExplanation* out) {
+  out->set_name(explanation.name);
+  switch (explanation.outcome) {
+    case ObjectOutcome::kNotProposed:
+      out->set_outcome(pb::OBJECT_OUTCOME_NOT_PROPOSED);
+      break;
+    case ObjectOutcome::kFewCorrespondences:
+      out->set_outcome(pb::OBJECT_OUTCOME_FEW_CORRESPONDENCES);
+      break;
+    case ObjectOutcome::kFewInliers:
+      out->set_outcome(pb::OBJECT_OUTCOME_FEW_INLIERS);
+      break;
+    case ObjectOutcome::kSuppressed:
+      out->set_outcome(pb::OBJECT_OUTCOME_SUPPRESSED);
+      break;
+    case ObjectOutcome::kDetected:
+      out->set_outcome(pb::OBJECT_OUTCOME_DETECTED);
+      break;
+  }
+  out->set_regions(uint32_t(explanation.regions));
+  out->set_best_score(explanation.best_score);
+  out->set_correspondences(uint32_t(explanation.correspondences));
+  out->set_inliers(uint32_t(explanation.inliers));
+  out->set_min_inliers(uint32_t(explanation.min_inliers));
+}
+
 ObjectFilter FromProto(const pb::ObjectFilter& filter) {
   return {{filter.names().begin(), filter.names().end()},
           {filter.classes().begin(), filter.classes().end()}};

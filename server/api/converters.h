@@ -73,6 +73,7 @@ PlaceResultOptions FromProto(const pb::ResultOptions& options,
 
 // One detection (the detection carries its model's class and units).
 void ToProto(const Detection& detection, pb::DetectedObject* out);
+void ToProto(const ObjectExplanation& explanation, pb::ObjectExplanation* out);
 pb::ObjectType ToProto(ObjectType type);
 ObjectFilter FromProto(const pb::ObjectFilter& filter);
 // What a request asks each detection to carry (inliers, covariance); unset = nothing extra.

@@ -17,12 +17,14 @@ std::string Method(const char* name) { return std::string(kService) + name; }
 
 // Decodes one frame, recognises the filter's objects with this worker's recogniser (through the
 // stream's tracker when there is one) and encodes the detections (core gives them best first)
-// with the extras `extras` asks for.
+// with the extras `extras` asks for; with `explanations` (unary calls only, no tracker), where
+// every object dropped out.
 Status RunRecognition(ServerState& state, WorkerContext& worker, const pb::Frame& request,
                       const ObjectFilter& filter, const DetectionOptions& extras,
                       ObjectTracker* tracker,
                       google::protobuf::RepeatedPtrField<pb::DetectedObject>* out,
-                      pb::Timing* timing) {
+                      pb::Timing* timing,
+                      google::protobuf::RepeatedPtrField<pb::ObjectExplanation>* explanations) {
   RECOG_ASSIGN_OR_RETURN(DecodedFrame frame,
                          DecodeFrame(request, state.objects->vocabulary().info().descriptor));
   if (!frame.intrinsics.has_value()) {
@@ -32,6 +34,8 @@ Status RunRecognition(ServerState& state, WorkerContext& worker, const pb::Frame
   timing->set_decode_ms(frame.decode_ms);
   ObjectRecognizer& recognizer = worker.Recognizer();
   std::vector<Detection> detections;
+  std::vector<ObjectExplanation> explained;
+  std::vector<ObjectExplanation>* explain = explanations != nullptr ? &explained : nullptr;
   RecognitionTiming stages;
   if (tracker != nullptr) {
     // The tracker extracts features only in the tracked objects' boxes: no separate ORB stage.
@@ -43,15 +47,16 @@ Status RunRecognition(ServerState& state, WorkerContext& worker, const pb::Frame
                                                    &detections, &tracking, filter, extras));
     stages.total = tracking.total;
   } else if (frame.has_image()) {
-    RECOG_RETURN_IF_ERROR(
-        recognizer.Recognize(frame.image, *frame.intrinsics, &detections, &stages, filter, extras));
+    RECOG_RETURN_IF_ERROR(recognizer.Recognize(frame.image, *frame.intrinsics, &detections, &stages,
+                                               filter, extras, explain));
   } else {
-    RECOG_RETURN_IF_ERROR(recognizer.RecognizeFeatures(frame.features, *frame.intrinsics,
-                                                       &detections, &stages, filter, extras));
+    RECOG_RETURN_IF_ERROR(recognizer.RecognizeFeatures(
+        frame.features, *frame.intrinsics, &detections, &stages, filter, extras, explain));
   }
   timing->set_features_ms(stages.orb);
   timing->set_recognition_ms(stages.total - stages.orb);
   for (const Detection& detection : detections) ToProto(detection, out->Add());
+  for (const ObjectExplanation& e : explained) ToProto(e, explanations->Add());
   state.metrics.AddFrames(FrameKind::kObject);
   state.metrics.AddObjectDetections(detections.size());
   return Status::Ok();
@@ -82,7 +87,7 @@ class ObjectFrameStream final
                 pb::StreamRecognizeObjectsResponse* response) override {
     // RunRecognition adds objects only once nothing can fail any more.
     return RunRecognition(state_, worker, frame, filter_, extras_, tracker_.get(),
-                          response->mutable_objects(), response->mutable_timing());
+                          response->mutable_objects(), response->mutable_timing(), nullptr);
   }
 
   ObjectFilter filter_;
@@ -101,7 +106,8 @@ grpc::ServerUnaryReactor* ObjectService::RecognizeObjects(
         RECOG_RETURN_IF_ERROR_AS_GRPC(
             RunRecognition(state_, worker, request->frame(), FromProto(request->filter()),
                            FromProto(request->detection_options()), nullptr,
-                           response->mutable_objects(), response->mutable_timing()),
+                           response->mutable_objects(), response->mutable_timing(),
+                           request->explain() ? response->mutable_explanations() : nullptr),
             call.request_id);
         response->set_client_frame_id(request->frame().client_frame_id());
         response->mutable_timing()->set_queue_ms(call.queue_ms);

@@ -412,11 +412,40 @@ Detection FromProto(const pb::DetectedObject& object) {
   return d;
 }
 
+// An explanation as recogd reports it.
+ObjectExplanation FromProto(const pb::ObjectExplanation& explanation) {
+  ObjectExplanation e;
+  e.name = explanation.name();
+  switch (explanation.outcome()) {
+    case pb::OBJECT_OUTCOME_FEW_CORRESPONDENCES:
+      e.outcome = ObjectOutcome::kFewCorrespondences;
+      break;
+    case pb::OBJECT_OUTCOME_FEW_INLIERS:
+      e.outcome = ObjectOutcome::kFewInliers;
+      break;
+    case pb::OBJECT_OUTCOME_SUPPRESSED:
+      e.outcome = ObjectOutcome::kSuppressed;
+      break;
+    case pb::OBJECT_OUTCOME_DETECTED:
+      e.outcome = ObjectOutcome::kDetected;
+      break;
+    default:
+      e.outcome = ObjectOutcome::kNotProposed;
+  }
+  e.regions = explanation.regions();
+  e.best_score = explanation.best_score();
+  e.correspondences = explanation.correspondences();
+  e.inliers = explanation.inliers();
+  e.min_inliers = explanation.min_inliers();
+  return e;
+}
+
 // Sends the image with its intrinsics to recogd's RecognizeObjects; `timing` gets the server's
-// milliseconds (decode, features, recognition, queue).
+// milliseconds (decode, features, recognition, queue), `explanation` (with --explain) what became
+// of every model.
 grpc::Status RecognizeOnServer(const RecognizeArgs& args, const cv::Mat& image,
                                const CameraIntrinsics& camera, std::vector<Detection>* detections,
-                               json* timing) {
+                               json* timing, std::vector<ObjectExplanation>* explanation) {
   auto client = args.server.Connect();
   if (!client.ok()) return client.status();
   auto frame = FrameFromImageFile(args.image, image);
@@ -425,10 +454,13 @@ grpc::Status RecognizeOnServer(const RecognizeArgs& args, const cv::Mat& image,
   pb::DetectionOptions extras;
   extras.set_include_inliers(args.extras.include_inliers);
   extras.set_include_covariance(args.extras.include_covariance);
-  auto response = (*client)->RecognizeObjects(*frame, {}, extras);
+  auto response = (*client)->RecognizeObjects(*frame, {}, extras, args.explain);
   if (!response.ok()) return response.status();
   for (const pb::DetectedObject& object : response->objects()) {
     detections->push_back(FromProto(object));
+  }
+  for (const pb::ObjectExplanation& e : response->explanations()) {
+    explanation->push_back(FromProto(e));
   }
   const pb::Timing& t = response->timing();
   *timing = {{"decode", t.decode_ms()},
@@ -444,11 +476,6 @@ int RunRecognize(const RecognizeArgs& args) {
     return Fail("recognize",
                 Status::InvalidArgument("give --models (recognise here) or --server (on recogd)"));
   }
-  if (remote && args.explain) {
-    return Fail("recognize", Status::InvalidArgument(
-                                 "--explain runs offline only (with --models): recogd does not "
-                                 "report explanations yet"));
-  }
   auto camera = ParseCamera(args.camera);
   if (!camera.ok()) return Fail("recognize", camera.status());
   auto image = ReadGrayImage(args.image);
@@ -457,7 +484,8 @@ int RunRecognize(const RecognizeArgs& args) {
   std::vector<ObjectExplanation> explanation;
   json timing;
   if (remote) {
-    const grpc::Status s = RecognizeOnServer(args, *image, *camera, &detections, &timing);
+    const grpc::Status s =
+        RecognizeOnServer(args, *image, *camera, &detections, &timing, &explanation);
     if (!s.ok()) return Fail("recognize", s);
   } else if (Status s = RecognizeOffline(args, *image, *camera, &detections, &timing, &explanation);
              !s.ok()) {
@@ -1039,7 +1067,7 @@ void AddObjectCommands(CLI::App& app, int* exit_code) {
   recognize->add_flag("--explain", recognize_args->explain,
                       "Say for every model where it dropped out: not_proposed (no region's bag "
                       "of words proposed it), few_correspondences, few_inliers, suppressed (by a "
-                      "stronger object's outline) or detected (offline, with --models)");
+                      "stronger object's outline) or detected");
   recognize->add_flag("--covariance", recognize_args->extras.include_covariance,
                       "With --json: each detection's 6x6 pose covariance (row-major, rotation "
                       "first)");

@@ -331,8 +331,6 @@ expect_ok "recognize --explain of a blank image" "$recog" recognize --models "$t
   --image "$tmp/blank.png" --camera 500,500,256,192 --explain
 grep -q "^no object recognised\$" "$tmp/out" && grep -q "^poster: not_proposed (proposed by 0 regions" "$tmp/out" \
   && pass || fail "recognize --explain says why nothing was found: $(cat "$tmp/out")"
-expect_error "recognize --explain on a server" "offline only" "$recog" recognize --server 127.0.0.1:1 \
-  --image "$images/1.jpg" --camera 500,500,256,192 --explain
 expect_error "model build without a source" "exactly one of" "$recog" model build -o "$tmp/m.robj"
 expect_error "model build with two sources" "exactly one of" "$recog" model build --planar "$images/1.jpg" \
   --rgbd "$tmp/views.txt" --width 0.64 --height 0.48 -o "$tmp/m.robj"

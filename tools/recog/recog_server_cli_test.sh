@@ -187,6 +187,13 @@ expect_ok "recognize --server --inliers --covariance" "$recog" recognize --serve
   --image "$images/1.jpg" --camera 500,500,256,192 --json --inliers --covariance
 json_check "recognize --server --json reports inliers_2d3d and covariance" \
   "x=d['detections'][0]; i=x['inliers_2d3d']; assert len(i)==x['inliers'] and sorted(i[0])==['pixel', 'point', 'point_id'] and len(x['covariance'])==36, x"
+expect_ok "recognize --server --explain" "$recog" recognize --server "127.0.0.1:$port" \
+  --image "$images/1.jpg" --camera 500,500,256,192 --json --explain
+json_check "recognize --server --explain says where each object of the repository ended" \
+  "e=d['explanation']; assert [(x['name'], x['outcome']) for x in e]==[('poster', 'detected')] and e[0]['inliers']>=e[0]['min_inliers']>0 and e[0]['regions']>=1, e"
+expect_ok "recognize --server without --explain" "$recog" recognize --server "127.0.0.1:$port" \
+  --image "$images/1.jpg" --camera 500,500,256,192 --json
+json_check "recognize --server explains nothing unless asked" "assert 'explanation' not in d, d"
 expect_ok "recognize stays offline with RECOG_SERVER set" env RECOG_SERVER=127.0.0.1:1 \
   RECOG_TOKEN_FILE="$tmp/no-token" "$recog" recognize --models "$tmp/poster.robj" \
   --image "$images/1.jpg" --camera 500,500,256,192 --json

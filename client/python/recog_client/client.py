@@ -403,8 +403,8 @@ class RecognitionClient:
     def recognize_objects(self, image: Image,
                           intrinsics: common_pb2.CameraIntrinsics | Sequence[float],
                           names: Iterable[str] = (), classes: Iterable[str] = (),
-                          include_inliers: bool = False, include_covariance: bool = False
-                          ) -> object_pb2.RecognizeObjectsResponse:
+                          include_inliers: bool = False, include_covariance: bool = False,
+                          explain: bool = False) -> object_pb2.RecognizeObjectsResponse:
         """Recognises the known objects in one image; ``response.objects`` is best first.
 
         ``intrinsics`` as in :func:`recog_client.make_intrinsics` (required: poses are solved with
@@ -412,7 +412,8 @@ class RecognitionClient:
         to those objects (empty: every object). Finding nothing is an empty list, not an error.
         For a SLAM that inserts the objects as landmarks, ``include_inliers`` fills each object's
         ``inliers_2d3d`` and ``include_covariance`` its ``covariance`` (6x6 of the pose,
-        row-major, rotation first).
+        row-major, rotation first). ``explain`` fills ``response.explanations``: for every object
+        the filter lets through, where it dropped out (``ObjectOutcome``) and with what evidence.
         """
         frame = common_pb2.Frame()
         frame.CopyFrom(as_frame(image))
@@ -420,7 +421,8 @@ class RecognitionClient:
         request = object_pb2.RecognizeObjectsRequest(
             frame=frame, filter=object_pb2.ObjectFilter(names=names, classes=classes),
             detection_options=object_pb2.DetectionOptions(include_inliers=include_inliers,
-                                                          include_covariance=include_covariance))
+                                                          include_covariance=include_covariance),
+            explain=explain)
         return self._unary(self._objects.RecognizeObjects, request)
 
     def stream_objects(self, frames: Iterable[Image],

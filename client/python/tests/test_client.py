@@ -25,8 +25,8 @@ try:
     from recogd_process import Recogd
     from recog_client import (AlreadyExists, Cancelled, InvalidArgument, NotFound,
                               PermissionDenied, RecognitionClient, ResultOptions,
-                              Unauthenticated, Unavailable, make_features, make_frame, place_pb2,
-                              repository_pb2)
+                              Unauthenticated, Unavailable, make_features, make_frame, object_pb2,
+                              place_pb2, repository_pb2)
 except ModuleNotFoundError as missing:
     if missing.name.split(".")[0] not in ("grpc", "google"):
         raise  # the package is not on PYTHONPATH: an error, not a skip
@@ -281,6 +281,8 @@ class RecognitionClientTest(unittest.TestCase):
             plain = self.client.recognize_objects(corridor(1), camera, names=["slam-poster"])
             full = self.client.recognize_objects(corridor(1), camera, names=["slam-poster"],
                                                  include_inliers=True, include_covariance=True)
+            explained = self.client.recognize_objects(corridor(60), camera,
+                                                      names=["slam-poster"], explain=True)
         finally:
             self.client.delete_model("slam-poster")
         self.assertEqual([o.name for o in plain.objects], ["slam-poster"])
@@ -291,6 +293,12 @@ class RecognitionClientTest(unittest.TestCase):
         self.assertEqual(len(detected.inliers_2d3d), detected.inliers)
         self.assertEqual(len(detected.covariance), 36)
         self.assertTrue(all(detected.covariance[i * 7] > 0 for i in range(6)))
+        self.assertEqual(len(plain.explanations), 0)  # only when asked
+        # Another corridor frame: the poster is not found, and the answer says where it dropped out.
+        self.assertEqual(len(explained.objects), 0)
+        self.assertEqual([e.name for e in explained.explanations], ["slam-poster"])
+        self.assertNotIn(explained.explanations[0].outcome,
+                         (object_pb2.OBJECT_OUTCOME_UNSPECIFIED, object_pb2.OBJECT_OUTCOME_DETECTED))
 
     def test_an_object_stream_tracks_unless_tracking_is_off(self):
         recog = os.environ.get("RECOG")
