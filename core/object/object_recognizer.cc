@@ -291,7 +291,7 @@ void ObjectRecognizer::VerifyCandidates(const std::vector<BcMatch>& candidates,
       }
       detections->push_back(std::move(detection));
     } else {
-      // Too few correspondences for a pose: nothing of the object is there to look closer at.
+      // Failed: worth a closer look only when the object had some correspondences in the region.
       if (verification.correspondences >= options_.second_pass.min_correspondences) {
         *weak = true;
         *evidence = std::max(*evidence, verification.correspondences);
