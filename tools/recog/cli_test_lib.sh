@@ -20,7 +20,7 @@ expect_error() {
   local what=$1 pattern=$2; shift 2
   "$@" >"$tmp/out" 2>"$tmp/err"
   local code=$?
-  if [ "$code" -ne 1 ]; then fail "$what: exit $code, expected 1"; return; fi
+  if [ "$code" -ne 1 ]; then fail "$what: exit $code, expected 1: $(tail -c 2000 "$tmp/err")"; return; fi
   one_error_line "$what" "$pattern"
 }
 # expect_usage_error DESCRIPTION PATTERN CMD...: refused by the command line parser (unknown
@@ -30,7 +30,7 @@ expect_usage_error() {
   local what=$1 pattern=$2; shift 2
   "$@" >"$tmp/out" 2>"$tmp/err"
   local code=$?
-  if [ "$code" -ne 2 ]; then fail "$what: exit $code, expected 2"; return; fi
+  if [ "$code" -ne 2 ]; then fail "$what: exit $code, expected 2: $(tail -c 2000 "$tmp/err")"; return; fi
   one_error_line "$what" "$pattern"
 }
 # expect_version DESCRIPTION NAME CMD...: exit status 0 and one stdout line
