@@ -45,6 +45,7 @@
 #include <spdlog/spdlog.h>
 
 #include "storage/record_codec.h"
+#include "storage/store_damage.h"
 
 namespace recog {
 namespace {
@@ -75,12 +76,12 @@ struct ColumnFamilyConfig {
 
 constexpr std::array<ColumnFamilyConfig, kNumColumnFamilies> kColumnFamilies = {{
     {kDefaultCf, "default", 0, false, "default"},
-    {kMapsCf, "maps", 0, false, "catalog"},
-    {kMetaCf, "entry_meta", kEntryMetadata, true, "metadata"},
+    {kMapsCf, kCatalogFamily, 0, false, "catalog"},
+    {kMetaCf, kEntryMetaFamily, kEntryMetadata, true, "metadata"},
     {kBowCf, "bow", kEntryBow, false, "bow"},
     {kDirectCf, "direct", kEntryDirect, false, "direct index"},
     {kFeaturesCf, "features", kEntryFeatures, false, "features"},
-    {kBlobsCf, "blobs", 0, false, "blob"},
+    {kBlobsCf, kBlobFamily, 0, false, "blob"},
 }};
 constexpr std::array<ColumnFamily, 4> kEntryColumnFamilies = {kMetaCf, kBowCf, kDirectCf,
                                                               kFeaturesCf};
@@ -200,8 +201,8 @@ Status UnknownMap(MapId map) {
 
 class RocksDbIndexStore final : public IndexStore {
  public:
-  RocksDbIndexStore(std::string dir, const RocksDbStoreOptions& options)
-      : dir_(std::move(dir)), options_(options) {
+  RocksDbIndexStore(std::string dir, const RocksDbStoreOptions& options, StoreRecovery* recovery)
+      : dir_(std::move(dir)), options_(options), recovery_(recovery) {
     write_options_.sync = options_.sync == SyncPolicy::kEveryWrite;
   }
   ~RocksDbIndexStore() override;
@@ -237,6 +238,12 @@ class RocksDbIndexStore final : public IndexStore {
   rocksdb::ColumnFamilyHandle* Cf(ColumnFamily cf) const { return handles_[cf]; }
   std::shared_ptr<MapState> FindMap(MapId map) const;
   Status LoadCatalog();
+  // The log is damaged: copies the files, replays the log up to the damage (into db_) and
+  // reports what that lost in *recovery_.
+  Status RecoverPointInTime(rocksdb::DBOptions db_options,
+                            const std::vector<rocksdb::ColumnFamilyDescriptor>& descriptors,
+                            std::vector<rocksdb::ColumnFamilyHandle*>* handles,
+                            std::vector<std::string> damage);
   Status Write(rocksdb::WriteBatch* batch, const std::string& what);
   // Reads the value of `key` in `cf`; NOT_FOUND when absent.
   Status Get(const rocksdb::ReadOptions& read_options, ColumnFamily cf, const std::string& key,
@@ -248,6 +255,7 @@ class RocksDbIndexStore final : public IndexStore {
 
   const std::string dir_;
   const RocksDbStoreOptions options_;
+  StoreRecovery* const recovery_;  // may be null
   rocksdb::WriteOptions write_options_;
   rocksdb::CompressionType compression_ = rocksdb::kNoCompression;
   rocksdb::DB* db_ = nullptr;  // owned; closed and deleted by the destructor
@@ -303,10 +311,14 @@ Status RocksDbIndexStore::Open() {
   rocksdb::DBOptions db_options;
   db_options.create_if_missing = options_.create_if_missing;
   db_options.create_missing_column_families = true;
-  // Replays the WAL up to its first damaged record (the torn last write of a crash) and keeps
-  // that consistent prefix: every write acknowledged before the crash is in it.
-  db_options.wal_recovery_mode = rocksdb::WALRecoveryMode::kPointInTimeRecovery;
+  // Replays the whole WAL, tolerating only a torn last record (a crash of the machine in the
+  // middle of a write, never acknowledged); any other damage fails the open (see "Damage").
+  db_options.wal_recovery_mode = rocksdb::WALRecoveryMode::kTolerateCorruptedTailRecords;
   db_options.keep_log_file_num = 4;  // RocksDB's info logs (LOG, LOG.old.*)
+  std::shared_ptr<rocksdb::Logger> rocksdb_log;
+  if (!rocksdb::CreateLoggerFromOptions(dir_, db_options, &rocksdb_log).ok()) rocksdb_log.reset();
+  auto recorder = std::make_shared<DamageRecorder>(std::move(rocksdb_log));
+  db_options.info_log = recorder;
 
   std::shared_ptr<rocksdb::Cache> cache;
   if (options_.block_cache_mb > 0) cache = rocksdb::NewLRUCache(options_.block_cache_mb << 20);
@@ -349,7 +361,22 @@ Status RocksDbIndexStore::Open() {
   const rocksdb::Status s = rocksdb::DB::Open(db_options, dir_, descriptors, &handles, &db_);
   if (!s.ok()) {
     db_ = nullptr;
-    return OpenFailure(s, dir_);
+    std::vector<std::string> damage = recorder->damage();
+    if (!s.IsCorruption() || damage.empty()) return OpenFailure(s, dir_);
+    if (options_.damaged_log == DamagedLogPolicy::kRefuse) {
+      std::string stretches;
+      for (const std::string& stretch : damage) {
+        if (!stretches.empty()) stretches += "; ";
+        stretches += stretch;
+      }
+      return Status::DataLoss("the write-ahead log of index store '" + dir_ + "' is damaged (" +
+                              stretches +
+                              "); nothing was changed. Restore a checkpoint, or accept losing "
+                              "the writes after the damage with point-in-time recovery "
+                              "(recogd --recover point-in-time), which keeps a copy of the files");
+    }
+    recorder->ClearDamage();
+    RECOG_RETURN_IF_ERROR(RecoverPointInTime(db_options, descriptors, &handles, std::move(damage)));
   }
   for (size_t i = 0; i < handles.size(); ++i) {
     if (i < kNumColumnFamilies) {
@@ -367,6 +394,56 @@ Status RocksDbIndexStore::Open() {
                    ? std::string("every write")
                    : "every " + std::to_string(options_.group_sync_interval_ms) + " ms",
                CompressionName(compression_));
+  return Status::Ok();
+}
+
+Status RocksDbIndexStore::RecoverPointInTime(
+    rocksdb::DBOptions db_options, const std::vector<rocksdb::ColumnFamilyDescriptor>& descriptors,
+    std::vector<rocksdb::ColumnFamilyHandle*>* handles, std::vector<std::string> damage) {
+  StoreRecovery recovery;
+  recovery.damage = std::move(damage);
+  RECOG_ASSIGN_OR_RETURN(recovery.damaged_copy, KeepDamagedCopy(dir_));
+
+  // What the store held: its table files (opened read-only, applying no log record), and every
+  // record of the log that is still readable, read by our own reader.
+  StoreInventory before;
+  {
+    TablesOnly tables;
+    rocksdb::DBOptions read_only = db_options;
+    read_only.wal_recovery_mode = rocksdb::WALRecoveryMode::kPointInTimeRecovery;
+    read_only.wal_filter = &tables;
+    std::vector<rocksdb::ColumnFamilyHandle*> read_handles;
+    rocksdb::DB* db = nullptr;
+    const rocksdb::Status s =
+        rocksdb::DB::OpenForReadOnly(read_only, dir_, descriptors, &read_handles, &db);
+    if (!s.ok()) return FromRocks(s, "cannot read the damaged index store '" + dir_ + "'");
+    StatusOr<StoreInventory> read =
+        ReadInventory(db, read_handles[kMapsCf], read_handles[kMetaCf], read_handles[kBlobsCf]);
+    for (rocksdb::ColumnFamilyHandle* handle : read_handles) db->DestroyColumnFamilyHandle(handle);
+    delete db;
+    RECOG_RETURN_IF_ERROR(read.status());
+    before = std::move(read).value();
+    const size_t skipped = ApplyReadableLog(dir_, tables, &before);
+    spdlog::info("index store '{}': {} damaged records of the write-ahead log skipped", dir_,
+                 skipped);
+  }
+
+  db_options.wal_recovery_mode = rocksdb::WALRecoveryMode::kPointInTimeRecovery;
+  const rocksdb::Status s = rocksdb::DB::Open(db_options, dir_, descriptors, handles, &db_);
+  if (!s.ok()) {
+    db_ = nullptr;
+    return OpenFailure(s, dir_);
+  }
+  RECOG_ASSIGN_OR_RETURN(
+      const StoreInventory after,
+      ReadInventory(db_, (*handles)[kMapsCf], (*handles)[kMetaCf], (*handles)[kBlobsCf]));
+  CompareInventories(before, after, &recovery);
+  spdlog::warn(
+      "index store '{}' recovered to the damage of its write-ahead log: {} entries of {} "
+      "maps and {} blobs lost",
+      dir_, recovery.entries_lost(), recovery.maps.size(), recovery.blobs_lost.size());
+  for (const std::string& line : recovery.Describe()) spdlog::warn("  {}", line);
+  if (recovery_ != nullptr) *recovery_ = std::move(recovery);
   return Status::Ok();
 }
 
@@ -870,10 +947,13 @@ Status RocksDbStoreOptions::Validate() const {
 }
 
 StatusOr<std::unique_ptr<IndexStore>> OpenRocksDbIndexStore(const std::string& dir,
-                                                            const RocksDbStoreOptions& options) {
+                                                            const RocksDbStoreOptions& options,
+                                                            StoreRecovery* recovery) {
   RECOG_RETURN_IF_ERROR(options.Validate());
   RECOG_RETURN_IF_ERROR(PrepareDirectory(dir, options.create_if_missing));
-  auto store = std::make_unique<RocksDbIndexStore>(dir, options);
+  RECOG_RETURN_IF_ERROR(CheckCurrentFileIsThere(dir));
+  if (recovery != nullptr) *recovery = StoreRecovery();
+  auto store = std::make_unique<RocksDbIndexStore>(dir, options, recovery);
   RECOG_RETURN_IF_ERROR(store->Open());
   return std::unique_ptr<IndexStore>(std::move(store));
 }

@@ -22,6 +22,18 @@
 //    of the process (kill -9, abort), but a crash of the machine may lose the writes of the last
 //    interval. Flush() forces the sync. Much higher write throughput: many writes share one fsync.
 //
+// Damage. A store never loses acknowledged writes without saying so. The write-ahead log is
+// replayed tolerating only a torn last write (the record being written when the machine lost
+// power). Damage anywhere else in the log (a flipped byte, a lost block) fails the open with
+// DATA_LOSS naming the log file and the damaged bytes, and nothing is rewritten. An operator who
+// accepts the loss opens with DamagedLogPolicy::kPointInTime: the store's files are first copied
+// beside it ("<dir>.damaged-<UTC time>"), the log is replayed up to its damage (a consistent
+// prefix of the writes), and StoreRecovery lists what that lost: per map the entries that the
+// log's readable records held and the recovered store does not, maps lost whole, blob keys lost.
+// Entries whose records lay in the damaged bytes themselves cannot be listed.
+// Damage to a table file (*.sst) is found when its block is read (DATA_LOSS naming the file);
+// a missing CURRENT file beside the store's other files is DATA_LOSS, not a new empty store.
+//
 // Checkpoints. IndexStore::Checkpoint(dir) writes a consistent, openable copy of the whole store
 // (SST files hard-linked when on the same filesystem) while the store keeps serving; it holds
 // every write that returned before the call. RestoreRocksDbCheckpoint copies one back into place,
@@ -37,6 +49,7 @@
 #include <cstdint>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "core/common/status.h"
 #include "core/index/index_store.h"
@@ -46,6 +59,33 @@ namespace recog {
 enum class SyncPolicy {
   kEveryWrite,  // fsync the WAL in every write: durable against machine crashes
   kGrouped,     // fsync the WAL from a background thread every group_sync_interval_ms
+};
+
+// What opening a store does with a write-ahead log damaged anywhere but in its torn last write.
+enum class DamagedLogPolicy {
+  kRefuse,       // DATA_LOSS naming the log file and the damage; no file is changed
+  kPointInTime,  // keep a copy of the files, replay up to the damage, report the loss
+};
+
+// What a point-in-time recovery lost (see "Damage" above). Empty when the log was whole.
+struct StoreRecovery {
+  struct MapLoss {
+    std::string name;
+    size_t entries_before = 0;     // entries held by the log's readable records
+    size_t entries_after = 0;      // entries in the recovered store
+    std::vector<EntryId> missing;  // the ids of the difference, increasing
+    bool map_lost = false;         // the map itself is gone
+  };
+  std::vector<std::string> damage;      // per damaged stretch: "<file>: dropping N bytes; <why>"
+  std::string damaged_copy;             // the directory holding the files as they were
+  std::vector<MapLoss> maps;            // the maps that lost something, by name
+  std::vector<std::string> blobs_lost;  // blob keys (object model versions: model/<name>/<v>)
+
+  bool recovered() const { return !damage.empty(); }
+  size_t entries_lost() const;  // the missing ids of every map
+  size_t maps_lost() const;     // the maps lost whole
+  // One line per damaged stretch, per map that lost something, and for the blobs lost.
+  std::vector<std::string> Describe() const;
 };
 
 struct RocksDbStoreOptions {
@@ -59,6 +99,9 @@ struct RocksDbStoreOptions {
   // Memory for cached uncompressed blocks, shared by all column families, at most 1 TiB. 0 turns
   // the cache off (every read goes to the files / the OS page cache).
   size_t block_cache_mb = 64;
+  // A write-ahead log damaged anywhere but in its torn last write: refuse, or recover to the
+  // damage and report the loss (see "Damage" above).
+  DamagedLogPolicy damaged_log = DamagedLogPolicy::kRefuse;
 
   // INVALID_ARGUMENT naming the bad field.
   Status Validate() const;
@@ -70,10 +113,12 @@ struct RocksDbStoreOptions {
 //  - FAILED_PRECONDITION when `dir` is not writable (read-only directory or filesystem), or the
 //    store was written by a newer, incompatible version;
 //  - UNAVAILABLE when another store (in this or another process) has `dir` open, or on other I/O
-//    errors; DATA_LOSS when the store is corrupt.
-// The message names the directory and includes RocksDB's own description.
+//    errors; DATA_LOSS when the store is corrupt (a damaged log under DamagedLogPolicy::kRefuse).
+// The message names the directory and includes RocksDB's own description. When the log was damaged
+// and options.damaged_log is kPointInTime, *recovery (if given) says what the recovery lost.
 StatusOr<std::unique_ptr<IndexStore>> OpenRocksDbIndexStore(const std::string& dir,
-                                                            const RocksDbStoreOptions& options);
+                                                            const RocksDbStoreOptions& options,
+                                                            StoreRecovery* recovery = nullptr);
 
 // Offline restore: copies a checkpoint directory (written by IndexStore::Checkpoint) to
 // `data_dir`, which must not exist (ALREADY_EXISTS otherwise) and is then opened with

@@ -130,8 +130,14 @@ Status RecognitionServer::Open() {
       config.store.sync == StoreSync::kEveryWrite ? SyncPolicy::kEveryWrite : SyncPolicy::kGrouped;
   store_options.group_sync_interval_ms = config.store.group_sync_interval_ms;
   store_options.block_cache_mb = size_t(config.store.block_cache_mb);
-  RECOG_ASSIGN_OR_RETURN(state.store,
-                         OpenRocksDbIndexStore(config.data_dir + "/store", store_options));
+  store_options.damaged_log = config.store.recover == StoreRecover::kPointInTime
+                                  ? DamagedLogPolicy::kPointInTime
+                                  : DamagedLogPolicy::kRefuse;
+  StoreRecovery recovery;
+  RECOG_ASSIGN_OR_RETURN(
+      state.store, OpenRocksDbIndexStore(config.data_dir + "/store", store_options, &recovery));
+  state.metrics.SetStoreRecoveryLoss(recovery.entries_lost(), recovery.maps_lost(),
+                                     recovery.blobs_lost.size());
 
   RECOG_ASSIGN_OR_RETURN(std::shared_ptr<const Vocabulary> place_vocabulary,
                          OpenVocabulary(config.place_vocabulary, DefaultPlaceVocabularyPath()));

@@ -169,6 +169,7 @@ Status ReadConfig(const YAML::Node& root, ServerConfig* config) {
   RECOG_RETURN_IF_ERROR(
       store.Read("group_sync_interval_ms", &config->store.group_sync_interval_ms));
   RECOG_RETURN_IF_ERROR(store.Read("block_cache_mb", &config->store.block_cache_mb));
+  RECOG_RETURN_IF_ERROR(store.ReadParsed("recover", &config->store.recover, ParseStoreRecover));
   RECOG_RETURN_IF_ERROR(store.RejectUnknownKeys());
 
   RECOG_ASSIGN_OR_RETURN(YamlSection place, top.Section("place"));
@@ -228,6 +229,24 @@ StatusOr<StoreSync> ParseStoreSync(std::string_view name) {
   }
   return Status::InvalidArgument("unknown store sync policy '" + std::string(name) +
                                  "' (grouped or every_write)");
+}
+
+std::string_view StoreRecoverName(StoreRecover recover) {
+  switch (recover) {
+    case StoreRecover::kRefuse:
+      return "refuse";
+    case StoreRecover::kPointInTime:
+      return "point-in-time";
+  }
+  return "unknown";
+}
+
+StatusOr<StoreRecover> ParseStoreRecover(std::string_view name) {
+  for (StoreRecover recover : {StoreRecover::kRefuse, StoreRecover::kPointInTime}) {
+    if (name == StoreRecoverName(recover)) return recover;
+  }
+  return Status::InvalidArgument("unknown store recovery '" + std::string(name) +
+                                 "' (refuse or point-in-time)");
 }
 
 StatusOr<ServerConfig> ServerConfig::LoadYaml(const std::string& path) {
@@ -459,6 +478,14 @@ void AddFlags(CLI::App& app, ServerConfig* config) {
       ->check(CLI::IsMember({std::string(StoreSyncName(StoreSync::kGrouped)),
                              std::string(StoreSyncName(StoreSync::kEveryWrite))}))
       ->default_str(std::string(StoreSyncName(config->store.sync)));
+  app.add_option_function<std::string>(
+         "--recover",
+         [config](const std::string& name) { config->store.recover = *ParseStoreRecover(name); },
+         "A damaged write-ahead log: refuse to start, or recover up to the damage (keeping a copy "
+         "of the files) and report what was lost")
+      ->check(CLI::IsMember({std::string(StoreRecoverName(StoreRecover::kRefuse)),
+                             std::string(StoreRecoverName(StoreRecover::kPointInTime))}))
+      ->default_str(std::string(StoreRecoverName(config->store.recover)));
   app.add_option("--shutdown-grace-ms", config->shutdown_grace_ms,
                  "Time calls in flight get to finish on SIGTERM/SIGINT")
       ->capture_default_str();

@@ -37,6 +37,15 @@ enum class StoreSync {
 std::string_view StoreSyncName(StoreSync sync);  // "grouped", "every_write"
 StatusOr<StoreSync> ParseStoreSync(std::string_view name);
 
+// What start-up does with a write-ahead log damaged anywhere but in its torn last write (mirrors
+// storage's DamagedLogPolicy; see storage/rocksdb_index_store.h, "Damage").
+enum class StoreRecover {
+  kRefuse,       // recogd exits 1 naming the log file and the damage; nothing is rewritten
+  kPointInTime,  // keep a copy of the files, recover to the damage, log and count what was lost
+};
+std::string_view StoreRecoverName(StoreRecover recover);  // "refuse", "point-in-time"
+StatusOr<StoreRecover> ParseStoreRecover(std::string_view name);
+
 // HTTP/2 keepalive, tuned for robots on Wi-Fi: dead connections are noticed within
 // time_ms + timeout_ms, and clients may ping idle connections.
 struct KeepaliveConfig {
@@ -67,6 +76,9 @@ struct StoreConfig {
   uint32_t group_sync_interval_ms = 50;
   // Default 64: block cache shared by all column families, in MiB; 0 turns it off.
   uint64_t block_cache_mb = 64;
+  // Default kRefuse ("refuse"): a damaged write-ahead log stops the start-up. "point-in-time"
+  // accepts losing the writes after the damage, once the operator has decided to (--recover).
+  StoreRecover recover = StoreRecover::kRefuse;
 };
 
 // Sharding place maps across servers (placement_table.h, docs/scaling.md). Both empty (the
@@ -167,7 +179,7 @@ uint32_t AvailableCpus(const CgroupPaths& paths, uint32_t hardware_cpus);
 
 // Adds one flag per commonly changed field (--listen, --data-dir, --place-vocabulary,
 // --object-vocabulary, --workers, --queue-capacity, --max-message-bytes, --token-file,
-// --tls-cert, --tls-key, --tls-client-ca, --metrics-listen, --sync, --shutdown-grace-ms,
+// --tls-cert, --tls-key, --tls-client-ca, --metrics-listen, --sync, --recover, --shutdown-grace-ms,
 // --log-level, --shard-name, --placement-file, --repository-primary, --repository-token-file,
 // --repository-tls-ca), bound to `config`: parsing `app` overwrites exactly
 // the fields whose flags were given. The help shows the values `config` holds now as defaults.

@@ -72,6 +72,7 @@ TEST_F(ServerConfigTest, DefaultsAreValidAndAsDocumented) {
   EXPECT_EQ(config.store.sync, StoreSync::kGrouped);
   EXPECT_EQ(config.store.group_sync_interval_ms, 50u);
   EXPECT_EQ(config.store.block_cache_mb, 64u);
+  EXPECT_EQ(config.store.recover, StoreRecover::kRefuse);
   EXPECT_EQ(config.shard.name, "");
   EXPECT_EQ(config.shard.placement_file, "");
   EXPECT_EQ(config.repository.primary, "");
@@ -158,6 +159,12 @@ TEST_F(ServerConfigTest, StoreSyncNamesRoundTrip) {
     EXPECT_EQ(*parsed, sync);
   }
   EXPECT_EQ(ParseStoreSync("sometimes").status().code(), StatusCode::kInvalidArgument);
+  for (StoreRecover recover : {StoreRecover::kRefuse, StoreRecover::kPointInTime}) {
+    StatusOr<StoreRecover> parsed = ParseStoreRecover(StoreRecoverName(recover));
+    ASSERT_TRUE(parsed.ok());
+    EXPECT_EQ(*parsed, recover);
+  }
+  EXPECT_EQ(ParseStoreRecover("skip").status().code(), StatusCode::kInvalidArgument);
 }
 
 TEST_F(ServerConfigTest, YamlSetsEveryFieldOfEverySection) {
@@ -186,6 +193,7 @@ store:
   sync: every_write
   group_sync_interval_ms: 200
   block_cache_mb: 0
+  recover: point-in-time
 shard:
   name: shard_a
   placement_file: /etc/recogd/router/placement.map
@@ -225,6 +233,7 @@ place:
   EXPECT_EQ(config->store.sync, StoreSync::kEveryWrite);
   EXPECT_EQ(config->store.group_sync_interval_ms, 200u);
   EXPECT_EQ(config->store.block_cache_mb, 0u);
+  EXPECT_EQ(config->store.recover, StoreRecover::kPointInTime);
   EXPECT_EQ(config->shard.name, "shard_a");
   EXPECT_EQ(config->shard.placement_file, "/etc/recogd/router/placement.map");
   EXPECT_EQ(config->repository.primary, "10.0.0.10:50051");
@@ -431,6 +440,8 @@ TEST_F(ServerConfigTest, EveryFlagSetsItsField) {
                                         "",
                                         "--sync",
                                         "every_write",
+                                        "--recover",
+                                        "point-in-time",
                                         "--shutdown-grace-ms",
                                         "0",
                                         "--log-level",
@@ -461,6 +472,7 @@ TEST_F(ServerConfigTest, EveryFlagSetsItsField) {
   EXPECT_EQ(c.tls.client_ca, "ca.pem");
   EXPECT_EQ(c.metrics_listen, "");
   EXPECT_EQ(c.store.sync, StoreSync::kEveryWrite);
+  EXPECT_EQ(c.store.recover, StoreRecover::kPointInTime);
   EXPECT_EQ(c.shutdown_grace_ms, 0u);
   EXPECT_EQ(c.log_level, "warn");
   EXPECT_EQ(c.shard.name, "shard_b");

@@ -69,6 +69,9 @@ ServerMetrics::ServerMetrics() : registry_(std::make_shared<prometheus::Registry
   objects_ =
       &Register(prometheus::BuildGauge(), r, "recog_objects", "Object models in the database")
            .Add({});
+  recovery_lost_ = &Register(prometheus::BuildGauge(), r, "recog_store_recovery_lost",
+                             "What a point-in-time recovery of the damaged store lost at start-up");
+  SetStoreRecoveryLoss(0, 0, 0);
   stream_active_ =
       &Register(prometheus::BuildGauge(), r, "recog_stream_active", "Open streaming calls per RPC");
   replica_synced_ = &Register(prometheus::BuildGauge(), r, "recog_replica_synced",
@@ -215,6 +218,12 @@ void ServerMetrics::RemoveMap(std::string_view map) {
 }
 
 void ServerMetrics::SetObjects(uint64_t objects) { objects_->Set(static_cast<double>(objects)); }
+
+void ServerMetrics::SetStoreRecoveryLoss(uint64_t entries, uint64_t maps, uint64_t blobs) {
+  recovery_lost_->Add({{"kind", "entries"}}).Set(static_cast<double>(entries));
+  recovery_lost_->Add({{"kind", "maps"}}).Set(static_cast<double>(maps));
+  recovery_lost_->Add({{"kind", "blobs"}}).Set(static_cast<double>(blobs));
+}
 
 void ServerMetrics::SetReplicaSynced(bool synced) { replica_synced_->Set(synced ? 1.0 : 0.0); }
 

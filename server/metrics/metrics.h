@@ -9,6 +9,9 @@
 //   recog_worker_busy                          gauge: workers running a task
 //   recog_map_entries{map}                     gauge: entries of each place map
 //   recog_objects                              gauge: object models in the database
+//   recog_store_recovery_lost{kind}            gauge: what this start-up's point-in-time recovery
+//                                              of a damaged store lost, kind "entries", "maps" or
+//                                              "blobs" (0 when the store opened whole)
 //   recog_stream_active{rpc}                   gauge: open streaming calls per RPC
 //   recog_replica_synced                       gauge: 1 while a repository replica follows its
 //                                              primary live, 0 otherwise (and on a primary)
@@ -100,6 +103,7 @@ class ServerMetrics {
   void SetMapEntries(std::string_view map, uint64_t entries);
   void RemoveMap(std::string_view map);
   void SetObjects(uint64_t objects);
+  void SetStoreRecoveryLoss(uint64_t entries, uint64_t maps, uint64_t blobs);
 
   // A repository replica (server/replication/) is or is no longer synced with its primary;
   // it applied `count` changes (copied versions, deletions).
@@ -144,6 +148,7 @@ class ServerMetrics {
   prometheus::Gauge* queue_depth_;
   prometheus::Gauge* busy_workers_;
   prometheus::Gauge* objects_;
+  prometheus::Family<prometheus::Gauge>* recovery_lost_;
   prometheus::Gauge* replica_synced_;
   prometheus::Counter* replica_changes_;
 

@@ -176,13 +176,19 @@ TEST(ServerMetricsTest, GaugesHoldTheLastValue) {
   metrics.SetBusyWorkers(2);
   metrics.SetObjects(11);
   EXPECT_THAT(Sample(metrics.Serialize(), "recog_replica_synced"), Optional(0.0));
+  EXPECT_THAT(Sample(metrics.Serialize(), "recog_store_recovery_lost{kind=\"entries\"}"),
+              Optional(0.0));
   metrics.SetReplicaSynced(true);
+  metrics.SetStoreRecoveryLoss(19, 1, 2);
   const std::string text = metrics.Serialize();
   EXPECT_THAT(text, HasSubstr("# TYPE recog_worker_queue_depth gauge"));
   EXPECT_THAT(Sample(text, "recog_worker_queue_depth"), Optional(3.0));
   EXPECT_THAT(Sample(text, "recog_worker_busy"), Optional(2.0));
   EXPECT_THAT(Sample(text, "recog_objects"), Optional(11.0));
   EXPECT_THAT(Sample(text, "recog_replica_synced"), Optional(1.0));
+  EXPECT_THAT(Sample(text, "recog_store_recovery_lost{kind=\"entries\"}"), Optional(19.0));
+  EXPECT_THAT(Sample(text, "recog_store_recovery_lost{kind=\"maps\"}"), Optional(1.0));
+  EXPECT_THAT(Sample(text, "recog_store_recovery_lost{kind=\"blobs\"}"), Optional(2.0));
 }
 
 TEST(ServerMetricsTest, BuildInfoIsOneSeriesLabelledWithTheVersionAndCommit) {

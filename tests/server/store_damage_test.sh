@@ -1,0 +1,106 @@
+#!/usr/bin/env bash
+# Issue 24's experiment against a real recogd: two maps streamed in, recogd stopped cleanly (the
+# frames are in the store's write-ahead log), one byte of the log flipped among m1's frames.
+# Expected: recogd refuses to start (exit 1, one line naming the log file and the damaged bytes)
+# and changes nothing; with --recover point-in-time it starts, keeps a copy of the damaged files,
+# logs m1's missing frame ids and m2 lost whole, counts them in recog_store_recovery_lost, and
+# serves the consistent prefix; the store then starts again without --recover.
+# Usage: store_damage_test.sh RECOG RECOGD PROJECT_DIR
+set -u
+recog=$1
+recogd=$2
+project=$3
+tmp=$(mktemp -d)
+server_pid=
+cleanup() {
+  [ -n "$server_pid" ] && kill -KILL "$server_pid" 2>/dev/null
+  rm -rf "$tmp"
+}
+trap cleanup EXIT
+# shellcheck source=../../tools/recog/cli_test_lib.sh
+source "$project/tools/recog/cli_test_lib.sh"
+
+images=$project/tests/data/corridor
+port=$(free_port)
+metrics_port=$(free_port)
+server=(--server "127.0.0.1:$port")
+
+# start_recogd ARGS...: recogd on the test's data directory, in the background, until it serves
+# (true) or exits (false; its status in $exit_status).
+start_recogd() {
+  "$recogd" --listen "127.0.0.1:$port" --data-dir "$tmp/data" --workers 2 \
+    --metrics-listen "127.0.0.1:$metrics_port" "$@" >"$tmp/recogd.log" 2>&1 &
+  server_pid=$!
+  for _ in $(seq 300); do
+    "$recog" admin health "${server[@]}" --timeout-ms 500 >/dev/null 2>&1 && return 0
+    if ! kill -0 "$server_pid" 2>/dev/null; then
+      wait "$server_pid"
+      exit_status=$?
+      server_pid=
+      return 1
+    fi
+    sleep 0.1
+  done
+  return 1
+}
+stop_recogd() {
+  kill -TERM "$server_pid" && wait "$server_pid"
+  server_pid=
+}
+
+start_recogd || { echo "FAIL: recogd did not start: $(cat "$tmp/recogd.log")"; exit 1; }
+for map in m1 m2; do
+  expect_ok "create $map" "$recog" maps create "$map" "${server[@]}"
+  for _ in 1 2 3; do
+    expect_ok "stream into $map" "$recog" stream --map "$map" --images "$images" -q "${server[@]}"
+  done
+done
+stop_recogd
+
+log=$(ls "$tmp"/data/store/*.log | head -1)
+python3 - "$log" <<'PY'
+import os, sys
+path = sys.argv[1]
+with open(path, "r+b") as f:
+    at = os.path.getsize(path) // 4  # among m1's frames
+    f.seek(at); b = f.read(1); f.seek(at); f.write(bytes([b[0] ^ 0x10]))
+PY
+cp "$log" "$tmp/damaged.log"
+
+# Refused, naming the file and the damage; nothing changed.
+if start_recogd; then
+  fail "recogd started on a damaged log"
+  stop_recogd
+else
+  [ "$exit_status" -eq 1 ] && pass || fail "a damaged log: exit $exit_status, expected 1"
+  grep -q "DATA_LOSS.*$(basename "$log"): dropping [0-9]* bytes.*--recover point-in-time" \
+    "$tmp/recogd.log" && pass || fail "the refusal names the log file and the damage: $(tail -2 "$tmp/recogd.log")"
+  cmp -s "$log" "$tmp/damaged.log" && pass || fail "the refused start changed the log"
+  ls -d "$tmp"/data/store.damaged-* >/dev/null 2>&1 && fail "a refused start copied files" || pass
+fi
+
+# Point-in-time recovery: starts, reports the loss, keeps the damaged files.
+start_recogd --recover point-in-time || fail "recogd --recover point-in-time: $(tail -3 "$tmp/recogd.log")"
+grep -q "map 'm1': [0-9]* -> [0-9]* entries, missing ids [0-9,]*11$" "$tmp/recogd.log" && pass \
+  || fail "the log lists m1's missing frames: $(grep "map '" "$tmp/recogd.log")"
+grep -q "map 'm2' lost whole: 12 -> 0 entries" "$tmp/recogd.log" && pass \
+  || fail "the log says m2 is lost: $(grep "map '" "$tmp/recogd.log")"
+copy=$(ls -d "$tmp"/data/store.damaged-* 2>/dev/null | head -1)
+[ -n "$copy" ] && cmp -s "$copy/$(basename "$log")" "$tmp/damaged.log" && pass \
+  || fail "the damaged log is kept in data/store.damaged-*: $(ls "$tmp/data")"
+expect_ok "maps list after the recovery" "$recog" maps list --json "${server[@]}"
+json_check "only m1 is left, with fewer than 12 frames" \
+  "assert [m['name'] for m in d]==['m1'] and 0 < d[0]['frames'] < 12, d"
+python3 - "$metrics_port" >"$tmp/metrics" 2>&1 <<'PY'
+import sys, urllib.request
+print(urllib.request.urlopen(f"http://127.0.0.1:{sys.argv[1]}/metrics", timeout=5).read().decode())
+PY
+grep -q '^recog_store_recovery_lost{kind="maps"} 1$' "$tmp/metrics" && pass \
+  || fail "recog_store_recovery_lost counts m2: $(grep recovery_lost "$tmp/metrics")"
+stop_recogd
+
+# The recovered store is whole: it starts without --recover.
+start_recogd && pass || fail "the recovered store does not start again: $(tail -2 "$tmp/recogd.log")"
+[ -n "$server_pid" ] && stop_recogd
+
+report_and_exit
