@@ -226,6 +226,7 @@ class RocksDbIndexStore final : public IndexStore {
   StatusOr<std::vector<std::string>> ListBlobKeys(const std::string& prefix) override;
   Status Flush() override;
   Status Checkpoint(const std::string& dir) override;
+  StatusOr<VerifyReport> Verify(uint64_t bytes_per_second) override;
 
  private:
   struct MapState {
@@ -914,6 +915,44 @@ Status RocksDbIndexStore::Checkpoint(const std::string& dir) {
   RECOG_RETURN_IF_ERROR(FromRocks(checkpoint->CreateCheckpoint(target.string()), what));
   spdlog::info("index store '{}': wrote checkpoint '{}'", dir_, target.string());
   return Status::Ok();
+}
+
+StatusOr<IndexStore::VerifyReport> RocksDbIndexStore::Verify(uint64_t bytes_per_second) {
+  // The files being checked stay on disk while compactions replace them.
+  RECOG_RETURN_IF_ERROR(
+      FromRocks(db_->DisableFileDeletions(), "cannot verify index store '" + dir_ + "'"));
+  struct EnableDeletions {
+    rocksdb::DB* db;
+    ~EnableDeletions() { db->EnableFileDeletions(/*force=*/false); }
+  } enable_deletions{db_};
+  std::vector<rocksdb::LiveFileMetaData> files;
+  db_->GetLiveFilesMetaData(&files);
+
+  const rocksdb::Options options;  // any block-based table reads with the default factory
+  rocksdb::ReadOptions read_options;
+  read_options.verify_checksums = true;
+  read_options.fill_cache = false;
+  VerifyReport report;
+  const auto start = std::chrono::steady_clock::now();
+  for (const rocksdb::LiveFileMetaData& file : files) {
+    const std::string path = file.directory + "/" + file.relative_filename;
+    const rocksdb::Status s =
+        rocksdb::VerifySstFileChecksum(options, rocksdb::EnvOptions(), read_options, path);
+    if (!s.ok()) {
+      return Status::DataLoss("index store '" + dir_ + "': table file " + path +
+                              " is damaged: " + s.ToString());
+    }
+    ++report.files;
+    report.bytes += file.size;
+    if (bytes_per_second > 0) {
+      // Sleep until the average rate is back under the limit.
+      const auto due =
+          start + std::chrono::duration<double>(double(report.bytes) / double(bytes_per_second));
+      std::this_thread::sleep_until(
+          std::chrono::time_point_cast<std::chrono::steady_clock::duration>(due));
+    }
+  }
+  return report;
 }
 
 // fsyncs a file or a directory.

@@ -170,7 +170,8 @@ StatusOr<std::string> KeepDamagedCopy(const std::string& dir) {
 
 std::string StoreInventory::NameOf(MapId id) const {
   const auto name = map_names.find(id);
-  return name != map_names.end() ? name->second : "<unnamed map id " + std::to_string(id) + '>';
+  if (name != map_names.end()) return name->second;
+  return "<map id " + std::to_string(id) + ", its name was in the damaged bytes>";
 }
 
 StatusOr<StoreInventory> ReadInventory(rocksdb::DB* db, rocksdb::ColumnFamilyHandle* maps,

@@ -62,7 +62,8 @@ struct StoreInventory {
   std::map<MapId, std::set<EntryId>> entries;  // entry ids by map (a map may lack its name)
   std::set<std::string> blob_keys;
 
-  // The name of map `id`, or "<unnamed map id N>" when its catalog record is missing.
+  // The name of map `id`, or "<map id N, its name was in the damaged bytes>" when its catalog
+  // record is missing.
   std::string NameOf(MapId id) const;
 };
 

@@ -8,6 +8,7 @@
 // memtable), as in the experiment of issue 24 (84 + 84 corridor frames). Tests that need table
 // files take a checkpoint first, which flushes the memtables to *.sst files.
 #include <algorithm>
+#include <chrono>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
@@ -227,6 +228,37 @@ TEST_F(StoreDamageTest, AFlippedByteInATableFileIsDataLossNamingTheFileWhenRead)
         << ids.status().ToString();
   }
   EXPECT_TRUE(found) << "the damaged block of " << table << " was never reported";
+}
+
+TEST_F(StoreDamageTest, VerifyReadsEveryTableFileAndNamesAFlippedByteWhileTheStoreServes) {
+  MakeStore(/*tables=*/true);
+  auto store = Reopen(DamagedLogPolicy::kRefuse);
+  ASSERT_TRUE(store.ok()) << store.status().ToString();
+  auto whole = (*store)->Verify(0);
+  ASSERT_TRUE(whole.ok()) << whole.status().ToString();
+  uintmax_t table_bytes = 0;
+  size_t tables = 0;
+  for (const fs::directory_entry& file : fs::directory_iterator(StorePath())) {
+    if (file.path().extension() == ".sst") {
+      table_bytes += file.file_size();
+      ++tables;
+    }
+  }
+  EXPECT_EQ(whole->files, tables);
+  EXPECT_EQ(whole->bytes, table_bytes);
+
+  // The rate limit holds: at 4 x the store's bytes a second, the check takes a quarter second.
+  const auto start = std::chrono::steady_clock::now();
+  ASSERT_TRUE((*store)->Verify(table_bytes * 4).ok());
+  EXPECT_GE(std::chrono::steady_clock::now() - start, std::chrono::milliseconds(240));
+
+  // A byte flipped under the running store (the block cache is off for what Verify reads).
+  const fs::path table = FileOf(StorePath(), ".sst");
+  FlipByte(table, fs::file_size(table) / 2);
+  auto damaged = (*store)->Verify(0);
+  ASSERT_EQ(damaged.status().code(), StatusCode::kDataLoss) << damaged.status().ToString();
+  EXPECT_NE(damaged.status().message().find(table.filename().string()), std::string::npos)
+      << damaged.status().ToString();
 }
 
 TEST_F(StoreDamageTest, ATruncatedTableFileIsRefusedAtOpen) {

@@ -1,4 +1,5 @@
-// RecognitionClient's calls for operators: the health check and online checkpoints.
+// RecognitionClient's calls for operators: the health check, online checkpoints and checks of the
+// store's files.
 #include <unistd.h>
 
 #include <cstdio>
@@ -39,6 +40,18 @@ Result<health::HealthCheckResponse::ServingStatus> RecognitionClient::CheckHealt
       health_->Check(UnaryContext().get(), health::HealthCheckRequest(), &response);
   if (!status.ok()) return status;
   return response.status();
+}
+
+Result<pb::VerifyResponse> RecognitionClient::VerifyStore(uint32_t mib_per_second) {
+  grpc::ClientContext context;
+  const Deadline deadline = std::chrono::system_clock::now() + options_.transfer_deadline;
+  PrepareContext(context, &deadline);
+  pb::VerifyRequest request;
+  request.set_mib_per_second(mib_per_second);
+  pb::VerifyResponse response;
+  const grpc::Status status = admin_->Verify(&context, request, &response);
+  if (!status.ok()) return status;
+  return response;
 }
 
 Result<pb::CheckpointManifest> RecognitionClient::DownloadCheckpoint(

@@ -195,6 +195,9 @@ class RecognitionClient {
   // transfer deadline applies.
   Result<pb::CheckpointManifest> DownloadCheckpoint(
       const std::string& directory, const std::function<void(uint64_t, uint64_t)>& progress = {});
+  // Has the server check every file of its store now (Admin.Verify) at `mib_per_second` (0: the
+  // server's default); DATA_LOSS when it found damage. The transfer deadline applies; no retries.
+  Result<pb::VerifyResponse> VerifyStore(uint32_t mib_per_second = 0);
 
  private:
   template <class Rpc>

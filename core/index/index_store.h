@@ -83,6 +83,16 @@ class IndexStore {
   // Writes a consistent copy of the whole store to `dir` (which must not exist) while the store
   // keeps serving. FAILED_PRECONDITION where the implementation has nothing on disk.
   virtual Status Checkpoint(const std::string& dir) = 0;
+
+  // What Verify read.
+  struct VerifyReport {
+    size_t files = 0;    // files checked
+    uint64_t bytes = 0;  // their bytes
+  };
+  // Reads every file of the store and checks every block's checksum while the store keeps
+  // serving, at most `bytes_per_second` (0: as fast as the disk goes) so that queries keep the
+  // disk. DATA_LOSS naming the first damaged file. Where nothing is on disk: an empty report.
+  virtual StatusOr<VerifyReport> Verify(uint64_t bytes_per_second) = 0;
 };
 
 // INVALID_ARGUMENT when `key` is empty or longer than IndexStore::kMaxBlobKeyBytes, or `value`

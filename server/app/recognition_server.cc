@@ -1,5 +1,6 @@
 #include "server/app/recognition_server.h"
 
+#include <algorithm>
 #include <filesystem>
 
 #include <grpcpp/ext/proto_server_reflection_plugin.h>
@@ -25,6 +26,20 @@ namespace pb = ::recognition::v1;
 
 // The directory under data_dir of the checked copies of the TLS files (see ServerTls).
 constexpr char kLiveTlsDir[] = "tls";
+
+RocksDbStoreOptions StoreOptionsOf(const ServerConfig& config) {
+  RocksDbStoreOptions options;
+  options.sync =
+      config.store.sync == StoreSync::kEveryWrite ? SyncPolicy::kEveryWrite : SyncPolicy::kGrouped;
+  options.group_sync_interval_ms = config.store.group_sync_interval_ms;
+  options.block_cache_mb = size_t(config.store.block_cache_mb);
+  options.damaged_log = config.store.recover == StoreRecover::kPointInTime
+                            ? DamagedLogPolicy::kPointInTime
+                            : DamagedLogPolicy::kRefuse;
+  return options;
+}
+
+std::string StorePathOf(const ServerConfig& config) { return config.data_dir + "/store"; }
 
 StatusOr<std::shared_ptr<const Vocabulary>> OpenVocabulary(const std::string& configured,
                                                            const std::string& bundled) {
@@ -108,6 +123,7 @@ StatusOr<std::unique_ptr<RecognitionServer>> RecognitionServer::Start(const Serv
   RECOG_RETURN_IF_ERROR(server->Open());
   RECOG_RETURN_IF_ERROR(server->StartFollowing());
   server->server_->GetHealthCheckService()->SetServingStatus(true);
+  server->server_->GetHealthCheckService()->SetServingStatus(kStoreHealthService, true);
   spdlog::info("recogd ready: {} place maps, {} objects, {} workers, metrics on {}",
                state.maps->List().size(), state.objects->size(), state.pool->threads(),
                config.metrics_listen.empty() ? "(off)" : config.metrics_listen);
@@ -125,17 +141,9 @@ Status RecognitionServer::Open() {
   }
   // Checkpoints left by a server that died while streaming one (AdminService) are of no use.
   std::filesystem::remove_all(std::filesystem::path(config.data_dir) / "checkpoints", error);
-  RocksDbStoreOptions store_options;
-  store_options.sync =
-      config.store.sync == StoreSync::kEveryWrite ? SyncPolicy::kEveryWrite : SyncPolicy::kGrouped;
-  store_options.group_sync_interval_ms = config.store.group_sync_interval_ms;
-  store_options.block_cache_mb = size_t(config.store.block_cache_mb);
-  store_options.damaged_log = config.store.recover == StoreRecover::kPointInTime
-                                  ? DamagedLogPolicy::kPointInTime
-                                  : DamagedLogPolicy::kRefuse;
   StoreRecovery recovery;
   RECOG_ASSIGN_OR_RETURN(
-      state.store, OpenRocksDbIndexStore(config.data_dir + "/store", store_options, &recovery));
+      state.store, OpenRocksDbIndexStore(StorePathOf(config), StoreOptionsOf(config), &recovery));
   state.metrics.SetStoreRecoveryLoss(recovery.entries_lost(), recovery.maps_lost(),
                                      recovery.blobs_lost.size());
 
@@ -157,8 +165,38 @@ Status RecognitionServer::Open() {
     state.metrics.SetMapEntries(map->name(), map->frames());
   }
   state.metrics.SetObjects(state.objects->size());
+  state.verifier = std::make_unique<StoreVerifier>(
+      state.store.get(), std::chrono::seconds(config.store.verify_interval_s),
+      uint64_t(config.store.verify_mb_per_s) << 20,
+      [this](const StoreVerifier::Result& result, std::chrono::duration<double> took) {
+        StoreChecked(result, took);
+      });
   state.ready = true;
   return Status::Ok();
+}
+
+void RecognitionServer::StoreChecked(const StoreVerifier::Result& result,
+                                     std::chrono::duration<double> took) {
+  const bool damaged = result.status().code() == StatusCode::kDataLoss;
+  const uint64_t bytes = result.ok() ? result->bytes : 0;
+  state_->metrics.StoreVerified(damaged, bytes, took.count());
+  if (damaged) server_->GetHealthCheckService()->SetServingStatus(kStoreHealthService, false);
+  if (result.ok()) {
+    server_->GetHealthCheckService()->SetServingStatus(kStoreHealthService, true);
+    spdlog::info("store verified: {} files, {:.1f} MiB in {:.1f} s ({:.1f} MiB/s), no damage",
+                 result->files, double(bytes) / (1 << 20), took.count(),
+                 double(bytes) / (1 << 20) / std::max(took.count(), 1e-9));
+  } else {
+    spdlog::error("store check failed: {}", result.status().ToString());
+  }
+}
+
+StatusOr<IndexStore::VerifyReport> RecognitionServer::VerifyOffline(const ServerConfig& config) {
+  RocksDbStoreOptions options = StoreOptionsOf(config);
+  options.create_if_missing = false;
+  RECOG_ASSIGN_OR_RETURN(std::unique_ptr<IndexStore> store,
+                         OpenRocksDbIndexStore(StorePathOf(config), options));
+  return store->Verify(0);
 }
 
 Status RecognitionServer::StartFollowing() {
@@ -187,6 +225,7 @@ void RecognitionServer::Shutdown(std::chrono::milliseconds grace) {
       repository_service_->CloseWatchers();
       server_->Shutdown(std::chrono::system_clock::now() + grace);
     }
+    state.verifier.reset();  // waits for a check in progress
     if (state.pool != nullptr) state.pool->Stop();
     if (state.store != nullptr) {
       const Status flushed = state.store->Flush();

@@ -40,6 +40,7 @@
 #include "core/common/status.h"
 #include "server/auth/token_auth.h"
 #include "server/config/server_config.h"
+#include "server/runtime/store_verifier.h"
 
 namespace recog::server {
 
@@ -56,6 +57,11 @@ class RecognitionServer {
   // FAILED_PRECONDITION / NOT_FOUND / DATA_LOSS ... from the store, the vocabularies or the token
   // file; UNAVAILABLE when the address cannot be bound. `config` must be valid.
   static StatusOr<std::unique_ptr<RecognitionServer>> Start(const ServerConfig& config);
+  // recogd --verify: opens the store of `config` (no server), checks every file of it as fast as
+  // the disk goes and closes it. DATA_LOSS naming the first damaged file; the store's open errors.
+  static StatusOr<IndexStore::VerifyReport> VerifyOffline(const ServerConfig& config);
+  // The health service name that is NOT_SERVING while the last check of the store found damage.
+  static constexpr char kStoreHealthService[] = "recog.store";
   ~RecognitionServer();
   RecognitionServer(const RecognitionServer&) = delete;
   RecognitionServer& operator=(const RecognitionServer&) = delete;
@@ -80,6 +86,8 @@ class RecognitionServer {
   RecognitionServer();
   Status Open();            // the store and everything in it; sets ready
   Status StartFollowing();  // the repository follower of a replica; nothing on a primary
+  // The outcome of a check of the store's files: logged, counted, and the store's health.
+  void StoreChecked(const StoreVerifier::Result& result, std::chrono::duration<double> took);
 
   std::unique_ptr<ServerState> state_;
   std::optional<TokenAuthenticator> tokens_;  // a copy of state_->auth, to reload it

@@ -170,6 +170,8 @@ Status ReadConfig(const YAML::Node& root, ServerConfig* config) {
       store.Read("group_sync_interval_ms", &config->store.group_sync_interval_ms));
   RECOG_RETURN_IF_ERROR(store.Read("block_cache_mb", &config->store.block_cache_mb));
   RECOG_RETURN_IF_ERROR(store.ReadParsed("recover", &config->store.recover, ParseStoreRecover));
+  RECOG_RETURN_IF_ERROR(store.Read("verify_interval_s", &config->store.verify_interval_s));
+  RECOG_RETURN_IF_ERROR(store.Read("verify_mb_per_s", &config->store.verify_mb_per_s));
   RECOG_RETURN_IF_ERROR(store.RejectUnknownKeys());
 
   RECOG_ASSIGN_OR_RETURN(YamlSection place, top.Section("place"));
@@ -190,14 +192,16 @@ bool IsLogLevel(const std::string& name) {
   return name == "off" || spdlog::level::from_str(name) != spdlog::level::off;
 }
 
-// Adds --config, --version and the flags of AddFlags, then parses. *help receives the usage text
-// when -h or --help was given; *version is set when --version was.
+// Adds --config, --version, --verify and the flags of AddFlags, then parses. *help receives the
+// usage text when -h or --help was given; *version and *verify are set when their flags were.
 Status ParseWith(int argc, const char* const* argv, std::string* config_file, ServerConfig* config,
-                 std::string* help, bool* version) {
+                 std::string* help, bool* version, bool* verify) {
   CLI::App app{"recogd: place and object recognition server", "recogd"};
   app.add_option("-c,--config", *config_file,
                  "YAML configuration file; the other flags override its values");
   app.add_flag("--version", *version, "Print the version and build, then exit");
+  app.add_flag("--verify", *verify,
+               "Check every file of the store (offline), print what was found, then exit");
   AddFlags(app, config);
   try {
     app.parse(argc, argv);
@@ -321,6 +325,9 @@ Status ServerConfig::Validate() const {
   if (store.group_sync_interval_ms < 1 || store.group_sync_interval_ms > kMaxGroupSyncIntervalMs) {
     return Status::InvalidArgument("store.group_sync_interval_ms must be between 1 and " +
                                    std::to_string(kMaxGroupSyncIntervalMs));
+  }
+  if (store.verify_mb_per_s < 1 || store.verify_mb_per_s > 65536) {
+    return Status::InvalidArgument("store.verify_mb_per_s must be between 1 and 65536");
   }
   if (store.block_cache_mb > kMaxBlockCacheMb) {
     return Status::InvalidArgument("store.block_cache_mb must be at most " +
@@ -507,8 +514,8 @@ StatusOr<CommandLine> ParseCommandLine(int argc, const char* const* argv) {
   CommandLine result;
   // First pass: find --config, catch --help and bad flags. The flags land in a scratch copy.
   ServerConfig scratch;
-  RECOG_RETURN_IF_ERROR(
-      ParseWith(argc, argv, &result.config_file, &scratch, &result.help, &result.version));
+  RECOG_RETURN_IF_ERROR(ParseWith(argc, argv, &result.config_file, &scratch, &result.help,
+                                  &result.version, &result.verify));
   if (!result.help.empty() || result.version) return result;
   if (!result.config_file.empty()) {
     RECOG_ASSIGN_OR_RETURN(result.config, ServerConfig::LoadYaml(result.config_file));
@@ -516,8 +523,8 @@ StatusOr<CommandLine> ParseCommandLine(int argc, const char* const* argv) {
   // Second pass: the flags given override what the file set.
   std::string unused_help;
   bool unused_version = false;
-  RECOG_RETURN_IF_ERROR(
-      ParseWith(argc, argv, &result.config_file, &result.config, &unused_help, &unused_version));
+  RECOG_RETURN_IF_ERROR(ParseWith(argc, argv, &result.config_file, &result.config, &unused_help,
+                                  &unused_version, &result.verify));
   RECOG_RETURN_IF_ERROR(result.config.Validate());
   return result;
 }

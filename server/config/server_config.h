@@ -79,6 +79,13 @@ struct StoreConfig {
   // Default kRefuse ("refuse"): a damaged write-ahead log stops the start-up. "point-in-time"
   // accepts losing the writes after the damage, once the operator has decided to (--recover).
   StoreRecover recover = StoreRecover::kRefuse;
+  // Default 86400 (a day): how often a background check reads every file of the store and checks
+  // its checksums (storage's Verify); 0 turns it off. The first check runs one period after
+  // start-up.
+  uint32_t verify_interval_s = 86400;
+  // Default 32: the background check and `recog admin verify` read at most this many MiB a
+  // second, 1 to 65536, so that queries keep the disk.
+  uint32_t verify_mb_per_s = 32;
 };
 
 // Sharding place maps across servers (placement_table.h, docs/scaling.md). Both empty (the
@@ -196,6 +203,9 @@ struct CommandLine {
   // True when --version was given: the caller prints its version and exits successfully. `config`
   // then holds the defaults and nothing else was checked.
   bool version = false;
+  // True when --verify was given: the caller opens the store of `config`, checks every file of it
+  // (as fast as the disk goes), prints what it found and exits: 0 when the store is whole.
+  bool verify = false;
 };
 
 // Parses recogd's command line: `--config FILE` (-c), --version and the flags of AddFlags. Flags

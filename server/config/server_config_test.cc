@@ -73,6 +73,8 @@ TEST_F(ServerConfigTest, DefaultsAreValidAndAsDocumented) {
   EXPECT_EQ(config.store.group_sync_interval_ms, 50u);
   EXPECT_EQ(config.store.block_cache_mb, 64u);
   EXPECT_EQ(config.store.recover, StoreRecover::kRefuse);
+  EXPECT_EQ(config.store.verify_interval_s, 86400u);
+  EXPECT_EQ(config.store.verify_mb_per_s, 32u);
   EXPECT_EQ(config.shard.name, "");
   EXPECT_EQ(config.shard.placement_file, "");
   EXPECT_EQ(config.repository.primary, "");
@@ -194,6 +196,8 @@ store:
   group_sync_interval_ms: 200
   block_cache_mb: 0
   recover: point-in-time
+  verify_interval_s: 60
+  verify_mb_per_s: 8
 shard:
   name: shard_a
   placement_file: /etc/recogd/router/placement.map
@@ -234,6 +238,8 @@ place:
   EXPECT_EQ(config->store.group_sync_interval_ms, 200u);
   EXPECT_EQ(config->store.block_cache_mb, 0u);
   EXPECT_EQ(config->store.recover, StoreRecover::kPointInTime);
+  EXPECT_EQ(config->store.verify_interval_s, 60u);
+  EXPECT_EQ(config->store.verify_mb_per_s, 8u);
   EXPECT_EQ(config->shard.name, "shard_a");
   EXPECT_EQ(config->shard.placement_file, "/etc/recogd/router/placement.map");
   EXPECT_EQ(config->repository.primary, "10.0.0.10:50051");
@@ -355,6 +361,7 @@ TEST_F(ServerConfigTest, ValidateNamesTheBadField) {
       {[](ServerConfig& c) { c.store.group_sync_interval_ms = 60001; },
        "store.group_sync_interval_ms"},
       {[](ServerConfig& c) { c.store.block_cache_mb = uint64_t{1} << 30; }, "store.block_cache_mb"},
+      {[](ServerConfig& c) { c.store.verify_mb_per_s = 0; }, "store.verify_mb_per_s"},
       {[](ServerConfig& c) { c.log_level = "verbose"; }, "log_level"},
       {[](ServerConfig& c) { c.shard.name = "a"; }, "shard.name and shard.placement_file"},
       {[](ServerConfig& c) {
@@ -499,6 +506,14 @@ TEST_F(ServerConfigTest, VersionIsReturnedAndSkipsTheFile) {
   StatusOr<CommandLine> plain = Parse({"--workers", "2"});
   ASSERT_TRUE(plain.ok()) << plain.status().ToString();
   EXPECT_FALSE(plain->version);
+  EXPECT_FALSE(plain->verify);
+}
+
+TEST_F(ServerConfigTest, VerifyIsReturnedWithTheConfigurationOfTheStoreToCheck) {
+  StatusOr<CommandLine> parsed = Parse({"--verify", "--data-dir", "/srv/recog"});
+  ASSERT_TRUE(parsed.ok()) << parsed.status().ToString();
+  EXPECT_TRUE(parsed->verify);
+  EXPECT_EQ(parsed->config.data_dir, "/srv/recog");
 }
 
 TEST_F(ServerConfigTest, BadFlagsAreInvalidArgumentWithCli11sMessage) {

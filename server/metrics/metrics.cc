@@ -72,6 +72,15 @@ ServerMetrics::ServerMetrics() : registry_(std::make_shared<prometheus::Registry
   recovery_lost_ = &Register(prometheus::BuildGauge(), r, "recog_store_recovery_lost",
                              "What a point-in-time recovery of the damaged store lost at start-up");
   SetStoreRecoveryLoss(0, 0, 0);
+  store_damaged_ = &Register(prometheus::BuildGauge(), r, "recog_store_damaged",
+                             "1 when the last check of the store's files found damage")
+                        .Add({});
+  verified_bytes_ = &Register(prometheus::BuildCounter(), r, "recog_store_verified_bytes_total",
+                              "Bytes read by the checks of the store's files")
+                         .Add({});
+  verify_seconds_ = &Register(prometheus::BuildGauge(), r, "recog_store_verify_seconds",
+                              "Duration of the last check of the store's files")
+                         .Add({});
   stream_active_ =
       &Register(prometheus::BuildGauge(), r, "recog_stream_active", "Open streaming calls per RPC");
   replica_synced_ = &Register(prometheus::BuildGauge(), r, "recog_replica_synced",
@@ -218,6 +227,12 @@ void ServerMetrics::RemoveMap(std::string_view map) {
 }
 
 void ServerMetrics::SetObjects(uint64_t objects) { objects_->Set(static_cast<double>(objects)); }
+
+void ServerMetrics::StoreVerified(bool damaged, uint64_t bytes, double seconds) {
+  store_damaged_->Set(damaged ? 1.0 : 0.0);
+  verified_bytes_->Increment(static_cast<double>(bytes));
+  verify_seconds_->Set(seconds);
+}
 
 void ServerMetrics::SetStoreRecoveryLoss(uint64_t entries, uint64_t maps, uint64_t blobs) {
   recovery_lost_->Add({{"kind", "entries"}}).Set(static_cast<double>(entries));

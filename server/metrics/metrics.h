@@ -12,6 +12,10 @@
 //   recog_store_recovery_lost{kind}            gauge: what this start-up's point-in-time recovery
 //                                              of a damaged store lost, kind "entries", "maps" or
 //                                              "blobs" (0 when the store opened whole)
+//   recog_store_damaged                        gauge: 1 when the last check of the store's files
+//                                              (background or `recog admin verify`) found damage
+//   recog_store_verified_bytes_total           counter: bytes those checks read
+//   recog_store_verify_seconds                 gauge: how long the last check took
 //   recog_stream_active{rpc}                   gauge: open streaming calls per RPC
 //   recog_replica_synced                       gauge: 1 while a repository replica follows its
 //                                              primary live, 0 otherwise (and on a primary)
@@ -104,6 +108,8 @@ class ServerMetrics {
   void RemoveMap(std::string_view map);
   void SetObjects(uint64_t objects);
   void SetStoreRecoveryLoss(uint64_t entries, uint64_t maps, uint64_t blobs);
+  // A check of the store's files ended: damage found or not, bytes read, its duration.
+  void StoreVerified(bool damaged, uint64_t bytes, double seconds);
 
   // A repository replica (server/replication/) is or is no longer synced with its primary;
   // it applied `count` changes (copied versions, deletions).
@@ -149,6 +155,9 @@ class ServerMetrics {
   prometheus::Gauge* busy_workers_;
   prometheus::Gauge* objects_;
   prometheus::Family<prometheus::Gauge>* recovery_lost_;
+  prometheus::Gauge* store_damaged_;
+  prometheus::Counter* verified_bytes_;
+  prometheus::Gauge* verify_seconds_;
   prometheus::Gauge* replica_synced_;
   prometheus::Counter* replica_changes_;
 

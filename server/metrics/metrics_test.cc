@@ -180,6 +180,8 @@ TEST(ServerMetricsTest, GaugesHoldTheLastValue) {
               Optional(0.0));
   metrics.SetReplicaSynced(true);
   metrics.SetStoreRecoveryLoss(19, 1, 2);
+  metrics.StoreVerified(false, 1000, 0.5);
+  metrics.StoreVerified(true, 500, 0.25);
   const std::string text = metrics.Serialize();
   EXPECT_THAT(text, HasSubstr("# TYPE recog_worker_queue_depth gauge"));
   EXPECT_THAT(Sample(text, "recog_worker_queue_depth"), Optional(3.0));
@@ -189,6 +191,9 @@ TEST(ServerMetricsTest, GaugesHoldTheLastValue) {
   EXPECT_THAT(Sample(text, "recog_store_recovery_lost{kind=\"entries\"}"), Optional(19.0));
   EXPECT_THAT(Sample(text, "recog_store_recovery_lost{kind=\"maps\"}"), Optional(1.0));
   EXPECT_THAT(Sample(text, "recog_store_recovery_lost{kind=\"blobs\"}"), Optional(2.0));
+  EXPECT_THAT(Sample(text, "recog_store_damaged"), Optional(1.0));
+  EXPECT_THAT(Sample(text, "recog_store_verified_bytes_total"), Optional(1500.0));
+  EXPECT_THAT(Sample(text, "recog_store_verify_seconds"), Optional(0.25));
 }
 
 TEST(ServerMetricsTest, BuildInfoIsOneSeriesLabelledWithTheVersionAndCommit) {

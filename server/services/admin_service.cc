@@ -149,4 +149,23 @@ grpc::ServerWriteReactor<pb::CheckpointResponse>* AdminService::Checkpoint(
   return new CheckpointDownload(state_, context, *request);
 }
 
+grpc::ServerUnaryReactor* AdminService::Verify(grpc::CallbackServerContext* context,
+                                               const pb::VerifyRequest* request,
+                                               pb::VerifyResponse* response) {
+  return RunUnary(
+      state_, context, "/recognition.v1.Admin/Verify", Right::kWrite,
+      [=, this](CallInfo& call, WorkerContext&) {
+        const uint64_t mib = request->mib_per_second() != 0 ? request->mib_per_second()
+                                                            : state_.config.store.verify_mb_per_s;
+        const auto start = std::chrono::steady_clock::now();
+        StoreVerifier::Result report = state_.verifier->RunNow(mib << 20);
+        RECOG_RETURN_IF_ERROR_AS_GRPC(report.status(), call.request_id);
+        response->set_files(report->files);
+        response->set_bytes(report->bytes);
+        response->set_seconds(
+            std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+        return grpc::Status::OK;
+      });
+}
+
 }  // namespace recog::server

@@ -1,4 +1,5 @@
-// AdminService: the Admin RPCs (proto/recognition/v1/admin.proto): online checkpoints.
+// AdminService: the Admin RPCs (proto/recognition/v1/admin.proto): online checkpoints and checks
+// of the store's files.
 //
 // Checkpoint asks the store for a consistent copy (IndexStore::Checkpoint: RocksDB hard-links its
 // files, so this is quick and costs little space) under <data_dir>/checkpoints/, then streams the
@@ -20,6 +21,11 @@ class AdminService final : public ::recognition::v1::Admin::CallbackService {
   grpc::ServerWriteReactor<::recognition::v1::CheckpointResponse>* Checkpoint(
       grpc::CallbackServerContext* context,
       const ::recognition::v1::CheckpointRequest* request) override;
+
+  // Verify runs the server's StoreVerifier now, on a worker (store_verifier.h).
+  grpc::ServerUnaryReactor* Verify(grpc::CallbackServerContext* context,
+                                   const ::recognition::v1::VerifyRequest* request,
+                                   ::recognition::v1::VerifyResponse* response) override;
 
  private:
   ServerState& state_;

@@ -22,6 +22,7 @@
 #include "server/config/server_config.h"
 #include "server/metrics/metrics.h"
 #include "server/runtime/request_log.h"
+#include "server/runtime/store_verifier.h"
 #include "server/runtime/worker_pool.h"
 #include "server/services/worker_context.h"
 
@@ -47,6 +48,7 @@ struct ServerState {
   std::unique_ptr<MapRegistry> maps;
   std::shared_ptr<ObjectDatabase> objects;
   std::unique_ptr<ModelRepository> repository;
+  std::unique_ptr<StoreVerifier> verifier;  // checks the store's files (store_verifier.h)
   FeatureOptions place_features;   // how frames sent as images are described for place maps
   RecognitionOptions recognition;  // object recognition settings
 

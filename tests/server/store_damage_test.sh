@@ -4,7 +4,9 @@
 # Expected: recogd refuses to start (exit 1, one line naming the log file and the damaged bytes)
 # and changes nothing; with --recover point-in-time it starts, keeps a copy of the damaged files,
 # logs m1's missing frame ids and m2 lost whole, counts them in recog_store_recovery_lost, and
-# serves the consistent prefix; the store then starts again without --recover.
+# serves the consistent prefix; the store then starts again without --recover. Then a byte
+# flipped in a table file under the running recogd is found by the background check, by
+# `recog admin verify` and by `recogd --verify`.
 # Usage: store_damage_test.sh RECOG RECOGD PROJECT_DIR
 set -u
 recog=$1
@@ -99,8 +101,45 @@ grep -q '^recog_store_recovery_lost{kind="maps"} 1$' "$tmp/metrics" && pass \
   || fail "recog_store_recovery_lost counts m2: $(grep recovery_lost "$tmp/metrics")"
 stop_recogd
 
-# The recovered store is whole: it starts without --recover.
+# The recovered store is whole: it starts without --recover, and its files check out, online
+# and offline.
 start_recogd && pass || fail "the recovered store does not start again: $(tail -2 "$tmp/recogd.log")"
+expect_ok "admin verify of the recovered store" "$recog" admin verify --json "${server[@]}"
+json_check "admin verify read table files" "assert d['files'] >= 1 and d['bytes'] > 0, d"
 [ -n "$server_pid" ] && stop_recogd
+expect_ok "recogd --verify of the recovered store" "$recogd" --verify --data-dir "$tmp/data"
+grep -q "no damage" "$tmp/out" && pass || fail "recogd --verify: $(cat "$tmp/out")"
+
+# A byte flipped in a table file while recogd runs is found by the background check (every
+# second here): the metric, the log naming the file, `recog admin verify` and, offline,
+# `recogd --verify` all say so.
+printf 'store:\n  verify_interval_s: 1\n' >"$tmp/recogd.yaml"
+start_recogd --config "$tmp/recogd.yaml" || fail "recogd with a 1 s check: $(tail -2 "$tmp/recogd.log")"
+table=$(ls -S "$tmp"/data/store/*.sst | head -1)
+python3 - "$table" <<'PY'
+import os, sys
+path = sys.argv[1]
+with open(path, "r+b") as f:
+    at = os.path.getsize(path) // 2
+    f.seek(at); b = f.read(1); f.seek(at); f.write(bytes([b[0] ^ 0x10]))
+PY
+found=
+for _ in $(seq 50); do
+  python3 - "$metrics_port" >"$tmp/metrics" 2>/dev/null <<'PY'
+import sys, urllib.request
+print(urllib.request.urlopen(f"http://127.0.0.1:{sys.argv[1]}/metrics", timeout=5).read().decode())
+PY
+  grep -q '^recog_store_damaged 1$' "$tmp/metrics" && found=1 && break
+  sleep 0.1
+done
+[ -n "$found" ] && pass || fail "the background check did not report the damage within 5 s"
+grep -q "store check failed: DATA_LOSS.*$(basename "$table") is damaged" "$tmp/recogd.log" && pass \
+  || fail "the log names the damaged file: $(grep -i "check" "$tmp/recogd.log" | tail -2)"
+expect_error "admin verify of a damaged store" "DATA_LOSS" "$recog" admin verify "${server[@]}"
+stop_recogd
+"$recogd" --verify --data-dir "$tmp/data" >"$tmp/out" 2>"$tmp/err"
+code=$?
+[ "$code" -eq 1 ] && grep -q "DATA_LOSS.*$(basename "$table") is damaged" "$tmp/err" && pass \
+  || fail "recogd --verify of a damaged store: exit $code: $(cat "$tmp/err")"
 
 report_and_exit

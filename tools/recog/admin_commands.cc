@@ -1,6 +1,7 @@
-// recog admin health | checkpoint | restore: operating recogd. health and checkpoint call the
-// server over the C++ client library (with the ServerFlags); restore works offline on a data
-// directory. A failure prints one line "recog admin <cmd>: ..." and exits 1.
+// recog admin health | checkpoint | verify | restore: operating recogd. health, checkpoint and
+// verify call the server over the C++ client library (with the ServerFlags); restore works offline
+// on a data directory. A failure prints one line "recog admin <cmd>: ..." and exits 1.
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <memory>
@@ -63,6 +64,30 @@ int RunCheckpoint(const CheckpointArgs& args, RecognitionClient& client) {
   return 0;
 }
 
+struct VerifyArgs {
+  ServerFlags server;
+  uint32_t mib_per_second = 0;
+};
+
+int RunVerify(const VerifyArgs& args, RecognitionClient& client) {
+  auto report = client.VerifyStore(args.mib_per_second);
+  if (!report.ok()) return Fail("admin verify", report.status());
+  const double mib = double(report->bytes()) / (1 << 20);
+  const double rate = mib / std::max(report->seconds(), 1e-9);
+  if (args.server.json) {
+    std::printf("%s\n", json({{"files", report->files()},
+                              {"bytes", report->bytes()},
+                              {"seconds", report->seconds()},
+                              {"mib_per_second", rate}})
+                            .dump()
+                            .c_str());
+  } else {
+    std::printf("store verified: %llu files, %.1f MiB in %.2f s (%.1f MiB/s), no damage\n",
+                static_cast<unsigned long long>(report->files()), mib, report->seconds(), rate);
+  }
+  return 0;
+}
+
 struct RestoreArgs {
   std::string from, data_dir;
 };
@@ -84,7 +109,7 @@ int RunRestore(const RestoreArgs& args) {
 }  // namespace
 
 void AddAdminCommands(CLI::App& app, int* exit_code) {
-  CLI::App* admin = app.add_subcommand("admin", "Operate recogd: health, backups");
+  CLI::App* admin = app.add_subcommand("admin", "Operate recogd: health, backups, checks");
   admin->require_subcommand(1);
   auto health_flags = std::make_shared<ServerFlags>();
   CLI::App* health = admin->add_subcommand(
@@ -106,6 +131,19 @@ void AddAdminCommands(CLI::App& app, int* exit_code) {
                  [checkpoint_args](RecognitionClient& client) {
                    return RunCheckpoint(*checkpoint_args, client);
                  });
+
+  auto verify_args = std::make_shared<VerifyArgs>();
+  CLI::App* verify = admin->add_subcommand(
+      "verify",
+      "Have the server read every file of its store and check every checksum now, online; "
+      "exit 1 on damage (DATA_LOSS)");
+  verify
+      ->add_option("--mib-per-second", verify_args->mib_per_second,
+                   "Read rate (0: the server's store.verify_mb_per_s)")
+      ->capture_default_str();
+  ConnectCommand(verify, &verify_args->server, exit_code, [verify_args](RecognitionClient& client) {
+    return RunVerify(*verify_args, client);
+  });
 
   auto restore_args = std::make_shared<RestoreArgs>();
   CLI::App* restore =

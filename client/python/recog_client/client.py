@@ -549,6 +549,16 @@ class RecognitionClient:
         response = self._unary(self._health.Check, health_pb2.HealthCheckRequest(service=service))
         return health_pb2.HealthCheckResponse.ServingStatus.Name(response.status)
 
+    def verify_store(self, mib_per_second: int = 0) -> admin_pb2.VerifyResponse:
+        """Has the server read every file of its store and check every checksum now
+        (Admin.Verify, needs the write right) at ``mib_per_second`` (0: the server's
+        ``store.verify_mb_per_s``); returns what it read. ``DataLoss`` when it found damage (the
+        server log names the file, and ``check_health("recog.store")`` says NOT_SERVING). The
+        transfer deadline applies."""
+        return self._unary(self._admin.Verify,
+                           admin_pb2.VerifyRequest(mib_per_second=mib_per_second),
+                           deadline=self.transfer_deadline)
+
     def checkpoint(self, directory: str | os.PathLike,
                    progress: Callable[[int, int], None] | None = None
                    ) -> admin_pb2.CheckpointManifest:

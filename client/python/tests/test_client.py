@@ -232,6 +232,11 @@ class RecognitionClientTest(unittest.TestCase):
             self.assertFalse((Path(tmp) / "checkpoint.part").exists())
             with self.assertRaises(AlreadyExists):
                 self.client.checkpoint(target)
+        # The checkpoint flushed the frame into a table file, which the check reads.
+        report = self.client.verify_store()
+        self.assertGreaterEqual(report.files, 1)
+        self.assertGreater(report.bytes, 0)
+        self.assertEqual(self.client.check_health("recog.store"), "SERVING")
 
     def test_stream_answers_in_order_and_detects_the_revisit(self):
         frames = [corridor(n) for n in (1, 20, 41, 60, 1)]

@@ -1,0 +1,86 @@
+#include "server/runtime/store_verifier.h"
+
+#include <atomic>
+#include <chrono>
+#include <mutex>
+#include <thread>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "core/index/memory_index_store.h"
+
+namespace recog::server {
+namespace {
+
+using namespace std::chrono_literals;
+
+// A store whose Verify reports `bytes` read, or DATA_LOSS once `damaged` is set.
+class CheckedStore : public MemoryIndexStore {
+ public:
+  StatusOr<VerifyReport> Verify(uint64_t bytes_per_second) override {
+    last_rate = bytes_per_second;
+    ++checks;
+    if (damaged) return Status::DataLoss("table file 000009.sst is damaged");
+    return VerifyReport{3, 1000};
+  }
+  std::atomic<int> checks{0};
+  std::atomic<uint64_t> last_rate{0};
+  std::atomic<bool> damaged{false};
+};
+
+// The outcomes a verifier reported.
+struct Outcomes {
+  std::mutex mutex;
+  std::vector<StatusCode> codes;
+  StoreVerifier::OnResult Recorder() {
+    return [this](const StoreVerifier::Result& result, std::chrono::duration<double>) {
+      std::lock_guard lock(mutex);
+      codes.push_back(result.status().code());
+    };
+  }
+  size_t size() {
+    std::lock_guard lock(mutex);
+    return codes.size();
+  }
+};
+
+TEST(StoreVerifierTest, ChecksEveryPeriodAtTheConfiguredRateAndReportsDamage) {
+  CheckedStore store;
+  Outcomes outcomes;
+  {
+    StoreVerifier verifier(&store, 1s, 4096, outcomes.Recorder());
+    EXPECT_EQ(store.checks, 0);  // the first check waits one period
+    for (int i = 0; i < 300 && outcomes.size() < 1; ++i) std::this_thread::sleep_for(10ms);
+    ASSERT_EQ(outcomes.size(), 1u);
+    EXPECT_EQ(store.last_rate, 4096u);
+    store.damaged = true;
+    for (int i = 0; i < 300 && outcomes.size() < 2; ++i) std::this_thread::sleep_for(10ms);
+    ASSERT_EQ(outcomes.size(), 2u);
+  }
+  EXPECT_EQ(outcomes.codes[0], StatusCode::kOk);
+  EXPECT_EQ(outcomes.codes[1], StatusCode::kDataLoss);
+}
+
+TEST(StoreVerifierTest, RunNowChecksOnTheCallersThreadAndReportsTheSameWay) {
+  CheckedStore store;
+  Outcomes outcomes;
+  StoreVerifier verifier(&store, 0s, 4096, outcomes.Recorder());  // no background thread
+  auto result = verifier.RunNow(0);
+  ASSERT_TRUE(result.ok());
+  EXPECT_EQ(result->files, 3u);
+  EXPECT_EQ(store.last_rate, 0u);
+  EXPECT_EQ(outcomes.size(), 1u);
+}
+
+TEST(StoreVerifierTest, DestroyingItStopsAWaitingThreadAtOnce) {
+  CheckedStore store;
+  Outcomes outcomes;
+  const auto start = std::chrono::steady_clock::now();
+  { StoreVerifier verifier(&store, 3600s, 0, outcomes.Recorder()); }
+  EXPECT_LT(std::chrono::steady_clock::now() - start, 2s);
+  EXPECT_EQ(store.checks, 0);
+}
+
+}  // namespace
+}  // namespace recog::server
