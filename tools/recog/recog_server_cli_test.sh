@@ -248,7 +248,15 @@ expect_ok "admin checkpoint" "$recog" admin checkpoint --to "$tmp/backup" -q --j
 json_check "admin checkpoint reports the maps and models" "assert d['maps']>=1 and d['models']>=1 and d['bytes']>0, d"
 expect_error "admin checkpoint to an existing folder" "ALREADY_EXISTS" "$recog" admin checkpoint \
   --to "$tmp/backup" -q "${server[@]}"
+cp -r "$tmp/backup" "$tmp/damaged-backup"
 expect_ok "admin restore" "$recog" admin restore --from "$tmp/backup" --data-dir "$tmp/restored"
+grep -q "^restored .* files, .* MiB checked" "$tmp/out" && pass \
+  || fail "admin restore checks what it restored: $(cat "$tmp/out")"
+table=$(ls -S "$tmp"/damaged-backup/*.sst | head -1)
+python3 -c "import sys; p=sys.argv[1]; f=open(p,'r+b'); f.seek(0,2); n=f.tell()//2; f.seek(n); b=f.read(1); f.seek(n); f.write(bytes([b[0]^16]))" "$table"
+expect_error "admin restore of a damaged checkpoint" "DATA_LOSS.*is damaged; nothing restored" \
+  "$recog" admin restore --from "$tmp/damaged-backup" --data-dir "$tmp/from-damaged"
+[ -e "$tmp/from-damaged/store" ] && fail "a damaged checkpoint was left in place" || pass
 expect_error "admin restore over a store" "ALREADY_EXISTS" "$recog" admin restore \
   --from "$tmp/backup" --data-dir "$tmp/restored"
 expect_error "admin restore of a missing checkpoint" "NOT_FOUND" "$recog" admin restore \
