@@ -8,8 +8,8 @@
 //
 // StoreInventory is what a store holds: its maps (id and name), each map's entry ids and the blob
 // keys. A point-in-time recovery takes one of what the damaged store held, the table files plus
-// every readable record of the log (LogInventory collects those), and one of the recovered state;
-// their difference is what the recovery lost.
+// every readable record of the log (TablesOnly and ApplyReadableLog read those), and one of the
+// recovered state; their difference is what the recovery lost.
 #pragma once
 
 #include <map>
