@@ -44,6 +44,7 @@
 #include <rocksdb/write_batch.h>
 #include <spdlog/spdlog.h>
 
+#include "storage/info_log_file.h"
 #include "storage/record_codec.h"
 #include "storage/store_damage.h"
 
@@ -252,6 +253,11 @@ class RocksDbIndexStore final : public IndexStore {
   // Decodes a value of the entry part held by `cf` into *record.
   static Status DecodePart(ColumnFamily cf, std::string_view value, const RecordContext& context,
                            EntryRecord* record);
+  // Makes every write so far durable: an empty write with sync, for which RocksDB syncs the
+  // log. Not DB::FlushWAL(true): it syncs the log file outside RocksDB's write queue, and once a
+  // write has failed on that file (a full disk) the Debian build of RocksDB 7.8, compiled with
+  // assertions, aborts the process there.
+  rocksdb::Status SyncLog();
   void SyncLoop();
 
   const std::string dir_;
@@ -292,7 +298,7 @@ RocksDbIndexStore::~RocksDbIndexStore() {
   if (db_ == nullptr) return;
   // DB::Close does not sync the WAL: do it so that a clean close keeps every write.
   if (options_.sync == SyncPolicy::kGrouped) {
-    const rocksdb::Status s = db_->FlushWAL(true);
+    const rocksdb::Status s = SyncLog();
     if (!s.ok()) spdlog::error("index store '{}': final WAL sync failed: {}", dir_, s.ToString());
   }
   for (rocksdb::ColumnFamilyHandle* handle : handles_) {
@@ -315,10 +321,10 @@ Status RocksDbIndexStore::Open() {
   // Replays the whole WAL, tolerating only a torn last record (a crash of the machine in the
   // middle of a write, never acknowledged); any other damage fails the open (see "Damage").
   db_options.wal_recovery_mode = rocksdb::WALRecoveryMode::kTolerateCorruptedTailRecords;
-  db_options.keep_log_file_num = 4;  // RocksDB's info logs (LOG, LOG.old.*)
-  std::shared_ptr<rocksdb::Logger> rocksdb_log;
-  if (!rocksdb::CreateLoggerFromOptions(dir_, db_options, &rocksdb_log).ok()) rocksdb_log.reset();
-  auto recorder = std::make_shared<DamageRecorder>(std::move(rocksdb_log));
+  // RocksDB's info log: LOG and the 3 previous ones, written so that a full disk cannot abort us.
+  auto info_log = InfoLogFile::Open(dir_, 3);
+  if (!info_log.ok()) spdlog::warn("index store '{}': {}", dir_, info_log.status().ToString());
+  auto recorder = std::make_shared<DamageRecorder>(info_log.ok() ? *info_log : nullptr);
   db_options.info_log = recorder;
 
   std::shared_ptr<rocksdb::Cache> cache;
@@ -542,6 +548,13 @@ Status RocksDbIndexStore::Get(const rocksdb::ReadOptions& read_options, ColumnFa
   return FromRocks(db_->Get(read_options, Cf(cf), key, value), what);
 }
 
+rocksdb::Status RocksDbIndexStore::SyncLog() {
+  rocksdb::WriteOptions synced;
+  synced.sync = true;
+  rocksdb::WriteBatch nothing;
+  return db_->Write(synced, &nothing);
+}
+
 void RocksDbIndexStore::SyncLoop() {
   const auto interval = std::chrono::milliseconds(options_.group_sync_interval_ms);
   bool failing = false;
@@ -549,7 +562,7 @@ void RocksDbIndexStore::SyncLoop() {
   while (!sync_cv_.wait_for(lock, interval, [this] { return stopping_; })) {
     if (!unsynced_writes_.exchange(false, std::memory_order_acq_rel)) continue;
     lock.unlock();
-    const rocksdb::Status s = db_->FlushWAL(true);
+    const rocksdb::Status s = SyncLog();
     lock.lock();
     if (!s.ok()) {
       unsynced_writes_.store(true);  // try again next time
@@ -895,7 +908,7 @@ StatusOr<std::vector<std::string>> RocksDbIndexStore::ListBlobKeys(const std::st
 }
 
 Status RocksDbIndexStore::Flush() {
-  return FromRocks(db_->FlushWAL(true), "cannot sync index store '" + dir_ + "'");
+  return FromRocks(SyncLog(), "cannot sync index store '" + dir_ + "'");
 }
 
 Status RocksDbIndexStore::Checkpoint(const std::string& dir) {
@@ -917,29 +930,23 @@ Status RocksDbIndexStore::Checkpoint(const std::string& dir) {
   return Status::Ok();
 }
 
-StatusOr<IndexStore::VerifyReport> RocksDbIndexStore::Verify(uint64_t bytes_per_second) {
-  // The files being checked stay on disk while compactions replace them.
-  RECOG_RETURN_IF_ERROR(
-      FromRocks(db_->DisableFileDeletions(), "cannot verify index store '" + dir_ + "'"));
-  struct EnableDeletions {
-    rocksdb::DB* db;
-    ~EnableDeletions() { db->EnableFileDeletions(/*force=*/false); }
-  } enable_deletions{db_};
-  std::vector<rocksdb::LiveFileMetaData> files;
-  db_->GetLiveFilesMetaData(&files);
-
+// Reads every block of the table files `files` (of the store in `dir`) and checks its checksum,
+// at most `bytes_per_second` on average (0 = unlimited). DATA_LOSS naming the first damaged file.
+StatusOr<IndexStore::VerifyReport> VerifyTableFiles(
+    const std::string& dir, const std::vector<rocksdb::LiveFileMetaData>& files,
+    uint64_t bytes_per_second) {
   const rocksdb::Options options;  // any block-based table reads with the default factory
   rocksdb::ReadOptions read_options;
   read_options.verify_checksums = true;
   read_options.fill_cache = false;
-  VerifyReport report;
+  IndexStore::VerifyReport report;
   const auto start = std::chrono::steady_clock::now();
   for (const rocksdb::LiveFileMetaData& file : files) {
     const std::string path = file.directory + "/" + file.relative_filename;
     const rocksdb::Status s =
         rocksdb::VerifySstFileChecksum(options, rocksdb::EnvOptions(), read_options, path);
     if (!s.ok()) {
-      return Status::DataLoss("index store '" + dir_ + "': table file " + path +
+      return Status::DataLoss("index store '" + dir + "': table file " + path +
                               " is damaged: " + s.ToString());
     }
     ++report.files;
@@ -953,6 +960,19 @@ StatusOr<IndexStore::VerifyReport> RocksDbIndexStore::Verify(uint64_t bytes_per_
     }
   }
   return report;
+}
+
+StatusOr<IndexStore::VerifyReport> RocksDbIndexStore::Verify(uint64_t bytes_per_second) {
+  // The files being checked stay on disk while compactions replace them.
+  RECOG_RETURN_IF_ERROR(
+      FromRocks(db_->DisableFileDeletions(), "cannot verify index store '" + dir_ + "'"));
+  struct EnableDeletions {
+    rocksdb::DB* db;
+    ~EnableDeletions() { db->EnableFileDeletions(/*force=*/false); }
+  } enable_deletions{db_};
+  std::vector<rocksdb::LiveFileMetaData> files;
+  db_->GetLiveFilesMetaData(&files);
+  return VerifyTableFiles(dir_, files, bytes_per_second);
 }
 
 // fsyncs a file or a directory.
@@ -1050,6 +1070,31 @@ Status RestoreRocksDbCheckpoint(const std::string& checkpoint_dir, const std::st
   RECOG_RETURN_IF_ERROR(SyncPath(parent, true));
   spdlog::info("restored checkpoint '{}' into '{}'", checkpoint_dir, data_dir);
   return Status::Ok();
+}
+
+StatusOr<IndexStore::VerifyReport> VerifyRocksDbCheckpoint(const std::string& checkpoint_dir) {
+  const std::string what = "checkpoint '" + checkpoint_dir + "'";
+  std::error_code ec;
+  if (!fs::is_directory(checkpoint_dir, ec)) return Status::NotFound(what + " is no directory");
+  rocksdb::DBOptions db_options;
+  db_options.create_if_missing = false;
+  db_options.wal_recovery_mode = rocksdb::WALRecoveryMode::kTolerateCorruptedTailRecords;
+  // No LOG file is written into the checkpoint.
+  db_options.info_log = std::make_shared<DamageRecorder>(nullptr);
+  std::vector<std::string> names;
+  rocksdb::Status s = rocksdb::DB::ListColumnFamilies(db_options, checkpoint_dir, &names);
+  if (!s.ok()) return Status::DataLoss(what + " is not a readable store: " + s.ToString());
+  std::vector<rocksdb::ColumnFamilyDescriptor> descriptors;
+  for (const std::string& name : names) descriptors.emplace_back(name, rocksdb::Options());
+  std::vector<rocksdb::ColumnFamilyHandle*> handles;
+  rocksdb::DB* db = nullptr;
+  s = rocksdb::DB::OpenForReadOnly(db_options, checkpoint_dir, descriptors, &handles, &db);
+  if (!s.ok()) return Status::DataLoss(what + " is not a readable store: " + s.ToString());
+  std::vector<rocksdb::LiveFileMetaData> files;
+  db->GetLiveFilesMetaData(&files);
+  for (rocksdb::ColumnFamilyHandle* handle : handles) db->DestroyColumnFamilyHandle(handle);
+  delete db;
+  return VerifyTableFiles(checkpoint_dir, files, 0);
 }
 
 }  // namespace recog

@@ -127,4 +127,10 @@ StatusOr<std::unique_ptr<IndexStore>> OpenRocksDbIndexStore(const std::string& d
 // `checkpoint_dir` does not exist, DATA_LOSS when it is not a readable store.
 Status RestoreRocksDbCheckpoint(const std::string& checkpoint_dir, const std::string& data_dir);
 
+// Checks a checkpoint directory (written by IndexStore::Checkpoint, or downloaded by `recog admin
+// checkpoint`) without changing it: it must open read-only as a store (CURRENT, MANIFEST and the
+// log readable) and every block of every table file it lists must match its checksum. DATA_LOSS
+// naming what is damaged, NOT_FOUND when `checkpoint_dir` is no directory.
+StatusOr<IndexStore::VerifyReport> VerifyRocksDbCheckpoint(const std::string& checkpoint_dir);
+
 }  // namespace recog

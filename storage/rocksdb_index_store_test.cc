@@ -649,5 +649,64 @@ TEST_F(RocksDbStoreTest, ADiskFullIsAnErrorAndAcknowledgedEntriesSurvive) {
   EXPECT_TRUE(store->CommitEntry(map, MakeTestEntry(5000)).ok());
 }
 
+// A real full filesystem (a small tmpfs), both sync policies: the write that finds no room is
+// RESOURCE_EXHAUSTED, every write acknowledged before it reads back whole, writes keep failing
+// while the disk is full, and once space returns the same open store takes writes again (no
+// restart) and a reopen finds everything acknowledged.
+TEST_F(RocksDbStoreTest, AFullDiskRefusesWritesLosesNothingAcknowledgedAndResumesWhenSpaceReturns) {
+  for (SyncPolicy sync : {SyncPolicy::kEveryWrite, SyncPolicy::kGrouped}) {
+    SCOPED_TRACE(sync == SyncPolicy::kEveryWrite ? "every write" : "grouped");
+    testing::SmallFilesystem disk("diskfull", size_t(256) << 20);
+    if (!disk.error().empty()) GTEST_SKIP() << disk.error();
+    disk.Fill(4 << 20);
+    const std::string path = disk.Sub("store");
+    auto store = Open(sync, path);
+    ASSERT_NE(store, nullptr);
+    auto map = store->CreateMap(TestMapConfig("m"));
+    ASSERT_TRUE(map.ok());
+    auto entry = [](EntryId id) { return MakeTestEntry(id, 5, DescriptorFormat::Orb(), 2000); };
+    std::vector<EntryId> acknowledged;
+    Status refused;
+    for (EntryId id = 0; id < 5000 && refused.ok(); ++id) {
+      refused = store->CommitEntry(map->id, entry(id));
+      if (refused.ok()) acknowledged.push_back(id);
+    }
+    ASSERT_EQ(refused.code(), StatusCode::kResourceExhausted) << refused.ToString();
+    EXPECT_GT(acknowledged.size(), 0u);
+    const EntryId next = acknowledged.back() + 1;
+    EXPECT_EQ(store->CommitEntry(map->id, entry(next)).code(), StatusCode::kResourceExhausted);
+    for (EntryId ack : acknowledged) {
+      EntryRecord got;
+      ASSERT_TRUE(store->ReadEntry(map->id, ack, kEntryAllParts, &got).ok()) << ack;
+      EXPECT_EQ(EntryDifference(got, entry(ack)), "") << ack;
+    }
+
+    disk.FreeSpace();
+    // RocksDB looks for free space every 5 s and then recovers by itself.
+    Status resumed = Status::ResourceExhausted("not tried yet");
+    for (int attempt = 0; attempt < 300 && !resumed.ok(); ++attempt) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(100));
+      resumed = store->CommitEntry(map->id, entry(next));
+      if (!resumed.ok()) {
+        ASSERT_EQ(resumed.code(), StatusCode::kResourceExhausted) << resumed.ToString();
+      }
+    }
+    ASSERT_TRUE(resumed.ok()) << resumed.ToString();
+    acknowledged.push_back(next);
+    EXPECT_TRUE(store->CommitEntry(map->id, entry(next + 1)).ok());
+    acknowledged.push_back(next + 1);
+
+    store.reset();
+    store = Open(sync, path);
+    ASSERT_NE(store, nullptr);
+    Status scan;
+    const std::vector<EntryId> present = ScanIds(*store, map->id, kEntryAllParts, &scan);
+    EXPECT_TRUE(scan.ok()) << scan.ToString();
+    for (EntryId ack : acknowledged) {
+      EXPECT_TRUE(std::binary_search(present.begin(), present.end(), ack)) << ack << " is gone";
+    }
+  }
+}
+
 }  // namespace
 }  // namespace recog

@@ -12,6 +12,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -193,8 +194,11 @@ TEST_F(StoreDamageTest, PointInTimeRecoveryOfADamagedLogKeepsACopyAndListsEveryL
 TEST_F(StoreDamageTest, ATornTailOfTheLogOpensWithAConsistentPrefixAndNoRecovery) {
   MakeStore();
   const fs::path log = FileOf(StorePath(), ".log");
-  // The last record cut short: what a machine crash leaves of a write never acknowledged.
-  fs::resize_file(log, fs::file_size(log) - 10);
+  // The blob's record, the last write, cut short in its value: what a machine crash leaves of a
+  // write never acknowledged.
+  const size_t value = ReadBytes(log).rfind("model bytes");
+  ASSERT_NE(value, std::string::npos);
+  fs::resize_file(log, value + 5);
 
   StoreRecovery recovery;
   auto store = Reopen(DamagedLogPolicy::kRefuse, &recovery);
@@ -228,6 +232,40 @@ TEST_F(StoreDamageTest, AFlippedByteInATableFileIsDataLossNamingTheFileWhenRead)
         << ids.status().ToString();
   }
   EXPECT_TRUE(found) << "the damaged block of " << table << " was never reported";
+}
+
+// A checkpoint (a backup) is checked when taken: read-only, so that checking it changes none of
+// its files, and a damaged table file or MANIFEST in it is DATA_LOSS naming the damage.
+TEST_F(StoreDamageTest, ACheckpointIsVerifiedWithoutChangingItAndDamageInItIsNamed) {
+  MakeStore(/*tables=*/true);
+  const std::string checkpoint = dir_.Sub("checkpoint");
+  auto listing = [&checkpoint] {
+    std::map<std::string, uintmax_t> files;
+    for (const fs::directory_entry& file : fs::directory_iterator(checkpoint)) {
+      files[file.path().filename().string()] = file.file_size();
+    }
+    return files;
+  };
+  const auto before = listing();
+  auto report = VerifyRocksDbCheckpoint(checkpoint);
+  ASSERT_TRUE(report.ok()) << report.status().ToString();
+  EXPECT_GT(report->files, 0u);
+  EXPECT_GT(report->bytes, 0u);
+  EXPECT_EQ(listing(), before) << "checking the checkpoint wrote into it";
+  EXPECT_EQ(VerifyRocksDbCheckpoint(dir_.Sub("nowhere")).status().code(), StatusCode::kNotFound);
+
+  const fs::path manifest = FileOf(checkpoint, "MANIFEST-");
+  const std::string intact_manifest = ReadBytes(manifest);
+  FlipByte(manifest, fs::file_size(manifest) / 2);
+  EXPECT_EQ(VerifyRocksDbCheckpoint(checkpoint).status().code(), StatusCode::kDataLoss);
+  std::ofstream(manifest, std::ios::binary | std::ios::trunc) << intact_manifest;
+
+  const fs::path table = FileOf(checkpoint, ".sst");
+  FlipByte(table, fs::file_size(table) / 2);
+  auto damaged = VerifyRocksDbCheckpoint(checkpoint);
+  ASSERT_EQ(damaged.status().code(), StatusCode::kDataLoss) << damaged.status().ToString();
+  EXPECT_NE(damaged.status().message().find(table.filename().string()), std::string::npos)
+      << damaged.status().ToString();
 }
 
 TEST_F(StoreDamageTest, VerifyReadsEveryTableFileAndNamesAFlippedByteWhileTheStoreServes) {

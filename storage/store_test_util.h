@@ -3,12 +3,15 @@
 // process) can recompute what an entry must hold from its id alone.
 #pragma once
 
+#include <sys/mount.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
+#include <cerrno>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <random>
 #include <string>
 #include <utility>
@@ -67,6 +70,50 @@ class TempDir {
 
  private:
   std::filesystem::path path_;
+};
+
+// A small filesystem of its own (tmpfs) mounted inside a TempDir, to fill up on purpose: the
+// disk-full tests. Mounting needs CAP_SYS_ADMIN (root in CI); without it `error()` says why and
+// the tests skip. Fill() leaves only a given number of bytes free, FreeSpace() gives the rest
+// back; the mount goes away with the object.
+class SmallFilesystem {
+ public:
+  SmallFilesystem(const std::string& tag, size_t bytes) : dir_(tag) {
+    root_ = dir_.Sub("mnt");
+    std::filesystem::create_directories(root_);
+    const std::string size = "size=" + std::to_string(bytes);
+    if (::mount("tmpfs", root_.c_str(), "tmpfs", 0, size.c_str()) != 0) {
+      error_ = "cannot mount a tmpfs (" + std::string(std::strerror(errno)) + ")";
+    }
+  }
+  ~SmallFilesystem() {
+    if (error_.empty()) ::umount2(root_.c_str(), MNT_DETACH);
+  }
+  SmallFilesystem(const SmallFilesystem&) = delete;
+  SmallFilesystem& operator=(const SmallFilesystem&) = delete;
+
+  // "" when mounted.
+  const std::string& error() const { return error_; }
+  // A path on the small filesystem (not created).
+  std::string Sub(const std::string& name) const { return root_ + "/" + name; }
+
+  // Writes a filler file until only `leave_bytes` (rounded to 64 KiB) are free.
+  void Fill(size_t leave_bytes) {
+    const std::filesystem::space_info space = std::filesystem::space(root_);
+    const size_t filler = space.available > leave_bytes ? space.available - leave_bytes : 0;
+    std::ofstream out(Sub(kFiller), std::ios::binary | std::ios::app);
+    const std::string block(64 << 10, '\0');
+    for (size_t written = 0; written + block.size() <= filler; written += block.size()) {
+      out.write(block.data(), std::streamsize(block.size()));
+    }
+  }
+  void FreeSpace() { std::filesystem::remove(Sub(kFiller)); }
+
+ private:
+  static constexpr char kFiller[] = "filler";
+  TempDir dir_;
+  std::string root_;
+  std::string error_;
 };
 
 inline MapConfig TestMapConfig(const std::string& name,

@@ -1,5 +1,5 @@
-// RecognitionClient's calls for operators: the health check, online checkpoints and checks of the
-// store's files.
+// RecognitionClient's calls for operators: the health check, online checkpoints, checks of the
+// store's files and the store's status.
 #include <unistd.h>
 
 #include <cstdio>
@@ -50,6 +50,14 @@ Result<pb::VerifyResponse> RecognitionClient::VerifyStore(uint32_t mib_per_secon
   request.set_mib_per_second(mib_per_second);
   pb::VerifyResponse response;
   const grpc::Status status = admin_->Verify(&context, request, &response);
+  if (!status.ok()) return status;
+  return response;
+}
+
+Result<pb::StoreStatusResponse> RecognitionClient::GetStoreStatus() {
+  pb::StoreStatusResponse response;
+  const grpc::Status status =
+      admin_->StoreStatus(UnaryContext().get(), pb::StoreStatusRequest(), &response);
   if (!status.ok()) return status;
   return response;
 }

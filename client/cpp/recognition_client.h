@@ -198,6 +198,9 @@ class RecognitionClient {
   // Has the server check every file of its store now (Admin.Verify) at `mib_per_second` (0: the
   // server's default); DATA_LOSS when it found damage. The transfer deadline applies; no retries.
   Result<pb::VerifyResponse> VerifyStore(uint32_t mib_per_second = 0);
+  // What a point-in-time recovery at the server's start-up lost and how the last check of its
+  // store's files went (Admin.StoreStatus).
+  Result<pb::StoreStatusResponse> GetStoreStatus();
 
  private:
   template <class Rpc>

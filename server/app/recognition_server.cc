@@ -141,7 +141,7 @@ Status RecognitionServer::Open() {
   }
   // Checkpoints left by a server that died while streaming one (AdminService) are of no use.
   std::filesystem::remove_all(std::filesystem::path(config.data_dir) / "checkpoints", error);
-  StoreRecovery recovery;
+  StoreRecovery& recovery = state.recovery;
   RECOG_ASSIGN_OR_RETURN(
       state.store, OpenRocksDbIndexStore(StorePathOf(config), StoreOptionsOf(config), &recovery));
   state.metrics.SetStoreRecoveryLoss(recovery.entries_lost(), recovery.maps_lost(),
@@ -177,6 +177,7 @@ Status RecognitionServer::Open() {
 
 void RecognitionServer::StoreChecked(const StoreVerifier::Result& result,
                                      std::chrono::duration<double> took) {
+  state_->set_last_store_check({std::chrono::system_clock::now(), result, took});
   const bool damaged = result.status().code() == StatusCode::kDataLoss;
   const uint64_t bytes = result.ok() ? result->bytes : 0;
   state_->metrics.StoreVerified(damaged, bytes, took.count());

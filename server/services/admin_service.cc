@@ -142,6 +142,33 @@ class CheckpointDownload final : public grpc::ServerWriteReactor<pb::CheckpointR
   pb::CheckpointResponse response_;
 };
 
+void FillRecoveryReport(const StoreRecovery& recovery, pb::StoreRecoveryReport* report) {
+  for (const std::string& damage : recovery.damage) report->add_damage(damage);
+  report->set_damaged_copy(recovery.damaged_copy);
+  for (const StoreRecovery::MapLoss& loss : recovery.maps) {
+    pb::MapLoss* map = report->add_maps();
+    map->set_name(loss.name);
+    map->set_frames_before(loss.entries_before);
+    map->set_frames_after(loss.entries_after);
+    for (EntryId id : loss.missing) map->add_missing_frame_ids(id);
+    map->set_map_lost(loss.map_lost);
+  }
+  for (const std::string& key : recovery.blobs_lost) report->add_blobs_lost(key);
+}
+
+void FillStoreCheck(const ServerState::StoreCheck& check, pb::StoreCheck* out) {
+  out->set_finished_unix_ms(
+      std::chrono::duration_cast<std::chrono::milliseconds>(check.finished.time_since_epoch())
+          .count());
+  if (check.result.ok()) {
+    out->set_files(check.result->files);
+    out->set_bytes(check.result->bytes);
+  } else {
+    out->set_error(check.result.status().ToString());
+  }
+  out->set_seconds(check.took.count());
+}
+
 }  // namespace
 
 grpc::ServerWriteReactor<pb::CheckpointResponse>* AdminService::Checkpoint(
@@ -166,6 +193,21 @@ grpc::ServerUnaryReactor* AdminService::Verify(grpc::CallbackServerContext* cont
             std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
         return grpc::Status::OK;
       });
+}
+
+grpc::ServerUnaryReactor* AdminService::StoreStatus(grpc::CallbackServerContext* context,
+                                                    const pb::StoreStatusRequest*,
+                                                    pb::StoreStatusResponse* response) {
+  return RunUnary(state_, context, "/recognition.v1.Admin/StoreStatus", Right::kRead,
+                  [=, this](CallInfo&, WorkerContext&) {
+                    if (state_.recovery.recovered()) {
+                      FillRecoveryReport(state_.recovery, response->mutable_recovery());
+                    }
+                    if (auto check = state_.last_store_check()) {
+                      FillStoreCheck(*check, response->mutable_last_check());
+                    }
+                    return grpc::Status::OK;
+                  });
 }
 
 }  // namespace recog::server

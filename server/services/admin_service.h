@@ -1,5 +1,5 @@
-// AdminService: the Admin RPCs (proto/recognition/v1/admin.proto): online checkpoints and checks
-// of the store's files.
+// AdminService: the Admin RPCs (proto/recognition/v1/admin.proto): online checkpoints, checks
+// of the store's files and the store's status.
 //
 // Checkpoint asks the store for a consistent copy (IndexStore::Checkpoint: RocksDB hard-links its
 // files, so this is quick and costs little space) under <data_dir>/checkpoints/, then streams the
@@ -26,6 +26,11 @@ class AdminService final : public ::recognition::v1::Admin::CallbackService {
   grpc::ServerUnaryReactor* Verify(grpc::CallbackServerContext* context,
                                    const ::recognition::v1::VerifyRequest* request,
                                    ::recognition::v1::VerifyResponse* response) override;
+
+  // StoreStatus: the start-up's recovery report and the last check (ServerState).
+  grpc::ServerUnaryReactor* StoreStatus(grpc::CallbackServerContext* context,
+                                        const ::recognition::v1::StoreStatusRequest* request,
+                                        ::recognition::v1::StoreStatusResponse* response) override;
 
  private:
   ServerState& state_;

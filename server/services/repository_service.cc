@@ -148,7 +148,7 @@ class ModelUpload final : public grpc::ServerReadReactor<pb::PutModelRequest> {
     std::vector<std::string> tags(header_.tags().begin(), header_.tags().end());
     StatusOr<ModelVersionInfo> stored =
         state_.repository->Put(bytes_, header_.name(), std::move(tags));
-    if (!stored.ok()) return ToGrpcStatus(stored.status(), call_.request_id);
+    if (!stored.ok()) return Final(context_, ToGrpcStatus(stored.status(), call_.request_id));
     call_.map = stored.value().metadata.name;
     partial_uploads_.RecordStored(Key(),
                                   {stored.value().metadata.name, stored.value().metadata.version});

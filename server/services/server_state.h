@@ -8,8 +8,10 @@
 #pragma once
 
 #include <atomic>
+#include <chrono>
 #include <memory>
 #include <mutex>
+#include <optional>
 
 #include "core/features/feature_extractor.h"
 #include "core/index/index_store.h"
@@ -25,6 +27,7 @@
 #include "server/runtime/store_verifier.h"
 #include "server/runtime/worker_pool.h"
 #include "server/services/worker_context.h"
+#include "storage/rocksdb_index_store.h"
 
 namespace recog::server {
 
@@ -49,6 +52,7 @@ struct ServerState {
   std::shared_ptr<ObjectDatabase> objects;
   std::unique_ptr<ModelRepository> repository;
   std::unique_ptr<StoreVerifier> verifier;  // checks the store's files (store_verifier.h)
+  StoreRecovery recovery;          // what opening the store recovered (empty when it opened whole)
   FeatureOptions place_features;   // how frames sent as images are described for place maps
   RecognitionOptions recognition;  // object recognition settings
 
@@ -63,9 +67,26 @@ struct ServerState {
     placement_ = std::move(table);
   }
 
+  // The last check of the store's files (background or Admin.Verify), for Admin.StoreStatus.
+  struct StoreCheck {
+    std::chrono::system_clock::time_point finished;
+    StoreVerifier::Result result;
+    std::chrono::duration<double> took;
+  };
+  std::optional<StoreCheck> last_store_check() const {
+    std::lock_guard lock(store_check_mutex_);
+    return last_store_check_;
+  }
+  void set_last_store_check(StoreCheck check) {
+    std::lock_guard lock(store_check_mutex_);
+    last_store_check_ = std::move(check);
+  }
+
  private:
   mutable std::mutex placement_mutex_;
   std::shared_ptr<const PlacementTable> placement_;
+  mutable std::mutex store_check_mutex_;
+  std::optional<StoreCheck> last_store_check_;
 };
 
 }  // namespace recog::server

@@ -492,6 +492,67 @@ TEST_F(ServerLifecycleTest, KillNineDuringAStreamLosesNoAcknowledgedFrame) {
   }
 }
 
+// A disk that fills up while frames stream in (the data directory on a small filesystem of its
+// own, nearly full): the frame that finds no room is RESOURCE_EXHAUSTED with a retry pushback of
+// -1 (retrying at once cannot help), every frame acknowledged before it is in the map, also after
+// a restart, and frames are taken again once there is room, without a restart.
+TEST_F(ServerLifecycleTest, AFullDiskRefusesFramesWithoutRetryLosesNoneAcknowledgedAndResumes) {
+  recog::testing::SmallFilesystem disk("server_disk_full", size_t(256) << 20);
+  if (!disk.error().empty()) GTEST_SKIP() << disk.error();
+  StopServer();
+  config().data_dir = disk.Sub("data");
+  disk.Fill(2 << 20);  // before the store opens, so that its log finds only what is left
+  StartServer();
+  ASSERT_TRUE(CreateMap("m").ok());
+  const std::string jpegs[] = {CorridorJpeg(1), CorridorJpeg(20), CorridorJpeg(41),
+                               CorridorJpeg(60)};
+  // AddFrame of the next corridor image; *pushback gets the refusal's retry pushback.
+  int sent = 0;
+  auto add_next_frame = [&](std::string* pushback) {
+    pb::AddFrameRequest request;
+    request.set_map("m");
+    *request.mutable_frame() = JpegFrame(jpegs[sent % 4], sent);
+    auto context = Context();
+    pb::AddFrameResponse response;
+    const grpc::Status status = places_->AddFrame(context.get(), request, &response);
+    sent += status.ok();
+    const auto& trailers = context->GetServerTrailingMetadata();
+    const auto found = trailers.find("grpc-retry-pushback-ms");
+    if (found != trailers.end()) pushback->assign(found->second.data(), found->second.size());
+    return status;
+  };
+
+  grpc::Status refused;
+  std::string pushback;
+  for (int frame = 0; frame < 1000 && refused.ok(); ++frame) refused = add_next_frame(&pushback);
+  ASSERT_EQ(refused.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << refused.error_message();
+  EXPECT_EQ(pushback, "-1");
+  EXPECT_NE(refused.error_message().find("No space left"), std::string::npos)
+      << refused.error_message();
+  ASSERT_GT(sent, 0);
+  pb::MapInfo info;
+  ASSERT_TRUE(GetMap("m", &info).ok());
+  EXPECT_EQ(info.frames(), uint64_t(sent));
+
+  disk.FreeSpace();
+  // The store looks for room every 5 s and then takes writes again.
+  grpc::Status resumed = refused;
+  for (int attempt = 0; attempt < 300 && !resumed.ok(); ++attempt) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    resumed = add_next_frame(&pushback);
+    if (!resumed.ok()) {
+      ASSERT_EQ(resumed.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED)
+          << resumed.error_message();
+    }
+  }
+  ASSERT_TRUE(resumed.ok()) << resumed.error_message();
+
+  RestartServer();
+  ASSERT_TRUE(GetMap("m", &info).ok());
+  EXPECT_EQ(info.frames(), uint64_t(sent));
+  StopServer();  // before the small filesystem goes
+}
+
 TEST_F(ServerLifecycleTest, StreamingTheCorridorGivesTheOfflineEvaluationsResults) {
   RECOG_SKIP_WITHOUT_SHARED_DATA("places/corridor/ground_truth.txt");
   const std::string images = recog::testing::SharedData("places/corridor/images");

@@ -6,7 +6,8 @@
 # logs m1's missing frame ids and m2 lost whole, counts them in recog_store_recovery_lost, and
 # serves the consistent prefix; the store then starts again without --recover. Then a byte
 # flipped in a table file under the running recogd is found by the background check, by
-# `recog admin verify` and by `recogd --verify`.
+# `recog admin verify`, by `recog admin checkpoint` (the copy is checked when taken) and by
+# `recogd --verify`.
 # Usage: store_damage_test.sh RECOG RECOGD PROJECT_DIR
 set -u
 recog=$1
@@ -99,6 +100,19 @@ print(urllib.request.urlopen(f"http://127.0.0.1:{sys.argv[1]}/metrics", timeout=
 PY
 grep -q '^recog_store_recovery_lost{kind="maps"} 1$' "$tmp/metrics" && pass \
   || fail "recog_store_recovery_lost counts m2: $(grep recovery_lost "$tmp/metrics")"
+# The same report from `recog admin status`, for operators without the log at hand.
+expect_ok "admin status after the recovery" "$recog" admin status --json "${server[@]}"
+json_check "admin status reports m1's missing frames, m2 lost, the copy and no check yet" "
+r = d['recovery']; maps = {m['name']: m for m in r['maps']}
+assert d['recovered'] and r['damaged_copy'].startswith('$tmp/data/store.damaged-'), d
+m1 = maps['m1']  # frames_before: those whose records are readable (not in the damaged bytes)
+assert m1['frames_before'] <= 12 and 0 < m1['frames_after'] < m1['frames_before'], d
+assert len(m1['missing_frame_ids']) == m1['frames_before'] - m1['frames_after'], d
+assert maps['m2']['map_lost'] and maps['m2']['frames_after'] == 0, d
+assert 'last_check' not in d and r['damage'][0].startswith('$log: dropping'), d"
+expect_ok "admin status in text" "$recog" admin status "${server[@]}"
+grep -q "^  map 'm2' lost whole: 12 -> 0 entries" "$tmp/out" && pass \
+  || fail "admin status says m2 is lost: $(cat "$tmp/out")"
 stop_recogd
 
 # The recovered store is whole: it starts without --recover, and its files check out, online
@@ -106,6 +120,9 @@ stop_recogd
 start_recogd && pass || fail "the recovered store does not start again: $(tail -2 "$tmp/recogd.log")"
 expect_ok "admin verify of the recovered store" "$recog" admin verify --json "${server[@]}"
 json_check "admin verify read table files" "assert d['files'] >= 1 and d['bytes'] > 0, d"
+expect_ok "admin status after a check" "$recog" admin status --json "${server[@]}"
+json_check "admin status: opened whole, checked without damage" \
+  "assert not d['recovered'] and d['last_check']['error'] == '' and d['last_check']['files'] >= 1, d"
 [ -n "$server_pid" ] && stop_recogd
 expect_ok "recogd --verify of the recovered store" "$recogd" --verify --data-dir "$tmp/data"
 grep -q "no damage" "$tmp/out" && pass || fail "recogd --verify: $(cat "$tmp/out")"
@@ -136,6 +153,13 @@ done
 grep -q "store check failed: DATA_LOSS.*$(basename "$table") is damaged" "$tmp/recogd.log" && pass \
   || fail "the log names the damaged file: $(grep -i "check" "$tmp/recogd.log" | tail -2)"
 expect_error "admin verify of a damaged store" "DATA_LOSS" "$recog" admin verify "${server[@]}"
+"$recog" admin status "${server[@]}" >"$tmp/out" 2>"$tmp/err"
+code=$?
+[ "$code" -eq 1 ] && grep -q "^last check .*DATA_LOSS.*$(basename "$table") is damaged" "$tmp/out" \
+  && pass || fail "admin status after damage was found: exit $code: $(cat "$tmp/out" "$tmp/err")"
+# A backup taken now is read back when taken, and refused: the damage came with the copy.
+expect_error "admin checkpoint of a damaged store" "DATA_LOSS.*$(basename "$table") is damaged" \
+  "$recog" admin checkpoint --to "$tmp/backup" -q "${server[@]}"
 stop_recogd
 "$recogd" --verify --data-dir "$tmp/data" >"$tmp/out" 2>"$tmp/err"
 code=$?

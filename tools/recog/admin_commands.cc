@@ -1,6 +1,7 @@
-// recog admin health | checkpoint | verify | restore: operating recogd. health, checkpoint and
-// verify call the server over the C++ client library (with the ServerFlags); restore works offline
-// on a data directory. A failure prints one line "recog admin <cmd>: ..." and exits 1.
+// recog admin health | checkpoint | verify | status | restore: operating recogd. health,
+// checkpoint, verify and status call the server over the C++ client library (with the
+// ServerFlags); restore works offline on a data directory. A failure prints one line
+// "recog admin <cmd>: ..." and exits 1.
 #include <algorithm>
 #include <cstdio>
 #include <filesystem>
@@ -47,19 +48,29 @@ int RunCheckpoint(const CheckpointArgs& args, RecognitionClient& client) {
       args.to, [&](uint64_t done, uint64_t total) { progress.Update("bytes", done, total); });
   progress.Finish();
   if (!manifest.ok()) return Fail("admin checkpoint", manifest.status());
+  // The copy is read back here, every block against its checksum, before it counts as a backup.
+  auto checked = VerifyRocksDbCheckpoint(args.to);
+  if (!checked.ok()) {
+    return Fail("admin checkpoint", checked.status().WithContext(
+                                        "the checkpoint in '" + args.to +
+                                        "' is damaged (kept for inspection; do not restore it)"));
+  }
   if (args.server.json) {
     std::printf("%s\n", json({{"directory", args.to},
                               {"files", manifest->files_size()},
                               {"bytes", manifest->total_bytes()},
                               {"maps", manifest->maps()},
                               {"models", manifest->models()},
-                              {"created", UtcTime(manifest->created_unix_ms())}})
+                              {"created", UtcTime(manifest->created_unix_ms())},
+                              {"verified_table_files", checked->files}})
                             .dump()
                             .c_str());
   } else {
-    std::printf("checkpoint of %u maps and %u models: %d files, %llu bytes in %s\n",
-                manifest->maps(), manifest->models(), manifest->files_size(),
-                static_cast<unsigned long long>(manifest->total_bytes()), args.to.c_str());
+    std::printf(
+        "checkpoint of %u maps and %u models: %d files, %llu bytes in %s; "
+        "%zu table files read back, no damage\n",
+        manifest->maps(), manifest->models(), manifest->files_size(),
+        static_cast<unsigned long long>(manifest->total_bytes()), args.to.c_str(), checked->files);
   }
   return 0;
 }
@@ -86,6 +97,77 @@ int RunVerify(const VerifyArgs& args, RecognitionClient& client) {
                 static_cast<unsigned long long>(report->files()), mib, report->seconds(), rate);
   }
   return 0;
+}
+
+// The server's recovery report as the store library describes recoveries (the lines recogd logs).
+StoreRecovery RecoveryOf(const client::pb::StoreRecoveryReport& report) {
+  StoreRecovery recovery;
+  recovery.damage.assign(report.damage().begin(), report.damage().end());
+  recovery.damaged_copy = report.damaged_copy();
+  for (const client::pb::MapLoss& map : report.maps()) {
+    StoreRecovery::MapLoss loss;
+    loss.name = map.name();
+    loss.entries_before = map.frames_before();
+    loss.entries_after = map.frames_after();
+    loss.missing.assign(map.missing_frame_ids().begin(), map.missing_frame_ids().end());
+    loss.map_lost = map.map_lost();
+    recovery.maps.push_back(std::move(loss));
+  }
+  recovery.blobs_lost.assign(report.blobs_lost().begin(), report.blobs_lost().end());
+  return recovery;
+}
+
+// Exit 1 when the last check found damage.
+int RunStatus(const ServerFlags& flags, RecognitionClient& client) {
+  auto status = client.GetStoreStatus();
+  if (!status.ok()) return Fail("admin status", status.status());
+  const StoreRecovery recovery = RecoveryOf(status->recovery());
+  const client::pb::StoreCheck& check = status->last_check();
+  const bool checked = status->has_last_check();
+  if (flags.json) {
+    json maps = json::array();
+    for (const StoreRecovery::MapLoss& loss : recovery.maps) {
+      maps.push_back({{"name", loss.name},
+                      {"frames_before", loss.entries_before},
+                      {"frames_after", loss.entries_after},
+                      {"missing_frame_ids", loss.missing},
+                      {"map_lost", loss.map_lost}});
+    }
+    json out = {{"recovered", recovery.recovered()}};
+    if (recovery.recovered()) {
+      out["recovery"] = {{"damage", recovery.damage},
+                         {"damaged_copy", recovery.damaged_copy},
+                         {"maps", maps},
+                         {"blobs_lost", recovery.blobs_lost}};
+    }
+    if (checked) {
+      out["last_check"] = {{"finished", UtcTime(check.finished_unix_ms())},
+                           {"error", check.error()},
+                           {"files", check.files()},
+                           {"bytes", check.bytes()},
+                           {"seconds", check.seconds()}};
+    }
+    std::printf("%s\n", out.dump().c_str());
+  } else {
+    if (!recovery.recovered()) {
+      std::printf("store opened whole at start-up (no recovery)\n");
+    } else {
+      std::printf("store recovered point-in-time at start-up:\n");
+      for (const std::string& line : recovery.Describe()) std::printf("  %s\n", line.c_str());
+    }
+    if (!checked) {
+      std::printf("store files not checked yet since start-up\n");
+    } else if (check.error().empty()) {
+      std::printf("last check %s: %llu files, %.1f MiB in %.2f s, no damage\n",
+                  UtcTime(check.finished_unix_ms()).c_str(),
+                  static_cast<unsigned long long>(check.files()), double(check.bytes()) / (1 << 20),
+                  check.seconds());
+    } else {
+      std::printf("last check %s: %s\n", UtcTime(check.finished_unix_ms()).c_str(),
+                  check.error().c_str());
+    }
+  }
+  return checked && !check.error().empty() ? 1 : 0;
 }
 
 struct RestoreArgs {
@@ -140,7 +222,8 @@ void AddAdminCommands(CLI::App& app, int* exit_code) {
   CLI::App* checkpoint = admin->add_subcommand(
       "checkpoint",
       "Copy the server's whole store (maps, frames, models) to a new folder here, "
-      "online; `recog admin restore` puts it in place for a new server");
+      "online, and check every block of the copy; `recog admin restore` puts it in place for a "
+      "new server");
   checkpoint->add_option("--to", checkpoint_args->to, "The new folder")->required();
   checkpoint->add_flag("-q,--quiet", checkpoint_args->quiet, "No progress output");
   ConnectCommand(checkpoint, &checkpoint_args->server, exit_code,
@@ -159,6 +242,16 @@ void AddAdminCommands(CLI::App& app, int* exit_code) {
       ->capture_default_str();
   ConnectCommand(verify, &verify_args->server, exit_code, [verify_args](RecognitionClient& client) {
     return RunVerify(*verify_args, client);
+  });
+
+  auto status_flags = std::make_shared<ServerFlags>();
+  CLI::App* status = admin->add_subcommand(
+      "status",
+      "What the server's store went through: the loss of a point-in-time recovery at start-up "
+      "(recogd --recover point-in-time) and the last check of its files; exit 1 when that check "
+      "found damage");
+  ConnectCommand(status, status_flags.get(), exit_code, [status_flags](RecognitionClient& client) {
+    return RunStatus(*status_flags, client);
   });
 
   auto restore_args = std::make_shared<RestoreArgs>();

@@ -245,7 +245,8 @@ grep -q "^SERVING" "$tmp/out" && pass || fail "admin health prints SERVING: $(ca
 "$recog" maps list --json "${server[@]}" >"$tmp/maps.json"
 "$recog" models list --json "${server[@]}" >"$tmp/models.json"
 expect_ok "admin checkpoint" "$recog" admin checkpoint --to "$tmp/backup" -q --json "${server[@]}"
-json_check "admin checkpoint reports the maps and models" "assert d['maps']>=1 and d['models']>=1 and d['bytes']>0, d"
+json_check "admin checkpoint reports the maps and models, and read its table files back" \
+  "assert d['maps']>=1 and d['models']>=1 and d['bytes']>0 and d['verified_table_files']>=1, d"
 expect_error "admin checkpoint to an existing folder" "ALREADY_EXISTS" "$recog" admin checkpoint \
   --to "$tmp/backup" -q "${server[@]}"
 cp -r "$tmp/backup" "$tmp/damaged-backup"
