@@ -559,6 +559,14 @@ class RecognitionClient:
                            admin_pb2.VerifyRequest(mib_per_second=mib_per_second),
                            deadline=self.transfer_deadline)
 
+    def store_status(self) -> admin_pb2.StoreStatusResponse:
+        """What the server's store went through (Admin.StoreStatus): ``recovery``, set when a
+        point-in-time recovery at start-up lost something (per map the frames before and after
+        and the ids missing, maps lost whole, blobs lost, where the damaged files are kept), and
+        ``last_check``, the last check of the store's files (``error`` empty when it found no
+        damage), set once one has run."""
+        return self._unary(self._admin.StoreStatus, admin_pb2.StoreStatusRequest())
+
     def checkpoint(self, directory: str | os.PathLike,
                    progress: Callable[[int, int], None] | None = None
                    ) -> admin_pb2.CheckpointManifest:

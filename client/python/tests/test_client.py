@@ -237,6 +237,10 @@ class RecognitionClientTest(unittest.TestCase):
         self.assertGreaterEqual(report.files, 1)
         self.assertGreater(report.bytes, 0)
         self.assertEqual(self.client.check_health("recog.store"), "SERVING")
+        status = self.client.store_status()
+        self.assertFalse(status.HasField("recovery"))  # the store opened whole
+        self.assertEqual(status.last_check.error, "")
+        self.assertEqual(status.last_check.files, report.files)
 
     def test_stream_answers_in_order_and_detects_the_revisit(self):
         frames = [corridor(n) for n in (1, 20, 41, 60, 1)]
