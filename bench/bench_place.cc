@@ -132,7 +132,7 @@ void RunPipeline(benchmark::State& state, bool with_depth) {
             std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
                 .count();
       }
-      auto r = detector.Process(features, 0.0, {}, with_depth ? &geometry : nullptr);
+      auto r = detector.Process(features, std::nullopt, {}, with_depth ? &geometry : nullptr);
       if (!r.ok()) std::exit(2);
       if (db->size() <= 26000) continue;  // measure once the map holds 26,000 frames
       const LoopTimings& t = r->timings;

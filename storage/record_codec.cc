@@ -97,6 +97,9 @@ bool Fits(const Reader& reader, uint64_t count, uint64_t item_size) {
   return item_size == 0 || count <= reader.left() / item_size;
 }
 
+// The flags byte of a kMetadataFormat record.
+constexpr uint8_t kMetadataHasTimestamp = 1;
+
 constexpr size_t kKeyPointBytes = 6 * 4;
 
 }  // namespace
@@ -275,17 +278,15 @@ Status CheckStorable(const EntryRecord& entry) {
 }
 
 std::string EncodeMetadata(const EntryMetadata& metadata) {
-  const bool with_client_id = !metadata.client_id.empty();
-  std::string out(1, char(with_client_id ? kMetadataWithClientIdFormat : kRecordFormat));
-  out.reserve(1 + 8 + 4 + 4 + metadata.user_data.size() + 4 + metadata.client_id.size());
-  Put<double>(&out, metadata.timestamp);
+  std::string out(1, char(kMetadataFormat));
+  out.reserve(1 + 1 + 8 + 4 + 4 + metadata.user_data.size() + 4 + metadata.client_id.size());
+  out.push_back(char(metadata.timestamp.has_value() ? kMetadataHasTimestamp : 0));
+  if (metadata.timestamp.has_value()) Put<double>(&out, *metadata.timestamp);
   Put<uint32_t>(&out, metadata.num_features);
   Put<uint32_t>(&out, uint32_t(metadata.user_data.size()));
   out += metadata.user_data;
-  if (with_client_id) {
-    Put<uint32_t>(&out, uint32_t(metadata.client_id.size()));
-    out += metadata.client_id;
-  }
+  Put<uint32_t>(&out, uint32_t(metadata.client_id.size()));
+  out += metadata.client_id;
   return out;
 }
 
@@ -294,18 +295,34 @@ Status DecodeMetadata(std::string_view bytes, const RecordContext& context, Entr
   Reader reader(bytes);
   uint8_t format = 0;
   if (!reader.Read(&format)) return Malformed(kWhat, context, "empty record");
-  if (format != kRecordFormat && format != kMetadataWithClientIdFormat) {
+  if (format != kRecordFormat && format != kMetadataWithClientIdFormat &&
+      format != kMetadataFormat) {
     return Malformed(kWhat, context, "unknown record format " + std::to_string(format));
   }
   EntryMetadata metadata;
+  double timestamp = 0;
+  if (format == kMetadataFormat) {
+    uint8_t flags = 0;
+    if (!reader.Read(&flags)) return Truncated(kWhat, context, reader);
+    if ((flags & ~kMetadataHasTimestamp) != 0) {
+      return Malformed(kWhat, context, "unknown flags " + std::to_string(flags));
+    }
+    if (flags & kMetadataHasTimestamp) {
+      if (!reader.Read(&timestamp)) return Truncated(kWhat, context, reader);
+      metadata.timestamp = timestamp;
+    }
+  } else {
+    if (!reader.Read(&timestamp)) return Truncated(kWhat, context, reader);
+    if (timestamp != 0.0) metadata.timestamp = timestamp;  // 0 meant "none" then
+  }
   uint32_t user_data_size = 0;
   const char* user_data = nullptr;
-  if (!reader.Read(&metadata.timestamp) || !reader.Read(&metadata.num_features) ||
-      !reader.Read(&user_data_size) || !reader.Skip(user_data_size, &user_data)) {
+  if (!reader.Read(&metadata.num_features) || !reader.Read(&user_data_size) ||
+      !reader.Skip(user_data_size, &user_data)) {
     return Truncated(kWhat, context, reader);
   }
   metadata.user_data.assign(user_data, user_data_size);
-  if (format == kMetadataWithClientIdFormat) {
+  if (format != kRecordFormat) {
     uint32_t client_id_size = 0;
     const char* client_id = nullptr;
     if (!reader.Read(&client_id_size) || !reader.Skip(client_id_size, &client_id)) {

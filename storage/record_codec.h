@@ -19,9 +19,12 @@
 //                vocabulary_words u32 | vocabulary_nodes u32 | descriptor type u8 |
 //                descriptor size_bytes u32 | scoring u8 | direct_index_levels_up u32
 //   next id    : format | next_entry_id u32
-//   metadata   : format | timestamp f64 | num_features u32 | user_data length u32 | bytes |
-//                and, for entries with a client id only (format byte kMetadataWithClientIdFormat),
-//                | client_id length u32 | bytes (a record without it has an empty client id)
+//   metadata   : format kMetadataFormat | flags u8 (bit 0: a timestamp follows) | timestamp f64
+//                when flagged | num_features u32 | user_data length u32 | bytes | client_id
+//                length u32 | bytes. Read too, as written before timestamps were optional (a
+//                timestamp of 0 then meant none, and is read as none): format kRecordFormat |
+//                timestamp f64 | num_features u32 | user_data length u32 | bytes, and format
+//                kMetadataWithClientIdFormat: the same | client_id length u32 | bytes.
 //   bow        : format | count u32 | count x (word u32, value f32), words strictly increasing
 //   direct     : format | nodes n u32 | features m u32 | n x node u32 (strictly increasing) |
 //                (n + 1) x offset u32 (0 ... m, non-decreasing) | m x feature index u32
@@ -51,8 +54,10 @@ namespace recog::storage {
 inline constexpr uint8_t kRecordFormat = 1;
 // Features records of object entries (with 3D points) start with this byte instead.
 inline constexpr uint8_t kFeaturesWithPointsFormat = 2;
-// Metadata records of entries with a client id start with this byte instead.
+// Metadata records written before timestamps were optional, with a client id (read only).
 inline constexpr uint8_t kMetadataWithClientIdFormat = 2;
+// Metadata records as written now: the timestamp is optional (0.0 is a time).
+inline constexpr uint8_t kMetadataFormat = 3;
 
 // Which record a value belongs to, for error messages.
 struct RecordContext {

@@ -95,30 +95,51 @@ TEST(RecordCodecTest, EntryPartsRoundTripBitExactly) {
   }
 }
 
-TEST(RecordCodecTest, MetadataWithoutAClientIdIsTheOldRecordAndReadsAsEmpty) {
-  EntryMetadata old;
-  old.timestamp = 12.5;
-  old.num_features = 7;
-  old.user_data = "cam";
-  // The record as versions without client ids wrote it, byte by byte.
-  std::string bytes(1, char(kRecordFormat));
-  bytes.append("\x00\x00\x00\x00\x00\x00\x29\x40", 8);  // 12.5, little-endian
-  bytes.append("\x07\x00\x00\x00\x03\x00\x00\x00", 8);
-  bytes += "cam";
-  EXPECT_EQ(EncodeMetadata(old), bytes);
+// Metadata records as versions before optional timestamps wrote them, byte by byte, still read:
+// without a client id (format 1) and with one (format 2); their timestamp 0 meant "none".
+TEST(RecordCodecTest, OldMetadataRecordsReadWithTheirClientIdAndZeroAsNoTimestamp) {
+  std::string old_bytes(1, char(kRecordFormat));
+  old_bytes.append("\x00\x00\x00\x00\x00\x00\x29\x40", 8);  // 12.5, little-endian
+  old_bytes.append("\x07\x00\x00\x00\x03\x00\x00\x00", 8);
+  old_bytes += "cam";
   EntryMetadata decoded;
   decoded.client_id = "stale";
-  ASSERT_TRUE(DecodeMetadata(bytes, kContext, &decoded).ok());
-  EXPECT_EQ(decoded, old);
+  ASSERT_TRUE(DecodeMetadata(old_bytes, kContext, &decoded).ok());
+  EXPECT_EQ(decoded.timestamp, 12.5);
+  EXPECT_EQ(decoded.num_features, 7u);
+  EXPECT_EQ(decoded.user_data, "cam");
   EXPECT_EQ(decoded.client_id, "");
 
-  EntryMetadata with_id = old;
-  with_id.client_id = std::string("kf\0-42", 6);
-  const std::string encoded = EncodeMetadata(with_id);
-  EXPECT_EQ(uint8_t(encoded[0]), kMetadataWithClientIdFormat);
-  EXPECT_EQ(encoded.size(), bytes.size() + 4 + 6);
-  ASSERT_TRUE(DecodeMetadata(encoded, kContext, &decoded).ok());
-  EXPECT_EQ(decoded, with_id);
+  std::string with_id(1, char(kMetadataWithClientIdFormat));
+  with_id.append(8, '\0');  // timestamp 0: none
+  with_id.append("\x07\x00\x00\x00\x03\x00\x00\x00", 8);
+  with_id += "cam";
+  with_id.append("\x02\x00\x00\x00", 4);
+  with_id += "kf";
+  ASSERT_TRUE(DecodeMetadata(with_id, kContext, &decoded).ok());
+  EXPECT_EQ(decoded.timestamp, std::nullopt);
+  EXPECT_EQ(decoded.client_id, "kf");
+}
+
+// Now a timestamp is optional and 0.0 is a time: none, 0.0 and others round-trip as themselves,
+// and the flags byte is checked.
+TEST(RecordCodecTest, MetadataKeepsNoTimestampApartFromTimeZero) {
+  for (const std::optional<double> timestamp :
+       {std::optional<double>(), std::optional<double>(0.0), std::optional<double>(-2.5)}) {
+    EntryMetadata metadata;
+    metadata.timestamp = timestamp;
+    metadata.num_features = 3;
+    metadata.client_id = std::string("kf\0-42", 6);
+    const std::string encoded = EncodeMetadata(metadata);
+    EXPECT_EQ(uint8_t(encoded[0]), kMetadataFormat);
+    EntryMetadata decoded;
+    ASSERT_TRUE(DecodeMetadata(encoded, kContext, &decoded).ok());
+    EXPECT_EQ(decoded, metadata);
+  }
+  EntryMetadata metadata;
+  std::string encoded = EncodeMetadata(metadata);
+  encoded[1] = char(0x80);  // an unknown flag
+  EXPECT_EQ(DecodeMetadata(encoded, kContext, &metadata).code(), StatusCode::kDataLoss);
 }
 
 TEST(RecordCodecTest, NonContinuousDescriptorsAreStoredRowByRow) {

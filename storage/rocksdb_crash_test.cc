@@ -83,7 +83,8 @@ uint64_t Fingerprint(const EntryRecord& e) {
     const auto* p = static_cast<const uint8_t*>(data);
     for (size_t i = 0; i < size; ++i) h = (h ^ p[i]) * 1099511628211ull;
   };
-  mix(&e.metadata.timestamp, sizeof(double));
+  const double timestamp = e.metadata.timestamp.value_or(-1.0);
+  mix(&timestamp, sizeof(timestamp));
   mix(&e.metadata.num_features, sizeof(uint32_t));
   mix(e.metadata.user_data.data(), e.metadata.user_data.size());
   mix(e.bow.entries().data(), e.bow.entries().size_bytes());

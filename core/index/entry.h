@@ -9,6 +9,7 @@
 
 #include <cstdint>
 #include <limits>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -37,9 +38,9 @@ enum EntryPart : uint32_t {
 inline constexpr size_t kMaxClientIdBytes = 128;
 
 struct EntryMetadata {
-  double timestamp = 0.0;     // seconds, as given by the client (0 when unknown)
-  uint32_t num_features = 0;  // keypoints of the entry; the direct index refers to them
-  std::string user_data;      // opaque to the database (camera id, pose, ...), at most 64 KiB
+  std::optional<double> timestamp;  // seconds, as given by the client; none when it gave none
+  uint32_t num_features = 0;        // keypoints of the entry; the direct index refers to them
+  std::string user_data;            // opaque to the database (camera id, pose, ...), at most 64 KiB
   // The client's own id of the frame (a SLAM's keyframe id), returned with every match; at most
   // kMaxClientIdBytes, empty when the client gave none (and for entries stored before it existed).
   std::string client_id;

@@ -188,14 +188,14 @@ StatusOr<LoopDetector> LoopDetector::Create(Database* database, const LoopDetect
   return LoopDetector(database, params);
 }
 
-EntryId LoopDetector::QueryBound(double timestamp) const {
+EntryId LoopDetector::QueryBound(std::optional<double> timestamp) const {
   const EntryId next = database_->next_entry_id();
-  if (timestamp <= 0.0) {
+  if (!timestamp.has_value()) {
     return next > params_.recent_frames ? next - params_.recent_frames : 0;
   }
   // Entries this detector added after (timestamp - recent_seconds) are too recent; entries from
   // before this detector existed are older than all of them.
-  const double limit = timestamp - params_.recent_seconds;
+  const double limit = *timestamp - params_.recent_seconds;
   const auto it = std::upper_bound(entry_timestamps_.begin(), entry_timestamps_.end(), limit);
   if (it == entry_timestamps_.end()) return next;
   return entry_ids_[size_t(it - entry_timestamps_.begin())];
@@ -267,7 +267,8 @@ bool LoopDetector::FindBestIsland(const std::vector<QueryResult>& results, doubl
   return true;
 }
 
-StatusOr<LoopResult> LoopDetector::Process(const FeatureSet& features, double timestamp,
+StatusOr<LoopResult> LoopDetector::Process(const FeatureSet& features,
+                                           std::optional<double> timestamp,
                                            std::string_view client_id,
                                            const FrameGeometry* geometry) {
   RECOG_RETURN_IF_ERROR(CheckClientId(client_id));
@@ -357,7 +358,7 @@ StatusOr<LoopResult> LoopDetector::Process(const FeatureSet& features, double ti
   return result;
 }
 
-StatusOr<EntryId> LoopDetector::Add(const FeatureSet& features, double timestamp,
+StatusOr<EntryId> LoopDetector::Add(const FeatureSet& features, std::optional<double> timestamp,
                                     std::string_view client_id, const FrameGeometry* geometry) {
   RECOG_RETURN_IF_ERROR(CheckClientId(client_id));
   RECOG_RETURN_IF_ERROR(CheckGeometry(features, geometry));
@@ -368,7 +369,8 @@ StatusOr<EntryId> LoopDetector::Add(const FeatureSet& features, double timestamp
   return Insert(features, bow, direct, timestamp, client_id, geometry);
 }
 
-StatusOr<LoopResult> LoopDetector::Query(const FeatureSet& features, double /*timestamp*/,
+StatusOr<LoopResult> LoopDetector::Query(const FeatureSet& features,
+                                         std::optional<double> /*timestamp*/,
                                          const FrameGeometry* geometry) const {
   RECOG_RETURN_IF_ERROR(CheckGeometry(features, geometry));
   LoopResult result;
@@ -411,7 +413,7 @@ StatusOr<LoopResult> LoopDetector::Query(const FeatureSet& features, double /*ti
 }
 
 StatusOr<EntryId> LoopDetector::Insert(const FeatureSet& features, const BowVector& bow,
-                                       const FeatureVector& direct, double timestamp,
+                                       const FeatureVector& direct, std::optional<double> timestamp,
                                        std::string_view client_id, const FrameGeometry* geometry) {
   if (HasEnoughFeatures(features)) previous_bow_ = bow;
   EntryMetadata metadata;
@@ -422,9 +424,9 @@ StatusOr<EntryId> LoopDetector::Insert(const FeatureSet& features, const BowVect
   RECOG_ASSIGN_OR_RETURN(
       const EntryId id,
       database_->AddConverted(bow, direct, features, std::move(metadata), std::move(points)));
-  if (timestamp > 0.0) {
+  if (timestamp.has_value()) {
     entry_timestamps_.push_back(
-        entry_timestamps_.empty() ? timestamp : std::max(timestamp, entry_timestamps_.back()));
+        entry_timestamps_.empty() ? *timestamp : std::max(*timestamp, entry_timestamps_.back()));
     entry_ids_.push_back(id);
   }
   return id;

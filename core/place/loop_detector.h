@@ -131,7 +131,8 @@ struct LoopDetectorParams {
   double min_score_with_previous = 0.005;  // thesis Table 4.4
   double alpha = 0.3;                      // minimum normalised score eta (Table 4.4)
   // tau_c: entries added less than this before the frame are not candidates. Frames count when
-  // the frames carry no timestamp; with timestamps (> 0), seconds (Table 4.4: 20 s).
+  // the frame carries no timestamp; with a timestamp (any time, 0.0 included), seconds (Table
+  // 4.4: 20 s).
   uint32_t recent_frames = 20;
   double recent_seconds = 20.0;
   uint32_t max_query_results = 50;          // database results considered per query
@@ -231,22 +232,23 @@ class LoopDetector {
   // the direct index. INVALID_ARGUMENT for bad parameters.
   static StatusOr<LoopDetector> Create(Database* database, const LoopDetectorParams& params);
 
-  // Processes the next frame of the sequence (timestamp in seconds, 0 when unknown) and adds it
+  // Processes the next frame of the sequence (timestamp in seconds, none when unknown) and adds it
   // to the database, with the client's id of the frame (stored in its metadata, at most
   // kMaxClientIdBytes). Errors are only for bad input (e.g. descriptors of another format) or a
   // failing store; "no loop" is a result.
   // With `geometry` (may be null), the entry keeps its points and a loop is checked in 3D.
-  StatusOr<LoopResult> Process(const FeatureSet& features, double timestamp = 0.0,
+  StatusOr<LoopResult> Process(const FeatureSet& features,
+                               std::optional<double> timestamp = std::nullopt,
                                std::string_view client_id = {},
                                const FrameGeometry* geometry = nullptr);
 
-  // Adds the next frame of the sequence (timestamp in seconds, 0 when unknown) to the database
+  // Adds the next frame of the sequence (timestamp in seconds, none when unknown) to the database
   // without querying, and returns its entry id. The detector's state moves on as Process would
   // move it for a frame that is not queried: the frame counts in the sequence (and so in the gap
   // between queries for temporal consistency), is the previous usable frame when it has enough
   // features, and its timestamp bounds tau_c. The client id and the errors are as for Process.
   // With `geometry` (may be null), the entry keeps its 3D points.
-  StatusOr<EntryId> Add(const FeatureSet& features, double timestamp = 0.0,
+  StatusOr<EntryId> Add(const FeatureSet& features, std::optional<double> timestamp = std::nullopt,
                         std::string_view client_id = {}, const FrameGeometry* geometry = nullptr);
 
   // Looks for the place of a single frame in the map, without adding the frame or changing the
@@ -265,7 +267,8 @@ class LoopDetector {
   // concurrently with Process and Add.
   // With `geometry` (may be null; its points are not used), a recognised place whose entry has
   // 3D points is checked in 3D and gets the metric pose.
-  StatusOr<LoopResult> Query(const FeatureSet& features, double timestamp = 0.0,
+  StatusOr<LoopResult> Query(const FeatureSet& features,
+                             std::optional<double> timestamp = std::nullopt,
                              const FrameGeometry* geometry = nullptr) const;
 
   const LoopDetectorParams& params() const { return params_; }
@@ -284,8 +287,9 @@ class LoopDetector {
   }
   // Step 1: the frame's bag of words and direct-index entry, as the map wants them.
   Status Convert(const FeatureSet& features, BowVector* bow, FeatureVector* direct) const;
-  // The first entry id too recent to be a candidate for a frame at `timestamp` (tau_c).
-  EntryId QueryBound(double timestamp) const;
+  // The first entry id too recent to be a candidate for a frame at `timestamp` (tau_c): by
+  // time when the frame has one, else by frames.
+  EntryId QueryBound(std::optional<double> timestamp) const;
   // Steps 3 and 4: normalises the scores of `results` by `reference` (eta = s / reference), keeps
   // those reaching alpha, groups them into islands and fills the match, score, eta and island of
   // `result` with the best island by H. False, with the status that says why, when no island is
@@ -311,7 +315,7 @@ class LoopDetector {
   // Step 7: adds the converted frame to the database and moves the detector's state on (the
   // previous usable frame, the timestamps for tau_c). Returns the frame's entry id.
   StatusOr<EntryId> Insert(const FeatureSet& features, const BowVector& bow,
-                           const FeatureVector& direct, double timestamp,
+                           const FeatureVector& direct, std::optional<double> timestamp,
                            std::string_view client_id, const FrameGeometry* geometry);
 
   Database* database_;
@@ -319,7 +323,9 @@ class LoopDetector {
   uint64_t frames_seen_ = 0;
   std::optional<BowVector> previous_bow_;  // of the last frame with enough features
   std::optional<PreviousMatch> previous_match_;
-  std::vector<double> entry_timestamps_;  // of the entries this detector added, by id order
+  // The timestamps of the timestamped entries this detector added (never decreasing), and their
+  // ids, in id order.
+  std::vector<double> entry_timestamps_;
   std::vector<EntryId> entry_ids_;
   std::vector<QueryResult> query_results_;  // reused by Process (Query uses its own)
 };

@@ -643,7 +643,7 @@ TEST_F(LoopDetectorTest, AFramesPointsAreKeptWithItsEntry) {
     geometry.points.push_back(i % 4 == 0 ? cv::Point3f(nan, nan, nan)
                                          : cv::Point3f(0.1f, 0.2f, 1.0f + 0.01f * float(i)));
   }
-  auto processed = detector->Process(features[0], 0.0, {}, &geometry);
+  auto processed = detector->Process(features[0], std::nullopt, {}, &geometry);
   ASSERT_TRUE(processed.ok()) << processed.status().ToString();
   EXPECT_FALSE(processed->metric.checked);
   auto added = detector->Add(features[1]);  // without geometry: no points
@@ -673,12 +673,12 @@ TEST_F(LoopDetectorTest, BadFrameGeometryAndMetricParametersAreInvalidArgument) 
   ASSERT_TRUE(detector.ok());
   const FeatureSet features = Extract(Visit(Places()[0], 1))[0];
   FrameGeometry no_camera;  // K all zeros
-  auto s = detector->Process(features, 0.0, {}, &no_camera).status();
+  auto s = detector->Process(features, std::nullopt, {}, &no_camera).status();
   EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
   EXPECT_NE(s.message().find("camera matrix"), std::string::npos) << s.ToString();
   FrameGeometry too_few{cv::Matx33d(300, 0, 128, 0, 300, 192, 0, 0, 1),
                         std::vector<cv::Point3f>(3, cv::Point3f(0, 0, 1))};
-  s = detector->Add(features, 0.0, {}, &too_few).status();
+  s = detector->Add(features, std::nullopt, {}, &too_few).status();
   EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
   EXPECT_NE(s.message().find("3 3D points"), std::string::npos) << s.ToString();
   EXPECT_EQ(detector->Query(features, 0.0, &no_camera).status().code(),

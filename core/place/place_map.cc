@@ -25,7 +25,8 @@ StatusOr<std::shared_ptr<PlaceMap>> PlaceMap::Open(IndexStore* store, const std:
       new PlaceMap(store, name, params, std::move(database), std::move(detector).value()));
 }
 
-StatusOr<PlaceFrameResult> PlaceMap::Add(const FeatureSet& features, double timestamp,
+StatusOr<PlaceFrameResult> PlaceMap::Add(const FeatureSet& features,
+                                         std::optional<double> timestamp,
                                          std::string_view client_id,
                                          const FrameGeometry* geometry) {
   PlaceFrameResult result;
@@ -36,7 +37,8 @@ StatusOr<PlaceFrameResult> PlaceMap::Add(const FeatureSet& features, double time
   return result;
 }
 
-StatusOr<PlaceFrameResult> PlaceMap::Detect(const FeatureSet& features, double timestamp,
+StatusOr<PlaceFrameResult> PlaceMap::Detect(const FeatureSet& features,
+                                            std::optional<double> timestamp,
                                             const PlaceResultOptions& options,
                                             std::string_view client_id,
                                             const FrameGeometry* geometry) {
@@ -52,7 +54,8 @@ StatusOr<PlaceFrameResult> PlaceMap::Detect(const FeatureSet& features, double t
   return result;
 }
 
-StatusOr<PlaceFrameResult> PlaceMap::Query(const FeatureSet& features, double timestamp,
+StatusOr<PlaceFrameResult> PlaceMap::Query(const FeatureSet& features,
+                                           std::optional<double> timestamp,
                                            const PlaceResultOptions& options,
                                            const FrameGeometry* geometry) const {
   RECOG_RETURN_IF_ERROR(options.Validate());

@@ -92,7 +92,7 @@ struct PlaceFrameResult {
   // The detector's result. Add fills only `entry` (the id the frame got); Detect fills everything
   // with `entry` set; Query everything but `entry`.
   LoopResult loop;
-  std::optional<double> match_timestamp;   // of loop.match, when there is one still stored
+  std::optional<double> match_timestamp;   // of loop.match, when it is still stored and has one
   std::string match_client_id;             // of loop.match (empty when none or not given)
   std::vector<PlaceCandidate> candidates;  // asked for: the best top_k, best score first
   std::vector<PlaceCorrespondence> correspondences;  // asked for and verified: the inliers
@@ -108,21 +108,21 @@ class PlaceMap {
                                                   const LoopDetectorParams& params,
                                                   std::shared_ptr<const Vocabulary> vocabulary);
 
-  // Adds the frame (timestamp in seconds, 0 when unknown) without querying. `client_id` (at most
+  // Adds the frame (timestamp in seconds, none when unknown) without querying. `client_id` (at most
   // kMaxClientIdBytes) is stored with the frame and returned whenever it is a match. `geometry`
   // (may be null) is the frame's 3D structure (LoopDetector: the frame keeps its points and its
   // loops are checked in 3D, LoopResult::metric).
-  StatusOr<PlaceFrameResult> Add(const FeatureSet& features, double timestamp,
+  StatusOr<PlaceFrameResult> Add(const FeatureSet& features, std::optional<double> timestamp,
                                  std::string_view client_id = {},
                                  const FrameGeometry* geometry = nullptr);
   // Queries the map with the frame, then adds it (loop-closure detection), with `client_id` as
   // for Add. INVALID_ARGUMENT for bad options (nothing is added then).
-  StatusOr<PlaceFrameResult> Detect(const FeatureSet& features, double timestamp,
+  StatusOr<PlaceFrameResult> Detect(const FeatureSet& features, std::optional<double> timestamp,
                                     const PlaceResultOptions& options = {},
                                     std::string_view client_id = {},
                                     const FrameGeometry* geometry = nullptr);
   // Looks for the frame's place; adds nothing and changes nothing.
-  StatusOr<PlaceFrameResult> Query(const FeatureSet& features, double timestamp,
+  StatusOr<PlaceFrameResult> Query(const FeatureSet& features, std::optional<double> timestamp,
                                    const PlaceResultOptions& options = {},
                                    const FrameGeometry* geometry = nullptr) const;
 

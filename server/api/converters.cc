@@ -281,11 +281,11 @@ StatusOr<DecodedFrame> DecodeFrame(const pb::Frame& frame, const DescriptorForma
     return Status::InvalidArgument(
         "frame.camera_id and frame.client_frame_id are at most 128 bytes");
   }
-  if (!Finite(frame.timestamp()) || frame.timestamp() < 0) {
+  if (frame.has_timestamp() && (!Finite(frame.timestamp()) || frame.timestamp() < 0)) {
     return Status::InvalidArgument("frame.timestamp must be finite and >= 0");
   }
   DecodedFrame out;
-  out.timestamp = frame.timestamp();
+  if (frame.has_timestamp()) out.timestamp = frame.timestamp();
   out.camera_id = frame.camera_id();
   out.client_frame_id = frame.client_frame_id();
   if (frame.has_intrinsics()) {

@@ -36,7 +36,7 @@ struct DecodedFrame {
   cv::Mat image;        // CV_8UC1; empty when the client sent features
   FeatureSet features;  // the client's features (when image is empty)
   std::optional<CameraIntrinsics> intrinsics;
-  double timestamp = 0;  // seconds, 0 = unknown
+  std::optional<double> timestamp;  // seconds; none when the frame has none
   std::string camera_id;
   std::string client_frame_id;  // stored with a place frame
   double decode_ms = 0;         // time spent decoding the image (and the depth or right image)

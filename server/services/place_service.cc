@@ -61,7 +61,7 @@ StatusOr<std::shared_ptr<PlaceMap>> CallMap(const ServerState& state, CallInfo& 
 StatusOr<PlaceFrameResult> RunMode(PlaceMap& map, FrameMode mode, const FeatureSet& features,
                                    const DecodedFrame& frame, const PlaceResultOptions& extras,
                                    const FrameGeometry* geometry) {
-  const double timestamp = frame.timestamp;
+  const std::optional<double> timestamp = frame.timestamp;
   switch (mode) {
     case FrameMode::kAdd:
       return map.Add(features, timestamp, frame.client_frame_id, geometry);

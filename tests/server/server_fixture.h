@@ -5,6 +5,7 @@
 
 #include <fstream>
 #include <memory>
+#include <optional>
 #include <sstream>
 #include <string>
 
@@ -35,10 +36,12 @@ inline std::string CorridorJpeg(int n) {
   return ReadFileBytes(recog::testing::ProjectTestData("corridor/" + std::to_string(n) + ".jpg"));
 }
 
-inline pb::Frame JpegFrame(const std::string& jpeg, double timestamp = 0) {
+// A frame of `jpeg`, with `timestamp` when given (none: unknown, tau_c counts frames).
+inline pb::Frame JpegFrame(const std::string& jpeg,
+                           std::optional<double> timestamp = std::nullopt) {
   pb::Frame frame;
   frame.set_encoded_image(jpeg);
-  frame.set_timestamp(timestamp);
+  if (timestamp.has_value()) frame.set_timestamp(*timestamp);
   return frame;
 }
 

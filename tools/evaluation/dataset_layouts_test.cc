@@ -92,7 +92,7 @@ TEST_F(TumTest, FrameSourceReadsTheLayoutWithTimestamps) {
   EXPECT_EQ(source->size(), 3u);
   cv::Mat gray;
   std::string name;
-  std::vector<double> timestamps;
+  std::vector<std::optional<double>> timestamps;
   for (;;) {
     auto more = source->Next(&gray, &name);
     ASSERT_TRUE(more.ok()) << more.status().ToString();
@@ -100,14 +100,14 @@ TEST_F(TumTest, FrameSourceReadsTheLayoutWithTimestamps) {
     EXPECT_EQ(gray.size(), cv::Size(16, 16));
     timestamps.push_back(source->timestamp());
   }
-  EXPECT_EQ(timestamps,
-            (std::vector<double>{1305031102.175304, 1305031102.211214, 1305031102.243211}));
+  EXPECT_EQ(timestamps, (std::vector<std::optional<double>>{1305031102.175304, 1305031102.211214,
+                                                            1305031102.243211}));
   // A plain folder of images has no timestamps.
   auto folder = FrameSource::Open(dir_ / "rgb", DatasetLayout::kFolder);
   ASSERT_TRUE(folder.ok()) << folder.status().ToString();
   EXPECT_EQ(folder->layout(), DatasetLayout::kFolder);
   ASSERT_TRUE(folder->Next(&gray, &name).value());
-  EXPECT_EQ(folder->timestamp(), 0.0);
+  EXPECT_EQ(folder->timestamp(), std::nullopt);
 }
 
 TEST_F(TumTest, BadListsAreClearErrors) {

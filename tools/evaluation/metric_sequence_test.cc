@@ -147,7 +147,8 @@ class MetricSequenceTest : public ::testing::Test {
       EXPECT_TRUE(s.ok()) << s.ToString();
       run.points_ms += MsSince(start);
       start = Clock::now();
-      auto r = detector->Process(features, 0.0, {}, source == Source::kNone ? nullptr : &geometry);
+      auto r = detector->Process(features, std::nullopt, {},
+                                 source == Source::kNone ? nullptr : &geometry);
       run.detector_ms += MsSince(start);
       EXPECT_TRUE(r.ok()) << r.status().ToString();
       run.results.push_back(std::move(r).value());
@@ -239,7 +240,7 @@ TEST_F(MetricSequenceTest, AQueryWithoutDepthInAnRgbdMapGetsTheMetricPose) {
     ASSERT_TRUE(PointsFromDepth((*features_)[i].keypoints, kSize, kK, (*frames_)[i].depth_mm, 0.001,
                                 &geometry.points)
                     .ok());
-    ASSERT_TRUE(detector->Add((*features_)[i], 0.0, {}, &geometry).ok());
+    ASSERT_TRUE(detector->Add((*features_)[i], std::nullopt, {}, &geometry).ok());
   }
   DetectorRun run;
   run.results.resize(size_t(kLapFrames));  // lap 1: not queried

@@ -111,8 +111,9 @@ StatusOr<bool> FrameSource::Next(cv::Mat* gray, std::string* name) {
   return true;
 }
 
-double FrameSource::timestamp() const {
-  return next_ > 0 && next_ <= timestamps_.size() ? timestamps_[next_ - 1] : 0.0;
+std::optional<double> FrameSource::timestamp() const {
+  if (next_ > 0 && next_ <= timestamps_.size()) return timestamps_[next_ - 1];
+  return std::nullopt;
 }
 
 std::string FrameSource::depth_path() const {
@@ -227,7 +228,8 @@ StatusOr<std::vector<LoopResult>> DetectLoops(const SequenceFeatures& sequence,
   std::vector<LoopResult> results;
   results.reserve(sequence.features.size());
   for (size_t i = 0; i < sequence.features.size(); ++i) {
-    const double timestamp = i < sequence.timestamps.size() ? sequence.timestamps[i] : 0.0;
+    const std::optional<double> timestamp =
+        i < sequence.timestamps.size() ? sequence.timestamps[i] : std::nullopt;
     const FrameGeometry* geometry = i < sequence.geometry.size() ? &sequence.geometry[i] : nullptr;
     RECOG_ASSIGN_OR_RETURN(LoopResult r,
                            detector.Process(sequence.features[i], timestamp, {}, geometry));

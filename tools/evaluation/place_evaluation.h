@@ -33,8 +33,8 @@ class FrameSource {
   // (the next call goes on with the following image). `name` is the image's path, or
   // "<video file name>#<frame number from 1>" ("camera:N#<frame number>" for a camera).
   StatusOr<bool> Next(cv::Mat* gray, std::string* name);
-  // Timestamp (seconds) of the frame Next() returned last; 0 when the source has none.
-  double timestamp() const;
+  // Timestamp (seconds) of the frame Next() returned last; none when the source has none.
+  std::optional<double> timestamp() const;
   // The depth image (TUM) and the right image (EuRoC, KITTI) of the frame Next() returned last;
   // empty when it has none.
   std::string depth_path() const;
@@ -77,7 +77,8 @@ struct SequenceFeatures {
   std::vector<FrameGeometry> geometry;
   std::vector<double> points_ms;  // time to compute the 3D points, per frame (with geometry)
   std::vector<std::string> names;
-  std::vector<double> timestamps;  // seconds, per frame (0: unknown; tau_c then counts frames)
+  // Seconds, per frame (none: unknown, tau_c then counts frames); empty when none has one.
+  std::vector<std::optional<double>> timestamps;
   std::vector<double> feature_ms;  // extraction time per frame
   std::vector<cv::Mat> images;     // kept only when asked (for drawing)
 };

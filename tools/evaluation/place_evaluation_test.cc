@@ -94,13 +94,14 @@ TEST(PlaceEvaluationTest, ATourOfDistinctPlacesWithoutRevisitsHasNoLoop) {
 }
 
 // tau_c counts frames without timestamps and seconds with them: the corridor's four demo frames
-// twice are all within the 20 most recent frames, and within 20 s when 1 s apart, but 100 s apart
-// every earlier frame is a candidate.
+// twice are all within the 20 most recent frames, and within 20 s when 1 s apart (also from a
+// clock that starts at 0.0, as KITTI's: 0.0 is a time, not "none"), but 100 s apart every earlier
+// frame is a candidate.
 TEST(PlaceEvaluationTest, TimestampsSetTauCInSeconds) {
   SequenceFeatures sequence = Extract(testing::ProjectTestData("corridor"));
   ASSERT_EQ(sequence.features.size(), 4u);
   for (size_t i = 0; i < 4; ++i) sequence.features.push_back(sequence.features[i]);
-  const auto candidates = [&](const std::vector<double>& timestamps) {
+  const auto candidates = [&](const std::vector<std::optional<double>>& timestamps) {
     sequence.timestamps = timestamps;
     auto results = DetectLoops(sequence, PlaceVocabulary(), PlaceEvaluationOptions{});
     EXPECT_TRUE(results.ok()) << results.status().ToString();
@@ -110,6 +111,9 @@ TEST(PlaceEvaluationTest, TimestampsSetTauCInSeconds) {
   };
   for (const EntryId match : candidates({})) EXPECT_EQ(match, kInvalidEntryId);
   for (const EntryId match : candidates({1, 2, 3, 4, 5, 6, 7, 8})) {
+    EXPECT_EQ(match, kInvalidEntryId);
+  }
+  for (const EntryId match : candidates({0, 1, 2, 3, 4, 5, 6, 7})) {
     EXPECT_EQ(match, kInvalidEntryId);
   }
   const std::vector<EntryId> matches = candidates({100, 200, 300, 400, 500, 600, 700, 800});

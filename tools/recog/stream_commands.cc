@@ -290,9 +290,12 @@ int RunStream(const StreamArgs& args, RecognitionClient& client) {
       std::this_thread::sleep_until(due);
     }
     if (args.timestamps) {
+      const std::optional<double> recorded = source->timestamp();
       frame->set_timestamp(
-          std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch())
-              .count());
+          recorded.has_value()
+              ? *recorded
+              : std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch())
+                    .count());
     }
     sent.names.push_back(fs::path(name).filename().string());
     if (!args.draw.empty()) sent.images.push_back(gray);
@@ -458,7 +461,8 @@ void AddStreamCommands(CLI::App& app, int* exit_code) {
                      "Folder for a PNG per loop (loop_<frame>_<match>.png): both frames side by "
                      "side with the inlier count");
   stream->add_flag("--timestamps", stream_args->timestamps,
-                   "Stamp each frame with this machine's clock when it is sent (the map's "
+                   "Stamp each frame with its time in the dataset (TUM, EuRoC, KITTI; 0.0 is a "
+                   "time), or else this machine's clock when it is sent (the map's "
                    "recent_seconds then applies instead of recent_frames)");
   stream->add_flag("-q,--quiet", stream_args->quiet, "No progress output");
   ConnectCommand(stream, &stream_args->server, exit_code, [stream_args](RecognitionClient& client) {

@@ -318,12 +318,13 @@ class RecognitionClient:
         request = place_pb2.DeleteMapRequest(name=name, request_id=_request_id(request_id))
         return self._unary(self._places.DeleteMap, request, name).frames_deleted
 
-    def add_frame(self, map_name: str, image: Image, timestamp: float = 0.0,
+    def add_frame(self, map_name: str, image: Image, timestamp: float | None = None,
                   client_frame_id: str = "", *, request_id: str | None = None
                   ) -> place_pb2.AddFrameResponse:
         """Adds a frame to a map without querying it; the response carries its ``frame_id``.
 
-        ``image`` in any form of :mod:`recog_client.frames`; ``timestamp`` (seconds, 0 = unknown)
+        ``image`` in any form of :mod:`recog_client.frames`; ``timestamp`` (seconds, None =
+        unknown, 0.0 is a time)
         and ``client_frame_id`` (the client's own id of the frame, e.g. a SLAM keyframe id: the
         map keeps it and returns it whenever the frame is a match) apply when ``image`` is not
         already a Frame.

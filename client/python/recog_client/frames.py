@@ -130,13 +130,14 @@ def _set_image(frame: common_pb2.Frame, image: Image) -> None:
         frame.encoded_image = read_bytes(image)
 
 
-def make_frame(image: Image, timestamp: float = 0.0,
+def make_frame(image: Image, timestamp: float | None = None,
                intrinsics: common_pb2.CameraIntrinsics | Sequence[float] | None = None,
                client_frame_id: str = "", depth=None, depth_scale: float = 1000.0,
                right=None, baseline: float = 0.0, camera_id: str = "") -> common_pb2.Frame:
     """Builds a frame of ``image`` (any form in the module comment but a Frame).
 
-    ``timestamp`` is in seconds in the client's clock (0 = unknown), ``intrinsics`` as in
+    ``timestamp`` is in seconds in the client's clock (None = unknown; 0.0 is a time),
+    ``intrinsics`` as in
     :func:`make_intrinsics`, ``client_frame_id`` free text (at most 128 bytes) that the server
     echoes and returns with every match, ``camera_id`` free text for the server's logs.
 
@@ -148,7 +149,7 @@ def make_frame(image: Image, timestamp: float = 0.0,
     intrinsics missing, or a right image without a positive baseline.
     """
     frame = common_pb2.Frame(timestamp=timestamp, client_frame_id=client_frame_id,
-                             camera_id=camera_id)
+                             camera_id=camera_id)  # timestamp=None leaves the field unset
     _set_image(frame, image)
     if intrinsics is not None:
         frame.intrinsics.CopyFrom(make_intrinsics(intrinsics))
@@ -175,7 +176,8 @@ def make_frame(image: Image, timestamp: float = 0.0,
     return frame
 
 
-def as_frame(image: Image, timestamp: float = 0.0, client_frame_id: str = "") -> common_pb2.Frame:
+def as_frame(image: Image, timestamp: float | None = None,
+             client_frame_id: str = "") -> common_pb2.Frame:
     """Returns ``image`` if it is a Frame, otherwise :func:`make_frame` of it."""
     if isinstance(image, common_pb2.Frame):
         return image

@@ -110,8 +110,29 @@ class RecognitionClientTest(unittest.TestCase):
         response = self.client.query_place("hall", corridor(41).read_bytes())
         self.assertEqual(response.result.status, place_pb2.LOOP_STATUS_LOOP_DETECTED)
         self.assertEqual(response.result.match_frame_id, 2)
+        self.assertEqual(response.result.match_timestamp, 41)
         self.assertFalse(response.result.HasField("frame_id"))  # nothing was added
         self.assertEqual(self.client.get_map("hall").frames, 4)
+
+    def test_a_clock_that_starts_at_zero_keeps_its_first_frame_recent(self):
+        # KITTI's times start at 0.0: a time, not "unknown". Every frame of this tour lies within
+        # the map's recent_seconds (20 s) of the others, so none is a candidate, the first frame
+        # included (a revisit of frame 0 two seconds later is no loop).
+        self.assertTrue(make_frame(corridor(1), timestamp=0.0).HasField("timestamp"))
+        self.assertFalse(make_frame(corridor(1)).HasField("timestamp"))
+        frames = [make_frame(corridor(n), timestamp=float(t)) for t, n in enumerate([1, 20, 1, 20])]
+        answers = list(self.client.stream_frames(
+            "kitti", frames, settings={"temporal_matches": 0, "recent_frames": 1}))
+        self.assertEqual(len(answers), 4)
+        for answer in answers:
+            self.assertTrue(answer.HasField("result"), answer.error.message)
+            self.assertFalse(answer.result.HasField("match_frame_id"), answer.result)
+        # Without timestamps recent_frames (1) applies: the revisit of frame 0 is found.
+        untimed = list(self.client.stream_frames(
+            "untimed", [corridor(n) for n in [1, 20, 1]],
+            settings={"temporal_matches": 0, "recent_frames": 1}))
+        self.assertEqual(untimed[2].result.match_frame_id, 0)
+        self.assertFalse(untimed[2].result.HasField("match_timestamp"))
 
     def test_a_frame_with_depth_gives_metric_loops_and_bad_depth_is_refused(self):
         self.client.create_map("rgbd")
