@@ -199,8 +199,10 @@ TEST_F(PlaceServiceTest, BadFramesAreAnsweredWithTheirErrorAndTheStreamGoesOn) {
   pb::Frame not_finite = FeaturesFrame(CorridorJpeg(1));
   not_finite.mutable_features()->mutable_keypoints()->set_x(3, std::nanf(""));
   frames.push_back(not_finite);
-  frames.push_back(pb::Frame());  // no content at all
-  frames.push_back(JpegFrame(CorridorJpeg(1)));
+  frames.push_back(pb::Frame());                               // no content at all
+  frames.push_back(JpegFrame(CorridorJpeg(1), std::nan("")));  // a time that is no time
+  frames.push_back(JpegFrame(CorridorJpeg(1), -1.0));          // before the clock's zero
+  frames.push_back(JpegFrame(CorridorJpeg(1), 0.0));           // 0.0 is a time: accepted
   pb::StreamConfig config;
   config.set_map("noisy");
   grpc::Status status;
@@ -216,6 +218,11 @@ TEST_F(PlaceServiceTest, BadFramesAreAnsweredWithTheirErrorAndTheStreamGoesOn) {
       << answers[5].error().message();
   EXPECT_NE(answers[6].error().message().find("non-finite value at keypoint 3"), std::string::npos)
       << answers[6].error().message();
+  for (size_t i : {answers.size() - 3, answers.size() - 2}) {
+    EXPECT_NE(answers[i].error().message().find("frame.timestamp must be finite and >= 0"),
+              std::string::npos)
+        << answers[i].error().message();
+  }
   ASSERT_TRUE(answers.back().has_result());
   EXPECT_EQ(answers.back().result().frame_id(), 0u);  // the failed frames added nothing
 }
