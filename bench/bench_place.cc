@@ -51,7 +51,7 @@ std::vector<FeatureSet> ExtractFrames(const cli::SequenceGenerator& generator, i
   feature_ms->assign(size_t(end - begin), 0.0);
   std::atomic<int> next{begin};
   auto work = [&] {
-    auto extractor = std::move(CreateFeatureExtractor(FeatureOptions{})).value();
+    auto extractor = std::move(CreateFeatureExtractor(PlaceFeatureOptions())).value();
     for (int i = next++; i < end; i = next++) {
       auto frame = generator.Frame(i);
       if (!frame.ok()) std::exit(2);

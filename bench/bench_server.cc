@@ -268,7 +268,7 @@ struct Frames {
 StatusOr<Frames> PrepareFrames(const std::string& dir) {
   RECOG_ASSIGN_OR_RETURN(std::vector<std::string> files, cli::ListImages(dir));
   RECOG_ASSIGN_OR_RETURN(std::unique_ptr<FeatureExtractor> extractor,
-                         CreateFeatureExtractor(FeatureOptions{}));
+                         CreateFeatureExtractor(PlaceFeatureOptions()));
   Frames frames;
   FeatureSet features;
   for (const std::string& file : files) {

@@ -27,7 +27,7 @@ std::vector<cv::Mat> CorridorDescriptorSets(int per_set) {
       files.push_back(testing::ProjectTestData(std::string("corridor/") + f));
     }
   }
-  auto extractor = CreateFeatureExtractor(FeatureOptions{});
+  auto extractor = CreateFeatureExtractor(PlaceFeatureOptions());
   cv::Mat all;
   FeatureSet features;
   for (const std::string& f : files) {

@@ -12,13 +12,15 @@
 namespace recog::client {
 namespace {
 
-// The server's default place features (core/features/feature_extractor.h, FeatureOptions{}).
+// The server's default place features (core/features/feature_extractor.h,
+// PlaceFeatureOptions()).
 constexpr int kOrbFeatures = 1000;
 constexpr float kOrbScaleFactor = 1.2f;
 constexpr int kOrbLevels = 8;
 constexpr int kOrbEdgeThreshold = 31;
 constexpr int kOrbPatchSize = 31;
 constexpr int kOrbFastThreshold = 20;
+constexpr int kMinShortSide = 352;  // smaller frames are enlarged to it before ORB
 constexpr int kDescriptorBytes = 32;
 
 grpc::Status Invalid(const std::string& message) {
@@ -70,6 +72,29 @@ int UsableLevels(cv::Size size) {
     scale *= kOrbScaleFactor;
   }
   return std::max(levels, 1);
+}
+
+// A frame whose shorter side is under kMinShortSide is enlarged (bilinear) until it is that long,
+// as the server does; MapToOriginal then moves the keypoints back to the frame's own pixels.
+cv::Mat EnlargeSmallFrame(const cv::Mat& grey) {
+  const int short_side = std::min(grey.rows, grey.cols);
+  if (short_side >= kMinShortSide) return grey;
+  const double scale = double(kMinShortSide) / short_side;
+  cv::Mat enlarged;
+  cv::resize(grey, enlarged,
+             cv::Size(int(std::lround(grey.cols * scale)), int(std::lround(grey.rows * scale))), 0,
+             0, cv::INTER_LINEAR);
+  return enlarged;
+}
+
+void MapToOriginal(cv::Size enlarged, cv::Size original, std::vector<cv::KeyPoint>* keypoints) {
+  const float sx = float(enlarged.width) / float(original.width);
+  const float sy = float(enlarged.height) / float(original.height);
+  for (cv::KeyPoint& kp : *keypoints) {
+    kp.pt.x = std::clamp((kp.pt.x + 0.5f) / sx - 0.5f, 0.f, float(original.width - 1));
+    kp.pt.y = std::clamp((kp.pt.y + 0.5f) / sy - 0.5f, 0.f, float(original.height - 1));
+    kp.size /= sx;
+  }
 }
 
 }  // namespace
@@ -143,10 +168,12 @@ Result<OrbFeatures> ExtractOrbFeatures(const cv::Mat& image) {
   std::vector<cv::KeyPoint> keypoints;
   cv::Mat descriptors;
   try {
-    cv::Ptr<cv::ORB> orb = cv::ORB::create(kOrbFeatures, kOrbScaleFactor, UsableLevels(grey.size()),
-                                           kOrbEdgeThreshold, /*firstLevel=*/0, /*WTA_K=*/2,
-                                           cv::ORB::HARRIS_SCORE, kOrbPatchSize, kOrbFastThreshold);
-    orb->detectAndCompute(grey, cv::noArray(), keypoints, descriptors);
+    const cv::Mat described = EnlargeSmallFrame(grey);
+    cv::Ptr<cv::ORB> orb = cv::ORB::create(
+        kOrbFeatures, kOrbScaleFactor, UsableLevels(described.size()), kOrbEdgeThreshold,
+        /*firstLevel=*/0, /*WTA_K=*/2, cv::ORB::HARRIS_SCORE, kOrbPatchSize, kOrbFastThreshold);
+    orb->detectAndCompute(described, cv::noArray(), keypoints, descriptors);
+    if (described.size() != grey.size()) MapToOriginal(described.size(), grey.size(), &keypoints);
   } catch (const cv::Exception& e) {
     return grpc::Status(grpc::StatusCode::INTERNAL, std::string("ORB failed: ") + e.what());
   }

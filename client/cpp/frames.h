@@ -4,11 +4,13 @@
 // Client-side features move the extraction onto the robot and cost about 60 KB a frame (1000
 // keypoints and 32-byte descriptors) whatever the camera's resolution. ExtractOrbFeatures computes
 // exactly what the server computes for a frame sent as an image with its default place settings
-// (core's FeatureOptions{}: ORB, 1000 features, scale factor 1.2, 8 levels, FAST threshold 20, edge
-// threshold 31, Harris score, 31-pixel patches, no grid bucketing; features sorted strongest
-// first), so a map built from either form answers the same. Equal features need equal grey pixels:
-// the server decodes images with cv::IMREAD_GRAYSCALE, so read files that way (cv::imread(path,
-// cv::IMREAD_GRAYSCALE)); converting a colour image yourself rounds differently.
+// (core's PlaceFeatureOptions(): ORB, 1000 features, scale factor 1.2, 8 levels, FAST threshold 20,
+// edge threshold 31, Harris score, 31-pixel patches, no grid bucketing; a frame whose shorter side
+// is under 352 pixels enlarged to 352 first and its keypoints mapped back to its own pixels;
+// features sorted strongest first), so a map built from either form answers the same. Equal
+// features need equal grey pixels: the server decodes images with cv::IMREAD_GRAYSCALE, so read
+// files that way (cv::imread(path, cv::IMREAD_GRAYSCALE)); converting a colour image yourself
+// rounds differently.
 //
 // Timestamps, camera ids, intrinsics and client frame ids are left for the caller to set on the
 // returned frame. None of these functions throws; they are thread-safe.

@@ -1,11 +1,12 @@
 // Tests of the frame helpers: client-side ORB features equal to the server's (core's extractor
-// with FeatureOptions{}), feature frames, encoded files and raw pixels.
+// with PlaceFeatureOptions()), feature frames, encoded files and raw pixels.
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 
 #include <gtest/gtest.h>
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "client/cpp/frames.h"
 #include "core/features/feature_extractor.h"
@@ -18,7 +19,7 @@ const std::string kCorridor1 = recog::testing::ProjectTestData("corridor/1.jpg")
 
 // What the server extracts from `image` for a place map.
 FeatureSet ServerFeatures(const cv::Mat& image) {
-  auto extractor = CreateFeatureExtractor(FeatureOptions{});
+  auto extractor = CreateFeatureExtractor(PlaceFeatureOptions());
   EXPECT_TRUE(extractor.ok());
   FeatureSet features;
   EXPECT_TRUE(extractor.value()->Extract(image, &features).ok());
@@ -54,6 +55,21 @@ TEST(FramesTest, ClientOrbFeaturesEqualTheServersOnACorridorImage) {
   Result<OrbFeatures> from_colour = ExtractOrbFeatures(colour);
   ASSERT_TRUE(from_colour.ok());
   ExpectSameFeatures(*from_colour, ServerFeatures(colour));
+}
+
+TEST(FramesTest, ClientOrbFeaturesEqualTheServersOnASmallFrameEnlargedBeforeOrb) {
+  const cv::Mat grey = cv::imread(kCorridor1, cv::IMREAD_GRAYSCALE);
+  ASSERT_FALSE(grey.empty());
+  cv::Mat small;
+  cv::resize(grey, small, cv::Size(160, 120), 0, 0, cv::INTER_AREA);
+  Result<OrbFeatures> features = ExtractOrbFeatures(small);
+  ASSERT_TRUE(features.ok()) << features.status().error_message();
+  EXPECT_GT(features->keypoints.size(), 200u) << "the enlarged frame has corners";
+  for (const cv::KeyPoint& kp : features->keypoints) {
+    ASSERT_TRUE(kp.pt.x >= 0 && kp.pt.x <= 159 && kp.pt.y >= 0 && kp.pt.y <= 119)
+        << "keypoints are in the frame's own pixels: " << kp.pt;
+  }
+  ExpectSameFeatures(*features, ServerFeatures(small));
 }
 
 TEST(FramesTest, AnImageTooSmallForFeaturesHasNoneAndABadImageIsRefused) {

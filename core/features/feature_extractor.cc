@@ -22,6 +22,7 @@ constexpr int kMaxFeaturesLimit = 1'000'000;
 constexpr double kMaxSmoothingSigma = 16.0;
 constexpr int kMaxOrbLevels = 32;
 constexpr int kMaxGridSide = 256;
+constexpr int kMaxMinShortSide = 4096;
 
 // With grid bucketing ORB first detects more candidates than it keeps (this many times
 // max_features, and at least this many per cell), so that weakly textured cells still have corners
@@ -133,6 +134,7 @@ Status ValidateOrb(const OrbOptions& o) {
   }
   RECOG_RETURN_IF_ERROR(CheckIntRange("orb.grid_rows", o.grid_rows, 0, kMaxGridSide));
   RECOG_RETURN_IF_ERROR(CheckIntRange("orb.grid_cols", o.grid_cols, 0, kMaxGridSide));
+  RECOG_RETURN_IF_ERROR(CheckIntRange("orb.min_short_side", o.min_short_side, 0, kMaxMinShortSide));
   if (!(std::isfinite(o.grid_fill_cap) && o.grid_fill_cap >= 0)) {
     return Status::InvalidArgument(OutOfRange(
         "orb.grid_fill_cap", "0 (no fill) or a positive number", ToText(o.grid_fill_cap)));
@@ -182,6 +184,14 @@ class OrbExtractor final : public FeatureExtractor {
     out->descriptors = EmptyDescriptors(format());
     cv::Mat gray;
     RECOG_RETURN_IF_ERROR(ToGray(image, &gray_buffer_, &gray));
+    const cv::Size original_size = gray.size();
+    if (std::min(gray.rows, gray.cols) < options_.min_short_side) {
+      const double scale = double(options_.min_short_side) / std::min(gray.rows, gray.cols);
+      cv::resize(gray, enlarged_,
+                 cv::Size(int(std::lround(gray.cols * scale)), int(std::lround(gray.rows * scale))),
+                 0, 0, cv::INTER_LINEAR);
+      gray = enlarged_;
+    }
 
     // OpenCV's pyramid fails on levels that round to zero pixels; only build the levels that exist
     // for this image (all of them for any image of useful size).
@@ -206,11 +216,24 @@ class OrbExtractor final : public FeatureExtractor {
                               " descriptors for " + std::to_string(keypoints_.size()) +
                               " keypoints");
     }
+    if (gray.size() != original_size) MapToOriginal(gray.size(), original_size);
     SortIntoFeatureSet(keypoints_, descriptors_, format(), size_t(options_.max_features), out);
     return Status::Ok();
   }
 
  private:
+  // Moves the keypoints found on an enlarged image back to the pixels of the image itself. A
+  // bilinear resize puts the centre of pixel x at (x + 0.5) * scale - 0.5 of the enlarged one.
+  void MapToOriginal(cv::Size enlarged, cv::Size original) {
+    const float sx = float(enlarged.width) / float(original.width);
+    const float sy = float(enlarged.height) / float(original.height);
+    for (cv::KeyPoint& kp : keypoints_) {
+      kp.pt.x = std::clamp((kp.pt.x + 0.5f) / sx - 0.5f, 0.f, float(original.width - 1));
+      kp.pt.y = std::clamp((kp.pt.y + 0.5f) / sy - 0.5f, 0.f, float(original.height - 1));
+      kp.size /= sx;
+    }
+  }
+
   int UsableLevels(cv::Size size) const {
     int levels = 0;
     double scale = 1.0;
@@ -287,6 +310,7 @@ class OrbExtractor final : public FeatureExtractor {
   cv::Ptr<cv::ORB> orb_;
   // Buffers reused between calls.
   cv::Mat gray_buffer_;
+  cv::Mat enlarged_;
   cv::Mat descriptors_;
   std::vector<cv::KeyPoint> keypoints_;
   std::vector<std::vector<size_t>> cell_members_;
@@ -490,6 +514,12 @@ Status FeatureOptions::Validate() const {
   RECOG_RETURN_IF_ERROR(
       CheckIntRange("sift.max_features", sift.max_features, 1, kMaxFeaturesLimit));
   return Status::Ok();
+}
+
+FeatureOptions PlaceFeatureOptions() {
+  FeatureOptions options;
+  options.orb.min_short_side = kPlaceMinShortSide;
+  return options;
 }
 
 StatusOr<std::unique_ptr<FeatureExtractor>> CreateFeatureExtractor(const FeatureOptions& options) {

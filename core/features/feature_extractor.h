@@ -46,6 +46,13 @@ struct OrbOptions {
   // With a grid: 0 = a cell's unused share stays unused; > 0 = it goes to the strongest keypoints
   // left in cells holding fewer than grid_fill_cap x max_features / cells.
   double grid_fill_cap = 0;
+  // Small frames: an image whose shorter side is under min_short_side pixels is enlarged
+  // (bilinear) until its shorter side is min_short_side before ORB runs, and the keypoints are
+  // mapped back to the image's own pixels (positions and sizes). ORB's 31-pixel border and patch
+  // leave little of a 160x120 frame; on the enlarged one its corners are found. 0 = never
+  // enlarge (the default: object crops are enlarged by their own rules). Places use
+  // PlaceFeatureOptions() below.
+  int min_short_side = 0;
 };
 
 struct BriefOptions {
@@ -77,6 +84,11 @@ class FeatureExtractor {
   // Fills `out` (cleared first). INVALID_ARGUMENT for an empty or non-8-bit image.
   virtual Status Extract(const cv::Mat& image, FeatureSet* out) = 0;
 };
+
+// The features of place frames, the server's and the tools' default: FeatureOptions{} with
+// orb.min_short_side = kPlaceMinShortSide, so that a low-resolution camera's frames are enlarged.
+inline constexpr int kPlaceMinShortSide = 352;
+FeatureOptions PlaceFeatureOptions();
 
 // Builds the extractor described by `options` (validated first).
 StatusOr<std::unique_ptr<FeatureExtractor>> CreateFeatureExtractor(const FeatureOptions& options);

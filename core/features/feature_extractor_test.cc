@@ -173,6 +173,8 @@ TEST(FeatureOptionsTest, ValidateRejectsEachOutOfRangeValueNamingTheField) {
          o.orb.grid_rows = 4;
          o.orb.grid_cols = 257;
        }},
+      {"orb.min_short_side", [](FeatureOptions& o) { o.orb.min_short_side = -1; }},
+      {"orb.min_short_side", [](FeatureOptions& o) { o.orb.min_short_side = 5000; }},
       {"orb.grid_fill_cap", [](FeatureOptions& o) { o.orb.grid_fill_cap = -1; }},
       {"orb.grid_fill_cap", [](FeatureOptions& o) { o.orb.grid_fill_cap = std::nan(""); }},
       {"orb.max_features", [](FeatureOptions& o) { o.orb.max_features = 2'000'000; }},
@@ -424,6 +426,41 @@ TEST(OrbTest, ManyPyramidLevelsOnASmallImageDoNotFail) {
   options.orb.scale_factor = 2.f;
   const FeatureSet features = ExtractOrDie(options, LoadGray("1.jpg"));
   EXPECT_GT(features.size(), 0u);
+}
+
+TEST(OrbTest, ASmallFrameIsDescribedOnItsEnlargementWithKeypointsInItsOwnPixels) {
+  cv::Mat small;
+  cv::resize(LoadGray("1.jpg"), small, cv::Size(128, 96), 0, 0, cv::INTER_AREA);
+  FeatureOptions plain = OptionsFor(FeatureType::kOrb);
+  const FeatureSet unenlarged = ExtractOrDie(plain, small);
+  const FeatureSet features = ExtractOrDie(PlaceFeatureOptions(), small);
+  EXPECT_GT(features.size(), 4 * unenlarged.size() + 100) << "ORB's border leaves little of 128x96";
+
+  // The same features as ORB on the frame enlarged by hand to a 352-pixel short side, with
+  // positions and sizes divided by the enlargement (pixel centres: (x + 0.5) / s - 0.5).
+  cv::Mat enlarged;
+  cv::resize(small, enlarged, cv::Size(469, 352), 0, 0, cv::INTER_LINEAR);
+  const FeatureSet reference = ExtractOrDie(plain, enlarged);
+  ASSERT_EQ(features.size(), reference.size());
+  EXPECT_EQ(cv::norm(features.descriptors, reference.descriptors, cv::NORM_HAMMING), 0);
+  for (size_t i = 0; i < features.size(); ++i) {
+    const cv::KeyPoint& a = features.keypoints[i];
+    const cv::KeyPoint& b = reference.keypoints[i];
+    EXPECT_NEAR(a.pt.x, (b.pt.x + 0.5f) * 128.f / 469.f - 0.5f, 1e-3) << i;
+    EXPECT_NEAR(a.pt.y, (b.pt.y + 0.5f) * 96.f / 352.f - 0.5f, 1e-3) << i;
+    EXPECT_NEAR(a.size, b.size * 128.f / 469.f, 1e-3) << i;
+    EXPECT_EQ(a.octave, b.octave);
+    ASSERT_TRUE(a.pt.x >= 0 && a.pt.x <= 127 && a.pt.y >= 0 && a.pt.y <= 95) << a.pt;
+  }
+}
+
+TEST(OrbTest, AFrameAsLargeAsTheMinimumShortSideIsNotEnlarged) {
+  const cv::Mat image = LoadGray("1.jpg");  // 512x384: its short side is over 352
+  const FeatureSet place = ExtractOrDie(PlaceFeatureOptions(), image);
+  const FeatureSet plain = ExtractOrDie(OptionsFor(FeatureType::kOrb), image);
+  ASSERT_EQ(place.size(), plain.size());
+  EXPECT_EQ(cv::norm(place.descriptors, plain.descriptors, cv::NORM_HAMMING), 0);
+  for (size_t i = 0; i < place.size(); ++i) EXPECT_EQ(place.keypoints[i].pt, plain.keypoints[i].pt);
 }
 
 TEST(OrbTest, GridKeepsEveryCellWithinItsShare) {

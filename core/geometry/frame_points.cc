@@ -4,7 +4,6 @@
 #include <limits>
 #include <string>
 
-#include <opencv2/features2d.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "core/common/descriptor.h"
@@ -13,6 +12,8 @@ namespace recog {
 namespace {
 
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+// ORB's patch at pyramid level 0: a keypoint's size is this times its level's scale.
+constexpr double kOrbPatchSize = 31.0;
 
 Status CheckIntrinsics(const cv::Matx33d& K) {
   if (!(K(0, 0) > 0.0) || !(K(1, 1) > 0.0) || !std::isfinite(K(0, 2)) || !std::isfinite(K(1, 2))) {
@@ -119,7 +120,7 @@ Status PointsFromDepth(const std::vector<cv::KeyPoint>& keypoints, cv::Size imag
   return Status::Ok();
 }
 
-Status PointsFromStereo(const FeatureSet& left, const cv::Mat& left_image,
+Status PointsFromStereo(const FeatureSet& left, const cv::Mat& left_image, const FeatureSet& right,
                         const cv::Mat& right_image, const cv::Matx33d& K, double baseline_m,
                         const StereoOptions& options, std::vector<cv::Point3f>* points) {
   RECOG_RETURN_IF_ERROR(CheckIntrinsics(K));
@@ -136,17 +137,14 @@ Status PointsFromStereo(const FeatureSet& left, const cv::Mat& left_image,
                                    std::to_string(left_image.type()));
   }
   RECOG_RETURN_IF_ERROR(CheckFeatureSet(left, DescriptorFormat::Orb()));
+  RECOG_RETURN_IF_ERROR(CheckFeatureSet(right, DescriptorFormat::Orb()));
   if (options.window < 3 || options.window % 2 == 0 || !(options.max_row_offset_px >= 0.0) ||
       !(options.max_disparity_px >= 0.0)) {
     return Status::InvalidArgument(
         "stereo options need an odd window >= 3 and non-negative row offset and disparity");
   }
   const cv::Mat left_gray = Gray(left_image), right_gray = Gray(right_image);
-  std::vector<cv::KeyPoint> right_keypoints;
-  cv::Mat right_descriptors;
-  cv::ORB::create(options.max_features, options.scale_factor, options.levels,
-                  options.edge_threshold, 0, 2, cv::ORB::HARRIS_SCORE, 31, options.fast_threshold)
-      ->detectAndCompute(right_gray, cv::noArray(), right_keypoints, right_descriptors);
+  const std::vector<cv::KeyPoint>& right_keypoints = right.keypoints;
 
   // Right features by row, for the search along the epipolar line.
   std::vector<std::vector<uint32_t>> rows(size_t(left_image.rows));
@@ -161,7 +159,7 @@ Status PointsFromStereo(const FeatureSet& left, const cv::Mat& left_image,
   std::vector<uint32_t> claimed_by(right_keypoints.size(), kNone);
   for (size_t i = 0; i < left.size(); ++i) {
     const cv::KeyPoint& l = left.keypoints[i];
-    const double tolerance = options.max_row_offset_px * std::pow(options.scale_factor, l.octave);
+    const double tolerance = options.max_row_offset_px * l.size / kOrbPatchSize;
     const int y0 = std::max(0, int(std::floor(l.pt.y - tolerance)));
     const int y1 = std::min(left_image.rows - 1, int(std::ceil(l.pt.y + tolerance)));
     uint32_t best = kNone, best_distance = kNone, second = kNone;
@@ -174,7 +172,7 @@ Status PointsFromStereo(const FeatureSet& left, const cv::Mat& left_image,
           continue;
         }
         const uint32_t h = Hamming256(left.descriptors.ptr<uint8_t>(int(i)),
-                                      right_descriptors.ptr<uint8_t>(int(j)));
+                                      right.descriptors.ptr<uint8_t>(int(j)));
         if (h < best_distance) {
           second = best_distance;
           best_distance = h;

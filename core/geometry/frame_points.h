@@ -11,17 +11,18 @@
 //    depth among its 8 neighbours (the foreground: a keypoint on an edge belongs to the object in
 //    front). X = (u - cx) Z / fx, Y = (v - cy) Z / fy.
 //  - PointsFromStereo: the left image is the frame; the right image is the same camera moved by
-//    the baseline B along +x, both rectified (epipolar lines are rows). ORB features of the right
-//    image (the extractor's parameters, StereoOptions) are matched to the left keypoints along
-//    their row: same row within max_row_offset_px times the left keypoint's pyramid scale,
-//    pyramid octaves at most one apart, disparity d = u_left - u_right in (0, max_disparity_px],
-//    Hamming distance and ratio test of `matching`, one-to-one (a right feature claimed twice goes
-//    to the closer descriptor). The disparity is then refined to a sub-pixel value by block
-//    matching (sum of absolute differences of a window around the left keypoint, ±2 px around
-//    the ORB disparity, parabola through the best three); Z = fx B / d.
+//    the baseline B along +x, both rectified (epipolar lines are rows). The ORB features of the
+//    right image, from the same extractor as the left ones, are matched to the left keypoints
+//    along their row: same row within max_row_offset_px times the left keypoint's pyramid scale
+//    (its size over ORB's 31-pixel patch), pyramid octaves at most one apart, disparity
+//    d = u_left - u_right in (0, max_disparity_px], Hamming distance and ratio test of `matching`,
+//    one-to-one (a right feature claimed twice goes to the closer descriptor). The disparity is
+//    then refined to a sub-pixel value by block matching (sum of absolute differences of a window
+//    around the left keypoint, ±2 px around the ORB disparity, parabola through the best three);
+//    Z = fx B / d.
 // Errors are INVALID_ARGUMENT for input that cannot be right: a depth image of another size than
 // the image or of a type other than CV_16U / CV_32F, a non-positive depth scale, a missing or
-// non-positive baseline, a right image of another size or type than the left one, non-ORB left
+// non-positive baseline, a right image of another size or type than the left one, non-ORB
 // descriptors, a K without positive focal lengths.
 #pragma once
 
@@ -43,22 +44,16 @@ Status PointsFromDepth(const std::vector<cv::KeyPoint>& keypoints, cv::Size imag
                        std::vector<cv::Point3f>* points);
 
 struct StereoOptions {
-  // ORB on the right image: the same parameters as the left features' extractor (the defaults
-  // are OrbOptions' defaults, core/features/feature_extractor.h).
-  int max_features = 1000;
-  float scale_factor = 1.2f;
-  int levels = 8;
-  int fast_threshold = 20;
-  int edge_threshold = 31;
-  double max_row_offset_px = 1.0;  // |v_left - v_right|, times the left keypoint's octave scale
+  double max_row_offset_px = 1.0;  // |v_left - v_right|, times the left keypoint's pyramid scale
   double max_disparity_px = 0;     // 0 = a quarter of the image width
   MatchOptions matching{.ratio = 0.8, .max_distance = 50};
   int window = 11;  // side of the block-matching window of the sub-pixel refinement (odd, >= 3)
 };
 
-// `left` are the features of `left_image` (ORB descriptors); `right_image` the rectified right
-// image (same size and type as the left, 8-bit grey or BGR); `baseline_m` > 0.
-Status PointsFromStereo(const FeatureSet& left, const cv::Mat& left_image,
+// `left` are the ORB features of `left_image`, `right` those of `right_image` (the rectified right
+// image: same size and type as the left, 8-bit grey or BGR), both from one extractor;
+// `baseline_m` > 0.
+Status PointsFromStereo(const FeatureSet& left, const cv::Mat& left_image, const FeatureSet& right,
                         const cv::Mat& right_image, const cv::Matx33d& K, double baseline_m,
                         const StereoOptions& options, std::vector<cv::Point3f>* points);
 

@@ -83,9 +83,24 @@ class PointsFromStereoTest : public ::testing::Test {
     cv::Mat photo = cv::imread(testing::ProjectTestData("corridor/20.jpg"), cv::IMREAD_GRAYSCALE);
     ASSERT_FALSE(photo.empty());
     cv::resize(photo, left_, cv::Size(640, 480), 0, 0, cv::INTER_LINEAR);
-    auto extractor = CreateFeatureExtractor(FeatureOptions{});
+    UseLeft(left_, FeatureOptions{});
+  }
+
+  // Makes `left` the left image, described with `options` (the right images too).
+  void UseLeft(const cv::Mat& left, const FeatureOptions& options) {
+    left_ = left;
+    auto extractor = CreateFeatureExtractor(options);
     ASSERT_TRUE(extractor.ok());
-    ASSERT_TRUE((*extractor)->Extract(left_, &features_).ok());
+    extractor_ = std::move(extractor).value();
+    ASSERT_TRUE(extractor_->Extract(left_, &features_).ok());
+  }
+
+  // PointsFromStereo with `right` described by the left image's extractor.
+  Status Points(const cv::Mat& right, double baseline, const StereoOptions& options,
+                std::vector<cv::Point3f>* points) const {
+    FeatureSet right_features;
+    if (!right.empty()) RECOG_RETURN_IF_ERROR(extractor_->Extract(right, &right_features));
+    return PointsFromStereo(features_, left_, right_features, right, kK, baseline, options, points);
   }
 
   // The right image of a fronto-parallel plane: the left image moved `disparity` px left
@@ -98,6 +113,7 @@ class PointsFromStereoTest : public ::testing::Test {
   }
 
   cv::Mat left_;
+  std::unique_ptr<FeatureExtractor> extractor_;
   FeatureSet features_;
 };
 
@@ -105,8 +121,7 @@ TEST_F(PointsFromStereoTest, DepthOfAFrontoParallelPlaneFromItsDisparity) {
   constexpr double kBaseline = 0.12, kDisparity = 12.3;
   const double expected_z = kK(0, 0) * kBaseline / kDisparity;  // 4.878 m
   std::vector<cv::Point3f> points;
-  ASSERT_TRUE(
-      PointsFromStereo(features_, left_, Right(kDisparity), kK, kBaseline, {}, &points).ok());
+  ASSERT_TRUE(Points(Right(kDisparity), kBaseline, {}, &points).ok());
   ASSERT_EQ(points.size(), features_.size());
   std::vector<double> errors;
   for (size_t i = 0; i < points.size(); ++i) {
@@ -121,45 +136,70 @@ TEST_F(PointsFromStereoTest, DepthOfAFrontoParallelPlaneFromItsDisparity) {
   EXPECT_LT(errors[errors.size() / 2], 0.01);
 }
 
+TEST_F(PointsFromStereoTest, ASmallPairEnlargedBeforeOrbGetsItsDepthInItsOwnPixels) {
+  // A 160x120 pair described with the place features (enlarged to a 352-pixel short side before
+  // ORB, keypoints mapped back): the right image's features come from the same enlargement, so
+  // octaves and row tolerances agree and the depth is that of the 160x120 disparity.
+  cv::Mat small;
+  cv::resize(left_, small, cv::Size(160, 120), 0, 0, cv::INTER_AREA);
+  UseLeft(small, PlaceFeatureOptions());
+  ASSERT_GT(features_.size(), 100u) << "the enlarged frame has corners";
+  constexpr double kBaseline = 0.12, kDisparity = 3.4;
+  const double expected_z = kK(0, 0) * kBaseline / kDisparity;
+  std::vector<cv::Point3f> points;
+  ASSERT_TRUE(Points(Right(kDisparity), kBaseline, {}, &points).ok());
+  std::vector<double> errors;
+  for (size_t i = 0; i < points.size(); ++i) {
+    EXPECT_LT(features_.keypoints[i].pt.x, 160.f) << "keypoints are in the frame's own pixels";
+    if (!IsNaN(points[i])) errors.push_back(std::abs(points[i].z - expected_z) / expected_z);
+  }
+  EXPECT_GT(errors.size(), features_.size() / 3);
+  std::nth_element(errors.begin(), errors.begin() + long(errors.size() / 2), errors.end());
+  EXPECT_LT(errors[errors.size() / 2], 0.05);
+}
+
 TEST_F(PointsFromStereoTest, MatchesStayOnTheirRowAndInFrontOfTheCamera) {
   std::vector<cv::Point3f> points;
   // The right image 10 px lower (more than the row tolerance of any octave): the true
   // counterparts are off the row; a few features of the corridor's repeated texture may still
   // find a look-alike on their row.
-  ASSERT_TRUE(PointsFromStereo(features_, left_, Right(12.0, 10.0), kK, 0.1, {}, &points).ok());
+  ASSERT_TRUE(Points(Right(12.0, 10.0), 0.1, {}, &points).ok());
   const auto with_depth = [&] {
     return std::count_if(points.begin(), points.end(),
                          [](const cv::Point3f& p) { return !IsNaN(p); });
   };
   EXPECT_LT(with_depth(), long(features_.size() / 20)) << "of " << features_.size();
   // A negative disparity (the right image moved right) is behind the camera: no depth.
-  ASSERT_TRUE(PointsFromStereo(features_, left_, Right(-12.0), kK, 0.1, {}, &points).ok());
+  ASSERT_TRUE(Points(Right(-12.0), 0.1, {}, &points).ok());
   EXPECT_LT(with_depth(), long(features_.size() / 20)) << "of " << features_.size();
 }
 
 TEST_F(PointsFromStereoTest, BadInputIsInvalidArgument) {
   std::vector<cv::Point3f> points;
   const cv::Mat right = Right(10);
-  auto s = PointsFromStereo(features_, left_, right, kK, 0.0, {}, &points);
+  auto s = Points(right, 0.0, {}, &points);
   EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
   EXPECT_NE(s.message().find("baseline"), std::string::npos) << s.ToString();
-  EXPECT_EQ(PointsFromStereo(features_, left_, right, kK, -0.1, {}, &points).code(),
-            StatusCode::kInvalidArgument);
+  EXPECT_EQ(Points(right, -0.1, {}, &points).code(), StatusCode::kInvalidArgument);
   cv::Mat small;
   cv::resize(right, small, cv::Size(320, 240));
-  s = PointsFromStereo(features_, left_, small, kK, 0.1, {}, &points);
+  s = Points(small, 0.1, {}, &points);
   EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
   EXPECT_NE(s.message().find("320x240"), std::string::npos) << s.ToString();
-  EXPECT_EQ(PointsFromStereo(features_, left_, cv::Mat(), kK, 0.1, {}, &points).code(),
-            StatusCode::kInvalidArgument);
+  EXPECT_EQ(Points(cv::Mat(), 0.1, {}, &points).code(), StatusCode::kInvalidArgument);
   FeatureSet float_features = features_;
   features_.descriptors.convertTo(float_features.descriptors, CV_32F);
-  EXPECT_EQ(PointsFromStereo(float_features, left_, right, kK, 0.1, {}, &points).code(),
-            StatusCode::kInvalidArgument);
+  FeatureSet right_features;
+  ASSERT_TRUE(extractor_->Extract(right, &right_features).ok());
+  EXPECT_EQ(
+      PointsFromStereo(float_features, left_, right_features, right, kK, 0.1, {}, &points).code(),
+      StatusCode::kInvalidArgument);
+  EXPECT_EQ(PointsFromStereo(features_, left_, float_features, right, kK, 0.1, {}, &points).code(),
+            StatusCode::kInvalidArgument)
+      << "the right features must be ORB too";
   StereoOptions even_window;
   even_window.window = 10;
-  EXPECT_EQ(PointsFromStereo(features_, left_, right, kK, 0.1, even_window, &points).code(),
-            StatusCode::kInvalidArgument);
+  EXPECT_EQ(Points(right, 0.1, even_window, &points).code(), StatusCode::kInvalidArgument);
 }
 
 }  // namespace

@@ -52,8 +52,9 @@ struct ServerState {
   std::shared_ptr<ObjectDatabase> objects;
   std::unique_ptr<ModelRepository> repository;
   std::unique_ptr<StoreVerifier> verifier;  // checks the store's files (store_verifier.h)
-  StoreRecovery recovery;          // what opening the store recovered (empty when it opened whole)
-  FeatureOptions place_features;   // how frames sent as images are described for place maps
+  StoreRecovery recovery;  // what opening the store recovered (empty when it opened whole)
+  // How frames sent as images are described for place maps.
+  FeatureOptions place_features = PlaceFeatureOptions();
   RecognitionOptions recognition;  // object recognition settings
 
   // With config.shard set: the placement table, replaced whole by a reload (SIGHUP). Null when

@@ -13,22 +13,17 @@ Status WorkerContext::ExtractPlaceFeatures(const cv::Mat& image, FeatureSet* out
 }
 
 Status WorkerContext::PlaceFrameGeometry(const DecodedFrame& frame, const FeatureSet& features,
-                                         FrameGeometry* out) const {
+                                         FrameGeometry* out) {
   out->K = frame.intrinsics->K();
   if (!frame.depth.empty()) {
     const cv::Size size = frame.has_image() ? frame.image.size() : frame.depth.size();
     return PointsFromDepth(features.keypoints, size, out->K, frame.depth, frame.depth_scale,
                            &out->points);
   }
-  const OrbOptions& orb = state_.place_features.orb;
-  StereoOptions stereo;
-  stereo.max_features = orb.max_features;
-  stereo.scale_factor = orb.scale_factor;
-  stereo.levels = orb.levels;
-  stereo.fast_threshold = orb.fast_threshold;
-  stereo.edge_threshold = orb.edge_threshold;
-  return PointsFromStereo(features, frame.image, frame.right, out->K, frame.baseline_m, stereo,
-                          &out->points);
+  FeatureSet right_features;
+  RECOG_RETURN_IF_ERROR(ExtractPlaceFeatures(frame.right, &right_features));
+  return PointsFromStereo(features, frame.image, right_features, frame.right, out->K,
+                          frame.baseline_m, StereoOptions{}, &out->points);
 }
 
 ObjectRecognizer& WorkerContext::Recognizer() {

@@ -29,10 +29,10 @@ class WorkerContext {
   // Extracts the image's features with the server's place settings.
   Status ExtractPlaceFeatures(const cv::Mat& image, FeatureSet* out);
   // The 3D structure of a place frame (core/geometry/frame_points.h) from its depth or right
-  // image, for its `features` (the right image is described with the server's ORB settings).
+  // image, for its `features` (the right image is described with the server's place settings).
   // Only for frames with depth or a right image (and so intrinsics); errors as the core's.
   Status PlaceFrameGeometry(const DecodedFrame& frame, const FeatureSet& features,
-                            FrameGeometry* out) const;
+                            FrameGeometry* out);
   // The recogniser over the server's object database, with its recognition settings. Only once
   // the server is ready.
   ObjectRecognizer& Recognizer();

@@ -134,8 +134,10 @@ size_t FrameSource::size() const {
 namespace {
 
 // The 3D points of the frame `source` returned last (none without a depth or right image).
+// The right image of a stereo pair is described by `extractor`, the left image's.
 Status FramePoints(const FrameSource& source, const cv::Mat& image, const FeatureSet& features,
-                   const SequenceGeometryOptions& options, FrameGeometry* geometry) {
+                   const SequenceGeometryOptions& options, FeatureExtractor& extractor,
+                   FrameGeometry* geometry) {
   geometry->K = options.K;
   geometry->points.clear();
   if (const std::string depth_path = source.depth_path(); !depth_path.empty()) {
@@ -147,8 +149,10 @@ Status FramePoints(const FrameSource& source, const cv::Mat& image, const Featur
   }
   if (const std::string right_path = source.right_path(); !right_path.empty()) {
     RECOG_ASSIGN_OR_RETURN(const cv::Mat right, ReadGrayImage(right_path));
-    return PointsFromStereo(features, image, right, options.K, options.baseline_m, options.stereo,
-                            &geometry->points);
+    FeatureSet right_features;
+    RECOG_RETURN_IF_ERROR(extractor.Extract(right, &right_features));
+    return PointsFromStereo(features, image, right_features, right, options.K, options.baseline_m,
+                            options.stereo, &geometry->points);
   }
   return Status::Ok();
 }
@@ -176,8 +180,9 @@ StatusOr<SequenceFeatures> ExtractSequence(FrameSource& source, const FeatureOpt
     if (geometry) {
       const auto points_start = std::chrono::steady_clock::now();
       FrameGeometry frame_geometry;
-      RECOG_RETURN_IF_ERROR(FramePoints(source, image, features, *geometry, &frame_geometry)
-                                .WithContext("frame '" + name + "'"));
+      RECOG_RETURN_IF_ERROR(
+          FramePoints(source, image, features, *geometry, *extractor, &frame_geometry)
+              .WithContext("frame '" + name + "'"));
       sequence.points_ms.push_back(
           std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - points_start)
               .count());

@@ -662,7 +662,7 @@ StatusOr<LoadReport> LoadGenerator::Run(
         if (!features.contains(folder)) {
           RECOG_ASSIGN_OR_RETURN(FrameSource source, FrameSource::Open(folder));
           RECOG_ASSIGN_OR_RETURN(features[folder],
-                                 ExtractSequence(source, FeatureOptions{}, false));
+                                 ExtractSequence(source, PlaceFeatureOptions(), false));
         }
         const pb::MapSettings& settings = robot.map()->settings();
         const auto key = std::make_pair(folder, settings.SerializeAsString());

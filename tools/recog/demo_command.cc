@@ -25,7 +25,7 @@ int RunDemo(const std::string& images_dir, const std::string& vocabulary_path) {
   if (!vocabulary.ok()) return fail(vocabulary.status());
   auto files = ListImages(images_dir);
   if (!files.ok()) return fail(files.status());
-  auto extractor = CreateFeatureExtractor(FeatureOptions{});
+  auto extractor = CreateFeatureExtractor(PlaceFeatureOptions());
   if (!extractor.ok()) return fail(extractor.status());
 
   std::printf("vocabulary %s: %zu words (k=%u, L=%u)\n", vocabulary_path.c_str(),

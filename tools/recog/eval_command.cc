@@ -33,6 +33,7 @@ struct EvalPlaceArgs {
   double depth_scale = 0, baseline = 0;
   std::string plot = "recog_eval_place_pr.png";
   int features = 1000;
+  int min_short_side = kPlaceMinShortSide;
   bool json = false;
   bool quiet = false;
 };
@@ -231,12 +232,12 @@ int RunEvalPlace(const EvalPlaceArgs& args) {
                              : (source->layout() == DatasetLayout::kTum ? 5000.0 : 1000.0);
     geometry->depth_scale = 1.0 / units_per_metre;
     geometry->baseline_m = args.baseline;
-    geometry->stereo.max_features = features;
   } else if (args.depth_scale > 0 || args.baseline > 0) {
     return Fail(Status::InvalidArgument("--depth-scale and --baseline need --camera"));
   }
-  FeatureOptions feature_options;
+  FeatureOptions feature_options = PlaceFeatureOptions();
   feature_options.orb.max_features = features;
+  feature_options.orb.min_short_side = args.min_short_side;
   ProgressBar progress(!args.quiet);
   auto sequence = ExtractSequence(
       *source, feature_options, !args.draw_dir.empty(),
@@ -395,6 +396,11 @@ void AddEvalCommand(CLI::App& app, int* exit_code) {
   place->add_option("--params", args->params_file,
                     "YAML file of detector parameters (over the --mode preset)");
   place->add_option("--features", args->features, "ORB features per frame")->capture_default_str();
+  place
+      ->add_option("--min-short-side", args->min_short_side,
+                   "Frames whose shorter side is under this many pixels are enlarged to it before "
+                   "ORB (0 = never)")
+      ->capture_default_str();
   place->add_option("--sweep", args->sweep, "'alpha': precision-recall curve over alpha 0..1");
   place
       ->add_option(

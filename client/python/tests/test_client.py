@@ -210,6 +210,17 @@ class RecognitionClientTest(unittest.TestCase):
         self.assertEqual(len(full.relative_pose.rotation), 9)
         self.assertAlmostEqual(sum(v * v for v in full.relative_pose.translation), 1.0, places=6)
 
+    def test_a_low_resolution_camera_s_frames_are_enlarged_by_the_server_and_find_the_place(self):
+        self.client.create_map("small-frames")
+        small = {n: cv2.resize(cv2.imread(str(corridor(n)), cv2.IMREAD_GRAYSCALE), (128, 96),
+                               interpolation=cv2.INTER_AREA) for n in (1, 20, 41, 60)}
+        for n, image in small.items():
+            added = self.client.add_frame("small-frames", image)
+            # ORB alone finds a few dozen corners in 128x96; the server enlarges the frame first
+            self.assertGreater(added.num_features, 100)
+        self.assertEqual(self.client.query_place("small-frames", small[41]).result.match_frame_id,
+                         2)
+
     def test_frames_from_numpy_arrays_and_from_client_side_features_find_the_place(self):
         self.client.create_map("arrays")
         for n in (1, 20, 41, 60):
