@@ -33,6 +33,12 @@ std::vector<LoopCandidate> Candidates(const std::vector<QueryResult>& results, d
   return candidates;
 }
 
+// The reference of eta when there is no previous frame to normalise by: the best candidate's
+// score (the results come best first), 0 without candidates.
+double BestScore(const std::vector<QueryResult>& results) {
+  return results.empty() ? 0.0 : results.front().score;
+}
+
 // Before the frame changes the detector's state (Database::AddConverted checks it too late).
 Status CheckClientId(std::string_view client_id) {
   if (client_id.size() <= kMaxClientIdBytes) return Status::Ok();
@@ -122,17 +128,59 @@ std::string_view LoopAcceptanceName(LoopAcceptance a) {
   return "unknown";
 }
 
+std::string_view ScoreNormalisationName(ScoreNormalisation n) {
+  switch (n) {
+    case ScoreNormalisation::kPreviousFrame:
+      return "previous_frame";
+    case ScoreNormalisation::kBestCandidate:
+      return "best_candidate";
+  }
+  return "unknown";
+}
+
+StatusOr<ScoreNormalisation> ParseScoreNormalisation(std::string_view name) {
+  for (ScoreNormalisation n :
+       {ScoreNormalisation::kPreviousFrame, ScoreNormalisation::kBestCandidate}) {
+    if (name == ScoreNormalisationName(n)) return n;
+  }
+  return Status::InvalidArgument("unknown score normalisation '" + std::string(name) +
+                                 "' (previous_frame or best_candidate)");
+}
+
+std::string_view DetectorPresetName(DetectorPreset preset) {
+  switch (preset) {
+    case DetectorPreset::kDefault:
+      return "default";
+    case DetectorPreset::kThesis:
+      return "thesis";
+    case DetectorPreset::kKeyframes:
+      return "keyframes";
+  }
+  return "unknown";
+}
+
 LoopDetectorParams LoopDetectorParams::Thesis() {
   LoopDetectorParams params;
+  params.preset = DetectorPreset::kThesis;
   params.strong_acceptance = false;
+  return params;
+}
+
+LoopDetectorParams LoopDetectorParams::Keyframes() {
+  LoopDetectorParams params;
+  params.preset = DetectorPreset::kKeyframes;
+  params.normalisation = ScoreNormalisation::kBestCandidate;
+  params.recent_frames = 4;
+  params.consistency_max_island_gap = 1;
   return params;
 }
 
 StatusOr<LoopDetectorParams> ParseLoopDetectorMode(std::string_view mode) {
   if (mode == "default") return LoopDetectorParams{};
   if (mode == "thesis") return LoopDetectorParams::Thesis();
+  if (mode == "keyframes") return LoopDetectorParams::Keyframes();
   return Status::InvalidArgument("unknown loop detector mode '" + std::string(mode) +
-                                 "' (default or thesis)");
+                                 "' (default, thesis or keyframes)");
 }
 
 Status LoopDetectorParams::Validate() const {
@@ -267,10 +315,27 @@ bool LoopDetector::FindBestIsland(const std::vector<QueryResult>& results, doubl
   return true;
 }
 
+Status LoopDetector::QueryDatabase(const BowVector& bow, EntryId bound,
+                                   std::span<const EntryId> excluded,
+                                   std::vector<QueryResult>* results) const {
+  // Asks for as many more results as entries are left out, so that max_query_results remain.
+  RECOG_RETURN_IF_ERROR(database_->Query(
+      bow, {.max_results = params_.max_query_results + excluded.size(), .max_entry_id = bound},
+      results));
+  if (!excluded.empty()) {
+    std::erase_if(*results, [&](const QueryResult& r) {
+      return std::find(excluded.begin(), excluded.end(), r.id) != excluded.end();
+    });
+  }
+  if (results->size() > params_.max_query_results) results->resize(params_.max_query_results);
+  return Status::Ok();
+}
+
 StatusOr<LoopResult> LoopDetector::Process(const FeatureSet& features,
                                            std::optional<double> timestamp,
                                            std::string_view client_id,
-                                           const FrameGeometry* geometry) {
+                                           const FrameGeometry* geometry,
+                                           std::span<const EntryId> excluded) {
   RECOG_RETURN_IF_ERROR(CheckClientId(client_id));
   RECOG_RETURN_IF_ERROR(CheckGeometry(features, geometry));
   LoopResult result;
@@ -285,6 +350,8 @@ StatusOr<LoopResult> LoopDetector::Process(const FeatureSet& features,
   const bool enough_features = HasEnoughFeatures(features);
   if (!enough_features) {
     result.status = LoopStatus::kTooFewFeatures;
+  } else if (params_.normalisation == ScoreNormalisation::kBestCandidate) {
+    // Every frame with enough features is queried; eta is relative to the best candidate.
   } else if (previous_bow_.has_value()) {
     result.previous_score = Score(database_->info().config.scoring, bow, *previous_bow_);
     if (result.previous_score < params_.min_score_with_previous) {
@@ -297,14 +364,15 @@ StatusOr<LoopResult> LoopDetector::Process(const FeatureSet& features,
   const bool query = enough_features && result.status != LoopStatus::kLowScoreWithPrevious;
   if (query) {
     start = Clock::now();
-    RECOG_RETURN_IF_ERROR(database_->Query(
-        bow, {.max_results = params_.max_query_results, .max_entry_id = QueryBound(timestamp)},
-        &query_results_));
+    RECOG_RETURN_IF_ERROR(QueryDatabase(bow, QueryBound(timestamp), excluded, &query_results_));
     result.timings.query = MsSince(start);
-    result.candidates = Candidates(query_results_, result.previous_score);
+    const double reference = params_.normalisation == ScoreNormalisation::kBestCandidate
+                                 ? BestScore(query_results_)
+                                 : result.previous_score;
+    result.candidates = Candidates(query_results_, reference);
 
     start = Clock::now();
-    if (FindBestIsland(query_results_, result.previous_score, &result)) {
+    if (FindBestIsland(query_results_, reference, &result)) {
       // Temporal consistency with the previous query's island.
       uint32_t consistent = 0;
       if (previous_match_.has_value() &&
@@ -371,7 +439,8 @@ StatusOr<EntryId> LoopDetector::Add(const FeatureSet& features, std::optional<do
 
 StatusOr<LoopResult> LoopDetector::Query(const FeatureSet& features,
                                          std::optional<double> /*timestamp*/,
-                                         const FrameGeometry* geometry) const {
+                                         const FrameGeometry* geometry,
+                                         std::span<const EntryId> excluded) const {
   RECOG_RETURN_IF_ERROR(CheckGeometry(features, geometry));
   LoopResult result;
 
@@ -388,13 +457,11 @@ StatusOr<LoopResult> LoopDetector::Query(const FeatureSet& features,
   start = Clock::now();
   std::vector<QueryResult> results;  // not query_results_: Process may be using it
   // The whole map, without tau_c: entry_ids_/entry_timestamps_ belong to Process and Add.
-  RECOG_RETURN_IF_ERROR(database_->Query(
-      bow, {.max_results = params_.max_query_results, .max_entry_id = kInvalidEntryId}, &results));
+  RECOG_RETURN_IF_ERROR(QueryDatabase(bow, kInvalidEntryId, excluded, &results));
   result.timings.query = MsSince(start);
 
   start = Clock::now();
-  // The results come best first: the first score is the reference for eta.
-  const double best_score = results.empty() ? 0.0 : results.front().score;
+  const double best_score = BestScore(results);
   result.candidates = Candidates(results, best_score);
   const bool found = FindBestIsland(results, best_score, &result);
   if (found) result.status = LoopStatus::kLoopDetected;

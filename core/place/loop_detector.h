@@ -64,6 +64,7 @@
 
 #include <cstdint>
 #include <optional>
+#include <span>
 #include <string_view>
 #include <vector>
 
@@ -126,9 +127,28 @@ enum class LoopAcceptance {
 };
 std::string_view LoopAcceptanceName(LoopAcceptance a);  // "none", "temporal_consistency", ...
 
+// What the scores of a query are normalised by (step 3).
+enum class ScoreNormalisation {
+  // eta = s(v_t, w) / s(v_t, v_t-1) (eq. 3.11), and a frame whose score with the previous one is
+  // under min_score_with_previous is not queried: video, where consecutive frames overlap.
+  kPreviousFrame,
+  // eta = s(v_t, w) / the best candidate's score (as Query does), and every frame with enough
+  // features is queried: keyframes metres apart, whose previous keyframe may share no scene.
+  kBestCandidate,
+};
+std::string_view ScoreNormalisationName(ScoreNormalisation n);  // "previous_frame", ...
+StatusOr<ScoreNormalisation> ParseScoreNormalisation(std::string_view name);
+
+// The named parameter sets (ParseLoopDetectorMode); a map keeps the name of the one it started
+// from, and its stored settings are applied over that one.
+enum class DetectorPreset { kDefault, kThesis, kKeyframes };
+std::string_view DetectorPresetName(DetectorPreset preset);  // "default", "thesis", "keyframes"
+
 struct LoopDetectorParams {
-  uint32_t min_features = 20;              // fewer features: the frame is not queried
-  double min_score_with_previous = 0.005;  // thesis Table 4.4
+  DetectorPreset preset = DetectorPreset::kDefault;  // the preset these values started from
+  uint32_t min_features = 20;                        // fewer features: the frame is not queried
+  ScoreNormalisation normalisation = ScoreNormalisation::kPreviousFrame;
+  double min_score_with_previous = 0.005;  // thesis Table 4.4 (kPreviousFrame only)
   double alpha = 0.3;                      // minimum normalised score eta (Table 4.4)
   // tau_c: entries added less than this before the frame are not candidates. Frames count when
   // the frame carries no timestamp; with a timestamp (any time, 0.0 included), seconds (Table
@@ -169,10 +189,16 @@ struct LoopDetectorParams {
   // The thesis's detector (Table 4.4): every loop needs k consistent queries
   // (strong_acceptance off).
   static LoopDetectorParams Thesis();
+  // For keyframe streams (a SLAM's keyframes, metres apart; chosen on the corridor's every 2nd,
+  // 3rd and 4th frame and a seqgen tour of one frame per place, README "Keyframe streams"): the
+  // scores normalised by the best candidate, tau_c of 4 keyframes, and consecutive loops
+  // consistent only when their islands are at most 1 keyframe apart.
+  static LoopDetectorParams Keyframes();
   Status Validate() const;
 };
 
-// The preset named `mode`: "default" (LoopDetectorParams{}) or "thesis" (Thesis()).
+// The preset named `mode`: "default" (LoopDetectorParams{}), "thesis" (Thesis()) or "keyframes"
+// (Keyframes()).
 StatusOr<LoopDetectorParams> ParseLoopDetectorMode(std::string_view mode);
 
 struct LoopTimings {  // milliseconds spent in each stage for one frame
@@ -211,7 +237,7 @@ struct LoopResult {
   EntryId match = kInvalidEntryId;  // the candidate (or verified loop) entry, when there is one
   double score = 0;                 // s(v_t, w_match)
   double normalized_score = 0;      // eta of the match
-  double previous_score = 0;        // s(v_t, v_t-1) (0 for Query)
+  double previous_score = 0;        // s(v_t, v_t-1) (0 for Query and kBestCandidate)
   EntryId island_first = kInvalidEntryId, island_last = kInvalidEntryId;
   double island_score = 0;          // H, the sum of eta over the island
   uint32_t consistent_queries = 0;  // previous queries the island is consistent with
@@ -237,10 +263,15 @@ class LoopDetector {
   // kMaxClientIdBytes). Errors are only for bad input (e.g. descriptors of another format) or a
   // failing store; "no loop" is a result.
   // With `geometry` (may be null), the entry keeps its points and a loop is checked in 3D.
+  // `excluded`: entries that are never candidates for this frame, beside tau_c's recent ones —
+  // the client's own keyframes covisible with this one (ORB-SLAM leaves out the keyframes
+  // connected to the query), which share its scene without being a revisit. Any order; ids the
+  // map does not hold are ignored.
   StatusOr<LoopResult> Process(const FeatureSet& features,
                                std::optional<double> timestamp = std::nullopt,
                                std::string_view client_id = {},
-                               const FrameGeometry* geometry = nullptr);
+                               const FrameGeometry* geometry = nullptr,
+                               std::span<const EntryId> excluded = {});
 
   // Adds the next frame of the sequence (timestamp in seconds, none when unknown) to the database
   // without querying, and returns its entry id. The detector's state moves on as Process would
@@ -266,10 +297,11 @@ class LoopDetector {
   // Errors are only for bad input or a failing store. Safe to call from any number of threads,
   // concurrently with Process and Add.
   // With `geometry` (may be null; its points are not used), a recognised place whose entry has
-  // 3D points is checked in 3D and gets the metric pose.
+  // 3D points is checked in 3D and gets the metric pose. `excluded` as for Process.
   StatusOr<LoopResult> Query(const FeatureSet& features,
                              std::optional<double> timestamp = std::nullopt,
-                             const FrameGeometry* geometry = nullptr) const;
+                             const FrameGeometry* geometry = nullptr,
+                             std::span<const EntryId> excluded = {}) const;
 
   const LoopDetectorParams& params() const { return params_; }
 
@@ -290,6 +322,9 @@ class LoopDetector {
   // The first entry id too recent to be a candidate for a frame at `timestamp` (tau_c): by
   // time when the frame has one, else by frames.
   EntryId QueryBound(std::optional<double> timestamp) const;
+  // Step 2: the best max_query_results entries below `bound` that are not `excluded`.
+  Status QueryDatabase(const BowVector& bow, EntryId bound, std::span<const EntryId> excluded,
+                       std::vector<QueryResult>* results) const;
   // Steps 3 and 4: normalises the scores of `results` by `reference` (eta = s / reference), keeps
   // those reaching alpha, groups them into islands and fills the match, score, eta and island of
   // `result` with the best island by H. False, with the status that says why, when no island is

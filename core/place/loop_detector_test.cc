@@ -370,6 +370,30 @@ TEST_F(LoopDetectorTest, QueryRecognisesAnAddedPlaceAndChangesNothing) {
   }
 }
 
+TEST_F(LoopDetectorTest, ExcludedFramesAreNeverCandidatesOfProcessOrQuery) {
+  // A SLAM leaves out its keyframes covisible with the query: here the first visit of place 0
+  // (entries 0-3), which the revisit frames 16-19 would otherwise match.
+  const std::vector<FeatureSet> tour = Extract(TourWithRevisits());
+  auto detector = LoopDetector::Create(db_.get(), params_);
+  ASSERT_TRUE(detector.ok());
+  for (size_t i = 0; i < 16; ++i) ASSERT_TRUE(detector->Add(tour[i]).ok());
+  const std::vector<EntryId> covisible = {3, 1, 2, 0, 999};  // any order; 999 is not in the map
+  for (size_t i = 16; i < 20; ++i) {
+    auto all = detector->Query(tour[i]);
+    auto without = detector->Query(tour[i], std::nullopt, nullptr, covisible);
+    ASSERT_TRUE(all.ok() && without.ok());
+    EXPECT_LT(all->match, 4u) << "without an exclusion the first visit is found, frame " << i;
+    for (const LoopCandidate& c : without->candidates) {
+      EXPECT_GE(c.entry, 4u) << "an excluded frame came back as a candidate of frame " << i;
+    }
+    EXPECT_NE(without->status, LoopStatus::kLoopDetected) << i;
+  }
+  auto processed = detector->Process(tour[16], std::nullopt, {}, nullptr, covisible);
+  ASSERT_TRUE(processed.ok());
+  for (const LoopCandidate& c : processed->candidates) EXPECT_GE(c.entry, 4u);
+  EXPECT_EQ(processed->entry, 16u) << "the frame is added as usual";
+}
+
 TEST_F(LoopDetectorTest, QueryOnAnEmptyMapHasNoCandidates) {
   const auto detector = LoopDetector::Create(db_.get(), params_);
   ASSERT_TRUE(detector.ok());
@@ -581,6 +605,53 @@ TEST_F(LoopDetectorTest, ThesisModeIsTheDetectorWithoutStrongAcceptance) {
   EXPECT_GE(loops, 4);
 }
 
+TEST_F(LoopDetectorTest, KeyframesThatShareNoSceneWithTheirPredecessorAreStillQueried) {
+  // One keyframe per place (places 0 1 2 3), then places 0 and 1 again from another viewpoint:
+  // no keyframe overlaps the one before it.
+  const std::vector<cv::Mat> places = Places();
+  std::vector<cv::Mat> frames;
+  for (int p : {0, 1, 2, 3, 0, 1}) {
+    frames.push_back(Visit(places[size_t(p)], 1, frames.size() >= 4 ? 6 : 0).front());
+  }
+  // A minimum score with the previous frame no pair reaches stands for "no overlap" whatever
+  // the vocabulary.
+  LoopDetectorParams video = params_;
+  video.recent_frames = 1;
+  video.min_score_with_previous = 1.0;
+  LoopDetectorParams keyframes = LoopDetectorParams::Keyframes();
+  keyframes.recent_frames = 1;
+  keyframes.min_score_with_previous = 1.0;
+  EXPECT_EQ(keyframes.preset, DetectorPreset::kKeyframes);
+  EXPECT_EQ(ParseLoopDetectorMode("keyframes")->normalisation, ScoreNormalisation::kBestCandidate);
+
+  const std::vector<LoopResult> by_video = Run(frames, video);
+  MemoryIndexStore store;
+  auto db = Database::Create(&store, "keyframes", *vocabulary_);
+  ASSERT_TRUE(db.ok());
+  const std::vector<LoopResult> by_keyframes = Run(frames, keyframes, db->get());
+  // Normalised by the previous keyframe, the revisits are never even queried.
+  for (size_t i : {4u, 5u}) {
+    EXPECT_EQ(by_video[i].status, LoopStatus::kLowScoreWithPrevious) << i;
+    EXPECT_TRUE(by_video[i].candidates.empty()) << i;
+  }
+  // Normalised by the best candidate, each revisit is queried and finds its place, and the
+  // first keyframe is queried too (it has no predecessor to need).
+  EXPECT_EQ(by_keyframes[0].status, LoopStatus::kNoCandidates);
+  int loops = 0;
+  for (size_t i : {4u, 5u}) {
+    const LoopResult& r = by_keyframes[i];
+    ASSERT_FALSE(r.candidates.empty()) << i;
+    EXPECT_EQ(r.match, EntryId(i - 4)) << i;
+    EXPECT_DOUBLE_EQ(r.candidates.front().normalized_score, 1.0) << "eta of the best is 1";
+    EXPECT_EQ(r.previous_score, 0.0);
+    if (r.status == LoopStatus::kLoopDetected) {
+      ++loops;
+      EXPECT_NE(r.acceptance, LoopAcceptance::kNone);
+    }
+  }
+  EXPECT_GE(loops, 1);
+}
+
 TEST_F(LoopDetectorTest, BadStrongAcceptanceParametersAreRefused) {
   const auto refused = [&](const LoopDetectorParams& p) {
     return LoopDetector::Create(db_.get(), p).status().code() == StatusCode::kInvalidArgument;
@@ -623,6 +694,15 @@ TEST(LoopStatusTest, NamesAreDistinctAndGeometryNamesParse) {
     EXPECT_EQ(ParseGeometryCheck(GeometryCheckName(c)).value(), c);
   }
   EXPECT_FALSE(ParseGeometryCheck("homography").ok());
+  for (ScoreNormalisation n :
+       {ScoreNormalisation::kPreviousFrame, ScoreNormalisation::kBestCandidate}) {
+    EXPECT_EQ(ParseScoreNormalisation(ScoreNormalisationName(n)).value(), n);
+  }
+  EXPECT_EQ(ParseScoreNormalisation("median").status().code(), StatusCode::kInvalidArgument);
+  for (DetectorPreset p :
+       {DetectorPreset::kDefault, DetectorPreset::kThesis, DetectorPreset::kKeyframes}) {
+    EXPECT_EQ(ParseLoopDetectorMode(DetectorPresetName(p))->preset, p);
+  }
   std::set<std::string_view> acceptances;
   for (LoopAcceptance a : {LoopAcceptance::kNone, LoopAcceptance::kTemporalConsistency,
                            LoopAcceptance::kStrongEvidence, LoopAcceptance::kRelocalisation}) {

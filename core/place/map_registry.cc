@@ -16,14 +16,17 @@ std::string SettingsKey(const std::string& name) { return kSettingsPrefix + name
 std::string EncodePlaceSettings(const LoopDetectorParams& p) {
   char buffer[512];
   std::snprintf(buffer, sizeof(buffer),
-                "version 1\nalpha %.17g\ntemporal_matches %u\nmin_inliers %zu\nrecent_seconds "
-                "%.17g\nrecent_frames %u\ngeometry %s\n",
-                p.alpha, p.temporal_matches, p.epipolar.min_inliers, p.recent_seconds,
-                p.recent_frames, std::string(GeometryCheckName(p.geometry)).c_str());
+                "version 1\npreset %s\nalpha %.17g\ntemporal_matches %u\nmin_inliers "
+                "%zu\nrecent_seconds %.17g\nrecent_frames %u\ngeometry %s\n",
+                std::string(DetectorPresetName(p.preset)).c_str(), p.alpha, p.temporal_matches,
+                p.epipolar.min_inliers, p.recent_seconds, p.recent_frames,
+                std::string(GeometryCheckName(p.geometry)).c_str());
   return buffer;
 }
 
 StatusOr<LoopDetectorParams> DecodePlaceSettings(std::string_view text) {
+  // The preset line comes first: the other keys apply over its values. Settings written before
+  // presets were stored have none and start from the default.
   LoopDetectorParams p;
   std::istringstream in{std::string(text)};
   std::string key, value;
@@ -37,6 +40,10 @@ StatusOr<LoopDetectorParams> DecodePlaceSettings(std::string_view text) {
         return Status::FailedPrecondition("place settings of an unknown version " + value);
       }
       versioned = true;
+    } else if (key == "preset") {
+      StatusOr<LoopDetectorParams> preset = ParseLoopDetectorMode(value);
+      if (!preset.ok()) return preset.status().WithContext("place settings", StatusCode::kDataLoss);
+      p = preset.value();
     } else if (key == "geometry") {
       StatusOr<GeometryCheck> geometry = ParseGeometryCheck(value);
       if (!geometry.ok()) {

@@ -61,7 +61,9 @@ class MapRegistry {
   std::map<std::string, std::shared_ptr<PlaceMap>> maps_;
 };
 
-// The parameters a map's settings blob holds, as text ("key value" lines), and back.
+// The parameters a map's settings blob holds, as text ("key value" lines), and back: the preset
+// the map started from (DetectorPreset), then alpha, k, the RANSAC inliers, tau_c and the
+// geometry check, applied over that preset's values.
 std::string EncodePlaceSettings(const LoopDetectorParams& params);
 StatusOr<LoopDetectorParams> DecodePlaceSettings(std::string_view text);
 

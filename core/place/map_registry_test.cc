@@ -100,5 +100,41 @@ TEST(MapRegistryTest, SettingsRoundTripThroughTheirText) {
   EXPECT_EQ(decoded->geometry, GeometryCheck::kNone);
 }
 
+TEST(MapRegistryTest, AMapKeepsItsPresetAcrossAReopenWithItsOwnValuesOverIt) {
+  MemoryIndexStore store;
+  LoopDetectorParams keyframes = LoopDetectorParams::Keyframes();
+  keyframes.recent_frames = 7;
+  {
+    auto registry = MapRegistry::Open(&store, PlaceVocabulary());
+    ASSERT_TRUE(registry.ok());
+    ASSERT_TRUE((*registry)->Create("slam", keyframes).ok());
+    ASSERT_TRUE((*registry)->Create("thesis", LoopDetectorParams::Thesis()).ok());
+  }
+  auto reopened = MapRegistry::Open(&store, PlaceVocabulary());
+  ASSERT_TRUE(reopened.ok());
+  auto slam = (*reopened)->Get("slam");
+  ASSERT_TRUE(slam.ok());
+  const LoopDetectorParams& p = (*slam)->params();
+  EXPECT_EQ(p.preset, DetectorPreset::kKeyframes);
+  EXPECT_EQ(p.normalisation, ScoreNormalisation::kBestCandidate) << "from the preset";
+  EXPECT_EQ(p.consistency_max_island_gap, 1u) << "from the preset";
+  EXPECT_EQ(p.recent_frames, 7u) << "the map's own value over the preset's 4";
+  auto thesis = (*reopened)->Get("thesis");
+  ASSERT_TRUE(thesis.ok());
+  EXPECT_FALSE((*thesis)->params().strong_acceptance) << "a thesis map stays a thesis map";
+}
+
+TEST(MapRegistryTest, SettingsWrittenBeforePresetsOpenWithTheDefaultAndAnUnknownPresetIsDataLoss) {
+  auto old = DecodePlaceSettings(
+      "version 1\nalpha 0.3\ntemporal_matches 3\nmin_inliers 12\nrecent_seconds 20\n"
+      "recent_frames 20\ngeometry direct_index\n");
+  ASSERT_TRUE(old.ok()) << old.status().ToString();
+  EXPECT_EQ(old->preset, DetectorPreset::kDefault);
+  EXPECT_TRUE(old->strong_acceptance);
+  auto unknown = DecodePlaceSettings("version 1\npreset sideways\n");
+  EXPECT_EQ(unknown.status().code(), StatusCode::kDataLoss);
+  EXPECT_NE(unknown.status().message().find("sideways"), std::string::npos);
+}
+
 }  // namespace
 }  // namespace recog

@@ -37,18 +37,16 @@ StatusOr<PlaceFrameResult> PlaceMap::Add(const FeatureSet& features,
   return result;
 }
 
-StatusOr<PlaceFrameResult> PlaceMap::Detect(const FeatureSet& features,
-                                            std::optional<double> timestamp,
-                                            const PlaceResultOptions& options,
-                                            std::string_view client_id,
-                                            const FrameGeometry* geometry) {
+StatusOr<PlaceFrameResult> PlaceMap::Detect(
+    const FeatureSet& features, std::optional<double> timestamp, const PlaceResultOptions& options,
+    std::string_view client_id, const FrameGeometry* geometry, std::span<const EntryId> excluded) {
   RECOG_RETURN_IF_ERROR(options.Validate());
   PlaceFrameResult result;
   {
     std::lock_guard lock(mutex_);
     if (deleted_) return Status::NotFound("map '" + name_ + "' was deleted");
     RECOG_ASSIGN_OR_RETURN(result.loop,
-                           detector_.Process(features, timestamp, client_id, geometry));
+                           detector_.Process(features, timestamp, client_id, geometry, excluded));
   }
   RECOG_RETURN_IF_ERROR(AddExtras(features, options, &result));
   return result;
@@ -57,15 +55,16 @@ StatusOr<PlaceFrameResult> PlaceMap::Detect(const FeatureSet& features,
 StatusOr<PlaceFrameResult> PlaceMap::Query(const FeatureSet& features,
                                            std::optional<double> timestamp,
                                            const PlaceResultOptions& options,
-                                           const FrameGeometry* geometry) const {
+                                           const FrameGeometry* geometry,
+                                           std::span<const EntryId> excluded) const {
   RECOG_RETURN_IF_ERROR(options.Validate());
   PlaceFrameResult result;
-  StatusOr<LoopResult> loop = detector_.Query(features, timestamp, geometry);
+  StatusOr<LoopResult> loop = detector_.Query(features, timestamp, geometry, excluded);
   if (loop.status().code() == StatusCode::kNotFound && !deleted()) {
     // A frame removed (RemoveFrame) between the detector's query and its geometric check.
     // deleted() took the map's lock, which RemoveFrame holds until the frame has left the index
     // too, so the query runs again without it.
-    loop = detector_.Query(features, timestamp, geometry);
+    loop = detector_.Query(features, timestamp, geometry, excluded);
   }
   if (!loop.ok()) return loop.status();
   result.loop = std::move(loop).value();

@@ -31,6 +31,7 @@
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <span>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -116,15 +117,19 @@ class PlaceMap {
                                  std::string_view client_id = {},
                                  const FrameGeometry* geometry = nullptr);
   // Queries the map with the frame, then adds it (loop-closure detection), with `client_id` as
-  // for Add. INVALID_ARGUMENT for bad options (nothing is added then).
+  // for Add. `excluded` frames are never candidates (the client's keyframes covisible with this
+  // one; LoopDetector::Process). INVALID_ARGUMENT for bad options (nothing is added then).
   StatusOr<PlaceFrameResult> Detect(const FeatureSet& features, std::optional<double> timestamp,
                                     const PlaceResultOptions& options = {},
                                     std::string_view client_id = {},
-                                    const FrameGeometry* geometry = nullptr);
-  // Looks for the frame's place; adds nothing and changes nothing.
+                                    const FrameGeometry* geometry = nullptr,
+                                    std::span<const EntryId> excluded = {});
+  // Looks for the frame's place, leaving out the `excluded` frames; adds nothing and changes
+  // nothing.
   StatusOr<PlaceFrameResult> Query(const FeatureSet& features, std::optional<double> timestamp,
                                    const PlaceResultOptions& options = {},
-                                   const FrameGeometry* geometry = nullptr) const;
+                                   const FrameGeometry* geometry = nullptr,
+                                   std::span<const EntryId> excluded = {}) const;
 
   // Removes frame `id` (keyframe culling). NOT_FOUND when the map has no such frame (never added,
   // or removed already) or was deleted.

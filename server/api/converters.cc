@@ -288,6 +288,15 @@ StatusOr<DecodedFrame> DecodeFrame(const pb::Frame& frame, const DescriptorForma
   if (frame.has_timestamp()) out.timestamp = frame.timestamp();
   out.camera_id = frame.camera_id();
   out.client_frame_id = frame.client_frame_id();
+  if (frame.exclude_frame_ids_size() > kMaxExcludedFrames) {
+    return Status::InvalidArgument("frame.exclude_frame_ids has " +
+                                   std::to_string(frame.exclude_frame_ids_size()) +
+                                   " ids; at most " + std::to_string(kMaxExcludedFrames));
+  }
+  for (const uint64_t id : frame.exclude_frame_ids()) {
+    // An id no map can hold (frame ids are 32-bit) excludes nothing.
+    if (id < kInvalidEntryId) out.excluded_frames.push_back(EntryId(id));
+  }
   if (frame.has_intrinsics()) {
     CameraIntrinsics intrinsics;
     RECOG_RETURN_IF_ERROR(DecodeIntrinsics(frame.intrinsics(), &intrinsics));
@@ -318,6 +327,11 @@ StatusOr<DecodedFrame> DecodeFrame(const pb::Frame& frame, const DescriptorForma
 }
 
 Status ApplyMapSettings(const pb::MapSettings& settings, LoopDetectorParams* params) {
+  if (settings.has_preset()) {
+    StatusOr<LoopDetectorParams> preset = ParseLoopDetectorMode(settings.preset());
+    if (!preset.ok()) return preset.status().WithContext("settings.preset");
+    *params = preset.value();
+  }
   if (settings.has_alpha()) params->alpha = settings.alpha();
   if (settings.has_temporal_matches()) params->temporal_matches = settings.temporal_matches();
   if (settings.has_min_inliers()) params->epipolar.min_inliers = settings.min_inliers();
@@ -350,6 +364,7 @@ Status ApplyMapSettings(const pb::MapSettings& settings, LoopDetectorParams* par
 }
 
 void ToProto(const LoopDetectorParams& params, pb::MapSettings* out) {
+  out->set_preset(std::string(DetectorPresetName(params.preset)));
   out->set_alpha(params.alpha);
   out->set_temporal_matches(params.temporal_matches);
   out->set_min_inliers(uint32_t(params.epipolar.min_inliers));

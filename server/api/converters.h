@@ -46,6 +46,7 @@ struct DecodedFrame {
   double depth_scale = 0;  // metres per unit of CV_16U depth
   cv::Mat right;           // CV_8UC1, the right image of a rectified stereo pair; or empty
   double baseline_m = 0;   // > 0 with `right`
+  std::vector<EntryId> excluded_frames;  // place maps: never candidates for this frame
   bool has_image() const { return !image.empty(); }
 };
 
@@ -53,7 +54,9 @@ struct DecodedFrame {
 // INVALID_ARGUMENT (naming the field) for anything unusable, including a frame without content,
 // and for depth or a right image that cannot go with the frame: another size than the image, 8-bit
 // depth, a missing or non-positive baseline, no intrinsics (or intrinsics with distortion), both
-// depth and a right image, a right image with client features.
+// depth and a right image, a right image with client features, more than kMaxExcludedFrames
+// exclude_frame_ids.
+inline constexpr int kMaxExcludedFrames = 1000;
 StatusOr<DecodedFrame> DecodeFrame(const pb::Frame& frame, const DescriptorFormat& format);
 
 // Map settings. ApplyMapSettings overwrites the fields `settings` sets and validates the result.

@@ -66,11 +66,12 @@ StatusOr<PlaceFrameResult> RunMode(PlaceMap& map, FrameMode mode, const FeatureS
     case FrameMode::kAdd:
       return map.Add(features, timestamp, frame.client_frame_id, geometry);
     case FrameMode::kDetect:
-      return map.Detect(features, timestamp, extras, frame.client_frame_id, geometry);
+      return map.Detect(features, timestamp, extras, frame.client_frame_id, geometry,
+                        frame.excluded_frames);
     case FrameMode::kQuery:
       break;
   }
-  return map.Query(features, timestamp, extras, geometry);
+  return map.Query(features, timestamp, extras, geometry, frame.excluded_frames);
 }
 
 // Decodes one frame, runs it against the map and encodes what it did. `num_features` reports an

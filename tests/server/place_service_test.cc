@@ -313,6 +313,29 @@ TEST_F(PlaceServiceTest, MapsAndTheirSettingsSurviveARestart) {
   EXPECT_EQ(added.frame_id(), 3u);
 }
 
+TEST_F(PlaceServiceTest, AKeyframeMapKeepsItsPresetAcrossARestartAndAnUnknownPresetIsRefused) {
+  pb::MapSettings settings;
+  settings.set_preset("keyframes");
+  settings.set_recent_frames(7);
+  ASSERT_TRUE(CreateMap("slam", settings).ok());
+  ASSERT_TRUE(CreateMap("video").ok());
+  pb::MapSettings unknown;
+  unknown.set_preset("sideways");
+  const grpc::Status refused = CreateMap("bad", unknown);
+  EXPECT_EQ(refused.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_NE(refused.error_message().find("settings.preset"), std::string::npos)
+      << refused.error_message();
+  RestartServer();
+  pb::MapInfo info;
+  ASSERT_TRUE(GetMap("slam", &info).ok());
+  EXPECT_EQ(info.settings().preset(), "keyframes");
+  EXPECT_EQ(info.settings().recent_frames(), 7u) << "the map's own value over the preset's 4";
+  ASSERT_TRUE(GetMap("video", &info).ok());
+  EXPECT_EQ(info.settings().preset(), "default");
+  EXPECT_EQ(info.settings().recent_frames(), 20u);
+  EXPECT_EQ(GetMap("bad", &info).error_code(), grpc::StatusCode::NOT_FOUND);
+}
+
 TEST_F(PlaceServiceTest, ASlamGetsItsKeyframeIdsTopCandidatesAndInlierPixelsBack) {
   ASSERT_TRUE(CreateMap("slam").ok());
   std::map<int, pb::Frame> frames;
@@ -361,6 +384,20 @@ TEST_F(PlaceServiceTest, ASlamGetsItsKeyframeIdsTopCandidatesAndInlierPixelsBack
     EXPECT_EQ(c.match_x(), query_keys.x(int(c.match_index())));
     EXPECT_EQ(c.match_y(), query_keys.y(int(c.match_index())));
   }
+
+  // The SLAM's keyframes covisible with the query (here the same image, frame 2) are left out:
+  // never a candidate, never the match.
+  query.mutable_frame()->add_exclude_frame_ids(2);
+  query.mutable_frame()->add_exclude_frame_ids(uint64_t{1} << 40);  // no map holds it: ignored
+  ASSERT_TRUE(places_->QueryPlace(Context().get(), query, &response).ok());
+  EXPECT_NE(response.result().match_frame_id(), 2u);
+  for (const pb::Candidate& c : response.result().candidates()) EXPECT_NE(c.frame_id(), 2u);
+  for (int i = 0; i < 1000; ++i) query.mutable_frame()->add_exclude_frame_ids(uint64_t(i));
+  const grpc::Status too_many = places_->QueryPlace(Context().get(), query, &response);
+  EXPECT_EQ(too_many.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_NE(too_many.error_message().find("exclude_frame_ids"), std::string::npos)
+      << too_many.error_message();
+  query.mutable_frame()->clear_exclude_frame_ids();
 
   query.mutable_options()->set_top_k(51);  // above the documented maximum
   EXPECT_EQ(places_->QueryPlace(Context().get(), query, &response).error_code(),

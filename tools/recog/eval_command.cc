@@ -110,6 +110,8 @@ Status ReadParams(const std::string& path, PlaceEvaluationOptions* options, int*
         *features = v.as<int>();
       else if (key == "geometry") {
         RECOG_ASSIGN_OR_RETURN(p.geometry, ParseGeometryCheck(v.as<std::string>()));
+      } else if (key == "normalisation") {
+        RECOG_ASSIGN_OR_RETURN(p.normalisation, ParseScoreNormalisation(v.as<std::string>()));
       } else if (key == "scoring") {
         RECOG_ASSIGN_OR_RETURN(options->scoring, ParseScoring(v.as<std::string>()));
       } else {
@@ -391,7 +393,9 @@ void AddEvalCommand(CLI::App& app, int* exit_code) {
   place
       ->add_option("--mode", args->mode,
                    "Detector preset: 'default' (strong geometric evidence needs no temporal "
-                   "consistency) or 'thesis' (every loop needs k consistent queries)")
+                   "consistency), 'thesis' (every loop needs k consistent queries) or "
+                   "'keyframes' (frames metres apart: scores normalised by the best candidate, "
+                   "tau_c 4 frames)")
       ->capture_default_str();
   place->add_option("--params", args->params_file,
                     "YAML file of detector parameters (over the --mode preset)");

@@ -43,7 +43,8 @@ json MapJson(const pb::MapInfo& map) {
           {"created", UtcTime(map.created_unix_ms())},
           {"vocabulary_checksum", map.vocabulary_checksum()},
           {"settings",
-           {{"alpha", s.alpha()},
+           {{"preset", s.preset()},
+            {"alpha", s.alpha()},
             {"temporal_matches", s.temporal_matches()},
             {"min_inliers", s.min_inliers()},
             {"geometry", EnumLabel(pb::GeometryCheck_Name(s.geometry()), "GEOMETRY_CHECK_")},
@@ -120,6 +121,12 @@ void AddMapsCommands(CLI::App& app, int* exit_code) {
           },
           "How loops are verified (direct_index)")
       ->check(CLI::IsMember({"direct_index", "exhaustive", "none"}));
+  create
+      ->add_option_function<std::string>(
+          "--preset", [settings](const std::string& v) { settings->set_preset(v); },
+          "Detector preset the other settings apply over: default, thesis, or keyframes for a "
+          "SLAM's keyframes (the server's settings)")
+      ->check(CLI::IsMember({"default", "thesis", "keyframes"}));
   create->add_option_function<double>(
       "--recent-seconds", [settings](const double& v) { settings->set_recent_seconds(v); },
       "Recent frames left out of queries, in seconds, for timestamped frames (20)");

@@ -119,6 +119,7 @@ json TimingJson(const pb::Timing& t) {
 struct StreamArgs {
   ServerFlags server;
   std::string map, images, draw;
+  std::string preset;  // with create: the new map's detector preset (the server's when empty)
   double rate = 0;
   uint64_t frames = 0;  // 0: every frame of the sequence
   bool features_on_client = false, create = false, timestamps = false, quiet = false;
@@ -191,6 +192,7 @@ int RunStream(const StreamArgs& args, RecognitionClient& client) {
   pb::StreamConfig config;
   config.set_map(args.map);
   config.set_create_if_missing(args.create);
+  if (!args.preset.empty()) config.mutable_settings()->set_preset(args.preset);
   auto stream = client::FrameStream::Open(client, config);
   if (!stream.ok()) return Fail("stream", stream.status());
 
@@ -457,6 +459,12 @@ void AddStreamCommands(CLI::App& app, int* exit_code) {
                    "Extract the ORB features here and send them instead of the images");
   stream->add_flag("--create", stream_args->create,
                    "Create the map (with the server's default settings) if it does not exist");
+  stream
+      ->add_option("--preset", stream_args->preset,
+                   "With --create: the new map's detector preset (default, thesis, or keyframes "
+                   "for a SLAM's keyframes)")
+      ->check(CLI::IsMember({"default", "thesis", "keyframes"}))
+      ->needs("--create");
   stream->add_option("--draw", stream_args->draw,
                      "Folder for a PNG per loop (loop_<frame>_<match>.png): both frames side by "
                      "side with the inlier count");

@@ -133,7 +133,8 @@ def _set_image(frame: common_pb2.Frame, image: Image) -> None:
 def make_frame(image: Image, timestamp: float | None = None,
                intrinsics: common_pb2.CameraIntrinsics | Sequence[float] | None = None,
                client_frame_id: str = "", depth=None, depth_scale: float = 1000.0,
-               right=None, baseline: float = 0.0, camera_id: str = "") -> common_pb2.Frame:
+               right=None, baseline: float = 0.0, camera_id: str = "",
+               exclude_frame_ids: Sequence[int] = ()) -> common_pb2.Frame:
     """Builds a frame of ``image`` (any form in the module comment but a Frame).
 
     ``timestamp`` is in seconds in the client's clock (None = unknown; 0.0 is a time),
@@ -147,9 +148,13 @@ def make_frame(image: Image, timestamp: float | None = None,
     or a ready ``DepthImage``), or ``right``, the right image of a rectified stereo pair (file,
     bytes or array) with ``baseline`` in metres. ``InvalidArgument`` for both at once,
     intrinsics missing, or a right image without a positive baseline.
+
+    ``exclude_frame_ids`` (place maps): frame ids, as the server returned them, that are never
+    candidates for this frame — a SLAM's keyframes covisible with it (at most 1000).
     """
     frame = common_pb2.Frame(timestamp=timestamp, client_frame_id=client_frame_id,
-                             camera_id=camera_id)  # timestamp=None leaves the field unset
+                             camera_id=camera_id,  # timestamp=None leaves the field unset
+                             exclude_frame_ids=list(exclude_frame_ids))
     _set_image(frame, image)
     if intrinsics is not None:
         frame.intrinsics.CopyFrom(make_intrinsics(intrinsics))

@@ -93,6 +93,13 @@ class RecognitionClientTest(unittest.TestCase):
         self.assert_raises(NotFound, self.client.get_map, "lifecycle")
         self.assert_raises(NotFound, self.client.delete_map, "lifecycle")
 
+    def test_a_keyframe_map_starts_from_the_keyframes_preset(self):
+        info = self.client.create_map("keyframes", {"preset": "keyframes"})
+        self.assertEqual(info.settings.preset, "keyframes")
+        self.assertEqual(info.settings.recent_frames, 4)  # the preset's tau_c
+        self.assertEqual(self.client.create_map("video").settings.preset, "default")
+        self.assert_raises(InvalidArgument, self.client.create_map, "odd", {"preset": "sideways"})
+
     def test_list_maps_reads_every_page(self):
         names = ["page-a", "page-b", "page-c"]
         for name in names:
@@ -220,6 +227,11 @@ class RecognitionClientTest(unittest.TestCase):
             self.assertGreater(added.num_features, 100)
         self.assertEqual(self.client.query_place("small-frames", small[41]).result.match_frame_id,
                          2)
+        # the SLAM's covisible keyframes are left out
+        left_out = self.client.query_place("small-frames",
+                                           make_frame(small[41], exclude_frame_ids=[2])).result
+        self.assertNotEqual(left_out.match_frame_id, 2)
+        self.assertNotIn(2, [c.frame_id for c in left_out.candidates])
 
     def test_frames_from_numpy_arrays_and_from_client_side_features_find_the_place(self):
         self.client.create_map("arrays")
