@@ -104,15 +104,16 @@ const PipelineTour& GetPipelineTour() {
   return tour;
 }
 
-// The whole pipeline over the tour; with_depth: every frame comes with a depth image (a plane
-// 2 m in front of the camera: seqgen's frames are warps of flat photos) whose 3D points the
-// entries keep and the loops are checked with (PnP, LoopResult::metric).
-void RunPipeline(benchmark::State& state, bool with_depth) {
+// The whole pipeline over the tour with the detector `params`; with_depth: every frame comes
+// with a depth image (a plane 2 m in front of the camera: seqgen's frames are warps of flat
+// photos) whose 3D points the entries keep and the loops are checked with (PnP,
+// LoopResult::metric).
+void RunPipeline(benchmark::State& state, const LoopDetectorParams& params, bool with_depth) {
   const PipelineTour& tour = GetPipelineTour();
   auto vocabulary = std::make_shared<const Vocabulary>(LoadBundledPlaceVocabulary());
   MemoryIndexStore store;
   auto db = std::move(Database::Create(&store, "tour", vocabulary)).value();
-  auto detector = std::move(LoopDetector::Create(db.get(), LoopDetectorParams{})).value();
+  auto detector = std::move(LoopDetector::Create(db.get(), params)).value();
   const cv::Size size(640, 480);
   const cv::Mat depth(size, CV_16U, cv::Scalar(2000));
   FrameGeometry geometry{cv::Matx33d(525, 0, 319.5, 0, 525, 239.5, 0, 0, 1), {}};
@@ -169,10 +170,15 @@ void RunPipeline(benchmark::State& state, bool with_depth) {
   if (with_depth) state.counters["metric_verified"] = metric_verified;
 }
 
-void BM_Pipeline_26K(benchmark::State& state) { RunPipeline(state, false); }
-void BM_Pipeline_26K_Depth(benchmark::State& state) { RunPipeline(state, true); }
+void BM_Pipeline_26K(benchmark::State& state) { RunPipeline(state, {}, false); }
+void BM_Pipeline_26K_Depth(benchmark::State& state) { RunPipeline(state, {}, true); }
+// The keyframes preset: every frame is queried (no gate on the score with the previous frame).
+void BM_Pipeline_26K_Keyframes(benchmark::State& state) {
+  RunPipeline(state, LoopDetectorParams::Keyframes(), false);
+}
 BENCHMARK(BM_Pipeline_26K)->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
 BENCHMARK(BM_Pipeline_26K_Depth)->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
+BENCHMARK(BM_Pipeline_26K_Keyframes)->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
 
 void BM_Table42(benchmark::State& state) {
   cli::SequenceOptions options;
