@@ -35,8 +35,8 @@
 
 #include "bench/bench_support.h"
 #include "client/cpp/recognition_client.h"
-#include "core/object/model_builder.h"
-#include "core/object/model_file.h"
+#include "core/object/builder/model_builder.h"
+#include "core/object/formats/model_file.h"
 #include "core/vocabulary/vocabulary_io.h"
 #include "server/app/recognition_server.h"
 #include "tests/testing/data_paths.h"

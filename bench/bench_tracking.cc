@@ -24,8 +24,8 @@
 #include <opencv2/core/utility.hpp>
 
 #include "core/index/memory_index_store.h"
-#include "core/object/model_builder.h"
-#include "core/object/object_tracker.h"
+#include "core/object/builder/model_builder.h"
+#include "core/object/tracking/object_tracker.h"
 #include "core/vocabulary/vocabulary_io.h"
 #include "tests/testing/data_paths.h"
 #include "tools/common/cli_support.h"

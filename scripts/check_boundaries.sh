@@ -27,7 +27,31 @@ if git grep -n -E '#include\s*"(core|storage|server|tools|tests)/' -- 'client/' 
   echo "check_boundaries: the client library must not include core/, storage/ or server/ headers" >&2
   status=1
 fi
-# core's modules form layers, each including only the ones below it (tests may include anything):
+# check_layers ROOT DEPS: every folder ROOT/<m>/ includes from ROOT/ only <m> itself and the
+# folders DEPS (the name of an associative array: folder -> allowed folders) lists for it; tests
+# may include anything. A folder missing from DEPS is an error too.
+check_layers() {
+  local root=$1
+  local -n deps=$2
+  local dir module allowed file line include used
+  for dir in "$root"/*/; do
+    module=$(basename "$dir")
+    if [ -z "${deps[$module]+set}" ]; then
+      echo "check_boundaries: $root/$module/ has no place in the layer list of this script" >&2
+      status=1
+      continue
+    fi
+    allowed="$module ${deps[$module]}"
+    while IFS=: read -r file line include; do
+      used=$(sed -E "s#.*\"$root/([a-z_]+)/.*#\\1#" <<<"$include")
+      if ! grep -qw -- "$used" <<<"$allowed"; then
+        echo "$file:$line: $root/$module/ may not include $root/$used/ (allowed: $allowed)" >&2
+        status=1
+      fi
+    done < <(git grep -n -E "#include\s*\"$root/" -- "$root/$module/" ':!*_test.cc')
+  done
+}
+# core's modules form layers, each including only the ones below it:
 # common < bow < vocabulary, geometry < features, index < place, object.
 declare -A core_layer_deps=(
   [common]=""
@@ -39,22 +63,22 @@ declare -A core_layer_deps=(
   [place]="common bow vocabulary geometry features index"
   [object]="common bow vocabulary geometry features index"
 )
-for dir in core/*/; do
-  module=$(basename "$dir")
-  if [ -z "${core_layer_deps[$module]+set}" ]; then
-    echo "check_boundaries: core/$module/ has no place in the layer list of this script" >&2
-    status=1
-    continue
-  fi
-  allowed="$module ${core_layer_deps[$module]}"
-  while IFS=: read -r file line include; do
-    used=$(sed -E 's#.*"core/([a-z_]+)/.*#\1#' <<<"$include")
-    if ! grep -qw -- "$used" <<<"$allowed"; then
-      echo "$file:$line: core/$module/ may not include core/$used/ (allowed: $allowed)" >&2
-      status=1
-    fi
-  done < <(git grep -n -E '#include\s*"core/' -- "core/$module/" ':!*_test.cc')
-done
+check_layers core core_layer_deps
+# core/object/ is layered the same way, one folder a concern: the model, its file formats, the
+# builders, recognition, the versioned repository, tracking and learning.
+declare -A object_layer_deps=(
+  [model]=""
+  [formats]="model"
+  [builder]="model formats"
+  [recognition]="model formats"
+  [repository]="model formats recognition"
+  [tracking]="model formats builder recognition"
+)
+check_layers core/object object_layer_deps
+if [ -n "$(git ls-files 'core/object/*.h' 'core/object/*.cc' | grep -v '^core/object/[a-z_]*/')" ]; then
+  echo "check_boundaries: core/object/ keeps its files in its concern folders" >&2
+  status=1
+fi
 if git grep -n -E '(\.|->)(mutex|deleted|detector)\b' -- 'server/services/' 'server/api/'; then
   echo "check_boundaries: server/services and server/api must not take a map's lock, read its" \
     "deleted flag or drive its detector: call PlaceMap instead" >&2

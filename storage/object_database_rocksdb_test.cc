@@ -5,8 +5,8 @@
 #include <gtest/gtest.h>
 #include <opencv2/imgcodecs.hpp>
 
-#include "core/object/model_builder.h"
-#include "core/object/object_database.h"
+#include "core/object/builder/model_builder.h"
+#include "core/object/recognition/object_database.h"
 #include "storage/rocksdb_index_store.h"
 #include "storage/store_test_util.h"
 #include "tests/testing/data_paths.h"

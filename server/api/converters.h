@@ -13,8 +13,8 @@
 
 #include "core/common/status.h"
 #include "core/features/feature_extractor.h"
-#include "core/object/model_repository.h"
-#include "core/object/object_recognizer.h"
+#include "core/object/recognition/object_recognizer.h"
+#include "core/object/repository/model_repository.h"
 #include "core/place/loop_detector.h"
 #include "core/place/place_map.h"
 #include "recognition/v1/object.pb.h"

@@ -3,7 +3,7 @@
 #include <chrono>
 #include <memory>
 
-#include "core/object/object_tracker.h"
+#include "core/object/tracking/object_tracker.h"
 #include "server/api/converters.h"
 #include "server/api/status_mapping.h"
 #include "server/services/call.h"

@@ -15,9 +15,9 @@
 
 #include "core/features/feature_extractor.h"
 #include "core/index/index_store.h"
-#include "core/object/model_repository.h"
-#include "core/object/object_database.h"
-#include "core/object/object_recognizer.h"
+#include "core/object/recognition/object_database.h"
+#include "core/object/recognition/object_recognizer.h"
+#include "core/object/repository/model_repository.h"
 #include "core/place/map_registry.h"
 #include "server/auth/token_auth.h"
 #include "server/config/placement_table.h"

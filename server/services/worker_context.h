@@ -14,7 +14,7 @@
 
 #include "core/common/status.h"
 #include "core/features/feature_extractor.h"
-#include "core/object/object_recognizer.h"
+#include "core/object/recognition/object_recognizer.h"
 #include "core/place/loop_detector.h"
 #include "server/api/converters.h"
 

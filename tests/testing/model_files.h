@@ -8,8 +8,8 @@
 #include <gtest/gtest.h>
 #include <opencv2/imgcodecs.hpp>
 
-#include "core/object/model_builder.h"
-#include "core/object/model_file.h"
+#include "core/object/builder/model_builder.h"
+#include "core/object/formats/model_file.h"
 #include "tests/testing/data_paths.h"
 #include "tests/testing/vocabularies.h"
 

@@ -21,7 +21,7 @@
 #include "client/cpp/recognition_client.h"
 #include "client/cpp/result.h"
 #include "core/common/status.h"
-#include "core/object/object_model.h"
+#include "core/object/model/object_model.h"
 
 namespace recog::cli {
 

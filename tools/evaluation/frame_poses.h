@@ -19,8 +19,8 @@
 #include <vector>
 
 #include "core/common/status.h"
-#include "core/object/object_model.h"
-#include "core/object/object_recognizer.h"
+#include "core/object/model/object_model.h"
+#include "core/object/recognition/object_recognizer.h"
 #include "tools/evaluation/object_evaluation.h"
 
 namespace recog::cli {

@@ -15,7 +15,7 @@
 
 #include "core/features/feature_extractor.h"
 #include "core/index/memory_index_store.h"
-#include "core/object/roboearth.h"
+#include "core/object/formats/roboearth.h"
 #include "core/vocabulary/vocabulary_io.h"
 #include "tools/common/cli_support.h"
 #include "tools/evaluation/place_evaluation.h"

@@ -27,8 +27,8 @@
 #include <opencv2/core.hpp>
 
 #include "core/common/status.h"
-#include "core/object/model_builder.h"
-#include "core/object/object_recognizer.h"
+#include "core/object/builder/model_builder.h"
+#include "core/object/recognition/object_recognizer.h"
 #include "tools/evaluation/object_sequence_generator.h"
 
 namespace recog::cli {

@@ -47,8 +47,8 @@
 #include <opencv2/core.hpp>
 
 #include "core/common/status.h"
-#include "core/object/model_builder.h"
-#include "core/object/object_model.h"
+#include "core/object/builder/model_builder.h"
+#include "core/object/model/object_model.h"
 
 namespace recog::cli {
 

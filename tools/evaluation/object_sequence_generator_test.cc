@@ -14,7 +14,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "core/index/memory_index_store.h"
-#include "core/object/object_recognizer.h"
+#include "core/object/recognition/object_recognizer.h"
 #include "tests/testing/data_paths.h"
 #include "tests/testing/vocabularies.h"
 #include "tools/evaluation/object_evaluation.h"

@@ -8,8 +8,8 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "core/index/memory_index_store.h"
-#include "core/object/object_database.h"
-#include "core/object/object_recognizer.h"
+#include "core/object/recognition/object_database.h"
+#include "core/object/recognition/object_recognizer.h"
 #include "core/vocabulary/vocabulary_io.h"
 #include "tests/testing/test_data.h"
 #include "tests/testing/vocabularies.h"

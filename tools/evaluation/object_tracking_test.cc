@@ -13,9 +13,9 @@
 #include <gtest/gtest.h>
 
 #include "core/index/memory_index_store.h"
-#include "core/object/model_builder.h"
-#include "core/object/object_tracker.h"
-#include "core/object/recording_learner.h"
+#include "core/object/builder/model_builder.h"
+#include "core/object/tracking/object_tracker.h"
+#include "core/object/tracking/recording_learner.h"
 #include "tests/testing/test_data.h"
 #include "tests/testing/vocabularies.h"
 #include "tools/evaluation/visp_files.h"

@@ -23,9 +23,9 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "core/index/memory_index_store.h"
-#include "core/object/model_builder.h"
-#include "core/object/object_recognizer.h"
-#include "core/object/recording_learner.h"
+#include "core/object/builder/model_builder.h"
+#include "core/object/recognition/object_recognizer.h"
+#include "core/object/tracking/recording_learner.h"
 #include "tests/testing/test_data.h"
 #include "tests/testing/vocabularies.h"
 #include "tools/evaluation/frame_poses.h"

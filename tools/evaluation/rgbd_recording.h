@@ -19,9 +19,9 @@
 #include <vector>
 
 #include "core/common/status.h"
-#include "core/object/model_builder.h"
-#include "core/object/object_model.h"
-#include "core/object/recording_learner.h"
+#include "core/object/builder/model_builder.h"
+#include "core/object/model/object_model.h"
+#include "core/object/tracking/recording_learner.h"
 
 namespace recog::cli {
 

@@ -7,7 +7,7 @@
 #include <vector>
 
 #include "core/common/status.h"
-#include "core/object/model_builder.h"
+#include "core/object/builder/model_builder.h"
 
 namespace recog::cli {
 

@@ -52,7 +52,7 @@
 #include "client/cpp/frame_stream.h"
 #include "client/cpp/recognition_client.h"
 #include "core/common/status.h"
-#include "core/object/object_model.h"
+#include "core/object/model/object_model.h"
 #include "recognition/v1/common.pb.h"
 
 namespace recog::cli {

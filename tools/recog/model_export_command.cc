@@ -4,8 +4,8 @@
 #include <memory>
 #include <string>
 
-#include "core/object/model_file.h"
-#include "core/object/roboearth.h"
+#include "core/object/formats/model_file.h"
+#include "core/object/formats/roboearth.h"
 #include "tools/recog/commands.h"
 
 namespace recog::cli {

@@ -12,8 +12,8 @@
 #include <nlohmann/json.hpp>
 
 #include "client/cpp/recognition_client.h"
-#include "core/object/model_builder.h"
-#include "core/object/model_file.h"
+#include "core/object/builder/model_builder.h"
+#include "core/object/formats/model_file.h"
 #include "tools/common/remote_support.h"
 #include "tools/common/server_flags.h"
 #include "tools/evaluation/object_evaluation.h"

@@ -18,11 +18,11 @@
 #include <opencv2/imgproc.hpp>
 
 #include "core/index/memory_index_store.h"
-#include "core/object/model_builder.h"
-#include "core/object/model_file.h"
-#include "core/object/object_recognizer.h"
-#include "core/object/object_tracker.h"
-#include "core/object/recording_learner.h"
+#include "core/object/builder/model_builder.h"
+#include "core/object/formats/model_file.h"
+#include "core/object/recognition/object_recognizer.h"
+#include "core/object/tracking/object_tracker.h"
+#include "core/object/tracking/recording_learner.h"
 #include "core/vocabulary/vocabulary_io.h"
 #include "tools/common/cli_support.h"
 #include "tools/common/remote_support.h"

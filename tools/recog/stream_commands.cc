@@ -24,7 +24,7 @@
 #include "client/cpp/frame_stream.h"
 #include "client/cpp/frames.h"
 #include "client/cpp/recognition_client.h"
-#include "core/object/object_model.h"
+#include "core/object/model/object_model.h"
 #include "tools/common/cli_support.h"
 #include "tools/common/remote_support.h"
 #include "tools/common/server_flags.h"
