@@ -211,6 +211,13 @@ double Median(std::vector<double> values) {
 
 namespace {
 
+std::optional<double> TimestampOf(const SequenceFeatures& sequence, size_t i) {
+  return i < sequence.timestamps.size() ? sequence.timestamps[i] : std::nullopt;
+}
+const FrameGeometry* GeometryOf(const SequenceFeatures& sequence, size_t i) {
+  return i < sequence.geometry.size() ? &sequence.geometry[i] : nullptr;
+}
+
 StageStats Stats(const std::vector<double>& values) {
   StageStats s;
   if (values.empty()) return s;
@@ -233,71 +240,150 @@ StatusOr<std::vector<LoopResult>> DetectLoops(const SequenceFeatures& sequence,
   std::vector<LoopResult> results;
   results.reserve(sequence.features.size());
   for (size_t i = 0; i < sequence.features.size(); ++i) {
-    const std::optional<double> timestamp =
-        i < sequence.timestamps.size() ? sequence.timestamps[i] : std::nullopt;
-    const FrameGeometry* geometry = i < sequence.geometry.size() ? &sequence.geometry[i] : nullptr;
     RECOG_ASSIGN_OR_RETURN(LoopResult r,
-                           detector.Process(sequence.features[i], timestamp, {}, geometry));
+                           detector.Process(sequence.features[i], TimestampOf(sequence, i), {},
+                                            GeometryOf(sequence, i)));
     results.push_back(std::move(r));
   }
   return results;
 }
 
+namespace {
+
+// The detector's time spent on one frame, per stage, into `times` (what timing_ms summarises).
+void AddTimings(const LoopTimings& t, double features_ms, const double* points_ms,
+                std::map<std::string, std::vector<double>>* times) {
+  (*times)["features"].push_back(features_ms);
+  (*times)["conversion"].push_back(t.conversion);
+  (*times)["query"].push_back(t.query);
+  (*times)["islands"].push_back(t.islands);
+  (*times)["insertion"].push_back(t.insertion);
+  (*times)["verification"].push_back(t.verification);
+  if (points_ms != nullptr) {
+    (*times)["points"].push_back(*points_ms);
+    (*times)["metric_verification"].push_back(t.metric_verification);
+  }
+  (*times)["total"].push_back(features_ms + (points_ms ? *points_ms : 0.0) + t.conversion +
+                              t.query + t.islands + t.insertion + t.verification +
+                              t.metric_verification);
+}
+
+// Counts frame `query`'s result in `eval`: its status, and its match (frame `match` of the
+// sequence, when it has one) scored against the ground truth.
+void CountResult(const LoopResult& r, int query, int match, const GroundTruth& truth,
+                 PlaceEvaluation* eval) {
+  ++eval->statuses[std::string(LoopStatusName(r.status))];
+  if (r.match == kInvalidEntryId) return;
+  DetectedLoop loop;
+  loop.query = query;
+  loop.match = match;
+  loop.status = r.status;
+  loop.correct = truth.Matches(query, match);
+  loop.normalized_score = r.normalized_score;
+  loop.acceptance = r.acceptance;
+  loop.inliers = uint32_t(r.inliers.size());
+  loop.metric = r.metric;
+  if (r.status == LoopStatus::kLoopDetected) {
+    ++eval->detections;
+    eval->correct += loop.correct;
+  }
+  eval->loops.push_back(loop);
+}
+
+void Finish(const std::map<std::string, std::vector<double>>& times, PlaceEvaluation* eval) {
+  for (const auto& [stage, values] : times) eval->timing_ms[stage] = Stats(values);
+  eval->precision = eval->detections > 0 ? double(eval->correct) / eval->detections : 1.0;
+  eval->recall = eval->query_frames_with_truth > 0
+                     ? double(eval->correct) / eval->query_frames_with_truth
+                     : 0.0;
+}
+
+Status CheckTruthCoversSequence(const GroundTruth& truth, const SequenceFeatures& sequence) {
+  if (truth.frames != int(sequence.features.size())) {
+    return Status::InvalidArgument("the ground truth covers " + std::to_string(truth.frames) +
+                                   " frames but the sequence has " +
+                                   std::to_string(sequence.features.size()));
+  }
+  return Status::Ok();
+}
+
+const double* PointsMsOf(const SequenceFeatures& sequence, size_t i) {
+  return sequence.points_ms.empty() ? nullptr : &sequence.points_ms[i];
+}
+
+}  // namespace
+
 StatusOr<PlaceEvaluation> EvaluatePlace(const SequenceFeatures& sequence, const GroundTruth& truth,
                                         std::shared_ptr<const Vocabulary> vocabulary,
                                         const PlaceEvaluationOptions& options,
                                         std::vector<LoopResult>* results) {
-  const int frames = int(sequence.features.size());
-  if (truth.frames != frames) {
-    return Status::InvalidArgument("the ground truth covers " + std::to_string(truth.frames) +
-                                   " frames but the sequence has " + std::to_string(frames));
-  }
+  RECOG_RETURN_IF_ERROR(CheckTruthCoversSequence(truth, sequence));
   RECOG_ASSIGN_OR_RETURN(std::vector<LoopResult> detected,
                          DetectLoops(sequence, std::move(vocabulary), options));
 
   PlaceEvaluation eval;
-  eval.frames = frames;
+  eval.frames = truth.frames;
   eval.query_frames_with_truth = truth.QueriesWithMatches();
   std::map<std::string, std::vector<double>> times;
-  for (int i = 0; i < frames; ++i) {
+  for (int i = 0; i < eval.frames; ++i) {
     const LoopResult& r = detected[size_t(i)];
-    const LoopTimings& t = r.timings;
-    times["features"].push_back(sequence.feature_ms[size_t(i)]);
-    times["conversion"].push_back(t.conversion);
-    times["query"].push_back(t.query);
-    times["islands"].push_back(t.islands);
-    times["insertion"].push_back(t.insertion);
-    times["verification"].push_back(t.verification);
-    const double points = i < int(sequence.points_ms.size()) ? sequence.points_ms[size_t(i)] : 0.0;
-    if (!sequence.points_ms.empty()) {
-      times["points"].push_back(points);
-      times["metric_verification"].push_back(t.metric_verification);
-    }
-    times["total"].push_back(sequence.feature_ms[size_t(i)] + points + t.conversion + t.query +
-                             t.islands + t.insertion + t.verification + t.metric_verification);
-    ++eval.statuses[std::string(LoopStatusName(r.status))];
-    if (r.match != kInvalidEntryId) {
-      DetectedLoop loop;
-      loop.query = i;
-      loop.match = int(r.match);
-      loop.status = r.status;
-      loop.correct = truth.Matches(i, int(r.match));
-      loop.normalized_score = r.normalized_score;
-      loop.acceptance = r.acceptance;
-      loop.inliers = uint32_t(r.inliers.size());
-      loop.metric = r.metric;
-      if (r.status == LoopStatus::kLoopDetected) {
-        ++eval.detections;
-        eval.correct += loop.correct;
-      }
-      eval.loops.push_back(loop);
-    }
+    AddTimings(r.timings, sequence.feature_ms[size_t(i)], PointsMsOf(sequence, size_t(i)), &times);
+    CountResult(r, i, int(r.match), truth, &eval);
   }
-  for (const auto& [stage, values] : times) eval.timing_ms[stage] = Stats(values);
-  eval.precision = eval.detections > 0 ? double(eval.correct) / eval.detections : 1.0;
-  eval.recall =
-      eval.query_frames_with_truth > 0 ? double(eval.correct) / eval.query_frames_with_truth : 0.0;
+  Finish(times, &eval);
   if (results != nullptr) *results = std::move(detected);
+  return eval;
+}
+
+StatusOr<AcrossMapsEvaluation> EvaluateAcrossMaps(const SequenceFeatures& sequence,
+                                                  const GroundTruth& truth, int split,
+                                                  std::shared_ptr<const Vocabulary> vocabulary,
+                                                  const PlaceEvaluationOptions& options) {
+  RECOG_RETURN_IF_ERROR(CheckTruthCoversSequence(truth, sequence));
+  const int frames = truth.frames;
+  if (split < 1 || split >= frames) {
+    return Status::InvalidArgument("the split must leave frames to both robots: 1.." +
+                                   std::to_string(frames - 1) + ", not " + std::to_string(split));
+  }
+  MemoryIndexStore store_a, store_b;
+  RECOG_ASSIGN_OR_RETURN(std::unique_ptr<Database> db_a,
+                         Database::Create(&store_a, "robot-a", vocabulary, options.scoring,
+                                          options.direct_index_levels_up));
+  RECOG_ASSIGN_OR_RETURN(std::unique_ptr<Database> db_b,
+                         Database::Create(&store_b, "robot-b", std::move(vocabulary),
+                                          options.scoring, options.direct_index_levels_up));
+  RECOG_ASSIGN_OR_RETURN(LoopDetector map_a, LoopDetector::Create(db_a.get(), options.detector));
+  RECOG_ASSIGN_OR_RETURN(LoopDetector map_b, LoopDetector::Create(db_b.get(), options.detector));
+  for (int i = 0; i < split; ++i) {
+    RECOG_RETURN_IF_ERROR(map_a
+                              .Add(sequence.features[size_t(i)], TimestampOf(sequence, size_t(i)),
+                                   {}, GeometryOf(sequence, size_t(i)))
+                              .status());
+  }
+
+  AcrossMapsEvaluation eval;
+  eval.inter_map.frames = eval.own_map.frames = frames - split;
+  std::map<std::string, std::vector<double>> inter_times, own_times;
+  for (int i = split; i < frames; ++i) {
+    const size_t f = size_t(i);
+    bool in_a = false, in_b = false;
+    for (int j : truth.matches[f]) (j < split ? in_a : in_b) = true;
+    eval.inter_map.query_frames_with_truth += in_a;
+    eval.own_map.query_frames_with_truth += in_b;
+    RECOG_ASSIGN_OR_RETURN(
+        LoopResult own,
+        map_b.Process(sequence.features[f], TimestampOf(sequence, f), {}, GeometryOf(sequence, f)));
+    AddTimings(own.timings, sequence.feature_ms[f], PointsMsOf(sequence, f), &own_times);
+    CountResult(own, i, split + int(own.match), truth, &eval.own_map);
+    RECOG_ASSIGN_OR_RETURN(
+        LoopResult across,
+        map_a.Query(sequence.features[f], TimestampOf(sequence, f), GeometryOf(sequence, f)));
+    AddTimings(across.timings, 0.0, nullptr, &inter_times);
+    CountResult(across, i, int(across.match), truth, &eval.inter_map);
+  }
+  Finish(inter_times, &eval.inter_map);
+  Finish(own_times, &eval.own_map);
+  eval.inter_map.timing_ms.erase("features");  // extracted once, counted in own_map
   return eval;
 }
 

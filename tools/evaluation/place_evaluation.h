@@ -137,6 +137,25 @@ StatusOr<PlaceEvaluation> EvaluatePlace(const SequenceFeatures& sequence, const 
                                         const PlaceEvaluationOptions& options,
                                         std::vector<LoopResult>* results = nullptr);
 
+// Two robots sharing a sequence's places (a fleet's maps, or one robot's two sessions): frames
+// [0, split) are robot A's map (added, no query); frames [split, n) stream into robot B's own
+// map (LoopDetector::Process, its own loops) and are looked up in A's map with A in B's search
+// set (LoopDetector::Query: relocalisation, every frame alone, no tau_c and no temporal
+// consistency). Frame indices are the sequence's, as in the ground truth; a query frame counts
+// as a revisit of A (inter_map.query_frames_with_truth) when the truth matches it to a frame
+// before `split`, and of B (own_map) when to one from `split` on. Timings of inter_map are the
+// lookup in A alone (the features are counted in own_map).
+struct AcrossMapsEvaluation {
+  PlaceEvaluation inter_map;  // B's frames looked up in A
+  PlaceEvaluation own_map;    // B's frames in B's own map
+};
+// INVALID_ARGUMENT when the split leaves no frame to one robot, or the truth does not cover the
+// sequence.
+StatusOr<AcrossMapsEvaluation> EvaluateAcrossMaps(const SequenceFeatures& sequence,
+                                                  const GroundTruth& truth, int split,
+                                                  std::shared_ptr<const Vocabulary> vocabulary,
+                                                  const PlaceEvaluationOptions& options);
+
 // Median of a copy of the values (0 for none).
 double Median(std::vector<double> values);
 

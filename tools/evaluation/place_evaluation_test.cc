@@ -122,6 +122,56 @@ TEST(PlaceEvaluationTest, TimestampsSetTauCInSeconds) {
   EXPECT_GE(repeated, 3);
 }
 
+// Frames 1, 20, 41 and 60 of the corridor: 41 revisits 1, and 60 revisits 20.
+TEST(PlaceEvaluationTest, ASecondRobotFindsTheFirstRobotsPlacesAsInterMapLoops) {
+  const SequenceFeatures sequence = Extract(testing::ProjectTestData("corridor"));
+  GroundTruth truth;
+  truth.frames = 4;
+  truth.matches = {{}, {}, {0}, {1}};
+  auto e = EvaluateAcrossMaps(sequence, truth, 2, PlaceVocabulary(), {});
+  ASSERT_TRUE(e.ok()) << e.status().ToString();
+  EXPECT_EQ(e->inter_map.frames, 2);
+  EXPECT_EQ(e->inter_map.query_frames_with_truth, 2);
+  EXPECT_EQ(e->own_map.query_frames_with_truth, 0);
+  EXPECT_EQ(e->inter_map.detections, 2);
+  EXPECT_EQ(e->inter_map.correct, 2);
+  for (const DetectedLoop& loop : e->inter_map.loops) {
+    EXPECT_EQ(loop.acceptance, LoopAcceptance::kRelocalisation);
+    EXPECT_LT(loop.match, 2) << "an inter-map loop matches a frame of robot A";
+  }
+  EXPECT_EQ(e->own_map.detections, 0) << "robot B has not been anywhere twice";
+  EXPECT_EQ(e->inter_map.timing_ms.count("features"), 0u);
+  EXPECT_EQ(e->own_map.timing_ms.count("features"), 1u);
+}
+
+TEST(PlaceEvaluationTest, ASplitThatLeavesARobotNoFrameIsRefused) {
+  const SequenceFeatures sequence = Extract(testing::ProjectTestData("corridor"));
+  GroundTruth truth;
+  truth.frames = 4;
+  truth.matches.resize(4);
+  for (int split : {0, 4, 9}) {
+    EXPECT_EQ(EvaluateAcrossMaps(sequence, truth, split, PlaceVocabulary(), {}).status().code(),
+              StatusCode::kInvalidArgument)
+        << split;
+  }
+}
+
+TEST(PlaceEvaluationTest, TheCorridorSplitBetweenTwoRobotsKeepsTheSingleMapRecall) {
+  RECOG_SKIP_WITHOUT_SHARED_DATA("places/corridor/ground_truth.txt");
+  auto source = FrameSource::Open(testing::SharedData("places/corridor/images"));
+  ASSERT_TRUE(source.ok());
+  auto sequence = ExtractSequence(*source, PlaceFeatureOptions(), false);
+  ASSERT_TRUE(sequence.ok());
+  auto truth = ReadGroundTruth(testing::SharedData("places/corridor/ground_truth.txt"));
+  ASSERT_TRUE(truth.ok());
+  auto e = EvaluateAcrossMaps(*sequence, *truth, 40, PlaceVocabulary(), {});
+  ASSERT_TRUE(e.ok()) << e.status().ToString();
+  EXPECT_EQ(e->inter_map.query_frames_with_truth, 44);
+  EXPECT_EQ(e->inter_map.precision, 1.0);
+  EXPECT_GE(e->inter_map.recall, 36.0 / 44) << "the single-map recall (README)";
+  EXPECT_EQ(e->own_map.precision, 1.0);
+}
+
 TEST(PlaceEvaluationTest, AGroundTruthOfAnotherLengthIsRefused) {
   const SequenceFeatures sequence = Extract(testing::ProjectTestData("corridor"));
   GroundTruth truth;

@@ -34,6 +34,7 @@ struct EvalPlaceArgs {
   std::string plot = "recog_eval_place_pr.png";
   int features = 1000;
   int min_short_side = kPlaceMinShortSide;
+  int split = 0;  // > 0: frames 1..split are robot A's map, the rest robot B's (EvaluateAcrossMaps)
   bool json = false;
   bool quiet = false;
 };
@@ -185,6 +186,52 @@ Status DrawDetections(const std::string& dir, const SequenceFeatures& seq,
   return Status::Ok();
 }
 
+// --split: robot A's map from the first `split` frames, robot B streaming the rest with A in its
+// search set; B's revisits of A's places are inter-map loops, the others B's own.
+int ReportAcrossMaps(const EvalPlaceArgs& args, const SequenceFeatures& sequence,
+                     const GroundTruth& truth, std::shared_ptr<const Vocabulary> vocabulary,
+                     const PlaceEvaluationOptions& options, nlohmann::json parameters) {
+  auto evaluation = EvaluateAcrossMaps(sequence, truth, args.split, std::move(vocabulary), options);
+  if (!evaluation.ok()) return Fail(evaluation.status());
+  const int frames = int(sequence.features.size());
+  if (args.json) {
+    const nlohmann::json out = {{"robot_a_frames", {1, args.split}},
+                                {"robot_b_frames", {args.split + 1, frames}},
+                                {"inter_map", ToJson(evaluation->inter_map, sequence)},
+                                {"own_map", ToJson(evaluation->own_map, sequence)},
+                                {"parameters", std::move(parameters)},
+                                {"ground_truth", args.ground_truth}};
+    std::printf("%s\n", out.dump(2).c_str());
+    return 0;
+  }
+  std::printf(
+      "robot A: frames 1-%d (its map); robot B: frames %d-%d (its own map, A's in its "
+      "search set)\n",
+      args.split, args.split + 1, frames);
+  const auto report = [&](const char* what, const PlaceEvaluation& e) {
+    std::printf(
+        "%s: B's frames with a true match there %d, detections %d, correct %d: precision "
+        "%.1f %%, recall %.1f %%\n",
+        what, e.query_frames_with_truth, e.detections, e.correct, 100 * e.precision,
+        100 * e.recall);
+  };
+  report("inter-map loops (in A's map)", evaluation->inter_map);
+  report("own loops (in B's map)", evaluation->own_map);
+  const StageStats& lookup = evaluation->inter_map.timing_ms.at("total");
+  std::printf("lookup in A's map: %.3f ms median, %.3f ms max per frame (features excluded)\n",
+              lookup.median, lookup.max);
+  for (const auto& [label, e] :
+       {std::pair{"inter-map", &evaluation->inter_map}, std::pair{"own", &evaluation->own_map}}) {
+    for (const DetectedLoop& l : e->loops) {
+      if (l.status != LoopStatus::kLoopDetected) continue;
+      std::printf("%s loop %s -> %s (%s, %u inliers)\n", label,
+                  sequence.names[size_t(l.query)].c_str(), sequence.names[size_t(l.match)].c_str(),
+                  l.correct ? "correct" : "WRONG", l.inliers);
+    }
+  }
+  return 0;
+}
+
 int RunEvalPlace(const EvalPlaceArgs& args) {
   PlaceEvaluationOptions options;
   auto preset = ParseLoopDetectorMode(args.mode);
@@ -199,6 +246,10 @@ int RunEvalPlace(const EvalPlaceArgs& args) {
   }
   if (!args.sweep.empty() && args.ground_truth.empty()) {
     return Fail(Status::InvalidArgument("--sweep needs --ground-truth"));
+  }
+  if (args.split > 0 &&
+      (args.ground_truth.empty() || !args.sweep.empty() || !args.draw_dir.empty())) {
+    return Fail(Status::InvalidArgument("--split needs --ground-truth, without --sweep or --draw"));
   }
   std::optional<DatasetLayout> layout;
   if (args.layout != "auto") {
@@ -254,18 +305,24 @@ int RunEvalPlace(const EvalPlaceArgs& args) {
     truth->matches.resize(sequence->features.size());
   }
 
+  nlohmann::json parameters = {
+      {"mode", args.mode},
+      {"strong_acceptance", options.detector.strong_acceptance},
+      {"alpha", options.detector.alpha},
+      {"temporal_matches", options.detector.temporal_matches},
+      {"geometry", std::string(GeometryCheckName(options.detector.geometry))},
+      {"direct_index_levels_up", options.direct_index_levels_up},
+      {"features", features},
+      {"vocabulary", vocabulary_path}};
+  if (args.split > 0) {
+    return ReportAcrossMaps(args, *sequence, *truth, shared, options, std::move(parameters));
+  }
+
   std::vector<LoopResult> results;
   auto evaluation = EvaluatePlace(*sequence, *truth, shared, options, &results);
   if (!evaluation.ok()) return Fail(evaluation.status());
   nlohmann::json out = ToJson(*evaluation, *sequence);
-  out["parameters"] = {{"mode", args.mode},
-                       {"strong_acceptance", options.detector.strong_acceptance},
-                       {"alpha", options.detector.alpha},
-                       {"temporal_matches", options.detector.temporal_matches},
-                       {"geometry", std::string(GeometryCheckName(options.detector.geometry))},
-                       {"direct_index_levels_up", options.direct_index_levels_up},
-                       {"features", features},
-                       {"vocabulary", vocabulary_path}};
+  out["parameters"] = std::move(parameters);
   out["layout"] = std::string(DatasetLayoutName(source->layout()));
   out["ground_truth"] = has_truth ? nlohmann::json(args.ground_truth) : nlohmann::json(nullptr);
   if (!has_truth) {
@@ -405,6 +462,11 @@ void AddEvalCommand(CLI::App& app, int* exit_code) {
                    "Frames whose shorter side is under this many pixels are enlarged to it before "
                    "ORB (0 = never)")
       ->capture_default_str();
+  place
+      ->add_option("--split", args->split,
+                   "Two robots: frames 1..N are robot A's map, the rest stream into robot B's map "
+                   "with A's in its search set (inter-map loops and B's own, scored apart)")
+      ->check(CLI::PositiveNumber);
   place->add_option("--sweep", args->sweep, "'alpha': precision-recall curve over alpha 0..1");
   place
       ->add_option(

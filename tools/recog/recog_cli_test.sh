@@ -243,6 +243,19 @@ assert d['parameters']['mode'] == 'thesis' and not d['parameters']['strong_accep
 assert all(l['acceptance'] != 'strong_evidence' for l in d['loops']), d['loops']" \
   && pass || fail "eval place --mode thesis turns strong acceptance off"
 [ -s "$tmp/pr.png" ] && [ -d "$tmp/draw" ] && pass || fail "eval place writes the PR plot and the draw folder"
+expect_ok "eval place --split (two robots)" "$recog" eval place --images "$images" \
+  --ground-truth "$tmp/gt4.txt" --split 2 --json -q
+json_check "eval place --split finds robot B's revisits in robot A's map" "
+assert d['robot_a_frames'] == [1, 2] and d['robot_b_frames'] == [3, 4], d
+i = d['inter_map']; assert i['query_frames_with_truth'] == 2 and i['detections'] == i['correct'] == 2, i
+assert all(l['match'] <= 2 and l['acceptance'] == 'relocalisation' for l in i['loops']), i['loops']
+assert d['own_map']['query_frames_with_truth'] == 0 and d['own_map']['detections'] == 0, d['own_map']"
+expect_error "eval place --split without a ground truth" "--split needs --ground-truth" \
+  "$recog" eval place --images "$images" --split 2 -q
+expect_error "eval place --split that leaves robot B no frame" "INVALID_ARGUMENT.*split" \
+  "$recog" eval place --images "$images" --ground-truth "$tmp/gt4.txt" --split 4 -q
+expect_usage_error "eval place --split 0" "--split" \
+  "$recog" eval place --images "$images" --ground-truth "$tmp/gt4.txt" --split 0 -q
 expect_error "eval place --plot naming a .csv" "INVALID_ARGUMENT.*another extension" "$recog" eval place \
   --images "$images" --ground-truth "$tmp/gt4.txt" --vocab "$tmp/v.rvoc" -q --sweep alpha --plot "$tmp/pr.csv"
 expect_error "eval place without ground truth file" "NOT_FOUND" "$recog" eval place --images "$images" \
