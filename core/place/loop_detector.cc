@@ -468,7 +468,11 @@ StatusOr<LoopResult> LoopDetector::Query(const FeatureSet& features,
   result.timings.islands = MsSince(start);
 
   if (found) {
-    RECOG_RETURN_IF_ERROR(Verify(features, direct, params_.epipolar, &result));
+    // One frame's evidence, with no consistent queries behind it: a higher floor of inliers.
+    EpipolarOptions epipolar = params_.epipolar;
+    epipolar.min_inliers =
+        std::max<size_t>(epipolar.min_inliers, params_.relocalisation_min_inliers);
+    RECOG_RETURN_IF_ERROR(Verify(features, direct, epipolar, &result));
     if (result.status == LoopStatus::kLoopDetected) {
       result.acceptance = LoopAcceptance::kRelocalisation;
     }

@@ -4,6 +4,8 @@
 #include <cstdlib>
 #include <sstream>
 
+#include "core/common/names.h"
+
 namespace recog {
 namespace {
 
@@ -13,7 +15,7 @@ std::string SettingsKey(const std::string& name) { return kSettingsPrefix + name
 
 }  // namespace
 
-std::string EncodePlaceSettings(const LoopDetectorParams& p) {
+std::string EncodePlaceSettings(const LoopDetectorParams& p, const std::string& group) {
   char buffer[512];
   std::snprintf(buffer, sizeof(buffer),
                 "version 1\npreset %s\nalpha %.17g\ntemporal_matches %u\nmin_inliers "
@@ -21,16 +23,17 @@ std::string EncodePlaceSettings(const LoopDetectorParams& p) {
                 std::string(DetectorPresetName(p.preset)).c_str(), p.alpha, p.temporal_matches,
                 p.epipolar.min_inliers, p.recent_seconds, p.recent_frames,
                 std::string(GeometryCheckName(p.geometry)).c_str());
-  return buffer;
+  return group.empty() ? std::string(buffer) : buffer + ("group " + group + "\n");
 }
 
-StatusOr<LoopDetectorParams> DecodePlaceSettings(std::string_view text) {
+StatusOr<LoopDetectorParams> DecodePlaceSettings(std::string_view text, std::string* group) {
   // The preset line comes first: the other keys apply over its values. Settings written before
   // presets were stored have none and start from the default.
   LoopDetectorParams p;
   std::istringstream in{std::string(text)};
   std::string key, value;
   bool versioned = false;
+  if (group != nullptr) group->clear();
   while (in >> key >> value) {
     char* end = nullptr;
     const double number = std::strtod(value.c_str(), &end);
@@ -44,6 +47,11 @@ StatusOr<LoopDetectorParams> DecodePlaceSettings(std::string_view text) {
       StatusOr<LoopDetectorParams> preset = ParseLoopDetectorMode(value);
       if (!preset.ok()) return preset.status().WithContext("place settings", StatusCode::kDataLoss);
       p = preset.value();
+    } else if (key == "group") {
+      if (!ValidateName("group", value).ok()) {
+        return Status::DataLoss("place settings: a malformed group name");
+      }
+      if (group != nullptr) *group = value;
     } else if (key == "geometry") {
       StatusOr<GeometryCheck> geometry = ParseGeometryCheck(value);
       if (!geometry.ok()) {
@@ -79,10 +87,12 @@ StatusOr<std::unique_ptr<MapRegistry>> MapRegistry::Open(
   for (const std::string& key : keys) {
     const std::string name = key.substr(sizeof(kSettingsPrefix) - 1);
     RECOG_ASSIGN_OR_RETURN(std::string text, store->GetBlob(key));
-    StatusOr<LoopDetectorParams> params = DecodePlaceSettings(text);
+    std::string group;
+    StatusOr<LoopDetectorParams> params = DecodePlaceSettings(text, &group);
     if (!params.ok()) return params.status().WithContext("map '" + name + "'");
     StatusOr<std::shared_ptr<PlaceMap>> map =
         PlaceMap::Open(store, name, params.value(), registry->vocabulary_);
+    if (map.ok()) map.value()->group_ = group;
     if (map.status().code() == StatusCode::kNotFound) {
       // Settings left behind by a deletion that was interrupted: finish it.
       RECOG_RETURN_IF_ERROR(store->DeleteBlob(key));
@@ -97,8 +107,10 @@ StatusOr<std::unique_ptr<MapRegistry>> MapRegistry::Open(
 }
 
 StatusOr<std::shared_ptr<PlaceMap>> MapRegistry::Create(const std::string& name,
-                                                        const LoopDetectorParams& params) {
+                                                        const LoopDetectorParams& params,
+                                                        const std::string& group) {
   RECOG_RETURN_IF_ERROR(params.Validate());
+  if (!group.empty()) RECOG_RETURN_IF_ERROR(ValidateName("group", group));
   std::lock_guard write(write_mutex_);
   {
     std::shared_lock read(maps_mutex_);
@@ -108,7 +120,7 @@ StatusOr<std::shared_ptr<PlaceMap>> MapRegistry::Create(const std::string& name,
   }
   // Settings first, then the map: a crash in between leaves settings without a map, which Open
   // drops (the other order would leave a map that Open does not list but whose name is taken).
-  RECOG_RETURN_IF_ERROR(store_->PutBlob(SettingsKey(name), EncodePlaceSettings(params)));
+  RECOG_RETURN_IF_ERROR(store_->PutBlob(SettingsKey(name), EncodePlaceSettings(params, group)));
   StatusOr<std::unique_ptr<Database>> created = Database::Create(store_, name, vocabulary_);
   if (!created.ok()) {
     if (created.status().code() != StatusCode::kAlreadyExists) {
@@ -118,6 +130,7 @@ StatusOr<std::shared_ptr<PlaceMap>> MapRegistry::Create(const std::string& name,
   }
   RECOG_ASSIGN_OR_RETURN(std::shared_ptr<PlaceMap> map,
                          PlaceMap::Open(store_, name, params, vocabulary_));
+  map->group_ = group;
   std::unique_lock lock(maps_mutex_);
   maps_[name] = map;
   return map;
@@ -128,6 +141,17 @@ StatusOr<std::shared_ptr<PlaceMap>> MapRegistry::Get(const std::string& name) co
   const auto it = maps_.find(name);
   if (it == maps_.end()) return Status::NotFound("no map named '" + name + "'");
   return it->second;
+}
+
+StatusOr<std::vector<std::shared_ptr<PlaceMap>>> MapRegistry::Group(
+    const std::string& group) const {
+  std::vector<std::shared_ptr<PlaceMap>> members;
+  std::shared_lock lock(maps_mutex_);
+  for (const auto& [name, map] : maps_) {
+    if (!group.empty() && map->group() == group) members.push_back(map);
+  }
+  if (members.empty()) return Status::NotFound("no map in group '" + group + "'");
+  return members;
 }
 
 std::vector<std::shared_ptr<PlaceMap>> MapRegistry::List() const {

@@ -2,8 +2,10 @@
 // detector).
 //
 // The registry opens every map of the store at start-up (rebuilding the in-memory inverted
-// indexes), creates and deletes maps, and persists each map's detector parameters beside it in the
-// store (a blob "place-settings/<name>"), so that a restarted server runs every map as before.
+// indexes), creates and deletes maps, and persists each map's detector parameters and group beside
+// it in the store (a blob "place-settings/<name>"), so that a restarted server runs every map as
+// before. A map group (a fleet's maps, or one robot's sessions) is a name given at creation that
+// queries across maps search together (Group); all maps of a registry share its vocabulary.
 // Maps other than place maps (the object map) are not touched: the registry only opens maps that
 // have settings.
 //
@@ -36,12 +38,16 @@ class MapRegistry {
       IndexStore* store, std::shared_ptr<const Vocabulary> vocabulary,
       const std::function<void(size_t, size_t)>& progress = {});
 
-  // Creates an empty map. ALREADY_EXISTS when the name is taken (by any map of the store),
-  // INVALID_ARGUMENT for a bad name or parameters.
+  // Creates an empty map in `group` (empty: none). ALREADY_EXISTS when the name is taken (by any
+  // map of the store), INVALID_ARGUMENT for a bad name, group name (the map name rule) or
+  // parameters.
   StatusOr<std::shared_ptr<PlaceMap>> Create(const std::string& name,
-                                             const LoopDetectorParams& params);
+                                             const LoopDetectorParams& params,
+                                             const std::string& group = {});
   // NOT_FOUND for an unknown map.
   StatusOr<std::shared_ptr<PlaceMap>> Get(const std::string& name) const;
+  // The maps of `group`, by name. NOT_FOUND naming the group when no map is in it.
+  StatusOr<std::vector<std::shared_ptr<PlaceMap>>> Group(const std::string& group) const;
   // Every map, by name.
   std::vector<std::shared_ptr<PlaceMap>> List() const;
   // Deletes a map and its frames, and marks the map deleted for its holders; returns how many
@@ -63,8 +69,10 @@ class MapRegistry {
 
 // The parameters a map's settings blob holds, as text ("key value" lines), and back: the preset
 // the map started from (DetectorPreset), then alpha, k, the RANSAC inliers, tau_c and the
-// geometry check, applied over that preset's values.
-std::string EncodePlaceSettings(const LoopDetectorParams& params);
-StatusOr<LoopDetectorParams> DecodePlaceSettings(std::string_view text);
+// geometry check, applied over that preset's values; and the map's group (no line for none, as
+// in settings written before groups).
+std::string EncodePlaceSettings(const LoopDetectorParams& params, const std::string& group = {});
+StatusOr<LoopDetectorParams> DecodePlaceSettings(std::string_view text,
+                                                 std::string* group = nullptr);
 
 }  // namespace recog

@@ -52,6 +52,34 @@ TEST(MapRegistryTest, MapsAndTheirParametersSurviveAReopen) {
   EXPECT_EQ(p.recent_frames, 9u);
 }
 
+TEST(MapRegistryTest, MapGroupsAreKeptAcrossAReopenAndListedByGroup) {
+  MemoryIndexStore store;
+  {
+    auto registry = MapRegistry::Open(&store, PlaceVocabulary());
+    ASSERT_TRUE(registry.ok());
+    ASSERT_TRUE((*registry)->Create("robot-a", {}, "fleet").ok());
+    ASSERT_TRUE((*registry)->Create("robot-b", {}, "fleet").ok());
+    ASSERT_TRUE((*registry)->Create("alone", {}).ok());
+    const Status bad = (*registry)->Create("c", {}, "a fleet").status();
+    EXPECT_EQ(bad.code(), StatusCode::kInvalidArgument);
+    EXPECT_NE(bad.message().find("group"), std::string::npos) << bad.ToString();
+    EXPECT_EQ((*registry)->Get("c").status().code(), StatusCode::kNotFound) << "nothing created";
+  }
+  auto reopened = MapRegistry::Open(&store, PlaceVocabulary());
+  ASSERT_TRUE(reopened.ok()) << reopened.status().ToString();
+  auto fleet = (*reopened)->Group("fleet");
+  ASSERT_TRUE(fleet.ok()) << fleet.status().ToString();
+  ASSERT_EQ(fleet->size(), 2u);
+  EXPECT_EQ((*fleet)[0]->name(), "robot-a");
+  EXPECT_EQ((*fleet)[1]->name(), "robot-b");
+  EXPECT_EQ((*fleet)[0]->group(), "fleet");
+  EXPECT_EQ((*reopened)->Get("alone").value()->group(), "");
+  const Status unknown = (*reopened)->Group("nobody").status();
+  EXPECT_EQ(unknown.code(), StatusCode::kNotFound);
+  EXPECT_NE(unknown.message().find("'nobody'"), std::string::npos) << unknown.ToString();
+  EXPECT_EQ((*reopened)->Group("").status().code(), StatusCode::kNotFound);
+}
+
 TEST(MapRegistryTest, DeletingAMapMarksItForItsHoldersAndFreesTheName) {
   MemoryIndexStore store;
   auto registry = MapRegistry::Open(&store, PlaceVocabulary());
@@ -85,6 +113,8 @@ TEST(MapRegistryTest, LeftoverSettingsAreDroppedAndDamagedOnesRefused) {
   EXPECT_EQ(MapRegistry::Open(&store, PlaceVocabulary()).status().code(), StatusCode::kDataLoss);
   ASSERT_TRUE(store.PutBlob("place-settings/real", "version 1\ngeometry sideways\n").ok());
   EXPECT_EQ(MapRegistry::Open(&store, PlaceVocabulary()).status().code(), StatusCode::kDataLoss);
+  ASSERT_TRUE(store.PutBlob("place-settings/real", "version 1\ngroup a/b\n").ok());
+  EXPECT_EQ(MapRegistry::Open(&store, PlaceVocabulary()).status().code(), StatusCode::kDataLoss);
   ASSERT_TRUE(store.PutBlob("place-settings/real", "version 9\n").ok());
   EXPECT_EQ(MapRegistry::Open(&store, PlaceVocabulary()).status().code(),
             StatusCode::kFailedPrecondition);
@@ -98,6 +128,11 @@ TEST(MapRegistryTest, SettingsRoundTripThroughTheirText) {
   ASSERT_TRUE(decoded.ok());
   EXPECT_EQ(decoded->alpha, p.alpha);
   EXPECT_EQ(decoded->geometry, GeometryCheck::kNone);
+  std::string group = "stale";
+  ASSERT_TRUE(DecodePlaceSettings(EncodePlaceSettings(p), &group).ok());
+  EXPECT_EQ(group, "") << "no group line: no group";
+  ASSERT_TRUE(DecodePlaceSettings(EncodePlaceSettings(p, "fleet-7"), &group).ok());
+  EXPECT_EQ(group, "fleet-7");
 }
 
 TEST(MapRegistryTest, AMapKeepsItsPresetAcrossAReopenWithItsOwnValuesOverIt) {

@@ -140,6 +140,8 @@ class PlaceMap {
   StatusOr<std::vector<EntryId>> RemoveFramesByClientId(const std::string& client_id);
 
   const std::string& name() const { return name_; }
+  // The map group it was created in (MapRegistry::Create; empty for none).
+  const std::string& group() const { return group_; }
   const LoopDetectorParams& params() const { return params_; }
   const MapInfo& info() const { return database_->info(); }
   const Vocabulary& vocabulary() const { return database_->vocabulary(); }
@@ -167,6 +169,7 @@ class PlaceMap {
 
   IndexStore* const store_;
   const std::string name_;
+  std::string group_;  // set by MapRegistry before it publishes the map, then never changed
   const LoopDetectorParams params_;
   const std::unique_ptr<Database> database_;  // declared before the detector, which points to it
   mutable std::mutex mutex_;                  // guards detector_'s Add/Process and deleted_

@@ -4,6 +4,7 @@
 #include <chrono>
 #include <optional>
 
+#include "core/place/map_search.h"
 #include "server/api/converters.h"
 #include "server/api/status_mapping.h"
 #include "server/services/call.h"
@@ -14,6 +15,9 @@ namespace {
 
 constexpr char kService[] = "/recognition.v1.PlaceRecognition/";
 constexpr size_t kDefaultPageSize = 100, kMaxPageSize = 1000;
+constexpr size_t kMaxSearchMaps = 100;  // maps a query may search besides its own
+
+using SearchSet = std::vector<std::shared_ptr<PlaceMap>>;
 
 using Clock = std::chrono::steady_clock;
 double MsSince(Clock::time_point start) {
@@ -34,6 +38,7 @@ void FillMapInfo(const PlaceMap& map, pb::MapInfo* out) {
   out->set_name(map.name());
   out->set_id(info.id);
   ToProto(map.params(), out->mutable_settings());
+  if (!map.group().empty()) out->mutable_settings()->set_group(map.group());
   out->set_frames(map.frames());
   out->set_next_frame_id(map.next_frame_id());
   out->set_created_unix_ms(info.created_unix_ms);
@@ -58,6 +63,38 @@ StatusOr<std::shared_ptr<PlaceMap>> CallMap(const ServerState& state, CallInfo& 
   return state.maps->Get(name);
 }
 
+// The maps a query searches besides `own` (its search_maps and search_group; PlaceMap::Query on
+// each, SearchMaps): NOT_FOUND naming an unknown map or group, INVALID_ARGUMENT beyond
+// kMaxSearchMaps. The own map is left out (its loops are the frame's result), and so are repeats.
+template <typename Names>
+StatusOr<SearchSet> ResolveSearchSet(const ServerState& state, const std::string& own,
+                                     const Names& names, const std::string& group) {
+  SearchSet maps;
+  const auto add = [&](std::shared_ptr<PlaceMap> map) {
+    const bool listed = std::any_of(maps.begin(), maps.end(),
+                                    [&](const auto& m) { return m->name() == map->name(); });
+    if (map->name() != own && !listed) maps.push_back(std::move(map));
+  };
+  for (const std::string& name : names) {
+    RECOG_ASSIGN_OR_RETURN(std::shared_ptr<PlaceMap> map, state.maps->Get(name));
+    add(std::move(map));
+  }
+  if (!group.empty()) {
+    RECOG_ASSIGN_OR_RETURN(SearchSet members, state.maps->Group(group));
+    for (std::shared_ptr<PlaceMap>& map : members) add(std::move(map));
+  }
+  if (maps.size() > kMaxSearchMaps) {
+    return Status::InvalidArgument("a query may search at most " + std::to_string(kMaxSearchMaps) +
+                                   " maps besides its own, not " + std::to_string(maps.size()));
+  }
+  return maps;
+}
+
+// The group a map is created in (settings.group, when set).
+std::string GroupOf(const pb::MapSettings& settings) {
+  return settings.has_group() ? settings.group() : std::string();
+}
+
 StatusOr<PlaceFrameResult> RunMode(PlaceMap& map, FrameMode mode, const FeatureSet& features,
                                    const DecodedFrame& frame, const PlaceResultOptions& extras,
                                    const FrameGeometry* geometry) {
@@ -74,11 +111,14 @@ StatusOr<PlaceFrameResult> RunMode(PlaceMap& map, FrameMode mode, const FeatureS
   return map.Query(features, timestamp, extras, geometry, frame.excluded_frames);
 }
 
-// Decodes one frame, runs it against the map and encodes what it did. `num_features` reports an
-// added frame's features.
+// Decodes one frame, runs it against the map, looks it up in the `search` maps, and encodes what
+// it did (`inter_map` may be null when `search` is empty). `num_features` reports an added
+// frame's features.
 Status RunPlaceFrame(ServerState& state, WorkerContext& worker, PlaceMap& map, FrameMode mode,
                      const pb::Frame& request, const pb::ResultOptions& options,
-                     pb::LoopResult* out, pb::Timing* timing, uint32_t* num_features = nullptr) {
+                     pb::LoopResult* out, pb::Timing* timing, uint32_t* num_features = nullptr,
+                     const SearchSet& search = {},
+                     google::protobuf::RepeatedPtrField<pb::InterMapMatch>* inter_map = nullptr) {
   RECOG_ASSIGN_OR_RETURN(DecodedFrame frame,
                          DecodeFrame(request, map.vocabulary().info().descriptor));
   timing->set_decode_ms(frame.decode_ms);
@@ -113,6 +153,16 @@ Status RunPlaceFrame(ServerState& state, WorkerContext& worker, PlaceMap& map, F
   }
   if (mode != FrameMode::kQuery) state.metrics.SetMapEntries(map.name(), map.frames());
   ToProto(result.value(), out);
+  if (!search.empty()) {
+    StatusOr<std::vector<MapMatch>> matches =
+        SearchMaps(search, *features, frame.timestamp, extras, geometry ? &*geometry : nullptr);
+    if (!matches.ok()) return matches.status();
+    for (const MapMatch& match : matches.value()) {
+      pb::InterMapMatch* found = inter_map->Add();
+      found->set_map(match.map);
+      ToProto(match.result, found->mutable_result());
+    }
+  }
   timing->set_recognition_ms(MsSince(start));
   return Status::Ok();
 }
@@ -143,12 +193,16 @@ class PlaceFrameStream final
     options_ = config.options();
     const Status options = FromProto(options_, std::nullopt).Validate();
     if (!options.ok()) return ToGrpcStatus(options, call_.request_id);
+    StatusOr<SearchSet> search =
+        ResolveSearchSet(state_, config.map(), config.search_maps(), config.search_group());
+    if (!search.ok()) return ToGrpcStatus(search.status(), call_.request_id);
+    search_ = std::move(search).value();
     if (!map.ok() && map.status().code() == StatusCode::kNotFound && config.create_if_missing() &&
         !config.query_only()) {
       LoopDetectorParams params = state_.config.place;
       const Status settings = ApplyMapSettings(config.settings(), &params);
       if (!settings.ok()) return ToGrpcStatus(settings, call_.request_id);
-      map = state_.maps->Create(config.map(), params);
+      map = state_.maps->Create(config.map(), params, GroupOf(config.settings()));
       if (map.status().code() == StatusCode::kAlreadyExists) {
         map = state_.maps->Get(config.map());  // created by another stream meanwhile
       }
@@ -161,10 +215,12 @@ class PlaceFrameStream final
   Status Answer(const pb::Frame& frame, WorkerContext& worker,
                 pb::StreamFramesResponse* response) override {
     return RunPlaceFrame(state_, worker, *map_, mode_, frame, options_, response->mutable_result(),
-                         response->mutable_timing());
+                         response->mutable_timing(), nullptr, search_,
+                         response->mutable_inter_map());
   }
 
   std::shared_ptr<PlaceMap> map_;
+  SearchSet search_;  // the maps every frame is also looked up in
   FrameMode mode_ = FrameMode::kDetect;
   pb::ResultOptions options_;
 };
@@ -174,19 +230,20 @@ class PlaceFrameStream final
 grpc::ServerUnaryReactor* PlaceService::CreateMap(grpc::CallbackServerContext* context,
                                                   const pb::CreateMapRequest* request,
                                                   pb::CreateMapResponse* response) {
-  return RunUnary(
-      state_, context, Method("CreateMap"), Right::kWrite, request->request_id(), response,
-      [=, this](CallInfo& call, WorkerContext&) {
-        RECOG_RETURN_IF_ERROR_AS_GRPC(ScopeCall(state_, call, request->name()), call.request_id);
-        LoopDetectorParams params = state_.config.place;
-        RECOG_RETURN_IF_ERROR_AS_GRPC(ApplyMapSettings(request->settings(), &params),
-                                      call.request_id);
-        StatusOr<std::shared_ptr<PlaceMap>> map = state_.maps->Create(request->name(), params);
-        if (!map.ok()) return ToGrpcStatus(map.status(), call.request_id);
-        FillMapInfo(*map.value(), response->mutable_map());
-        state_.metrics.SetMapEntries(request->name(), 0);
-        return grpc::Status::OK;
-      });
+  return RunUnary(state_, context, Method("CreateMap"), Right::kWrite, request->request_id(),
+                  response, [=, this](CallInfo& call, WorkerContext&) {
+                    RECOG_RETURN_IF_ERROR_AS_GRPC(ScopeCall(state_, call, request->name()),
+                                                  call.request_id);
+                    LoopDetectorParams params = state_.config.place;
+                    RECOG_RETURN_IF_ERROR_AS_GRPC(ApplyMapSettings(request->settings(), &params),
+                                                  call.request_id);
+                    StatusOr<std::shared_ptr<PlaceMap>> map =
+                        state_.maps->Create(request->name(), params, GroupOf(request->settings()));
+                    if (!map.ok()) return ToGrpcStatus(map.status(), call.request_id);
+                    FillMapInfo(*map.value(), response->mutable_map());
+                    state_.metrics.SetMapEntries(request->name(), 0);
+                    return grpc::Status::OK;
+                  });
 }
 
 grpc::ServerUnaryReactor* PlaceService::GetMap(grpc::CallbackServerContext* context,
@@ -272,9 +329,13 @@ grpc::ServerUnaryReactor* PlaceService::QueryPlace(grpc::CallbackServerContext* 
         StatusOr<std::shared_ptr<PlaceMap>> map = CallMap(state_, call, request->map());
         if (!map.ok()) return ToGrpcStatus(map.status(), call.request_id);
         const FrameMode mode = request->add_frame() ? FrameMode::kDetect : FrameMode::kQuery;
+        StatusOr<SearchSet> search = ResolveSearchSet(
+            state_, request->map(), request->search_maps(), request->search_group());
+        if (!search.ok()) return ToGrpcStatus(search.status(), call.request_id);
         RECOG_RETURN_IF_ERROR_AS_GRPC(
             RunPlaceFrame(state_, worker, *map.value(), mode, request->frame(), request->options(),
-                          response->mutable_result(), response->mutable_timing()),
+                          response->mutable_result(), response->mutable_timing(), nullptr,
+                          search.value(), response->mutable_inter_map()),
             call.request_id);
         response->set_client_frame_id(request->frame().client_frame_id());
         response->mutable_timing()->set_queue_ms(call.queue_ms);

@@ -336,6 +336,106 @@ TEST_F(PlaceServiceTest, AKeyframeMapKeepsItsPresetAcrossARestartAndAnUnknownPre
   EXPECT_EQ(GetMap("bad", &info).error_code(), grpc::StatusCode::NOT_FOUND);
 }
 
+// Robot A's map holds corridor frames 1 and 20, robot B's frame 60; robot C, in the same group,
+// has been elsewhere. B's view of frame 41 (a revisit of 1) is looked up across the fleet.
+TEST_F(PlaceServiceTest, AQueryAcrossAGroupFindsThePlaceInAnotherRobotsMap) {
+  pb::MapSettings fleet;
+  fleet.set_group("fleet");
+  for (const char* robot : {"robot-a", "robot-b", "robot-c"}) {
+    ASSERT_TRUE(CreateMap(robot, fleet).ok());
+  }
+  ASSERT_TRUE(CreateMap("elsewhere").ok());
+  pb::AddFrameResponse added;
+  for (int n : {1, 20}) {
+    pb::Frame frame = JpegFrame(CorridorJpeg(n));
+    frame.set_client_frame_id("a-" + std::to_string(n));
+    ASSERT_TRUE(AddFrame("robot-a", frame, &added).ok());
+  }
+  ASSERT_TRUE(AddFrame("robot-b", JpegFrame(CorridorJpeg(60)), &added).ok());
+  ASSERT_TRUE(AddFrame("elsewhere", JpegFrame(CorridorJpeg(1)), &added).ok());
+  RestartServer();  // the group is kept with the maps
+  pb::MapInfo info;
+  ASSERT_TRUE(GetMap("robot-c", &info).ok());
+  EXPECT_EQ(info.settings().group(), "fleet");
+
+  pb::QueryPlaceRequest query;
+  query.set_map("robot-b");
+  query.set_add_frame(true);
+  query.set_search_group("fleet");
+  query.mutable_options()->set_include_relative_pose(true);
+  *query.mutable_frame() = JpegFrame(CorridorJpeg(41));
+  pb::CameraIntrinsics* k = query.mutable_frame()->mutable_intrinsics();  // 512 x 384 pinhole
+  k->set_fx(400);
+  k->set_fy(400);
+  k->set_cx(256);
+  k->set_cy(192);
+  pb::QueryPlaceResponse response;
+  ASSERT_TRUE(places_->QueryPlace(Context().get(), query, &response).ok());
+  ASSERT_EQ(response.inter_map_size(), 1) << "only robot A has been there ('elsewhere' is not "
+                                             "in the group, robot B's own loops are in result)";
+  const pb::InterMapMatch& match = response.inter_map(0);
+  EXPECT_EQ(match.map(), "robot-a");
+  EXPECT_EQ(match.result().status(), pb::LOOP_STATUS_LOOP_DETECTED);
+  EXPECT_EQ(match.result().match_frame_id(), 0u);
+  EXPECT_EQ(match.result().match_client_frame_id(), "a-1");
+  EXPECT_GE(match.result().inliers(), 12u);
+  EXPECT_TRUE(match.result().has_relative_pose());
+  EXPECT_EQ(response.result().frame_id(), 1u) << "the frame joined robot B's own map";
+  ASSERT_TRUE(GetMap("robot-a", &info).ok());
+  EXPECT_EQ(info.frames(), 2u) << "searching a map adds nothing to it";
+
+  // The same by name, in a stream: every frame is looked up in robot A's map too.
+  pb::StreamConfig config;
+  config.set_map("robot-c");
+  config.add_search_maps("robot-a");
+  config.add_search_maps("robot-c");  // its own map: not searched again
+  grpc::Status status;
+  const auto answers =
+      Stream(*places_, config, {JpegFrame(CorridorJpeg(41)), JpegFrame(CorridorJpeg(60))}, &status);
+  ASSERT_TRUE(status.ok()) << status.error_message();
+  ASSERT_EQ(answers.size(), 2u);
+  ASSERT_EQ(answers[0].inter_map_size(), 1);
+  EXPECT_EQ(answers[0].inter_map(0).map(), "robot-a");
+  EXPECT_EQ(answers[0].inter_map(0).result().match_frame_id(), 0u);
+  for (const pb::InterMapMatch& m : answers[1].inter_map()) EXPECT_NE(m.map(), "robot-c");
+}
+
+TEST_F(PlaceServiceTest, AnUnknownMapOrGroupInTheSearchSetIsNotFoundAndAddsNothing) {
+  ASSERT_TRUE(CreateMap("robot-a").ok());
+  for (const auto& [maps, group, named] :
+       {std::tuple{std::vector<std::string>{"ghost"}, std::string(), std::string("'ghost'")},
+        std::tuple{std::vector<std::string>{}, std::string("no-fleet"),
+                   std::string("'no-fleet'")}}) {
+    pb::QueryPlaceRequest query;
+    query.set_map("robot-a");
+    query.set_add_frame(true);
+    for (const std::string& m : maps) query.add_search_maps(m);
+    query.set_search_group(group);
+    *query.mutable_frame() = JpegFrame(CorridorJpeg(1));
+    pb::QueryPlaceResponse response;
+    const grpc::Status refused = places_->QueryPlace(Context().get(), query, &response);
+    EXPECT_EQ(refused.error_code(), grpc::StatusCode::NOT_FOUND);
+    EXPECT_NE(refused.error_message().find(named), std::string::npos) << refused.error_message();
+
+    pb::StreamConfig config;
+    config.set_map("robot-a");
+    for (const std::string& m : maps) config.add_search_maps(m);
+    config.set_search_group(group);
+    grpc::Status status;
+    Stream(*places_, config, {JpegFrame(CorridorJpeg(1))}, &status);
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::NOT_FOUND);
+    EXPECT_NE(status.error_message().find(named), std::string::npos) << status.error_message();
+  }
+  pb::MapInfo info;
+  ASSERT_TRUE(GetMap("robot-a", &info).ok());
+  EXPECT_EQ(info.frames(), 0u);
+  pb::MapSettings bad;
+  bad.set_group("a fleet");
+  const grpc::Status refused = CreateMap("robot-b", bad);
+  EXPECT_EQ(refused.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_NE(refused.error_message().find("group"), std::string::npos) << refused.error_message();
+}
+
 TEST_F(PlaceServiceTest, ASlamGetsItsKeyframeIdsTopCandidatesAndInlierPixelsBack) {
   ASSERT_TRUE(CreateMap("slam").ok());
   std::map<int, pb::Frame> frames;

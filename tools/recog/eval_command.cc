@@ -99,6 +99,8 @@ Status ReadParams(const std::string& path, PlaceEvaluationOptions* options, int*
         p.strong_acceptance = v.as<bool>();
       else if (key == "strong_temporal_matches")
         p.strong_temporal_matches = v.as<uint32_t>();
+      else if (key == "relocalisation_min_inliers")
+        p.relocalisation_min_inliers = v.as<uint32_t>();
       else if (key == "strong_min_inliers")
         p.strong_min_inliers = v.as<uint32_t>();
       else if (key == "strong_min_spread")

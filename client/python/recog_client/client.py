@@ -336,7 +336,8 @@ class RecognitionClient:
 
     def query_place(self, map_name: str, image: Image, add_frame: bool = False,
                     result_options: place_pb2.ResultOptions | Mapping | None = None,
-                    client_frame_id: str = "", *, request_id: str | None = None
+                    client_frame_id: str = "", *, request_id: str | None = None,
+                    search_maps: Iterable[str] = (), search_group: str = ""
                     ) -> place_pb2.QueryPlaceResponse:
         """Looks a frame up in a map; ``response.result`` is its ``LoopResult``.
 
@@ -348,11 +349,18 @@ class RecognitionClient:
         a verified loop, its inlier correspondences, fundamental matrix and relative pose (the
         last needs the frame's intrinsics). The matched frame's client id is
         ``result.match_client_frame_id``.
+
+        ``search_maps`` (names) and ``search_group`` (a group given at creation, ``settings``
+        ``{"group": ...}``) are other maps the frame is also looked up in, each as a
+        relocalisation query: the places recognised there are ``response.inter_map`` (each with
+        its ``map`` and ``result``), best first, one at most per map. ``NotFound`` naming an
+        unknown map or group (nothing is added then).
         """
         request = place_pb2.QueryPlaceRequest(
             map=map_name, frame=as_frame(image, client_frame_id=client_frame_id),
             add_frame=add_frame, options=_result_options(result_options),
-            request_id=_request_id(request_id))
+            request_id=_request_id(request_id), search_maps=list(search_maps),
+            search_group=search_group)
         return self._unary(self._places.QueryPlace, request, map_name)
 
     def remove_frame(self, map_name: str, frame_id: int | None = None,
@@ -376,7 +384,8 @@ class RecognitionClient:
     def stream_frames(self, map_name: str, frames: Iterable[Image], create_if_missing: bool = True,
                       settings: place_pb2.MapSettings | Mapping | None = None,
                       query_only: bool = False,
-                      result_options: place_pb2.ResultOptions | Mapping | None = None
+                      result_options: place_pb2.ResultOptions | Mapping | None = None,
+                      search_maps: Iterable[str] = (), search_group: str = ""
                       ) -> Stream[place_pb2.StreamFramesResponse]:
         """Streams frames into a map; returns the :class:`Stream` of their answers, in order.
 
@@ -386,11 +395,13 @@ class RecognitionClient:
         ``error`` (this frame failed, e.g. an undecodable image; the stream goes on).
         ``settings`` (as in :meth:`create_map`) apply when ``create_if_missing`` creates the map;
         ``query_only`` looks every frame up without adding it; ``result_options`` as in
-        :meth:`query_place`, for every frame.
+        :meth:`query_place`, for every frame, and so are ``search_maps`` and ``search_group``
+        (each answer's ``inter_map``; an unknown map or group ends the stream with ``NotFound``).
         """
         config = place_pb2.StreamConfig(map=map_name, create_if_missing=create_if_missing,
                                         settings=_map_settings(settings), query_only=query_only,
-                                        options=_result_options(result_options))
+                                        options=_result_options(result_options),
+                                        search_maps=list(search_maps), search_group=search_group)
 
         def requests():
             yield place_pb2.StreamFramesRequest(config=config)

@@ -233,6 +233,26 @@ class RecognitionClientTest(unittest.TestCase):
         self.assertNotEqual(left_out.match_frame_id, 2)
         self.assertNotIn(2, [c.frame_id for c in left_out.candidates])
 
+    def test_a_robot_finds_another_robot_s_place_across_their_group(self):
+        for robot in ("robot-a", "robot-b"):
+            self.assertEqual(self.client.create_map(robot, {"group": "fleet"}).settings.group,
+                             "fleet")
+        for n in (1, 20):
+            self.client.add_frame("robot-a", corridor(n), client_frame_id=f"a-{n}")
+        answer = self.client.query_place("robot-b", corridor(41), add_frame=True,
+                                         search_group="fleet")
+        self.assertEqual([m.map for m in answer.inter_map], ["robot-a"])
+        self.assertEqual(answer.inter_map[0].result.match_client_frame_id, "a-1")
+        self.assertEqual(answer.result.frame_id, 0)  # robot B's own map got the frame
+        answers = list(self.client.stream_frames("robot-b", [corridor(41)],
+                                                 search_maps=["robot-a"]))
+        self.assertEqual(answers[0].inter_map[0].result.match_frame_id, 0)
+        with self.assertRaises(NotFound) as unknown:
+            self.client.query_place("robot-b", corridor(41), add_frame=True,
+                                    search_maps=["robot-z"])
+        self.assertIn("robot-z", str(unknown.exception))
+        self.assertEqual(self.client.get_map("robot-b").frames, 2)  # the refused frame was not added
+
     def test_frames_from_numpy_arrays_and_from_client_side_features_find_the_place(self):
         self.client.create_map("arrays")
         for n in (1, 20, 41, 60):

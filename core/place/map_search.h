@@ -1,0 +1,42 @@
+// Looking a frame up in other maps: a fleet's shared memory of places (robot B recognising where
+// robot A has been) and a robot's earlier sessions (relocalising in yesterday's map).
+//
+// SearchMaps runs PlaceMap::Query (relocalisation: every frame of the map is a candidate, no
+// tau_c, no temporal consistency, nothing added) on each map of a search set and returns the
+// places recognised, one match at most per map, best first. Measured on the corridor split
+// between two robots (`recog eval place --split 40`, README "Queries across maps"): each of
+// robot B's frames looked up alone in robot A's map finds 37 of the 44 revisits with no false
+// one, more than the single map's detector (36). The maps must share a vocabulary (all maps of a
+// MapRegistry do).
+//
+// Thread safety: as PlaceMap::Query, any number of searches may run at once and beside the maps'
+// own Add and Detect.
+#pragma once
+
+#include <memory>
+#include <optional>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "core/common/status.h"
+#include "core/place/place_map.h"
+
+namespace recog {
+
+struct MapMatch {
+  std::string map;          // the map the place was recognised in
+  PlaceFrameResult result;  // its PlaceMap::Query answer (status kLoopDetected)
+};
+
+// Queries every map of `maps` with the frame and returns the recognised places, most RANSAC
+// inliers first (then highest score, then map name). Maps without a recognised place, and maps
+// deleted meanwhile, are left out. Errors are those of PlaceMap::Query (bad options or geometry, a
+// failing store), naming the map.
+StatusOr<std::vector<MapMatch>> SearchMaps(std::span<const std::shared_ptr<PlaceMap>> maps,
+                                           const FeatureSet& features,
+                                           std::optional<double> timestamp,
+                                           const PlaceResultOptions& options = {},
+                                           const FrameGeometry* geometry = nullptr);
+
+}  // namespace recog

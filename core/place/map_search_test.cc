@@ -1,0 +1,104 @@
+#include "core/place/map_search.h"
+
+#include <gtest/gtest.h>
+
+#include "core/index/memory_index_store.h"
+#include "core/place/map_registry.h"
+#include "core/place/place_test_frames.h"
+
+namespace recog {
+namespace {
+
+// Robot A has been at places 0 and 1, robot B at places 2 and 3 (place_test_frames.h).
+class MapSearchTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    vocabulary_ = new std::shared_ptr<const Vocabulary>(testing::TrainPlacesVocabulary());
+  }
+  static void TearDownTestSuite() { delete vocabulary_; }
+
+  void SetUp() override {
+    auto registry = MapRegistry::Open(&store_, *vocabulary_);
+    ASSERT_TRUE(registry.ok()) << registry.status().ToString();
+    registry_ = std::move(registry).value();
+    places_ = testing::Places();
+    robot_a_ = AddVisits("robot-a", {0, 1});
+    robot_b_ = AddVisits("robot-b", {2, 3});
+  }
+
+  std::shared_ptr<PlaceMap> AddVisits(const std::string& name, std::vector<int> places) {
+    auto map = registry_->Create(name, {}, "fleet");
+    EXPECT_TRUE(map.ok()) << map.status().ToString();
+    for (int p : places) {
+      for (const FeatureSet& f : testing::Extract(testing::Visit(places_[size_t(p)], 4))) {
+        EXPECT_TRUE(map.value()->Add(f, std::nullopt).ok());
+      }
+    }
+    return map.value();
+  }
+
+  // A new view of `place`, shifted further than any stored one.
+  FeatureSet Revisit(int place) const {
+    return testing::Extract(testing::Visit(places_[size_t(place)], 1, 5)).front();
+  }
+
+  static std::shared_ptr<const Vocabulary>* vocabulary_;
+  MemoryIndexStore store_;
+  std::unique_ptr<MapRegistry> registry_;
+  std::vector<cv::Mat> places_;
+  std::shared_ptr<PlaceMap> robot_a_, robot_b_;
+};
+std::shared_ptr<const Vocabulary>* MapSearchTest::vocabulary_ = nullptr;
+
+TEST_F(MapSearchTest, APlaceIsFoundInTheMapThatHasBeenThere) {
+  const std::vector<std::shared_ptr<PlaceMap>> fleet = {robot_b_, robot_a_};
+  for (int place = 0; place < 4; ++place) {
+    auto found = SearchMaps(fleet, Revisit(place), std::nullopt);
+    ASSERT_TRUE(found.ok()) << found.status().ToString();
+    ASSERT_EQ(found->size(), 1u) << "place " << place << " is in one map only";
+    const MapMatch& m = found->front();
+    EXPECT_EQ(m.map, place < 2 ? "robot-a" : "robot-b") << place;
+    EXPECT_EQ(m.result.loop.status, LoopStatus::kLoopDetected);
+    EXPECT_EQ(m.result.loop.acceptance, LoopAcceptance::kRelocalisation);
+    // Each map holds its two places as frames 0-3 and 4-7.
+    EXPECT_EQ(m.result.loop.match / 4, EntryId(place % 2)) << place;
+  }
+  EXPECT_EQ(robot_a_->frames(), 8u) << "searching adds nothing";
+  EXPECT_EQ(robot_b_->frames(), 8u);
+}
+
+TEST_F(MapSearchTest, MapsThatHaveNotBeenThereAreLeftOut) {
+  const std::vector<std::shared_ptr<PlaceMap>> only_a = {robot_a_};
+  auto found = SearchMaps(only_a, Revisit(3), std::nullopt);
+  ASSERT_TRUE(found.ok());
+  EXPECT_TRUE(found->empty());
+  EXPECT_TRUE(SearchMaps({}, Revisit(0), std::nullopt).value().empty());
+}
+
+TEST_F(MapSearchTest, MatchesComeBestFirst) {
+  // A third map that has seen place 0 once, from further away than robot A's four views.
+  auto glimpse = registry_->Create("robot-c", {}, "fleet");
+  ASSERT_TRUE(glimpse.ok());
+  ASSERT_TRUE((*glimpse)
+                  ->Add(testing::Extract(testing::Visit(places_[0], 1, 12)).front(), std::nullopt)
+                  .ok());
+  const std::vector<std::shared_ptr<PlaceMap>> fleet = {*glimpse, robot_b_, robot_a_};
+  auto found = SearchMaps(fleet, Revisit(0), std::nullopt);
+  ASSERT_TRUE(found.ok());
+  ASSERT_EQ(found->size(), 2u) << "robot A and robot C have been there";
+  EXPECT_GT((*found)[0].result.loop.inliers.size(), (*found)[1].result.loop.inliers.size());
+  EXPECT_EQ((*found)[0].map, "robot-a") << "four close views beat one distant one";
+  EXPECT_EQ((*found)[1].map, "robot-c");
+}
+
+TEST_F(MapSearchTest, BadOptionsAreRefusedNamingTheMap) {
+  PlaceResultOptions options;
+  options.top_k = PlaceResultOptions::kMaxTopK + 1;
+  const std::vector<std::shared_ptr<PlaceMap>> fleet = {robot_a_};
+  const Status refused = SearchMaps(fleet, Revisit(0), std::nullopt, options).status();
+  EXPECT_EQ(refused.code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(refused.message().find("robot-a"), std::string::npos) << refused.ToString();
+}
+
+}  // namespace
+}  // namespace recog
