@@ -194,9 +194,12 @@ Result<pb::AddFrameResponse> RecognitionClient::AddFrame(const std::string& map,
 
 Result<pb::QueryPlaceResponse> RecognitionClient::QueryPlace(
     const std::string& map, const pb::Frame& frame, QueryMode mode,
-    const pb::ResultOptions& result_options, const std::string& request_id) {
+    const pb::ResultOptions& result_options, const std::string& request_id,
+    const SearchSet& search) {
   pb::QueryPlaceRequest request;
   request.set_map(map);
+  for (const std::string& name : search.maps) request.add_search_maps(name);
+  request.set_search_group(search.group);
   *request.mutable_frame() = frame;
   request.set_add_frame(mode == QueryMode::kAddFrame);
   *request.mutable_options() = result_options;

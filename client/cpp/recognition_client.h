@@ -66,6 +66,15 @@ enum class QueryMode {
   kAddFrame,    // run the map's loop detector and keep the frame, as a stream frame does
 };
 
+// Other maps QueryPlace also looks the frame up in: by name, and every map of a group (created
+// with MapSettings.group). Their recognised places come back in the response's inter_map, best
+// first; an unknown map or group is NOT_FOUND naming it. A stream names them in its StreamConfig
+// (search_maps, search_group).
+struct SearchSet {
+  std::vector<std::string> maps = {};  // default: none
+  std::string group = {};              // default "": none
+};
+
 // Which models ListModels returns; empty fields match everything. The initializers let callers
 // name only the fields they set: ListModels({.tag = "kitchen"}).
 struct ModelFilter {
@@ -124,11 +133,13 @@ class RecognitionClient {
   // Looks a frame up in a map (see QueryMode). `result_options` asks for the top-k candidates,
   // and for the fundamental matrix, the relative pose or the inlier correspondences of a verified
   // loop. The matched frame's client_frame_id comes in result().match_client_frame_id().
-  // `request_id` counts with kAddFrame only.
+  // `request_id` counts with kAddFrame only. `search` names other maps to look the frame up in
+  // (SearchSet).
   Result<pb::QueryPlaceResponse> QueryPlace(const std::string& map, const pb::Frame& frame,
                                             QueryMode mode = QueryMode::kRelocalise,
                                             const pb::ResultOptions& result_options = {},
-                                            const std::string& request_id = {});
+                                            const std::string& request_id = {},
+                                            const SearchSet& search = {});
   // Removes frame `frame_id` from a map (keyframe culling); returns {frame_id}. NOT_FOUND for an
   // unknown map or frame.
   Result<std::vector<uint64_t>> RemoveFrame(const std::string& map, uint64_t frame_id,

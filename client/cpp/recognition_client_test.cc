@@ -96,6 +96,29 @@ TEST_F(RecognitionClientTest, AnAddedPlaceIsFoundByARelocalisationQueryThatChang
             grpc::StatusCode::NOT_FOUND);
 }
 
+TEST_F(RecognitionClientTest, AQueryAcrossAGroupFindsThePlaceInAnotherRobotsMap) {
+  auto client = Connect();
+  ASSERT_NE(client, nullptr);
+  pb::MapSettings fleet;
+  fleet.set_group("fleet");
+  ASSERT_TRUE(client->CreateMap("robot-a", fleet).ok());
+  ASSERT_TRUE(client->CreateMap("robot-b", fleet).ok());
+  ASSERT_TRUE(client->AddFrame("robot-a", JpegFrame(CorridorJpeg(1))).ok());
+  Result<pb::QueryPlaceResponse> found = client->QueryPlace(
+      "robot-b", JpegFrame(CorridorJpeg(41)), QueryMode::kAddFrame, {}, {}, {.group = "fleet"});
+  ASSERT_TRUE(found.ok()) << found.status().error_message();
+  ASSERT_EQ(found->inter_map_size(), 1);
+  EXPECT_EQ(found->inter_map(0).map(), "robot-a");
+  EXPECT_EQ(found->inter_map(0).result().match_frame_id(), 0u);
+  const grpc::Status unknown = client
+                                   ->QueryPlace("robot-b", JpegFrame(CorridorJpeg(41)),
+                                                QueryMode::kAddFrame, {}, {}, {.maps = {"robot-z"}})
+                                   .status();
+  EXPECT_EQ(unknown.error_code(), grpc::StatusCode::NOT_FOUND);
+  EXPECT_NE(unknown.error_message().find("robot-z"), std::string::npos);
+  EXPECT_EQ(client->GetMap("robot-b")->frames(), 1u) << "the refused query added nothing";
+}
+
 TEST_F(RecognitionClientTest, MatchesNameTheClientsFrameIdsAndRemovedFramesAreGone) {
   auto client = Connect();
   ASSERT_NE(client, nullptr);

@@ -49,7 +49,8 @@ json MapJson(const pb::MapInfo& map) {
             {"min_inliers", s.min_inliers()},
             {"geometry", EnumLabel(pb::GeometryCheck_Name(s.geometry()), "GEOMETRY_CHECK_")},
             {"recent_seconds", s.recent_seconds()},
-            {"recent_frames", s.recent_frames()}}}};
+            {"recent_frames", s.recent_frames()},
+            {"group", s.group()}}}};
 }
 
 int RunMapsList(const ServerFlags& flags, RecognitionClient& client) {
@@ -127,6 +128,10 @@ void AddMapsCommands(CLI::App& app, int* exit_code) {
           "Detector preset the other settings apply over: default, thesis, or keyframes for a "
           "SLAM's keyframes (the server's settings)")
       ->check(CLI::IsMember({"default", "thesis", "keyframes"}));
+  create->add_option_function<std::string>(
+      "--group", [settings](const std::string& v) { settings->set_group(v); },
+      "Map group (a fleet's maps, a robot's sessions) that queries search together "
+      "(recog stream --search-group)");
   create->add_option_function<double>(
       "--recent-seconds", [settings](const double& v) { settings->set_recent_seconds(v); },
       "Recent frames left out of queries, in seconds, for timestamped frames (20)");

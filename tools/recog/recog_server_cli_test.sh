@@ -85,6 +85,23 @@ expect_error "stream into an unknown map" "NOT_FOUND" "$recog" stream --map corr
 expect_ok "stream the bundled frames" "$recog" stream --map corridor --create --images "$images" \
   --rate 50 -q "${server[@]}"
 grep -q "^4 frames, 0 loops, 0 errors" "$tmp/out" && pass || fail "stream summary: $(cat "$tmp/out")"
+# Two robots of a fleet: robot B's frames are looked up in robot A's map (the corridor above).
+expect_ok "maps create --group" "$recog" maps create robot-b --group fleet --json "${server[@]}"
+json_check "maps create --group keeps the group" "assert d['settings']['group']=='fleet', d"
+expect_ok "stream --search-maps" "$recog" stream --map robot-b --images "$images/41.jpg" \
+  --search-maps corridor --json -q "${server[@]}"
+/usr/bin/python3 -c "
+import json; events=[json.loads(l) for l in open('$tmp/out')]
+found=[e for e in events if e['event']=='inter_map_loop']
+assert [(e['map'], e['match']) for e in found]==[('corridor', 2)], events  # the same image
+assert found[0]['frame_file'].startswith('41.jpg'), found
+assert events[-1]['event']=='summary' and events[-1]['inter_map_loops']==1, events[-1]" \
+  && pass || fail "stream --search-maps reports the inter-map loop: $(cat "$tmp/out")"
+expect_error "stream --search-group of an unknown group" "NOT_FOUND.*'armada'" "$recog" stream \
+  --map robot-b --images "$images/41.jpg" --search-group armada -q "${server[@]}"
+expect_ok "maps stats robot-b" "$recog" maps stats robot-b --json "${server[@]}"
+json_check "the refused stream added nothing" "assert d['frames']==1, d"
+expect_ok "maps delete robot-b" "$recog" maps delete robot-b "${server[@]}"
 expect_ok "query" "$recog" query --map corridor "$images/41.jpg" --json "${server[@]}"
 json_check "query of 41.jpg finds frame 2" \
   "assert d['status']=='loop_detected' and d['match']==2 and d['inliers']>=12 and 'frame' not in d, d"

@@ -120,6 +120,9 @@ struct StreamArgs {
   ServerFlags server;
   std::string map, images, draw;
   std::string preset;  // with create: the new map's detector preset (the server's when empty)
+  std::string group;   // with create: the new map's group
+  std::vector<std::string> search_maps;  // other maps every frame is looked up in
+  std::string search_group;
   double rate = 0;
   uint64_t frames = 0;  // 0: every frame of the sequence
   bool features_on_client = false, create = false, timestamps = false, quiet = false;
@@ -193,12 +196,15 @@ int RunStream(const StreamArgs& args, RecognitionClient& client) {
   config.set_map(args.map);
   config.set_create_if_missing(args.create);
   if (!args.preset.empty()) config.mutable_settings()->set_preset(args.preset);
+  if (!args.group.empty()) config.mutable_settings()->set_group(args.group);
+  for (const std::string& name : args.search_maps) config.add_search_maps(name);
+  config.set_search_group(args.search_group);
   auto stream = client::FrameStream::Open(client, config);
   if (!stream.ok()) return Fail("stream", stream.status());
 
   ProgressBar progress(!args.quiet);
   SentFrames sent;
-  size_t answered = 0, loops = 0, errors = 0;
+  size_t answered = 0, loops = 0, inter_map_loops = 0, errors = 0;
   grpc::Status failure;  // the stream's, once it failed
   // Reports one answer, in order; false once the stream has failed.
   const auto handle = [&](client::FrameStream::Answer answer) {
@@ -219,6 +225,25 @@ int RunStream(const StreamArgs& args, RecognitionClient& client) {
     }
     const pb::LoopResult& r = answer->result();
     if (r.has_frame_id()) sent.sequence_of_id[r.frame_id()] = sequence;
+    for (const pb::InterMapMatch& found : answer->inter_map()) {
+      ++inter_map_loops;
+      const pb::LoopResult& m = found.result();
+      if (args.server.json) {
+        json loop = {{"event", "inter_map_loop"}, {"map", found.map()}};
+        loop.update(LoopJson(m));
+        loop["frame_file"] = sent.names[sequence];
+        std::printf("%s\n", loop.dump().c_str());
+      } else {
+        progress.Finish();
+        std::printf("frame %s was seen in map '%s' as frame %llu%s: %u inliers\n",
+                    sent.names[sequence].c_str(), found.map().c_str(),
+                    static_cast<unsigned long long>(m.match_frame_id()),
+                    m.match_client_frame_id().empty()
+                        ? ""
+                        : (" (" + m.match_client_frame_id() + ")").c_str(),
+                    m.inliers());
+      }
+    }
     if (r.status() != pb::LOOP_STATUS_LOOP_DETECTED || !r.has_match_frame_id()) return true;
     ++loops;
     if (args.server.json) {
@@ -320,13 +345,16 @@ int RunStream(const StreamArgs& args, RecognitionClient& client) {
                               {"map", args.map},
                               {"frames", answered},
                               {"loops", loops},
+                              {"inter_map_loops", inter_map_loops},
                               {"errors", errors},
                               {"seconds", seconds},
                               {"frames_per_second", rate}})
                             .dump()
                             .c_str());
   } else {
-    std::printf("%zu frames, %zu loops, %zu errors in %.2f s (%.1f frames/s)\n", answered, loops,
+    const bool searching = !args.search_maps.empty() || !args.search_group.empty();
+    std::printf("%zu frames, %zu loops, %s%zu errors in %.2f s (%.1f frames/s)\n", answered, loops,
+                searching ? (std::to_string(inter_map_loops) + " inter-map loops, ").c_str() : "",
                 errors, seconds, rate);
   }
   return errors == 0 ? 0 : 1;
@@ -465,6 +493,15 @@ void AddStreamCommands(CLI::App& app, int* exit_code) {
                    "for a SLAM's keyframes)")
       ->check(CLI::IsMember({"default", "thesis", "keyframes"}))
       ->needs("--create");
+  stream
+      ->add_option("--group", stream_args->group,
+                   "With --create: the new map's group (searched together by --search-group)")
+      ->needs("--create");
+  stream->add_option("--search-maps", stream_args->search_maps,
+                     "Other maps every frame is also looked up in (relocalisation; their matches "
+                     "are reported as inter-map loops)");
+  stream->add_option("--search-group", stream_args->search_group,
+                     "Every map of this group is searched too, as --search-maps");
   stream->add_option("--draw", stream_args->draw,
                      "Folder for a PNG per loop (loop_<frame>_<match>.png): both frames side by "
                      "side with the inlier count");
