@@ -434,6 +434,23 @@ TEST_F(PlaceServiceTest, AnUnknownMapOrGroupInTheSearchSetIsNotFoundAndAddsNothi
   const grpc::Status refused = CreateMap("robot-b", bad);
   EXPECT_EQ(refused.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
   EXPECT_NE(refused.error_message().find("group"), std::string::npos) << refused.error_message();
+
+  // More than 100 maps to search is INVALID_ARGUMENT, and adds nothing either.
+  pb::MapSettings crowd;
+  crowd.set_group("crowd");
+  for (int i = 0; i < 101; ++i) ASSERT_TRUE(CreateMap("m" + std::to_string(i), crowd).ok());
+  pb::QueryPlaceRequest query;
+  query.set_map("robot-a");
+  query.set_add_frame(true);
+  query.set_search_group("crowd");
+  *query.mutable_frame() = JpegFrame(CorridorJpeg(1));
+  pb::QueryPlaceResponse response;
+  const grpc::Status crowded = places_->QueryPlace(Context().get(), query, &response);
+  EXPECT_EQ(crowded.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_NE(crowded.error_message().find("at most 100"), std::string::npos)
+      << crowded.error_message();
+  ASSERT_TRUE(GetMap("robot-a", &info).ok());
+  EXPECT_EQ(info.frames(), 0u);
 }
 
 TEST_F(PlaceServiceTest, ASlamGetsItsKeyframeIdsTopCandidatesAndInlierPixelsBack) {
