@@ -210,6 +210,23 @@ Result<pb::QueryPlaceResponse> RecognitionClient::QueryPlace(
   return response;
 }
 
+Result<pb::RelocalizeResponse> RecognitionClient::Relocalize(
+    const std::vector<pb::Frame>& frames, const SearchSet& search,
+    const pb::ResultOptions& result_options, uint32_t max_results) {
+  pb::RelocalizeRequest request;
+  for (const pb::Frame& frame : frames) *request.add_frames() = frame;
+  for (const std::string& name : search.maps) request.add_maps(name);
+  request.set_group(search.group);
+  *request.mutable_options() = result_options;
+  request.set_max_results(max_results);
+  pb::RelocalizeResponse response;
+  const std::string* routed_by = search.maps.empty() ? nullptr : &search.maps.front();
+  const grpc::Status status =
+      places_->Relocalize(UnaryContext(routed_by).get(), request, &response);
+  if (!status.ok()) return status;
+  return response;
+}
+
 Result<std::vector<uint64_t>> RecognitionClient::RemoveFrame(const std::string& map,
                                                              uint64_t frame_id,
                                                              const std::string& request_id) {

@@ -140,6 +140,15 @@ class RecognitionClient {
                                             const pb::ResultOptions& result_options = {},
                                             const std::string& request_id = {},
                                             const SearchSet& search = {});
+  // Relocalisation (a kidnapped robot, the start of a session): looks 1..10 frames (say, the
+  // last few of one camera) up in the maps of `search` and returns the places recognised, one at
+  // most per map, best first (RelocalizeResponse.places; a map recognising more of the frames
+  // first). `max_results` 0 keeps them all. Nothing is added; needs the read right. Through a
+  // router the call goes to the shard of search.maps' first map.
+  Result<pb::RelocalizeResponse> Relocalize(const std::vector<pb::Frame>& frames,
+                                            const SearchSet& search,
+                                            const pb::ResultOptions& result_options = {},
+                                            uint32_t max_results = 0);
   // Removes frame `frame_id` from a map (keyframe culling); returns {frame_id}. NOT_FOUND for an
   // unknown map or frame.
   Result<std::vector<uint64_t>> RemoveFrame(const std::string& map, uint64_t frame_id,

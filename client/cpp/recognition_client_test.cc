@@ -4,6 +4,7 @@
 #include <atomic>
 #include <fstream>
 #include <latch>
+#include <map>
 #include <thread>
 
 #include <opencv2/imgcodecs.hpp>
@@ -117,6 +118,34 @@ TEST_F(RecognitionClientTest, AQueryAcrossAGroupFindsThePlaceInAnotherRobotsMap)
   EXPECT_EQ(unknown.error_code(), grpc::StatusCode::NOT_FOUND);
   EXPECT_NE(unknown.error_message().find("robot-z"), std::string::npos);
   EXPECT_EQ(client->GetMap("robot-b")->frames(), 1u) << "the refused query added nothing";
+}
+
+TEST_F(RecognitionClientTest, RelocalizeFindsTheFramesInTheGroupsMaps) {
+  auto client = Connect();
+  ASSERT_NE(client, nullptr);
+  pb::MapSettings fleet;
+  fleet.set_group("fleet");
+  ASSERT_TRUE(client->CreateMap("robot-a", fleet).ok());
+  ASSERT_TRUE(client->CreateMap("robot-b", fleet).ok());
+  ASSERT_TRUE(client->AddFrame("robot-a", JpegFrame(CorridorJpeg(1))).ok());
+  ASSERT_TRUE(client->AddFrame("robot-b", JpegFrame(CorridorJpeg(60))).ok());
+  const std::vector<pb::Frame> frames = {JpegFrame(CorridorJpeg(41)), JpegFrame(CorridorJpeg(60))};
+  Result<pb::RelocalizeResponse> found = client->Relocalize(frames, {.group = "fleet"});
+  ASSERT_TRUE(found.ok()) << found.status().error_message();
+  std::map<std::string, pb::Relocalization> by_map;
+  for (const pb::Relocalization& place : found->places()) by_map[place.map()] = place;
+  ASSERT_EQ(by_map.size(), 2u) << found->DebugString();
+  EXPECT_EQ(by_map["robot-a"].frame_index(), 0u);
+  EXPECT_EQ(by_map["robot-a"].result().match_frame_id(), 0u);
+  EXPECT_EQ(by_map["robot-b"].frame_index(), 1u);
+  Result<pb::RelocalizeResponse> named = client->Relocalize(frames, {.maps = {"robot-b"}});
+  ASSERT_TRUE(named.ok());
+  ASSERT_EQ(named->places_size(), 1);
+  EXPECT_EQ(named->places(0).map(), "robot-b");
+  const grpc::Status unknown = client->Relocalize(frames, {.maps = {"robot-z"}}).status();
+  EXPECT_EQ(unknown.error_code(), grpc::StatusCode::NOT_FOUND);
+  EXPECT_NE(unknown.error_message().find("robot-z"), std::string::npos);
+  EXPECT_EQ(client->GetMap("robot-a")->frames(), 1u) << "relocalising added nothing";
 }
 
 TEST_F(RecognitionClientTest, MatchesNameTheClientsFrameIdsAndRemovedFramesAreGone) {

@@ -39,4 +39,26 @@ StatusOr<std::vector<MapMatch>> SearchMaps(std::span<const std::shared_ptr<Place
                                            const PlaceResultOptions& options = {},
                                            const FrameGeometry* geometry = nullptr);
 
+// One frame of a relocalisation (Relocalize): its features, and its timestamp and 3D points or
+// intrinsics when it has them (metric checks, as in PlaceMap::Query).
+struct RelocalizationFrame {
+  const FeatureSet* features = nullptr;
+  std::optional<double> timestamp;
+  const FrameGeometry* geometry = nullptr;
+};
+
+struct Relocalization {
+  std::string map;               // the map the place was recognised in
+  size_t frame_index = 0;        // the frame of the request `result` is for (the map's best)
+  size_t frames_recognised = 0;  // how many of the request's frames were recognised in the map
+  PlaceFrameResult result;       // that frame's PlaceMap::Query answer (status kLoopDetected)
+};
+
+// Looks every frame up in every map (SearchMaps) and returns one answer per map that recognised
+// any: the frame with the most inliers (then the highest score, then the earliest frame). Maps
+// come by frames recognised, then as SearchMaps ranks them. Nothing is added to any map.
+StatusOr<std::vector<Relocalization>> Relocalize(std::span<const std::shared_ptr<PlaceMap>> maps,
+                                                 std::span<const RelocalizationFrame> frames,
+                                                 const PlaceResultOptions& options = {});
+
 }  // namespace recog

@@ -100,5 +100,43 @@ TEST_F(MapSearchTest, BadOptionsAreRefusedNamingTheMap) {
   EXPECT_NE(refused.message().find("robot-a"), std::string::npos) << refused.ToString();
 }
 
+// Relocalize over frames at places 3, 0, 1 and a blank one: robot A has seen two of them.
+TEST_F(MapSearchTest, RelocalizationRanksTheMapThatRecognisesMostFramesFirst) {
+  const std::vector<FeatureSet> seen = {Revisit(3), Revisit(0), Revisit(1), FeatureSet()};
+  std::vector<RelocalizationFrame> frames;
+  for (const FeatureSet& f : seen) frames.push_back({&f, std::nullopt, nullptr});
+  const std::vector<std::shared_ptr<PlaceMap>> fleet = {robot_b_, robot_a_};
+  auto found = Relocalize(fleet, frames);
+  ASSERT_TRUE(found.ok()) << found.status().ToString();
+  ASSERT_EQ(found->size(), 2u);
+  const Relocalization& a = (*found)[0];
+  EXPECT_EQ(a.map, "robot-a");
+  EXPECT_EQ(a.frames_recognised, 2u);
+  ASSERT_TRUE(a.frame_index == 1 || a.frame_index == 2) << a.frame_index;
+  // The answer is the frame with more inliers of the two robot A recognised.
+  const size_t other = a.frame_index == 1 ? 2 : 1;
+  auto alone =
+      SearchMaps(std::vector<std::shared_ptr<PlaceMap>>{robot_a_}, seen[other], std::nullopt);
+  ASSERT_TRUE(alone.ok());
+  ASSERT_EQ(alone->size(), 1u);
+  EXPECT_GE(a.result.loop.inliers.size(), alone->front().result.loop.inliers.size());
+  EXPECT_EQ(a.result.loop.match / 4, EntryId(a.frame_index == 1 ? 0 : 1));
+  const Relocalization& b = (*found)[1];
+  EXPECT_EQ(b.map, "robot-b");
+  EXPECT_EQ(b.frames_recognised, 1u);
+  EXPECT_EQ(b.frame_index, 0u);
+  EXPECT_EQ(b.result.loop.match / 4, EntryId(1)) << "place 3 is robot B's second";
+  EXPECT_EQ(robot_a_->frames() + robot_b_->frames(), 16u) << "relocalising adds nothing";
+
+  EXPECT_TRUE(Relocalize(fleet, {}).value().empty());
+  const std::vector<RelocalizationFrame> blank = {frames.back()};
+  EXPECT_TRUE(Relocalize(fleet, blank).value().empty());
+  PlaceResultOptions options;
+  options.top_k = PlaceResultOptions::kMaxTopK + 1;
+  const Status refused = Relocalize(fleet, frames, options).status();
+  EXPECT_EQ(refused.code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(refused.message().find("robot-b"), std::string::npos) << refused.ToString();
+}
+
 }  // namespace
 }  // namespace recog

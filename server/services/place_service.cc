@@ -15,7 +15,8 @@ namespace {
 
 constexpr char kService[] = "/recognition.v1.PlaceRecognition/";
 constexpr size_t kDefaultPageSize = 100, kMaxPageSize = 1000;
-constexpr size_t kMaxSearchMaps = 100;  // maps a query may search besides its own
+constexpr size_t kMaxSearchMaps = 100;    // maps a query may search besides its own
+constexpr int kMaxRelocalizeFrames = 10;  // frames of one Relocalize
 
 using SearchSet = std::vector<std::shared_ptr<PlaceMap>>;
 
@@ -85,7 +86,8 @@ StatusOr<SearchSet> ResolveSearchSet(const ServerState& state, const std::string
   }
   if (maps.size() > kMaxSearchMaps) {
     return Status::InvalidArgument("a query may search at most " + std::to_string(kMaxSearchMaps) +
-                                   " maps besides its own, not " + std::to_string(maps.size()));
+                                   " maps" + (own.empty() ? "" : " besides its own") + ", not " +
+                                   std::to_string(maps.size()));
   }
   return maps;
 }
@@ -111,6 +113,54 @@ StatusOr<PlaceFrameResult> RunMode(PlaceMap& map, FrameMode mode, const FeatureS
   return map.Query(features, timestamp, extras, geometry, frame.excluded_frames);
 }
 
+// A request frame ready for the core: decoded, with its features (the client's, or extracted
+// from its image) and its geometry (3D points from depth or a right image, or only the
+// intrinsics of a pinhole camera) when it has any.
+class PreparedFrame {
+ public:
+  // Decodes `request` for maps of `descriptor`, extracts its features and its 3D points, adding
+  // the time each step took to `timing` (decode_ms, features_ms, recognition_ms for the points).
+  static StatusOr<PreparedFrame> Prepare(WorkerContext& worker, const pb::Frame& request,
+                                         const DescriptorFormat& descriptor, pb::Timing* timing) {
+    PreparedFrame prepared;
+    RECOG_ASSIGN_OR_RETURN(prepared.frame_, DecodeFrame(request, descriptor));
+    const DecodedFrame& frame = prepared.frame_;
+    timing->set_decode_ms(timing->decode_ms() + frame.decode_ms);
+    if (frame.has_image()) {
+      const auto start = Clock::now();
+      RECOG_RETURN_IF_ERROR(worker.ExtractPlaceFeatures(frame.image, &prepared.extracted_));
+      timing->set_features_ms(timing->features_ms() + MsSince(start));
+    }
+    const auto start = Clock::now();
+    if (!frame.depth.empty() || !frame.right.empty()) {
+      prepared.geometry_.emplace();
+      RECOG_RETURN_IF_ERROR(
+          worker.PlaceFrameGeometry(frame, prepared.features(), &*prepared.geometry_));
+    } else if (frame.intrinsics.has_value() &&
+               std::all_of(frame.intrinsics->distortion.begin(), frame.intrinsics->distortion.end(),
+                           [](double d) { return d == 0; })) {  // pinhole keypoints
+      prepared.geometry_.emplace().K = frame.intrinsics->K();
+    }
+    timing->set_recognition_ms(timing->recognition_ms() + MsSince(start));
+    return prepared;
+  }
+
+  const DecodedFrame& frame() const { return frame_; }
+  const FeatureSet& features() const { return frame_.has_image() ? extracted_ : frame_.features; }
+  const FrameGeometry* geometry() const { return geometry_ ? &*geometry_ : nullptr; }
+  // The extras `options` asks for, with the frame's intrinsics (for relative poses).
+  PlaceResultOptions Extras(const pb::ResultOptions& options) const {
+    return FromProto(options, frame_.intrinsics);
+  }
+
+ private:
+  PreparedFrame() = default;
+
+  DecodedFrame frame_;
+  FeatureSet extracted_;  // when the frame carried an image
+  std::optional<FrameGeometry> geometry_;
+};
+
 // Decodes one frame, runs it against the map, looks it up in the `search` maps, and encodes what
 // it did (`inter_map` may be null when `search` is empty). `num_features` reports an added
 // frame's features.
@@ -119,33 +169,15 @@ Status RunPlaceFrame(ServerState& state, WorkerContext& worker, PlaceMap& map, F
                      pb::LoopResult* out, pb::Timing* timing, uint32_t* num_features = nullptr,
                      const SearchSet& search = {},
                      google::protobuf::RepeatedPtrField<pb::InterMapMatch>* inter_map = nullptr) {
-  RECOG_ASSIGN_OR_RETURN(DecodedFrame frame,
-                         DecodeFrame(request, map.vocabulary().info().descriptor));
-  timing->set_decode_ms(frame.decode_ms);
-  FeatureSet extracted;
-  const FeatureSet* features = &frame.features;
-  if (frame.has_image()) {
-    const auto start = Clock::now();
-    RECOG_RETURN_IF_ERROR(worker.ExtractPlaceFeatures(frame.image, &extracted));
-    timing->set_features_ms(MsSince(start));
-    features = &extracted;
-  }
-  if (num_features != nullptr) *num_features = uint32_t(features->size());
+  RECOG_ASSIGN_OR_RETURN(
+      PreparedFrame prepared,
+      PreparedFrame::Prepare(worker, request, map.vocabulary().info().descriptor, timing));
+  const FeatureSet& features = prepared.features();
+  if (num_features != nullptr) *num_features = uint32_t(features.size());
   const auto start = Clock::now();
-  // A frame with depth or a right image gets its 3D points (metric loops); a calibrated frame
-  // without them can still be checked against stored points.
-  std::optional<FrameGeometry> geometry;
-  if (!frame.depth.empty() || !frame.right.empty()) {
-    geometry.emplace();
-    RECOG_RETURN_IF_ERROR(worker.PlaceFrameGeometry(frame, *features, &*geometry));
-  } else if (frame.intrinsics.has_value() &&
-             std::all_of(frame.intrinsics->distortion.begin(), frame.intrinsics->distortion.end(),
-                         [](double d) { return d == 0; })) {  // pinhole keypoints
-    geometry.emplace().K = frame.intrinsics->K();
-  }
-  const PlaceResultOptions extras = FromProto(options, frame.intrinsics);
+  const PlaceResultOptions extras = prepared.Extras(options);
   StatusOr<PlaceFrameResult> result =
-      RunMode(map, mode, *features, frame, extras, geometry ? &*geometry : nullptr);
+      RunMode(map, mode, features, prepared.frame(), extras, prepared.geometry());
   if (!result.ok()) return result.status();
   state.metrics.AddFrames(FrameKind::kPlace);
   if (mode != FrameMode::kAdd && result->loop.status == LoopStatus::kLoopDetected) {
@@ -155,7 +187,7 @@ Status RunPlaceFrame(ServerState& state, WorkerContext& worker, PlaceMap& map, F
   ToProto(result.value(), out);
   if (!search.empty()) {
     StatusOr<std::vector<MapMatch>> matches =
-        SearchMaps(search, *features, frame.timestamp, extras, geometry ? &*geometry : nullptr);
+        SearchMaps(search, features, prepared.frame().timestamp, extras, prepared.geometry());
     if (!matches.ok()) return matches.status();
     for (const MapMatch& match : matches.value()) {
       pb::InterMapMatch* found = inter_map->Add();
@@ -163,7 +195,7 @@ Status RunPlaceFrame(ServerState& state, WorkerContext& worker, PlaceMap& map, F
       ToProto(match.result, found->mutable_result());
     }
   }
-  timing->set_recognition_ms(MsSince(start));
+  timing->set_recognition_ms(timing->recognition_ms() + MsSince(start));
   return Status::Ok();
 }
 
@@ -224,6 +256,49 @@ class PlaceFrameStream final
   FrameMode mode_ = FrameMode::kDetect;
   pb::ResultOptions options_;
 };
+
+// Relocalize: every frame prepared, then looked up in every map of the set (core Relocalize).
+Status RunRelocalize(ServerState& state, WorkerContext& worker,
+                     const pb::RelocalizeRequest& request, pb::RelocalizeResponse* response) {
+  if (request.frames_size() < 1 || request.frames_size() > kMaxRelocalizeFrames) {
+    return Status::InvalidArgument("frames: Relocalize takes 1 to " +
+                                   std::to_string(kMaxRelocalizeFrames) + " frames, not " +
+                                   std::to_string(request.frames_size()));
+  }
+  RECOG_ASSIGN_OR_RETURN(SearchSet maps,
+                         ResolveSearchSet(state, "", request.maps(), request.group()));
+  if (maps.empty()) return Status::InvalidArgument("Relocalize needs maps or a group to search");
+  pb::Timing* timing = response->mutable_timing();
+  std::vector<PreparedFrame> prepared;
+  prepared.reserve(size_t(request.frames_size()));
+  for (int i = 0; i < request.frames_size(); ++i) {
+    StatusOr<PreparedFrame> frame = PreparedFrame::Prepare(
+        worker, request.frames(i), maps.front()->vocabulary().info().descriptor, timing);
+    if (!frame.ok()) return frame.status().WithContext("frames[" + std::to_string(i) + "]");
+    prepared.push_back(std::move(frame).value());
+  }
+  std::vector<RelocalizationFrame> frames;
+  frames.reserve(prepared.size());
+  for (const PreparedFrame& p : prepared) {
+    frames.push_back({&p.features(), p.frame().timestamp, p.geometry()});
+  }
+  const auto start = Clock::now();
+  // Frames of one request share their options; the intrinsics for relative poses are the first's.
+  RECOG_ASSIGN_OR_RETURN(std::vector<Relocalization> found,
+                         Relocalize(maps, frames, prepared.front().Extras(request.options())));
+  timing->set_recognition_ms(timing->recognition_ms() + MsSince(start));
+  state.metrics.AddFrames(FrameKind::kPlace, prepared.size());
+  const size_t limit = request.max_results() == 0 ? found.size() : request.max_results();
+  for (size_t i = 0; i < found.size() && i < limit; ++i) {
+    pb::Relocalization* place = response->add_places();
+    place->set_map(found[i].map);
+    place->set_frame_index(uint32_t(found[i].frame_index));
+    place->set_client_frame_id(request.frames(int(found[i].frame_index)).client_frame_id());
+    place->set_frames_recognised(uint32_t(found[i].frames_recognised));
+    ToProto(found[i].result, place->mutable_result());
+  }
+  return Status::Ok();
+}
 
 }  // namespace
 
@@ -379,6 +454,18 @@ grpc::ServerUnaryReactor* PlaceService::RemoveFrame(grpc::CallbackServerContext*
         state_.metrics.SetMapEntries(place_map.name(), place_map.frames());
         return grpc::Status::OK;
       });
+}
+
+grpc::ServerUnaryReactor* PlaceService::Relocalize(grpc::CallbackServerContext* context,
+                                                   const pb::RelocalizeRequest* request,
+                                                   pb::RelocalizeResponse* response) {
+  return RunUnary(state_, context, Method("Relocalize"), Right::kRead,
+                  [=, this](CallInfo& call, WorkerContext& worker) {
+                    RECOG_RETURN_IF_ERROR_AS_GRPC(RunRelocalize(state_, worker, *request, response),
+                                                  call.request_id);
+                    response->mutable_timing()->set_queue_ms(call.queue_ms);
+                    return grpc::Status::OK;
+                  });
 }
 
 grpc::ServerBidiReactor<pb::StreamFramesRequest, pb::StreamFramesResponse>*

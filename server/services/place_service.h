@@ -3,7 +3,8 @@
 //
 // Each RPC decodes its request, makes one core call (MapRegistry for map management; for a frame
 // PlaceMap::Add for AddFrame, Detect for QueryPlace with add_frame and writing streams, Query for
-// QueryPlace and query-only streams) and encodes the result, updating the metrics. Map management
+// QueryPlace and query-only streams; SearchMaps and Relocalize for the maps a query searches and
+// Relocalize) and encodes the result, updating the metrics. Map management
 // and unary frames run on the worker pool through RunUnary. StreamFrames is one reactor per call
 // (FrameStream in place_service.cc) that reads a frame only after answering the previous one.
 // PlaceMap orders the frames of one map and lets queries run beside them.
@@ -39,6 +40,9 @@ class PlaceService final : public ::recognition::v1::PlaceRecognition::CallbackS
   grpc::ServerUnaryReactor* RemoveFrame(grpc::CallbackServerContext* context,
                                         const ::recognition::v1::RemoveFrameRequest* request,
                                         ::recognition::v1::RemoveFrameResponse* response) override;
+  grpc::ServerUnaryReactor* Relocalize(grpc::CallbackServerContext* context,
+                                       const ::recognition::v1::RelocalizeRequest* request,
+                                       ::recognition::v1::RelocalizeResponse* response) override;
   grpc::ServerBidiReactor<::recognition::v1::StreamFramesRequest,
                           ::recognition::v1::StreamFramesResponse>*
   StreamFrames(grpc::CallbackServerContext* context) override;

@@ -453,6 +453,99 @@ TEST_F(PlaceServiceTest, AnUnknownMapOrGroupInTheSearchSetIsNotFoundAndAddsNothi
   EXPECT_EQ(info.frames(), 0u);
 }
 
+TEST_F(PlaceServiceTest, RelocalizeFindsAFewFramesInTheMapsOfAGroupAndAddsNothing) {
+  pb::MapSettings fleet;
+  fleet.set_group("fleet");
+  ASSERT_TRUE(CreateMap("robot-a", fleet).ok());
+  ASSERT_TRUE(CreateMap("robot-b", fleet).ok());
+  ASSERT_TRUE(CreateMap("elsewhere").ok());
+  pb::AddFrameResponse added;
+  for (int n : {1, 20}) {
+    pb::Frame frame = JpegFrame(CorridorJpeg(n));
+    frame.set_client_frame_id("a-" + std::to_string(n));
+    ASSERT_TRUE(AddFrame("robot-a", frame, &added).ok());
+  }
+  ASSERT_TRUE(AddFrame("robot-b", JpegFrame(CorridorJpeg(60)), &added).ok());
+  ASSERT_TRUE(AddFrame("elsewhere", JpegFrame(CorridorJpeg(1)), &added).ok());
+
+  pb::RelocalizeRequest request;
+  request.set_group("fleet");
+  for (int n : {41, 60}) {
+    pb::Frame* frame = request.add_frames();
+    *frame = JpegFrame(CorridorJpeg(n));
+    frame->set_client_frame_id("q-" + std::to_string(n));
+  }
+  pb::RelocalizeResponse response;
+  ASSERT_TRUE(places_->Relocalize(Context().get(), request, &response).ok());
+  std::map<std::string, pb::Relocalization> by_map;
+  for (const pb::Relocalization& place : response.places()) by_map[place.map()] = place;
+  ASSERT_TRUE(by_map.count("robot-a") && by_map.count("robot-b")) << response.DebugString();
+  EXPECT_FALSE(by_map.count("elsewhere")) << "not in the group";
+  const pb::Relocalization& a = by_map["robot-a"];
+  EXPECT_EQ(a.frame_index(), 0u);
+  EXPECT_EQ(a.client_frame_id(), "q-41");
+  EXPECT_EQ(a.result().status(), pb::LOOP_STATUS_LOOP_DETECTED);
+  EXPECT_EQ(a.result().match_client_frame_id(), "a-1");
+  EXPECT_GE(a.result().inliers(), 12u);
+  const pb::Relocalization& b = by_map["robot-b"];
+  EXPECT_EQ(b.frame_index(), 1u) << "robot B has seen frame 60 only";
+  EXPECT_EQ(b.result().match_frame_id(), 0u);
+  for (int i = 1; i < response.places_size(); ++i) {  // best first
+    const pb::Relocalization &before = response.places(i - 1), &after = response.places(i);
+    EXPECT_TRUE(before.frames_recognised() > after.frames_recognised() ||
+                (before.frames_recognised() == after.frames_recognised() &&
+                 before.result().inliers() >= after.result().inliers()));
+  }
+  EXPECT_GT(response.timing().features_ms(), 0);
+
+  // A map named besides the group joins the set; max_results keeps the best.
+  request.add_maps("elsewhere");
+  request.set_max_results(1);
+  pb::RelocalizeResponse best;
+  ASSERT_TRUE(places_->Relocalize(Context().get(), request, &best).ok());
+  ASSERT_EQ(best.places_size(), 1);
+  request.set_max_results(0);
+  pb::RelocalizeResponse all;
+  ASSERT_TRUE(places_->Relocalize(Context().get(), request, &all).ok());
+  EXPECT_EQ(all.places_size(), response.places_size() + 1) << "'elsewhere' has seen frame 41";
+  EXPECT_EQ(best.places(0).map(), all.places(0).map());
+  for (const auto& [name, frames] :
+       {std::pair{"robot-a", 2u}, {"robot-b", 1u}, {"elsewhere", 1u}}) {
+    pb::MapInfo info;
+    ASSERT_TRUE(GetMap(name, &info).ok());
+    EXPECT_EQ(info.frames(), frames) << name << ": relocalising adds nothing";
+  }
+}
+
+TEST_F(PlaceServiceTest, ARelocalizeWithoutFramesOrMapsOrWithABadFrameIsRefusedNamingIt) {
+  ASSERT_TRUE(CreateMap("robot-a").ok());
+  const auto relocalize = [&](const std::vector<pb::Frame>& frames,
+                              const std::vector<std::string>& maps, const std::string& group) {
+    pb::RelocalizeRequest request;
+    for (const pb::Frame& f : frames) *request.add_frames() = f;
+    for (const std::string& m : maps) request.add_maps(m);
+    request.set_group(group);
+    pb::RelocalizeResponse response;
+    return places_->Relocalize(Context().get(), request, &response);
+  };
+  const pb::Frame frame = JpegFrame(CorridorJpeg(1));
+  const pb::Frame broken = JpegFrame("\xff\xd8 this is not a JPEG");
+  for (const auto& [status, code, named] : {
+           std::tuple{relocalize({}, {"robot-a"}, ""), grpc::StatusCode::INVALID_ARGUMENT,
+                      "frames"},
+           {relocalize(std::vector<pb::Frame>(11, frame), {"robot-a"}, ""),
+            grpc::StatusCode::INVALID_ARGUMENT, "not 11"},
+           {relocalize({frame}, {}, ""), grpc::StatusCode::INVALID_ARGUMENT, "maps or a group"},
+           {relocalize({frame}, {"robot-a", "ghost"}, ""), grpc::StatusCode::NOT_FOUND, "'ghost'"},
+           {relocalize({frame}, {}, "no-fleet"), grpc::StatusCode::NOT_FOUND, "'no-fleet'"},
+           {relocalize({frame, broken}, {"robot-a"}, ""), grpc::StatusCode::INVALID_ARGUMENT,
+            "frames[1]"},
+       }) {
+    EXPECT_EQ(status.error_code(), code) << named << ": " << status.error_message();
+    EXPECT_NE(status.error_message().find(named), std::string::npos) << status.error_message();
+  }
+}
+
 TEST_F(PlaceServiceTest, ASlamGetsItsKeyframeIdsTopCandidatesAndInlierPixelsBack) {
   ASSERT_TRUE(CreateMap("slam").ok());
   std::map<int, pb::Frame> frames;

@@ -112,6 +112,12 @@ class TcpProxy {
     }
   }
 
+  // A write that fails with EPIPE instead of raising SIGPIPE when the peer (or the other pump of
+  // the same connection) has already shut the socket down.
+  static ssize_t Send(int socket, const char* bytes, size_t size) {
+    return send(socket, bytes, size, MSG_NOSIGNAL);
+  }
+
   // Copies from the client to the server until either side closes (or the connection is cut).
   static void PumpRequests(Connection* c) {
     const int from = c->client, to = c->server;
@@ -122,14 +128,14 @@ class TcpProxy {
       if (c->cut_after > 0) {
         const uint64_t room = c->cut_after - c->sent_upstream.load();
         if (uint64_t(n) >= room) {
-          if (room > 0) (void)!write(to, buffer, size_t(room));
+          if (room > 0) (void)!Send(to, buffer, size_t(room));
           c->sent_upstream += room;
           std::this_thread::sleep_for(kStallBeforeCut);
           break;
         }
       }
       for (ssize_t at = 0; at < n;) {
-        const ssize_t w = write(to, buffer + at, size_t(n - at));
+        const ssize_t w = Send(to, buffer + at, size_t(n - at));
         if (w <= 0) goto done;
         at += w;
       }
@@ -161,7 +167,7 @@ class TcpProxy {
           goto done;
         }
         for (size_t w = 0; w < 9 + length;) {
-          const ssize_t written = write(c->client, pending.data() + at + w, 9 + length - w);
+          const ssize_t written = Send(c->client, pending.data() + at + w, 9 + length - w);
           if (written <= 0) goto done;
           w += size_t(written);
         }

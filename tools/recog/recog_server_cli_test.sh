@@ -99,6 +99,19 @@ assert events[-1]['event']=='summary' and events[-1]['inter_map_loops']==1, even
   && pass || fail "stream --search-maps reports the inter-map loop: $(cat "$tmp/out")"
 expect_error "stream --search-group of an unknown group" "NOT_FOUND.*'armada'" "$recog" stream \
   --map robot-b --images "$images/41.jpg" --search-group armada -q "${server[@]}"
+# A robot that lost itself relocalises from two images in the fleet's maps.
+expect_ok "relocalize" "$recog" relocalize "$images/41.jpg" "$images/60.jpg" --maps corridor \
+  --group fleet "${server[@]}"
+grep -q "^map 'corridor': .* is frame [23], .* inliers .*; 2 of 2 images recognised" "$tmp/out" \
+  && pass || fail "relocalize names the map and counts the images: $(cat "$tmp/out")"
+expect_ok "relocalize --json" "$recog" relocalize "$images/41.jpg" --maps corridor --json \
+  "${server[@]}"
+json_check "relocalize --json finds 41.jpg as frame 2" \
+  "p=d['places']; assert len(p)==1 and p[0]['map']=='corridor' and p[0]['result']['match']==2 and p[0]['frames_recognised']==1, d"
+expect_error "relocalize in an unknown group" "NOT_FOUND.*'armada'" "$recog" relocalize \
+  "$images/41.jpg" --group armada "${server[@]}"
+expect_error "relocalize without maps" "INVALID_ARGUMENT.*maps or a group" "$recog" relocalize \
+  "$images/41.jpg" "${server[@]}"
 expect_ok "maps stats robot-b" "$recog" maps stats robot-b --json "${server[@]}"
 json_check "the refused stream added nothing" "assert d['frames']==1, d"
 expect_ok "maps delete robot-b" "$recog" maps delete robot-b "${server[@]}"

@@ -1,9 +1,11 @@
-// recog stream and recog query: frames into a map of recogd, over the C++ client library. Both
-// take the ServerFlags; a failed call prints one line "recog <cmd>: CODE: message" and exits 1.
+// recog stream, recog query and recog relocalize: frames into (or looked up in) maps of recogd,
+// over the C++ client library. All take the ServerFlags; a failed call prints one line
+// "recog <cmd>: CODE: message" and exits 1.
 //
-//   stream   a recorded sequence (folder, list or video) through one StreamFrames call, printing
-//            every loop closure as it is answered
-//   query    one QueryPlace: relocalisation, or the loop detector's step with --add
+//   stream      a recorded sequence (folder, list or video) through one StreamFrames call,
+//               printing every loop closure as it is answered
+//   query       one QueryPlace: relocalisation, or the loop detector's step with --add
+//   relocalize  one Relocalize: a few images looked up in maps or a group, nothing added
 #include <chrono>
 #include <csignal>
 #include <cstdio>
@@ -456,6 +458,67 @@ int RunQuery(const QueryArgs& args, RecognitionClient& client) {
   return 0;
 }
 
+// ---- recog relocalize ----
+
+struct RelocalizeArgs {
+  ServerFlags server;
+  std::vector<std::string> images, maps;
+  std::string group, camera;
+  uint32_t max_results = 0;
+};
+
+int RunRelocalize(const RelocalizeArgs& args, RecognitionClient& client) {
+  std::vector<pb::Frame> frames;
+  for (const std::string& image : args.images) {
+    auto gray = ReadGrayImage(image);
+    if (!gray.ok()) return Fail("relocalize", gray.status());
+    auto frame = FrameFromImageFile(image, *gray);
+    if (!frame.ok()) return Fail("relocalize", frame.status());
+    frame->set_client_frame_id(fs::path(image).filename().string());
+    frames.push_back(std::move(frame).value());
+  }
+  pb::ResultOptions options;
+  if (!args.camera.empty()) {
+    auto camera = ParseCamera(args.camera);
+    if (!camera.ok()) return Fail("relocalize", camera.status());
+    for (pb::Frame& frame : frames) SetIntrinsics(*camera, &frame);
+    options.set_include_relative_pose(true);
+  }
+  auto answer = client.Relocalize(frames, {.maps = args.maps, .group = args.group}, options,
+                                  args.max_results);
+  if (!answer.ok()) return Fail("relocalize", answer.status());
+  if (args.server.json) {
+    json places = json::array();
+    for (const pb::Relocalization& place : answer->places()) {
+      places.push_back({{"map", place.map()},
+                        {"image", args.images[place.frame_index()]},
+                        {"frame_index", place.frame_index()},
+                        {"frames_recognised", place.frames_recognised()},
+                        {"result", LoopJson(place.result())}});
+    }
+    std::printf("%s\n", json({{"frames", frames.size()},
+                              {"places", std::move(places)},
+                              {"timing_ms", TimingJson(answer->timing())}})
+                            .dump(2)
+                            .c_str());
+    return 0;
+  }
+  if (answer->places_size() == 0) {
+    std::printf("no map recognised %s\n", frames.size() == 1 ? "the image" : "any of the images");
+  }
+  for (const pb::Relocalization& place : answer->places()) {
+    const pb::LoopResult& r = place.result();
+    std::printf(
+        "map '%s': %s is frame %llu%s%s%s, %u inliers (score %.3f); %u of %zu images "
+        "recognised\n",
+        place.map().c_str(), place.client_frame_id().c_str(),
+        (unsigned long long)r.match_frame_id(), r.match_client_frame_id().empty() ? "" : " (",
+        r.match_client_frame_id().c_str(), r.match_client_frame_id().empty() ? "" : ")",
+        r.inliers(), r.score(), place.frames_recognised(), frames.size());
+  }
+  return 0;
+}
+
 }  // namespace
 
 void AddStreamCommands(CLI::App& app, int* exit_code) {
@@ -547,6 +610,34 @@ void AddStreamCommands(CLI::App& app, int* exit_code) {
                   "frames");
   ConnectCommand(query, &query_args->server, exit_code,
                  [query_args](RecognitionClient& client) { return RunQuery(*query_args, client); });
+
+  auto relocalize_args = std::make_shared<RelocalizeArgs>();
+  CLI::App* relocalize = app.add_subcommand(
+      "relocalize",
+      "Find where one image, or a few consecutive ones, was seen: in maps or a map group of "
+      "recogd (nothing is added)");
+  relocalize->footer(
+      "Each image is looked up in every map with no temporal consistency to wait for (as "
+      "`recog query` without --add). One line per map that recognised any image, best first: a "
+      "map that recognised more of the images first, each with its best image's match. Finding "
+      "nothing is not an error (exit status 0). --json prints {\"places\": [...]} with each "
+      "map's loop result.");
+  relocalize->add_option("images", relocalize_args->images, "1 to 10 image files")->required();
+  relocalize
+      ->add_option("--maps", relocalize_args->maps, "Maps to search, by name (A,B or repeated)")
+      ->delimiter(',')
+      ->allow_extra_args(false);
+  relocalize->add_option("--group", relocalize_args->group, "Search every map of this group");
+  relocalize
+      ->add_option("--max-results", relocalize_args->max_results,
+                   "Report the best N maps only (0: every map that recognised an image)")
+      ->capture_default_str();
+  relocalize->add_option("--camera", relocalize_args->camera,
+                         "fx,fy,cx,cy[,k1,k2,p1,p2[,k3]]: also report the relative pose");
+  ConnectCommand(relocalize, &relocalize_args->server, exit_code,
+                 [relocalize_args](RecognitionClient& client) {
+                   return RunRelocalize(*relocalize_args, client);
+                 });
 }
 
 }  // namespace recog::cli

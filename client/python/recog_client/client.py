@@ -363,6 +363,26 @@ class RecognitionClient:
             search_group=search_group)
         return self._unary(self._places.QueryPlace, request, map_name)
 
+    def relocalize(self, images: Iterable[Image], maps: Iterable[str] = (), group: str = "",
+                   result_options: place_pb2.ResultOptions | Mapping | None = None,
+                   max_results: int = 0) -> place_pb2.RelocalizeResponse:
+        """Relocalisation (a kidnapped robot, the start of a session): looks 1 to 10 frames up.
+
+        ``images`` (anything :meth:`query_place` takes, e.g. the last few frames of one camera)
+        are looked up in ``maps`` (names) and every map of ``group``, with no temporal
+        consistency to wait for and nothing added. ``response.places`` lists the places
+        recognised, one at most per map, best first: a map that recognised more of the frames
+        (``frames_recognised``) first; each names the frame it is for (``frame_index``,
+        ``client_frame_id``) and carries that frame's ``result``. ``max_results`` keeps the best
+        few (0: all). ``NotFound`` naming an unknown map or group; ``InvalidArgument`` without
+        maps, with no frame or more than 10, or naming a bad frame (``frames[i]``).
+        """
+        maps = list(maps)
+        request = place_pb2.RelocalizeRequest(
+            frames=[as_frame(image) for image in images], maps=maps, group=group,
+            options=_result_options(result_options), max_results=max_results)
+        return self._unary(self._places.Relocalize, request, maps[0] if maps else None)
+
     def remove_frame(self, map_name: str, frame_id: int | None = None,
                      client_frame_id: str | None = None, *, request_id: str | None = None
                      ) -> list[int]:

@@ -253,6 +253,29 @@ class RecognitionClientTest(unittest.TestCase):
         self.assertIn("robot-z", str(unknown.exception))
         self.assertEqual(self.client.get_map("robot-b").frames, 2)  # the refused frame was not added
 
+    def test_a_kidnapped_robot_relocalizes_in_its_group_from_a_few_frames(self):
+        for robot in ("lost-a", "lost-b"):
+            self.client.create_map(robot, {"group": "lost"})
+        self.client.add_frame("lost-a", corridor(1), client_frame_id="a-1")
+        self.client.add_frame("lost-b", corridor(60))
+        frames = [make_frame(corridor(41), client_frame_id="q-41"), corridor(60)]
+        answer = self.client.relocalize(frames, group="lost")
+        places = {place.map: place for place in answer.places}
+        self.assertEqual(set(places), {"lost-a", "lost-b"})
+        a = places["lost-a"]
+        self.assertEqual((a.frame_index, a.client_frame_id), (0, "q-41"))
+        self.assertEqual(a.result.match_client_frame_id, "a-1")
+        self.assertEqual(a.result.status, place_pb2.LOOP_STATUS_LOOP_DETECTED)
+        self.assertEqual(places["lost-b"].frame_index, 1)  # lost-b has seen frame 60 only
+        best = self.client.relocalize(frames, group="lost", max_results=1).places
+        self.assertEqual([p.map for p in best], [answer.places[0].map])
+        with self.assertRaises(NotFound) as unknown:
+            self.client.relocalize(frames, maps=["robot-z"])
+        self.assertIn("robot-z", str(unknown.exception))
+        with self.assertRaises(InvalidArgument):
+            self.client.relocalize([], maps=["lost-a"])
+        self.assertEqual(self.client.get_map("lost-a").frames, 1)  # nothing was added
+
     def test_frames_from_numpy_arrays_and_from_client_side_features_find_the_place(self):
         self.client.create_map("arrays")
         for n in (1, 20, 41, 60):
