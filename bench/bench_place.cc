@@ -10,6 +10,9 @@
 //   Table42       correspondences through the direct index at levels 0-3 against exhaustive
 //                 matching (thesis Table 4.2): recall and verification time on a seqgen tour of
 //                 200 distinct places, 10 frames a visit, 50 % revisits.
+//   Relocalize_Group10x2600_vs_One26K  a relocalisation (core Relocalize, one frame) in a group
+//                 of 10 maps of 2,600 frames each against the same 26,000 frames in one map:
+//                 median ms of each and their ratio (see RelocalisationFleet).
 // Needs the shared Caltech photos (falls back to the 4 bundled frames, which gives a degenerate
 // tour). Long: about 40 minutes in all on 2 cores (the distinct-place filter of the 4,400-photo
 // tour takes most of it). Run: build/bin/bench_place [--benchmark_filter=...]
@@ -19,12 +22,17 @@
 #include <chrono>
 #include <filesystem>
 #include <iterator>
+#include <numeric>
 #include <optional>
+#include <random>
+#include <span>
 #include <thread>
 
 #include "bench/bench_support.h"
 #include "core/geometry/frame_points.h"
 #include "core/index/memory_index_store.h"
+#include "core/place/map_registry.h"
+#include "core/place/map_search.h"
 #include "tests/testing/data_paths.h"
 #include "tools/common/cli_support.h"
 #include "tools/evaluation/place_evaluation.h"
@@ -229,6 +237,147 @@ void BM_Table42(benchmark::State& state) {
   state.counters["query_frames_with_truth"] = truth.QueriesWithMatches();
 }
 BENCHMARK(BM_Table42)->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
+
+// A random 60-100 % of `all`'s features (another view of the same place, for a cost benchmark).
+FeatureSet FeatureSubset(const FeatureSet& all, std::mt19937_64& rng) {
+  std::vector<int> rows(all.size());
+  std::iota(rows.begin(), rows.end(), 0);
+  std::shuffle(rows.begin(), rows.end(), rng);
+  rows.resize(size_t(double(rows.size()) * std::uniform_real_distribution<double>(0.6, 1.0)(rng)));
+  FeatureSet subset;
+  for (int r : rows) {
+    subset.keypoints.push_back(all.keypoints[size_t(r)]);
+    subset.descriptors.push_back(all.descriptors.row(r));
+  }
+  return subset;
+}
+
+// A fleet's 26,000 frames twice over: as 10 maps of 2,600 frames (one group: each robot has seen
+// its own tenth of the shared Caltech photos, every photo about five times as 60-100 % subsets of
+// its features) and as one map of the same 26,000 frames. The queries are 200 fresh subsets of
+// photos drawn at random: each place is in exactly one map of the group, and in the one map.
+struct RelocalisationFleet {
+  MemoryIndexStore store;
+  std::unique_ptr<MapRegistry> registry;
+  std::vector<std::shared_ptr<PlaceMap>> group, one;
+  std::vector<FeatureSet> queries;
+  std::vector<size_t> query_map;  // the group's map that has the query's place
+};
+
+const RelocalisationFleet& GetRelocalisationFleet() {
+  static RelocalisationFleet* fleet = [] {
+    constexpr size_t kMaps = 10, kFramesPerMap = 2600, kQueries = 200;
+    auto* f = new RelocalisationFleet;
+    std::vector<FeatureSet> photos;
+    {
+      cli::SequenceOptions unused;
+      auto extractor = std::move(CreateFeatureExtractor(PlaceFeatureOptions())).value();
+      FeatureSet features;
+      for (const std::string& file : TourPhotos(&unused)) {
+        auto image = ReadGrayImage(file);
+        if (image.ok() && extractor->Extract(*image, &features).ok() && features.size() >= 50) {
+          photos.push_back(features);
+        }
+      }
+    }
+    std::fprintf(stderr, "bench_place: features of %zu photos\n", photos.size());
+    auto vocabulary = std::make_shared<const Vocabulary>(LoadBundledPlaceVocabulary());
+    f->registry = std::move(MapRegistry::Open(&f->store, vocabulary)).value();
+    f->one.push_back(std::move(f->registry->Create("one", {})).value());
+    std::mt19937_64 rng(26);
+    const size_t per_map = std::max<size_t>(1, photos.size() / kMaps);
+    for (size_t m = 0; m < kMaps; ++m) {
+      auto map = std::move(f->registry->Create("robot-" + std::to_string(m), {}, "fleet")).value();
+      for (size_t i = 0; i < kFramesPerMap; ++i) {
+        const FeatureSet frame =
+            FeatureSubset(photos[(m * per_map + i % per_map) % photos.size()], rng);
+        if (!map->Add(frame, std::nullopt).ok() || !f->one[0]->Add(frame, std::nullopt).ok()) {
+          std::exit(2);
+        }
+      }
+      f->group.push_back(std::move(map));
+      std::fprintf(stderr, "bench_place: %zu / %zu maps\n", m + 1, kMaps);
+    }
+    for (size_t q = 0; q < kQueries; ++q) {
+      const size_t m = rng() % kMaps, photo = m * per_map + rng() % per_map;
+      f->queries.push_back(FeatureSubset(photos[photo % photos.size()], rng));
+      f->query_map.push_back(m);
+    }
+    return f;
+  }();
+  return *fleet;
+}
+
+void BM_Relocalize_Group10x2600_vs_One26K(benchmark::State& state) {
+  const RelocalisationFleet& fleet = GetRelocalisationFleet();
+  std::vector<double> group_ms, one_ms;
+  int group_found = 0, one_found = 0;
+  const auto timed = [](std::span<const std::shared_ptr<PlaceMap>> maps, const FeatureSet& frame,
+                        std::vector<double>* ms) {
+    const RelocalizationFrame query{&frame, std::nullopt, nullptr};
+    const auto start = std::chrono::steady_clock::now();
+    auto found = Relocalize(maps, std::span(&query, 1));
+    ms->push_back(
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
+            .count());
+    if (!found.ok()) std::exit(2);
+    return std::move(found).value();
+  };
+  for (auto _ : state) {
+    for (size_t q = 0; q < fleet.queries.size(); ++q) {  // alternating, to share the noise
+      const auto in_group = timed(fleet.group, fleet.queries[q], &group_ms);
+      group_found +=
+          !in_group.empty() && in_group.front().map == fleet.group[fleet.query_map[q]]->name();
+      one_found += !timed(fleet.one, fleet.queries[q], &one_ms).empty();
+    }
+  }
+  // Where a group query's time goes: SearchMaps' steps, timed one by one.
+  std::vector<double> convert_ms, shortlist_ms, one_shortlist_ms, recognise_ms, verified_maps;
+  for (const FeatureSet& query : fleet.queries) {
+    const auto since = [](auto start) {
+      return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
+          .count();
+    };
+    LoopDetector::ConvertedFrame frame;
+    auto start = std::chrono::steady_clock::now();
+    if (!fleet.group[0]->ConvertForQuery(query, &frame).ok()) std::exit(2);
+    convert_ms.push_back(since(start));
+    start = std::chrono::steady_clock::now();
+    std::vector<LoopDetector::Shortlist> shortlists;
+    double reference = 0;
+    for (const auto& map : fleet.group) {
+      shortlists.push_back(std::move(map->Shortlist(frame)).value());
+      reference = std::max(reference, shortlists.back().best_score);
+    }
+    shortlist_ms.push_back(since(start));
+    start = std::chrono::steady_clock::now();
+    if (!fleet.one[0]->Shortlist(frame).ok()) std::exit(2);
+    one_shortlist_ms.push_back(since(start));
+    start = std::chrono::steady_clock::now();
+    int verified = 0;
+    for (size_t m = 0; m < fleet.group.size(); ++m) {
+      auto r = fleet.group[m]->Recognise(query, frame, shortlists[m], reference);
+      verified += r.ok() && r->loop.timings.verification > 0;
+    }
+    recognise_ms.push_back(since(start));
+    verified_maps.push_back(verified);
+  }
+  state.counters["group_conversion_median_ms"] = cli::Median(convert_ms);
+  state.counters["group_shortlists_median_ms"] = cli::Median(shortlist_ms);
+  state.counters["group_recognise_median_ms"] = cli::Median(recognise_ms);
+  state.counters["one_map_shortlist_median_ms"] = cli::Median(one_shortlist_ms);
+  state.counters["group_verified_maps_median"] = cli::Median(verified_maps);
+  state.counters["group_median_ms"] = cli::Median(group_ms);
+  state.counters["one_map_median_ms"] = cli::Median(one_ms);
+  state.counters["ratio"] = cli::Median(group_ms) / cli::Median(one_ms);
+  state.counters["queries"] = double(fleet.queries.size());
+  state.counters["group_right_map_first"] = group_found;
+  state.counters["one_map_recognised"] = one_found;
+}
+BENCHMARK(BM_Relocalize_Group10x2600_vs_One26K)
+    ->Unit(benchmark::kSecond)
+    ->Iterations(1)
+    ->UseRealTime();
 
 }  // namespace
 }  // namespace recog::bench

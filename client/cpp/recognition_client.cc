@@ -220,9 +220,13 @@ Result<pb::RelocalizeResponse> RecognitionClient::Relocalize(
   *request.mutable_options() = result_options;
   request.set_max_results(max_results);
   pb::RelocalizeResponse response;
-  const std::string* routed_by = search.maps.empty() ? nullptr : &search.maps.front();
-  const grpc::Status status =
-      places_->Relocalize(UnaryContext(routed_by).get(), request, &response);
+  // A router sends the call to the shard of its first map, or of its group (`group:NAME` in the
+  // placement table).
+  const std::string routed_by = !search.maps.empty()   ? search.maps.front()
+                                : search.group.empty() ? std::string()
+                                                       : "group:" + search.group;
+  const grpc::Status status = places_->Relocalize(
+      UnaryContext(routed_by.empty() ? nullptr : &routed_by).get(), request, &response);
   if (!status.ok()) return status;
   return response;
 }

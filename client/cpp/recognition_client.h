@@ -144,7 +144,7 @@ class RecognitionClient {
   // last few of one camera) up in the maps of `search` and returns the places recognised, one at
   // most per map, best first (RelocalizeResponse.places; a map recognising more of the frames
   // first). `max_results` 0 keeps them all. Nothing is added; needs the read right. Through a
-  // router the call goes to the shard of search.maps' first map.
+  // router the call goes to the shard of search.maps' first map, or else of search.group.
   Result<pb::RelocalizeResponse> Relocalize(const std::vector<pb::Frame>& frames,
                                             const SearchSet& search,
                                             const pb::ResultOptions& result_options = {},

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <bit>
 #include <cmath>
+#include <span>
 #include <thread>
 
 namespace recog {
@@ -245,7 +246,18 @@ void Database::ScoreEntries(const BowVector& query, EntryId bound,
   const uint32_t generation = scratch.generation;
   double* score = scratch.score.data();
   uint32_t* stamp = scratch.stamp.data();
-  for (const BowEntry& q : query.entries()) {
+  // Each word's posting list is a cache miss away (its vector, then its first postings), which
+  // costs more than scoring a short list: the lists of the words a few steps ahead are fetched
+  // meanwhile. (Measured by bench_place Relocalize_Group10x2600_vs_One26K, whose small maps have
+  // short lists.)
+  const std::span<const BowEntry> words = query.entries();
+  constexpr size_t kListsAhead = 4, kVectorsAhead = 8;
+  for (size_t i = 0; i < words.size(); ++i) {
+    if (i + kVectorsAhead < words.size())
+      __builtin_prefetch(&postings_[words[i + kVectorsAhead].word]);
+    if (i + kListsAhead < words.size())
+      __builtin_prefetch(postings_[words[i + kListsAhead].word].data());
+    const BowEntry& q = words[i];
     if (q.value <= 0.f) continue;
     const double v = q.value;
     for (const Posting& p : postings_[q.word]) {

@@ -442,28 +442,47 @@ StatusOr<LoopResult> LoopDetector::Query(const FeatureSet& features,
                                          const FrameGeometry* geometry,
                                          std::span<const EntryId> excluded) const {
   RECOG_RETURN_IF_ERROR(CheckGeometry(features, geometry));
-  LoopResult result;
+  ConvertedFrame frame;
+  RECOG_RETURN_IF_ERROR(ConvertForQuery(features, &frame));
+  RECOG_ASSIGN_OR_RETURN(const Shortlist shortlist, ShortlistFor(frame, excluded));
+  return Recognise(features, frame, shortlist, shortlist.best_score, geometry);
+}
 
-  auto start = Clock::now();
-  BowVector bow;
-  FeatureVector direct;
-  RECOG_RETURN_IF_ERROR(Convert(features, &bow, &direct));
-  result.timings.conversion = MsSince(start);
+Status LoopDetector::ConvertForQuery(const FeatureSet& features, ConvertedFrame* frame) const {
+  const auto start = Clock::now();
+  RECOG_RETURN_IF_ERROR(Convert(features, &frame->bow, &frame->direct));
+  frame->conversion_ms = MsSince(start);
+  return Status::Ok();
+}
+
+StatusOr<LoopDetector::Shortlist> LoopDetector::ShortlistFor(
+    const ConvertedFrame& frame, std::span<const EntryId> excluded) const {
+  Shortlist shortlist;
+  const auto start = Clock::now();
+  // The whole map, without tau_c: entry_ids_/entry_timestamps_ belong to Process and Add.
+  // (Not query_results_: Process may be using it.)
+  RECOG_RETURN_IF_ERROR(QueryDatabase(frame.bow, kInvalidEntryId, excluded, &shortlist.results));
+  shortlist.best_score = BestScore(shortlist.results);
+  shortlist.query_ms = MsSince(start);
+  return shortlist;
+}
+
+StatusOr<LoopResult> LoopDetector::Recognise(const FeatureSet& features,
+                                             const ConvertedFrame& frame,
+                                             const Shortlist& shortlist, double reference_score,
+                                             const FrameGeometry* geometry) const {
+  RECOG_RETURN_IF_ERROR(CheckGeometry(features, geometry));
+  LoopResult result;
+  result.timings.conversion = frame.conversion_ms;
   if (!HasEnoughFeatures(features)) {
     result.status = LoopStatus::kTooFewFeatures;
     return result;
   }
+  result.timings.query = shortlist.query_ms;
 
-  start = Clock::now();
-  std::vector<QueryResult> results;  // not query_results_: Process may be using it
-  // The whole map, without tau_c: entry_ids_/entry_timestamps_ belong to Process and Add.
-  RECOG_RETURN_IF_ERROR(QueryDatabase(bow, kInvalidEntryId, excluded, &results));
-  result.timings.query = MsSince(start);
-
-  start = Clock::now();
-  const double best_score = BestScore(results);
-  result.candidates = Candidates(results, best_score);
-  const bool found = FindBestIsland(results, best_score, &result);
+  const auto start = Clock::now();
+  result.candidates = Candidates(shortlist.results, reference_score);
+  const bool found = FindBestIsland(shortlist.results, reference_score, &result);
   if (found) result.status = LoopStatus::kLoopDetected;
   result.timings.islands = MsSince(start);
 
@@ -472,7 +491,7 @@ StatusOr<LoopResult> LoopDetector::Query(const FeatureSet& features,
     EpipolarOptions epipolar = params_.epipolar;
     epipolar.min_inliers =
         std::max<size_t>(epipolar.min_inliers, params_.relocalisation_min_inliers);
-    RECOG_RETURN_IF_ERROR(Verify(features, direct, epipolar, &result));
+    RECOG_RETURN_IF_ERROR(Verify(features, frame.direct, epipolar, &result));
     if (result.status == LoopStatus::kLoopDetected) {
       result.acceptance = LoopAcceptance::kRelocalisation;
     }

@@ -310,6 +310,29 @@ class LoopDetector {
                              const FrameGeometry* geometry = nullptr,
                              std::span<const EntryId> excluded = {}) const;
 
+  // Query in three steps, for a frame looked up in several maps of one vocabulary at once
+  // (SearchMaps): ConvertForQuery once for all the maps, Shortlist in each, then Recognise in
+  // each with `reference_score` the best score over all of them. Scores are then normalised as
+  // if the maps were one: a map whose candidates all score under alpha times the best map's is
+  // not verified (kLowScore). Query is the three steps with the map's own best score. Thread
+  // safety as Query.
+  struct ConvertedFrame {
+    BowVector bow;
+    FeatureVector direct;
+    double conversion_ms = 0;
+  };
+  struct Shortlist {
+    std::vector<QueryResult> results;  // the map's best max_query_results entries
+    double best_score = 0;
+    double query_ms = 0;
+  };
+  Status ConvertForQuery(const FeatureSet& features, ConvertedFrame* frame) const;
+  StatusOr<Shortlist> ShortlistFor(const ConvertedFrame& frame,
+                                   std::span<const EntryId> excluded = {}) const;
+  StatusOr<LoopResult> Recognise(const FeatureSet& features, const ConvertedFrame& frame,
+                                 const Shortlist& shortlist, double reference_score,
+                                 const FrameGeometry* geometry = nullptr) const;
+
   const LoopDetectorParams& params() const { return params_; }
 
  private:

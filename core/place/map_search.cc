@@ -15,17 +15,45 @@ std::tuple<size_t, double> Strength(const PlaceFrameResult& found) {
 
 StatusOr<std::vector<MapMatch>> SearchMaps(std::span<const std::shared_ptr<PlaceMap>> maps,
                                            const FeatureSet& features,
-                                           std::optional<double> timestamp,
+                                           std::optional<double> /*timestamp: no tau_c*/,
                                            const PlaceResultOptions& options,
                                            const FrameGeometry* geometry) {
-  std::vector<MapMatch> matches;
-  matches.reserve(maps.size());
+  RECOG_RETURN_IF_ERROR(options.Validate().WithContext(
+      maps.empty() ? "search" : "map '" + maps.front()->name() + "'"));
+  // The frame's bag of words once (again only for a map that converts otherwise), then each
+  // map's shortlist, and the best score over all of them as the reference of every map's eta.
+  struct Searched {
+    const PlaceMap* map;
+    const LoopDetector::ConvertedFrame* frame;
+    LoopDetector::Shortlist shortlist;
+  };
+  std::vector<Searched> searched;
+  searched.reserve(maps.size());
+  std::vector<std::pair<const PlaceMap*, LoopDetector::ConvertedFrame>> conversions;
+  conversions.reserve(maps.size());  // the pointers kept in `searched` stay valid
+  double reference = 0;
   for (const std::shared_ptr<PlaceMap>& map : maps) {
     if (map->deleted()) continue;
-    StatusOr<PlaceFrameResult> found = map->Query(features, timestamp, options, geometry);
-    if (!found.ok()) return found.status().WithContext("map '" + map->name() + "'");
+    const auto named = [&](const Status& s) { return s.WithContext("map '" + map->name() + "'"); };
+    auto converted = std::find_if(conversions.begin(), conversions.end(),
+                                  [&](const auto& c) { return c.first->ConvertsLike(*map); });
+    if (converted == conversions.end()) {
+      LoopDetector::ConvertedFrame frame;
+      RECOG_RETURN_IF_ERROR(named(map->ConvertForQuery(features, &frame)));
+      converted = conversions.insert(conversions.end(), {map.get(), std::move(frame)});
+    }
+    StatusOr<LoopDetector::Shortlist> shortlist = map->Shortlist(converted->second);
+    if (!shortlist.ok()) return named(shortlist.status());
+    reference = std::max(reference, shortlist->best_score);
+    searched.push_back({map.get(), &converted->second, std::move(shortlist).value()});
+  }
+  std::vector<MapMatch> matches;
+  for (const Searched& s : searched) {
+    StatusOr<PlaceFrameResult> found =
+        s.map->Recognise(features, *s.frame, s.shortlist, reference, options, geometry);
+    if (!found.ok()) return found.status().WithContext("map '" + s.map->name() + "'");
     if (found->loop.status != LoopStatus::kLoopDetected) continue;
-    matches.push_back({map->name(), std::move(found).value()});
+    matches.push_back({s.map->name(), std::move(found).value()});
   }
   std::sort(matches.begin(), matches.end(), [](const MapMatch& a, const MapMatch& b) {
     if (Strength(a.result) != Strength(b.result)) return Strength(a.result) > Strength(b.result);

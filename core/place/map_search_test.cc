@@ -100,6 +100,26 @@ TEST_F(MapSearchTest, BadOptionsAreRefusedNamingTheMap) {
   EXPECT_NE(refused.message().find("robot-a"), std::string::npos) << refused.ToString();
 }
 
+// Maps searched together are normalised by the best score over all of them: a map whose best
+// candidate scores under alpha (0.3) of the best map's is not verified.
+TEST_F(MapSearchTest, AMapFarBelowTheBestMapsScoreIsNotVerified) {
+  const FeatureSet query = Revisit(0);
+  LoopDetector::ConvertedFrame frame;
+  ASSERT_TRUE(robot_a_->ConvertForQuery(query, &frame).ok());
+  auto shortlist = robot_a_->Shortlist(frame);
+  ASSERT_TRUE(shortlist.ok()) << shortlist.status().ToString();
+  ASSERT_GT(shortlist->best_score, 0);
+  auto alone = robot_a_->Recognise(query, frame, *shortlist, shortlist->best_score);
+  ASSERT_TRUE(alone.ok());
+  EXPECT_EQ(alone->loop.status, LoopStatus::kLoopDetected);
+  EXPECT_EQ(alone->loop.normalized_score, 1.0);
+  auto outscored = robot_a_->Recognise(query, frame, *shortlist, 10 * shortlist->best_score);
+  ASSERT_TRUE(outscored.ok());
+  EXPECT_EQ(outscored->loop.status, LoopStatus::kLowScore);
+  EXPECT_EQ(outscored->loop.timings.verification, 0.0);
+  EXPECT_EQ(robot_b_->ConvertsLike(*robot_a_), true) << "one registry, one conversion";
+}
+
 // Relocalize over frames at places 3, 0, 1 and a blank one: robot A has seen two of them.
 TEST_F(MapSearchTest, RelocalizationRanksTheMapThatRecognisesMostFramesFirst) {
   const std::vector<FeatureSet> seen = {Revisit(3), Revisit(0), Revisit(1), FeatureSet()};

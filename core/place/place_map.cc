@@ -72,6 +72,43 @@ StatusOr<PlaceFrameResult> PlaceMap::Query(const FeatureSet& features,
   return result;
 }
 
+Status PlaceMap::ConvertForQuery(const FeatureSet& features,
+                                 LoopDetector::ConvertedFrame* frame) const {
+  return detector_.ConvertForQuery(features, frame);
+}
+
+bool PlaceMap::ConvertsLike(const PlaceMap& other) const {
+  const MapConfig &mine = info().config, &theirs = other.info().config;
+  return mine.vocabulary_checksum == theirs.vocabulary_checksum && mine.scoring == theirs.scoring &&
+         mine.direct_index_levels_up == theirs.direct_index_levels_up;
+}
+
+StatusOr<LoopDetector::Shortlist> PlaceMap::Shortlist(
+    const LoopDetector::ConvertedFrame& frame) const {
+  return detector_.ShortlistFor(frame);
+}
+
+StatusOr<PlaceFrameResult> PlaceMap::Recognise(const FeatureSet& features,
+                                               const LoopDetector::ConvertedFrame& frame,
+                                               const LoopDetector::Shortlist& shortlist,
+                                               double reference_score,
+                                               const PlaceResultOptions& options,
+                                               const FrameGeometry* geometry) const {
+  RECOG_RETURN_IF_ERROR(options.Validate());
+  PlaceFrameResult result;
+  StatusOr<LoopResult> loop =
+      detector_.Recognise(features, frame, shortlist, reference_score, geometry);
+  if (loop.status().code() == StatusCode::kNotFound && !deleted()) {
+    // A frame removed meanwhile, as in Query: shortlisted again without it.
+    RECOG_ASSIGN_OR_RETURN(const LoopDetector::Shortlist again, detector_.ShortlistFor(frame));
+    loop = detector_.Recognise(features, frame, again, reference_score, geometry);
+  }
+  if (!loop.ok()) return loop.status();
+  result.loop = std::move(loop).value();
+  RECOG_RETURN_IF_ERROR(AddExtras(features, options, &result));
+  return result;
+}
+
 bool PlaceMap::deleted() const {
   std::lock_guard lock(mutex_);
   return deleted_;

@@ -130,6 +130,19 @@ class PlaceMap {
                                    const PlaceResultOptions& options = {},
                                    const FrameGeometry* geometry = nullptr,
                                    std::span<const EntryId> excluded = {}) const;
+  // Query in steps, for a frame looked up in several maps at once (SearchMaps; see
+  // LoopDetector::Recognise): the frame converted once by any map that ConvertsLike the others,
+  // each map's Shortlist, then Recognise with the best score over the maps, which adds the
+  // extras of `options` as Query does.
+  Status ConvertForQuery(const FeatureSet& features, LoopDetector::ConvertedFrame* frame) const;
+  bool ConvertsLike(const PlaceMap& other) const;
+  StatusOr<LoopDetector::Shortlist> Shortlist(const LoopDetector::ConvertedFrame& frame) const;
+  StatusOr<PlaceFrameResult> Recognise(const FeatureSet& features,
+                                       const LoopDetector::ConvertedFrame& frame,
+                                       const LoopDetector::Shortlist& shortlist,
+                                       double reference_score,
+                                       const PlaceResultOptions& options = {},
+                                       const FrameGeometry* geometry = nullptr) const;
 
   // Removes frame `id` (keyframe culling). NOT_FOUND when the map has no such frame (never added,
   // or removed already) or was deleted.

@@ -49,6 +49,22 @@ StatusOr<std::shared_ptr<const Vocabulary>> OpenVocabulary(const std::string& co
   return std::make_shared<const Vocabulary>(std::move(vocabulary));
 }
 
+// A map of this shard whose group `table` places on another shard would be missing from that
+// group's searches without a word: FAILED_PRECONDITION naming it.
+Status CheckGroupPlacement(const PlacementTable& table, const ServerState& state) {
+  const ShardConfig& shard = state.config.shard;
+  for (const std::shared_ptr<PlaceMap>& map : state.maps->List()) {
+    const std::optional<std::string> group_shard = table.OwnerOfGroup(map->group());
+    if (!map->group().empty() && group_shard.has_value() && *group_shard != shard.name) {
+      return Status::FailedPrecondition(
+          "the placement table '" + shard.placement_file + "' places group '" + map->group() +
+          "' on shard '" + *group_shard + "', but its map '" + map->name() +
+          "' is on this shard ('" + shard.name + "'): move the map there first");
+    }
+  }
+  return Status::Ok();
+}
+
 }  // namespace
 
 RecognitionServer::RecognitionServer() = default;
@@ -161,6 +177,9 @@ Status RecognitionServer::Open() {
   state.objects = std::move(objects);
   RECOG_ASSIGN_OR_RETURN(state.repository,
                          ModelRepository::Open(state.store.get(), state.objects, Sha256Hex));
+  if (const std::shared_ptr<const PlacementTable> placement = state.placement()) {
+    RECOG_RETURN_IF_ERROR(CheckGroupPlacement(*placement, state));
+  }
   for (const std::shared_ptr<PlaceMap>& map : state.maps->List()) {
     state.metrics.SetMapEntries(map->name(), map->frames());
   }
@@ -269,8 +288,9 @@ Status RecognitionServer::ReloadPlacement() {
   const ShardConfig& shard = state_->config.shard;
   if (shard.placement_file.empty()) return Status::Ok();
   RECOG_ASSIGN_OR_RETURN(PlacementTable table, PlacementTable::Load(shard.placement_file));
-  spdlog::info("recogd: shard '{}', placement table '{}': {} maps", shard.name,
-               shard.placement_file, table.size());
+  if (state_->maps != nullptr) RECOG_RETURN_IF_ERROR(CheckGroupPlacement(table, *state_));
+  spdlog::info("recogd: shard '{}', placement table '{}': {} maps, {} groups", shard.name,
+               shard.placement_file, table.size(), table.groups());
   state_->set_placement(std::make_shared<const PlacementTable>(std::move(table)));
   return Status::Ok();
 }

@@ -72,7 +72,8 @@ class RecognitionServer {
   int metrics_port() const;
 
   // Re-reads the placement table (ServerConfig::shard) and serves by it from the next call; OK
-  // and nothing done without a shard configuration. On error the table in use is kept.
+  // and nothing done without a shard configuration. On error the table in use is kept; a table
+  // that places the group of one of this shard's maps on another shard is FAILED_PRECONDITION.
   Status ReloadPlacement();
 
   // Reloads the placement table, the tokens and the TLS files (see the header comment), each

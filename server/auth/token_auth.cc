@@ -39,15 +39,53 @@ std::string EntryName(size_t index, const YAML::Node& entry) {
   return name;
 }
 
+// Reads an entry's `maps` ({read: [...], write: [...]}) into the caller's map scopes: the
+// writable maps are those of `write` (none without it), the readable ones those of `read` and
+// `write`.
+Status ReadMapScopes(const YAML::Node& maps, const std::string& named, Caller* caller) {
+  if (!maps.IsMap()) {
+    return Status::InvalidArgument(named + ": maps must be a mapping of read and write lists");
+  }
+  std::vector<std::string> patterns[2];  // read, write
+  for (const auto& item : maps) {
+    const std::string key = item.first.IsScalar() ? item.first.Scalar() : "";
+    const bool write = key == RightName(Right::kWrite);
+    if (!write && key != RightName(Right::kRead)) {
+      return Status::InvalidArgument(named + ": maps has an unknown key '" + key +
+                                     "' (read, write)");
+    }
+    if (!item.second.IsSequence()) {
+      return Status::InvalidArgument(named + ": maps." + key + " must be a list of patterns");
+    }
+    for (const YAML::Node& pattern : item.second) {
+      if (!pattern.IsScalar()) {
+        return Status::InvalidArgument(named + ": maps." + key + " holds a non-text pattern");
+      }
+      patterns[write].push_back(pattern.Scalar());
+    }
+  }
+  if (!patterns[1].empty() && !caller->can_write) {
+    return Status::InvalidArgument(named + ": maps.write needs the write right");
+  }
+  StatusOr<MapScope> readable = MapScope::Of(patterns[0]);
+  StatusOr<MapScope> writable = MapScope::Of(patterns[1]);
+  if (!readable.ok()) return readable.status().WithContext(named + ": maps.read");
+  if (!writable.ok()) return writable.status().WithContext(named + ": maps.write");
+  caller->writable_maps = std::move(writable).value();
+  caller->readable_maps = std::move(readable).value();
+  caller->readable_maps.Include(caller->writable_maps);
+  return Status::Ok();
+}
+
 // Reads one entry of the `tokens` list into *caller and *token.
 Status ReadEntry(const YAML::Node& entry, const std::string& where, Caller* caller,
                  std::string* token) {
   if (!entry.IsMap()) return Status::InvalidArgument(where + " must be a mapping");
   for (const auto& item : entry) {
     const std::string key = item.first.IsScalar() ? item.first.Scalar() : "";
-    if (key != "name" && key != "token" && key != "rights") {
+    if (key != "name" && key != "token" && key != "rights" && key != "maps") {
       return Status::InvalidArgument(where + " has an unknown key '" + key +
-                                     "' (name, token, rights)");
+                                     "' (name, token, rights, maps)");
     }
   }
   const YAML::Node name = entry["name"];
@@ -88,10 +126,49 @@ Status ReadEntry(const YAML::Node& entry, const std::string& where, Caller* call
                                      "' (read or write)");
     }
   }
-  return Status::Ok();
+  const YAML::Node maps = entry["maps"];
+  return maps.IsDefined() ? ReadMapScopes(maps, named, caller) : Status::Ok();
 }
 
 }  // namespace
+
+StatusOr<MapScope> MapScope::Of(const std::vector<std::string>& patterns) {
+  constexpr std::string_view kGroup = "group:";
+  MapScope scope;
+  scope.every_map_ = false;
+  for (const std::string& pattern : patterns) {
+    const size_t star = pattern.find('*');
+    if (pattern.empty() || pattern == kGroup ||
+        (star != std::string::npos && star + 1 != pattern.size())) {
+      return Status::InvalidArgument("bad pattern '" + pattern +
+                                     "' (a map name, a name prefix ending in '*', or group:NAME)");
+    }
+    if (pattern.starts_with(kGroup)) {
+      scope.groups_.push_back(pattern.substr(kGroup.size()));
+    } else if (star != std::string::npos) {
+      scope.prefixes_.push_back(pattern.substr(0, star));
+    } else {
+      scope.names_.push_back(pattern);
+    }
+  }
+  return scope;
+}
+
+bool MapScope::Covers(std::string_view map, std::string_view group) const {
+  const auto any = [](const std::vector<std::string>& list, auto matches) {
+    return std::any_of(list.begin(), list.end(), matches);
+  };
+  return every_map_ || any(names_, [&](const std::string& n) { return n == map; }) ||
+         any(prefixes_, [&](const std::string& p) { return map.starts_with(p); }) ||
+         (!group.empty() && any(groups_, [&](const std::string& g) { return g == group; }));
+}
+
+void MapScope::Include(const MapScope& other) {
+  every_map_ = every_map_ || other.every_map_;
+  names_.insert(names_.end(), other.names_.begin(), other.names_.end());
+  prefixes_.insert(prefixes_.end(), other.prefixes_.begin(), other.prefixes_.end());
+  groups_.insert(groups_.end(), other.groups_.begin(), other.groups_.end());
+}
 
 std::string_view RightName(Right right) {
   switch (right) {
@@ -168,7 +245,8 @@ StatusOr<std::shared_ptr<const TokenAuthenticator::Callers>> TokenAuthenticator:
 TokenAuthenticator TokenAuthenticator::AllowAll() { return TokenAuthenticator(); }
 
 StatusOr<Caller> TokenAuthenticator::Authenticate(std::string_view authorization_header) const {
-  if (shared_ == nullptr) return Caller{std::string(kAnonymous), true, true};
+  if (shared_ == nullptr)
+    return Caller{.name = std::string(kAnonymous), .can_read = true, .can_write = true};
   const std::string_view header = TrimSpaces(authorization_header);
   if (header.empty()) {
     return Status::Unauthenticated("missing authorization header (expected 'Bearer <token>')");
@@ -197,6 +275,15 @@ Status TokenAuthenticator::Check(const Caller& caller, Right right) {
   if (allowed) return Status::Ok();
   return Status::PermissionDenied("'" + caller.name + "' does not have the " +
                                   std::string(RightName(right)) + " right");
+}
+
+Status TokenAuthenticator::CheckMap(const Caller& caller, Right right, std::string_view map,
+                                    std::string_view group) {
+  RECOG_RETURN_IF_ERROR(Check(caller, right));
+  const MapScope& scope = right == Right::kRead ? caller.readable_maps : caller.writable_maps;
+  if (scope.Covers(map, group)) return Status::Ok();
+  return Status::PermissionDenied("'" + caller.name + "' may not " + std::string(RightName(right)) +
+                                  " map '" + std::string(map) + "'");
 }
 
 }  // namespace recog::server

@@ -13,6 +13,21 @@
 // (write implies read). Two entries may share a name (e.g. a robot's old and new token while it
 // is rotated), never a token.
 //
+// An entry may scope its rights on place maps (a fleet: each robot writes its own maps and reads
+// its group's; an operator's entry has no `maps` and reaches every map):
+//
+//     - name: robot-7
+//       token: "..."
+//       rights: [write]
+//       maps:
+//         write: ["robot-7*"]       # map names, name prefixes ending in '*', or group:NAME
+//         read: ["group:fleet"]     # read also holds where write does
+//
+// With `maps`, the token reaches only the maps its patterns cover (MapScope); the server checks
+// every map a call names, the maps a query searches included (CheckMap: PERMISSION_DENIED naming
+// the map), and ListMaps lists only the readable ones. Its rights on the object repository and
+// the admin calls are its `rights`, unscoped.
+//
 // Only the SHA-256 digests of the tokens are kept, and a presented token is found by looking up
 // its digest, so the time Authenticate takes says nothing useful about the secrets. Error
 // messages and Caller never contain a token.
@@ -29,6 +44,7 @@
 #include <string>
 #include <string_view>
 #include <unordered_map>
+#include <vector>
 
 #include "core/common/status.h"
 
@@ -41,11 +57,33 @@ enum class Right {
 };
 std::string_view RightName(Right right);  // "read", "write"
 
+// The place maps a right holds for: every map, or those a list of patterns covers. A pattern is
+// a map name ("robot-7"), a name prefix ending in '*' ("robot-7*"), or "group:NAME" (every map
+// created in that group).
+class MapScope {
+ public:
+  // Every map (the default).
+  MapScope() = default;
+  // The maps `patterns` cover (none for an empty list). INVALID_ARGUMENT naming a pattern that is
+  // empty, has a '*' elsewhere than at its end, or is "group:" without a name.
+  static StatusOr<MapScope> Of(const std::vector<std::string>& patterns);
+
+  bool Covers(std::string_view map, std::string_view group) const;
+  // Also covers what `other` covers.
+  void Include(const MapScope& other);
+
+ private:
+  bool every_map_ = true;
+  std::vector<std::string> names_, prefixes_, groups_;
+};
+
 // An authenticated caller.
 struct Caller {
-  std::string name;        // the token's name from the file, or "anonymous" with AllowAll
-  bool can_read = false;   // holds Right::kRead
-  bool can_write = false;  // holds Right::kWrite
+  std::string name;             // the token's name from the file, or "anonymous" with AllowAll
+  bool can_read = false;        // holds Right::kRead
+  bool can_write = false;       // holds Right::kWrite
+  MapScope readable_maps = {};  // where can_read holds for place maps (every map by default)
+  MapScope writable_maps = {};  // where can_write holds for place maps
 };
 
 class TokenAuthenticator {
@@ -53,7 +91,8 @@ class TokenAuthenticator {
   // Reads the token file at `path`. NOT_FOUND when it is missing; INVALID_ARGUMENT naming the
   // entry (its number and line) for a missing or empty name, a token shorter than
   // kMinTokenLength or with characters other than visible ASCII, a token used twice, an unknown
-  // or missing right, an unknown key, a file without tokens, or malformed YAML.
+  // or missing right, an unknown key, a bad `maps` (not read/write lists of valid patterns, or
+  // write patterns without the write right), a file without tokens, or malformed YAML.
   static StatusOr<TokenAuthenticator> Load(const std::string& path);
 
   // No authentication: every call, with or without a header, is made by "anonymous" with both
@@ -71,6 +110,10 @@ class TokenAuthenticator {
 
   // OK when `caller` holds `right`, else PERMISSION_DENIED naming the caller and the right.
   static Status Check(const Caller& caller, Right right);
+  // Check, then that the right holds for the place map `map` of group `group` ("" for none):
+  // else PERMISSION_DENIED naming the caller, the right and the map.
+  static Status CheckMap(const Caller& caller, Right right, std::string_view map,
+                         std::string_view group);
 
   // True for AllowAll().
   bool allows_all() const { return shared_ == nullptr; }

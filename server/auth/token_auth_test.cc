@@ -113,17 +113,63 @@ TEST_F(TokenAuthTest, MissingMalformedAndUnknownTokensAreUnauthenticated) {
 }
 
 TEST_F(TokenAuthTest, CheckDeniesRightsTheCallerDoesNotHold) {
-  const Caller reader{"robot-7", true, false};
+  const Caller reader{.name = "robot-7", .can_read = true};
   EXPECT_TRUE(TokenAuthenticator::Check(reader, Right::kRead).ok());
   const Status denied = TokenAuthenticator::Check(reader, Right::kWrite);
   EXPECT_EQ(denied.code(), StatusCode::kPermissionDenied);
   EXPECT_THAT(denied.message(), HasSubstr("'robot-7'"));
   EXPECT_THAT(denied.message(), HasSubstr("write"));
 
-  const Caller nobody{"nobody", false, false};
+  const Caller nobody{.name = "nobody"};
   EXPECT_EQ(TokenAuthenticator::Check(nobody, Right::kRead).code(), StatusCode::kPermissionDenied);
-  const Caller writer{"mapper", true, true};
+  const Caller writer{.name = "mapper", .can_read = true, .can_write = true};
   EXPECT_TRUE(TokenAuthenticator::Check(writer, Right::kWrite).ok());
+}
+
+TEST_F(TokenAuthTest, AScopedTokenReachesOnlyTheMapsItsPatternsCover) {
+  StatusOr<TokenAuthenticator> auth = LoadText(R"(tokens:
+  - name: robot-7
+    token: robot-7-token-0123456789
+    rights: [write]
+    maps:
+      write: ["robot-7*", scratch]
+      read: ["group:fleet"]
+  - name: viewer
+    token: viewer-token-0123456789
+    rights: [read]
+    maps: {read: [robot-3]}
+  - name: operator
+    token: operator-token-0123456789
+    rights: [write]
+)");
+  ASSERT_TRUE(auth.ok()) << auth.status().ToString();
+  const Caller robot = auth->Authenticate("Bearer robot-7-token-0123456789").value();
+  const auto allowed = [](const Caller& caller, Right right, const char* map, const char* group) {
+    return TokenAuthenticator::CheckMap(caller, right, map, group).ok();
+  };
+  EXPECT_TRUE(allowed(robot, Right::kWrite, "robot-7", ""));
+  EXPECT_TRUE(allowed(robot, Right::kWrite, "robot-7-tuesday", "fleet"));  // the prefix
+  EXPECT_TRUE(allowed(robot, Right::kWrite, "scratch", ""));
+  EXPECT_FALSE(allowed(robot, Right::kWrite, "scratch-2", ""));   // a name is not a prefix
+  EXPECT_TRUE(allowed(robot, Right::kRead, "robot-7", ""));       // write implies read
+  EXPECT_TRUE(allowed(robot, Right::kRead, "robot-3", "fleet"));  // its group's
+  EXPECT_FALSE(allowed(robot, Right::kWrite, "robot-3", "fleet"));
+  EXPECT_FALSE(allowed(robot, Right::kRead, "robot-3", ""));  // not in the group
+  EXPECT_FALSE(allowed(robot, Right::kRead, "robot-3", "other-fleet"));
+  const Status denied = TokenAuthenticator::CheckMap(robot, Right::kWrite, "robot-3", "fleet");
+  EXPECT_EQ(denied.code(), StatusCode::kPermissionDenied);
+  EXPECT_THAT(denied.message(), HasSubstr("'robot-7' may not write map 'robot-3'"));
+
+  const Caller viewer = auth->Authenticate("Bearer viewer-token-0123456789").value();
+  EXPECT_TRUE(allowed(viewer, Right::kRead, "robot-3", "fleet"));
+  EXPECT_FALSE(allowed(viewer, Right::kRead, "robot-7", "fleet"));
+  const Status no_write = TokenAuthenticator::CheckMap(viewer, Right::kWrite, "robot-3", "");
+  EXPECT_EQ(no_write.code(), StatusCode::kPermissionDenied);
+  EXPECT_THAT(no_write.message(), HasSubstr("does not have the write right"));
+
+  const Caller op = auth->Authenticate("Bearer operator-token-0123456789").value();
+  EXPECT_TRUE(allowed(op, Right::kWrite, "robot-3", "fleet"));  // no maps: every map
+  EXPECT_TRUE(allowed(op, Right::kRead, "anything", ""));
 }
 
 TEST_F(TokenAuthTest, AllowAllLetsEveryCallerDoEverythingAsAnonymous) {
@@ -167,6 +213,24 @@ TEST_F(TokenAuthTest, BadEntriesAreRejectedNamingTheEntryButNeverTheSecret) {
       {"  - name: spaces\n    token: \"other token 0123456789\"\n    rights: [read]\n",
        {"entry 2", "visible ASCII"}},
       {"  - just-a-string\n", {"entry 2", "must be a mapping"}},
+      {"  - name: scoped\n    token: other-token-0123456789\n    rights: [write]\n"
+       "    maps: robot-7\n",
+       {"entry 2", "maps must be a mapping"}},
+      {"  - name: scoped\n    token: other-token-0123456789\n    rights: [write]\n"
+       "    maps: {delete: [robot-7]}\n",
+       {"entry 2", "unknown key 'delete'"}},
+      {"  - name: scoped\n    token: other-token-0123456789\n    rights: [write]\n"
+       "    maps: {write: robot-7}\n",
+       {"entry 2", "maps.write must be a list"}},
+      {"  - name: scoped\n    token: other-token-0123456789\n    rights: [write]\n"
+       "    maps: {write: [\"robot-*-a\"]}\n",
+       {"entry 2", "bad pattern 'robot-*-a'"}},
+      {"  - name: scoped\n    token: other-token-0123456789\n    rights: [write]\n"
+       "    maps: {read: [\"group:\"]}\n",
+       {"entry 2", "maps.read", "bad pattern 'group:'"}},
+      {"  - name: scoped\n    token: other-token-0123456789\n    rights: [read]\n"
+       "    maps: {write: [robot-7]}\n",
+       {"entry 2", "maps.write needs the write right"}},
   };
   for (const auto& [entry, expected] : cases) {
     StatusOr<TokenAuthenticator> auth = LoadText("tokens:\n" + good + entry);

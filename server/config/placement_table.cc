@@ -46,17 +46,20 @@ StatusOr<PlacementTable> PlacementTable::Parse(const std::string& text, const st
     if (tokens.size() != 2 || tokens[1].size() < 2 || tokens[1].back() != ';') {
       return bad("expected '<map> <shard>;'");
     }
-    const std::string& map = tokens[0];
+    const std::string& key = tokens[0];
     const std::string shard = tokens[1].substr(0, tokens[1].size() - 1);
-    if (map == "default" || map == "hostnames" || map == "include" || map == "volatile") {
-      return bad("'" + map + "' is an nginx map keyword: list every map explicitly");
+    if (key == "default" || key == "hostnames" || key == "include" || key == "volatile") {
+      return bad("'" + key + "' is an nginx map keyword: list every map explicitly");
     }
-    if (Status valid = ValidateName("map", map); !valid.ok()) return bad(valid.message());
+    const bool group = key.starts_with(kGroupPrefix);
+    const std::string name = group ? key.substr(std::string_view(kGroupPrefix).size()) : key;
+    const char* kind = group ? "group" : "map";
+    if (Status valid = ValidateName(kind, name); !valid.ok()) return bad(valid.message());
     if (!IsShardName(shard)) {
       return bad("shard name '" + shard + "' must have 1 to 64 characters of [A-Za-z0-9_]");
     }
-    if (!table.owners_.emplace(map, shard).second) {
-      return bad("map '" + map + "' is listed twice");
+    if (!(group ? table.group_owners_ : table.owners_).emplace(name, shard).second) {
+      return bad(std::string(kind) + " '" + name + "' is listed twice");
     }
   }
   return table;
@@ -65,6 +68,12 @@ StatusOr<PlacementTable> PlacementTable::Parse(const std::string& text, const st
 std::optional<std::string> PlacementTable::OwnerOf(const std::string& map) const {
   const auto it = owners_.find(map);
   if (it == owners_.end()) return std::nullopt;
+  return it->second;
+}
+
+std::optional<std::string> PlacementTable::OwnerOfGroup(const std::string& group) const {
+  const auto it = group_owners_.find(group);
+  if (it == group_owners_.end()) return std::nullopt;
   return it->second;
 }
 

@@ -9,7 +9,12 @@
 //   hall-robot-1     shard_a;
 //   yard-robot-2     shard_b;
 //
-// Map names follow recogd's map-name rule; shard names are nginx upstream names
+// A line `group:<group> <shard>;` places a map group (MapSettings.group): every map of the group
+// must be created on that shard (the servers refuse it elsewhere), so a query that searches the
+// group finds all of its maps on the one server it reaches; nginx routes a call naming only a
+// group (the clients send `x-recog-map: group:<group>`) to that shard.
+//
+// Map and group names follow recogd's name rule; shard names are nginx upstream names
 // ([A-Za-z0-9_], 1 to 64 characters). nginx's special map keys (default, hostnames, include,
 // volatile) and regular expressions are refused: every map is listed explicitly, and a map that
 // is not listed has no owner (nginx and the servers refuse it). A server started with a shard
@@ -34,13 +39,19 @@ class PlacementTable {
 
   // The shard that owns `map`; nullopt when the table does not list it.
   std::optional<std::string> OwnerOf(const std::string& map) const;
-  size_t size() const { return owners_.size(); }
+  // The shard that holds every map of `group`; nullopt when the table does not place it.
+  std::optional<std::string> OwnerOfGroup(const std::string& group) const;
+  size_t size() const { return owners_.size(); }  // maps listed
+  size_t groups() const { return group_owners_.size(); }
+
+  static constexpr char kGroupPrefix[] = "group:";
 
   // Whether `name` may name a shard.
   static bool IsShardName(const std::string& name);
 
  private:
-  std::map<std::string, std::string> owners_;  // map -> shard
+  std::map<std::string, std::string> owners_;        // map -> shard
+  std::map<std::string, std::string> group_owners_;  // group -> shard
 };
 
 }  // namespace recog::server

@@ -20,6 +20,21 @@ TEST(PlacementTableTest, EntriesCommentsAndBlankLinesAreRead) {
   EXPECT_EQ(table->OwnerOf("unlisted"), std::nullopt);
 }
 
+TEST(PlacementTableTest, AGroupLinePlacesEveryMapOfTheGroup) {
+  auto table = PlacementTable::Parse(
+      "group:fleet      shard_a;\n"
+      "robot-1          shard_a;\n"
+      "fleet            shard_b;   # a map named like the group is another entry\n",
+      "placement.map");
+  ASSERT_TRUE(table.ok()) << table.status().ToString();
+  EXPECT_EQ(table->size(), 2u);
+  EXPECT_EQ(table->groups(), 1u);
+  EXPECT_EQ(table->OwnerOfGroup("fleet"), "shard_a");
+  EXPECT_EQ(table->OwnerOf("fleet"), "shard_b");
+  EXPECT_EQ(table->OwnerOf("group:fleet"), std::nullopt);
+  EXPECT_EQ(table->OwnerOfGroup("robot-1"), std::nullopt);
+}
+
 TEST(PlacementTableTest, BadEntriesAreRefusedWithTheirLine) {
   const std::pair<const char*, const char*> cases[] = {
       {"hall shard_a\n", "placement.map:1: expected"},         // no semicolon
@@ -29,6 +44,9 @@ TEST(PlacementTableTest, BadEntriesAreRefusedWithTheirLine) {
       {"bad/name shard_a;\n", "placement.map:1: map name 'bad/name'"},
       {"hall shard-a;\n", "placement.map:1: shard name 'shard-a'"},
       {"hall a;\nhall b;\n", "placement.map:2: map 'hall' is listed twice"},
+      {"group: shard_a;\n", "placement.map:1: group name must have"},
+      {"group:a/b shard_a;\n", "placement.map:1: group name 'a/b'"},
+      {"group:fleet a;\ngroup:fleet b;\n", "placement.map:2: group 'fleet' is listed twice"},
   };
   for (const auto& [text, expected] : cases) {
     auto table = PlacementTable::Parse(text, "placement.map");

@@ -182,21 +182,36 @@ grpc::ServerUnaryReactor* RunUnary(ServerState& state, grpc::CallbackServerConte
   return reactor;
 }
 
-grpc::Status CheckMapOwner(const ServerState& state, const std::string& map) {
-  const std::shared_ptr<const PlacementTable> placement = state.placement();
-  if (placement == nullptr) return grpc::Status::OK;
-  const std::optional<std::string> owner = placement->OwnerOf(map);
+namespace {
+
+// CheckMapOwner and CheckGroupOwner: `owner` is what the placement table says of the map or group
+// `what` ("map 'x'", "group 'y'"), `entry` how to list it.
+grpc::Status CheckOwner(const ServerState& state, const std::optional<std::string>& owner,
+                        const std::string& what, const std::string& entry) {
   const std::string& self = state.config.shard.name;
   if (owner == self) return grpc::Status::OK;
   if (!owner.has_value()) {
     return {grpc::StatusCode::FAILED_PRECONDITION,
-            "map '" + map + "' is not in the placement table (" +
-                state.config.shard.placement_file +
-                "): add it to a shard, then reload nginx and the servers"};
+            what + " is not in the placement table (" + state.config.shard.placement_file +
+                "): add `" + entry + " <shard>;`, then reload nginx and the servers"};
   }
-  return {grpc::StatusCode::FAILED_PRECONDITION, "map '" + map + "' belongs to shard '" + *owner +
-                                                     "', not to this server (shard '" + self +
-                                                     "')"};
+  return {grpc::StatusCode::FAILED_PRECONDITION,
+          what + " belongs to shard '" + *owner + "', not to this server (shard '" + self + "')"};
+}
+
+}  // namespace
+
+grpc::Status CheckMapOwner(const ServerState& state, const std::string& map) {
+  const std::shared_ptr<const PlacementTable> placement = state.placement();
+  if (placement == nullptr) return grpc::Status::OK;
+  return CheckOwner(state, placement->OwnerOf(map), "map '" + map + "'", map);
+}
+
+grpc::Status CheckGroupOwner(const ServerState& state, const std::string& group) {
+  const std::shared_ptr<const PlacementTable> placement = state.placement();
+  if (placement == nullptr) return grpc::Status::OK;
+  return CheckOwner(state, placement->OwnerOfGroup(group), "group '" + group + "'",
+                    PlacementTable::kGroupPrefix + group);
 }
 
 }  // namespace recog::server

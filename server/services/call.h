@@ -70,6 +70,9 @@ grpc::Status RunOnce(ServerState& state, grpc::CallbackServerContext* context, c
 // when the placement table gives the map to this shard. FAILED_PRECONDITION naming the owner (or
 // saying that the table does not list the map) otherwise.
 grpc::Status CheckMapOwner(const ServerState& state, const std::string& map);
+// The same for every map of `group`: the placement table must place the group (`group:NAME`) on
+// this shard, so that its maps are created and searched here only.
+grpc::Status CheckGroupOwner(const ServerState& state, const std::string& group);
 
 // The work of a unary call, on a worker, with that worker's context.
 using UnaryWork = std::function<grpc::Status(CallInfo&, WorkerContext&)>;

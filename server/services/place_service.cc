@@ -49,40 +49,65 @@ void FillMapInfo(const PlaceMap& map, pb::MapInfo* out) {
   out->set_vocabulary_checksum(checksum);
 }
 
+// On a shard, a map or group that this server does not hold (CheckMapOwner, CheckGroupOwner) as
+// a core Status (FAILED_PRECONDITION naming where it is).
+Status Owned(const grpc::Status& owned) {
+  return owned.ok() ? Status::Ok() : Status::FailedPrecondition(owned.error_message());
+}
+
 // Where every map-scoped call starts: names the map in the call's log line and checks that this
 // server owns it (FAILED_PRECONDITION otherwise, see CheckMapOwner).
 Status ScopeCall(const ServerState& state, CallInfo& call, const std::string& name) {
   call.map = name;
-  const grpc::Status owned = CheckMapOwner(state, name);
-  return owned.ok() ? Status::Ok() : Status::FailedPrecondition(owned.error_message());
+  return Owned(CheckMapOwner(state, name));
 }
 
-// ScopeCall, then the map (NOT_FOUND when there is none).
-StatusOr<std::shared_ptr<PlaceMap>> CallMap(const ServerState& state, CallInfo& call,
-                                            const std::string& name) {
+// What creating map `name` in `group` ("" for none) needs: ScopeCall, the group placed on this
+// shard too, and the caller's write right on the map.
+Status CheckCreation(const ServerState& state, CallInfo& call, const std::string& name,
+                     const std::string& group) {
   RECOG_RETURN_IF_ERROR(ScopeCall(state, call, name));
-  return state.maps->Get(name);
+  if (!group.empty()) RECOG_RETURN_IF_ERROR(Owned(CheckGroupOwner(state, group)));
+  return TokenAuthenticator::CheckMap(call.caller, Right::kWrite, name, group);
+}
+
+// ScopeCall, then the map (NOT_FOUND when there is none), if the caller holds `right` on it
+// (PERMISSION_DENIED naming it otherwise: TokenAuthenticator::CheckMap).
+StatusOr<std::shared_ptr<PlaceMap>> CallMap(const ServerState& state, CallInfo& call,
+                                            const std::string& name, Right right) {
+  RECOG_RETURN_IF_ERROR(ScopeCall(state, call, name));
+  RECOG_ASSIGN_OR_RETURN(std::shared_ptr<PlaceMap> map, state.maps->Get(name));
+  RECOG_RETURN_IF_ERROR(TokenAuthenticator::CheckMap(call.caller, right, name, map->group()));
+  return map;
 }
 
 // The maps a query searches besides `own` (its search_maps and search_group; PlaceMap::Query on
-// each, SearchMaps): NOT_FOUND naming an unknown map or group, INVALID_ARGUMENT beyond
-// kMaxSearchMaps. The own map is left out (its loops are the frame's result), and so are repeats.
+// each, SearchMaps): NOT_FOUND naming an unknown map or group, PERMISSION_DENIED naming a map the
+// caller may not read, FAILED_PRECONDITION on a shard for a map or group placed elsewhere (a
+// search never leaves out a map silently), INVALID_ARGUMENT beyond kMaxSearchMaps. The own map is
+// left out (its loops are the frame's result), and so are repeats.
 template <typename Names>
-StatusOr<SearchSet> ResolveSearchSet(const ServerState& state, const std::string& own,
-                                     const Names& names, const std::string& group) {
+StatusOr<SearchSet> ResolveSearchSet(const ServerState& state, const Caller& caller,
+                                     const std::string& own, const Names& names,
+                                     const std::string& group) {
   SearchSet maps;
-  const auto add = [&](std::shared_ptr<PlaceMap> map) {
+  const auto add = [&](std::shared_ptr<PlaceMap> map) -> Status {
+    RECOG_RETURN_IF_ERROR(
+        TokenAuthenticator::CheckMap(caller, Right::kRead, map->name(), map->group()));
     const bool listed = std::any_of(maps.begin(), maps.end(),
                                     [&](const auto& m) { return m->name() == map->name(); });
     if (map->name() != own && !listed) maps.push_back(std::move(map));
+    return Status::Ok();
   };
   for (const std::string& name : names) {
+    RECOG_RETURN_IF_ERROR(Owned(CheckMapOwner(state, name)));
     RECOG_ASSIGN_OR_RETURN(std::shared_ptr<PlaceMap> map, state.maps->Get(name));
-    add(std::move(map));
+    RECOG_RETURN_IF_ERROR(add(std::move(map)));
   }
   if (!group.empty()) {
+    RECOG_RETURN_IF_ERROR(Owned(CheckGroupOwner(state, group)));
     RECOG_ASSIGN_OR_RETURN(SearchSet members, state.maps->Group(group));
-    for (std::shared_ptr<PlaceMap>& map : members) add(std::move(map));
+    for (std::shared_ptr<PlaceMap>& map : members) RECOG_RETURN_IF_ERROR(add(std::move(map)));
   }
   if (maps.size() > kMaxSearchMaps) {
     return Status::InvalidArgument("a query may search at most " + std::to_string(kMaxSearchMaps) +
@@ -213,30 +238,29 @@ class PlaceFrameStream final
               "the first message of StreamFrames must be a StreamConfig"};
     }
     const pb::StreamConfig& config = first.config();
-    StatusOr<std::shared_ptr<PlaceMap>> map = CallMap(state_, call_, config.map());
+    const Right right = config.query_only() ? Right::kRead : Right::kWrite;
+    StatusOr<std::shared_ptr<PlaceMap>> map = CallMap(state_, call_, config.map(), right);
     if (!map.ok() && map.status().code() != StatusCode::kNotFound) {  // not this shard's map
       return ToGrpcStatus(map.status(), call_.request_id);
     }
     mode_ = config.query_only() ? FrameMode::kQuery : FrameMode::kDetect;
-    if (!config.query_only()) {
-      const Status allowed = TokenAuthenticator::Check(call_.caller, Right::kWrite);
-      if (!allowed.ok()) return ToGrpcStatus(allowed, call_.request_id);
-    }
     options_ = config.options();
     const Status options = FromProto(options_, std::nullopt).Validate();
     if (!options.ok()) return ToGrpcStatus(options, call_.request_id);
-    StatusOr<SearchSet> search =
-        ResolveSearchSet(state_, config.map(), config.search_maps(), config.search_group());
+    StatusOr<SearchSet> search = ResolveSearchSet(state_, call_.caller, config.map(),
+                                                  config.search_maps(), config.search_group());
     if (!search.ok()) return ToGrpcStatus(search.status(), call_.request_id);
     search_ = std::move(search).value();
     if (!map.ok() && map.status().code() == StatusCode::kNotFound && config.create_if_missing() &&
         !config.query_only()) {
+      const Status allowed = CheckCreation(state_, call_, config.map(), GroupOf(config.settings()));
+      if (!allowed.ok()) return ToGrpcStatus(allowed, call_.request_id);
       LoopDetectorParams params = state_.config.place;
       const Status settings = ApplyMapSettings(config.settings(), &params);
       if (!settings.ok()) return ToGrpcStatus(settings, call_.request_id);
       map = state_.maps->Create(config.map(), params, GroupOf(config.settings()));
       if (map.status().code() == StatusCode::kAlreadyExists) {
-        map = state_.maps->Get(config.map());  // created by another stream meanwhile
+        map = CallMap(state_, call_, config.map(), right);  // created by another stream meanwhile
       }
     }
     if (!map.ok()) return ToGrpcStatus(map.status(), call_.request_id);
@@ -258,7 +282,7 @@ class PlaceFrameStream final
 };
 
 // Relocalize: every frame prepared, then looked up in every map of the set (core Relocalize).
-Status RunRelocalize(ServerState& state, WorkerContext& worker,
+Status RunRelocalize(ServerState& state, WorkerContext& worker, const Caller& caller,
                      const pb::RelocalizeRequest& request, pb::RelocalizeResponse* response) {
   if (request.frames_size() < 1 || request.frames_size() > kMaxRelocalizeFrames) {
     return Status::InvalidArgument("frames: Relocalize takes 1 to " +
@@ -266,7 +290,7 @@ Status RunRelocalize(ServerState& state, WorkerContext& worker,
                                    std::to_string(request.frames_size()));
   }
   RECOG_ASSIGN_OR_RETURN(SearchSet maps,
-                         ResolveSearchSet(state, "", request.maps(), request.group()));
+                         ResolveSearchSet(state, caller, "", request.maps(), request.group()));
   if (maps.empty()) return Status::InvalidArgument("Relocalize needs maps or a group to search");
   pb::Timing* timing = response->mutable_timing();
   std::vector<PreparedFrame> prepared;
@@ -307,8 +331,9 @@ grpc::ServerUnaryReactor* PlaceService::CreateMap(grpc::CallbackServerContext* c
                                                   pb::CreateMapResponse* response) {
   return RunUnary(state_, context, Method("CreateMap"), Right::kWrite, request->request_id(),
                   response, [=, this](CallInfo& call, WorkerContext&) {
-                    RECOG_RETURN_IF_ERROR_AS_GRPC(ScopeCall(state_, call, request->name()),
-                                                  call.request_id);
+                    RECOG_RETURN_IF_ERROR_AS_GRPC(
+                        CheckCreation(state_, call, request->name(), GroupOf(request->settings())),
+                        call.request_id);
                     LoopDetectorParams params = state_.config.place;
                     RECOG_RETURN_IF_ERROR_AS_GRPC(ApplyMapSettings(request->settings(), &params),
                                                   call.request_id);
@@ -324,26 +349,28 @@ grpc::ServerUnaryReactor* PlaceService::CreateMap(grpc::CallbackServerContext* c
 grpc::ServerUnaryReactor* PlaceService::GetMap(grpc::CallbackServerContext* context,
                                                const pb::GetMapRequest* request,
                                                pb::GetMapResponse* response) {
-  return RunUnary(
-      state_, context, Method("GetMap"), Right::kRead, [=, this](CallInfo& call, WorkerContext&) {
-        StatusOr<std::shared_ptr<PlaceMap>> map = CallMap(state_, call, request->name());
-        if (!map.ok()) return ToGrpcStatus(map.status(), call.request_id);
-        FillMapInfo(*map.value(), response->mutable_map());
-        return grpc::Status::OK;
-      });
+  return RunUnary(state_, context, Method("GetMap"), Right::kRead,
+                  [=, this](CallInfo& call, WorkerContext&) {
+                    StatusOr<std::shared_ptr<PlaceMap>> map =
+                        CallMap(state_, call, request->name(), Right::kRead);
+                    if (!map.ok()) return ToGrpcStatus(map.status(), call.request_id);
+                    FillMapInfo(*map.value(), response->mutable_map());
+                    return grpc::Status::OK;
+                  });
 }
 
 grpc::ServerUnaryReactor* PlaceService::ListMaps(grpc::CallbackServerContext* context,
                                                  const pb::ListMapsRequest* request,
                                                  pb::ListMapsResponse* response) {
   return RunUnary(
-      state_, context, Method("ListMaps"), Right::kRead, [=, this](CallInfo&, WorkerContext&) {
+      state_, context, Method("ListMaps"), Right::kRead, [=, this](CallInfo& call, WorkerContext&) {
         size_t page_size = request->page_size() == 0 ? kDefaultPageSize : request->page_size();
         page_size = std::min(page_size, kMaxPageSize);
         const std::string& after = request->page_token();  // last name of the page
         size_t added = 0;
         for (const std::shared_ptr<PlaceMap>& map : state_.maps->List()) {
           if (!after.empty() && map->name() <= after) continue;
+          if (!call.caller.readable_maps.Covers(map->name(), map->group())) continue;
           if (added == page_size) {
             response->set_next_page_token(response->maps(int(added) - 1).name());
             break;
@@ -360,8 +387,9 @@ grpc::ServerUnaryReactor* PlaceService::DeleteMap(grpc::CallbackServerContext* c
                                                   pb::DeleteMapResponse* response) {
   return RunUnary(state_, context, Method("DeleteMap"), Right::kWrite, request->request_id(),
                   response, [=, this](CallInfo& call, WorkerContext&) {
-                    RECOG_RETURN_IF_ERROR_AS_GRPC(ScopeCall(state_, call, request->name()),
-                                                  call.request_id);
+                    RECOG_RETURN_IF_ERROR_AS_GRPC(
+                        CallMap(state_, call, request->name(), Right::kWrite).status(),
+                        call.request_id);
                     StatusOr<size_t> frames = state_.maps->Delete(request->name());
                     if (!frames.ok()) return ToGrpcStatus(frames.status(), call.request_id);
                     response->set_frames_deleted(frames.value());
@@ -376,7 +404,8 @@ grpc::ServerUnaryReactor* PlaceService::AddFrame(grpc::CallbackServerContext* co
   return RunUnary(
       state_, context, Method("AddFrame"), Right::kWrite, request->request_id(), response,
       [=, this](CallInfo& call, WorkerContext& worker) {
-        StatusOr<std::shared_ptr<PlaceMap>> map = CallMap(state_, call, request->map());
+        StatusOr<std::shared_ptr<PlaceMap>> map =
+            CallMap(state_, call, request->map(), Right::kWrite);
         if (!map.ok()) return ToGrpcStatus(map.status(), call.request_id);
         pb::LoopResult added;
         uint32_t num_features = 0;
@@ -401,11 +430,11 @@ grpc::ServerUnaryReactor* PlaceService::QueryPlace(grpc::CallbackServerContext* 
       // Only a query that adds its frame changes the map: a relocalisation query just runs again.
       request->add_frame() ? request->request_id() : std::string(), response,
       [=, this](CallInfo& call, WorkerContext& worker) {
-        StatusOr<std::shared_ptr<PlaceMap>> map = CallMap(state_, call, request->map());
+        StatusOr<std::shared_ptr<PlaceMap>> map = CallMap(state_, call, request->map(), right);
         if (!map.ok()) return ToGrpcStatus(map.status(), call.request_id);
         const FrameMode mode = request->add_frame() ? FrameMode::kDetect : FrameMode::kQuery;
         StatusOr<SearchSet> search = ResolveSearchSet(
-            state_, request->map(), request->search_maps(), request->search_group());
+            state_, call.caller, request->map(), request->search_maps(), request->search_group());
         if (!search.ok()) return ToGrpcStatus(search.status(), call.request_id);
         RECOG_RETURN_IF_ERROR_AS_GRPC(
             RunPlaceFrame(state_, worker, *map.value(), mode, request->frame(), request->options(),
@@ -424,7 +453,8 @@ grpc::ServerUnaryReactor* PlaceService::RemoveFrame(grpc::CallbackServerContext*
   return RunUnary(
       state_, context, Method("RemoveFrame"), Right::kWrite, request->request_id(), response,
       [=, this](CallInfo& call, WorkerContext&) {
-        StatusOr<std::shared_ptr<PlaceMap>> map = CallMap(state_, call, request->map());
+        StatusOr<std::shared_ptr<PlaceMap>> map =
+            CallMap(state_, call, request->map(), Right::kWrite);
         if (!map.ok()) return ToGrpcStatus(map.status(), call.request_id);
         PlaceMap& place_map = *map.value();
         switch (request->frame_case()) {
@@ -461,8 +491,9 @@ grpc::ServerUnaryReactor* PlaceService::Relocalize(grpc::CallbackServerContext* 
                                                    pb::RelocalizeResponse* response) {
   return RunUnary(state_, context, Method("Relocalize"), Right::kRead,
                   [=, this](CallInfo& call, WorkerContext& worker) {
-                    RECOG_RETURN_IF_ERROR_AS_GRPC(RunRelocalize(state_, worker, *request, response),
-                                                  call.request_id);
+                    RECOG_RETURN_IF_ERROR_AS_GRPC(
+                        RunRelocalize(state_, worker, call.caller, *request, response),
+                        call.request_id);
                     response->mutable_timing()->set_queue_ms(call.queue_ms);
                     return grpc::Status::OK;
                   });

@@ -2,6 +2,7 @@
 #include <atomic>
 #include <cmath>
 #include <condition_variable>
+#include <fstream>
 #include <map>
 #include <mutex>
 #include <optional>
@@ -124,13 +125,13 @@ TEST_F(PlaceServiceTest, ClientSideFeaturesWorkLikeImages) {
   EXPECT_EQ(response.result().match_frame_id(), 0u);
 }
 
-// Streams the frames after `config` and collects every answer.
-std::vector<pb::StreamFramesResponse> Stream(pb::PlaceRecognition::Stub& stub,
-                                             const pb::StreamConfig& config,
-                                             const std::vector<pb::Frame>& frames,
-                                             grpc::Status* status) {
-  grpc::ClientContext context;
-  auto stream = stub.StreamFrames(&context);
+// Streams the frames after `config` (in `context`, e.g. one with a caller's token) and collects
+// every answer.
+std::vector<pb::StreamFramesResponse> Stream(
+    pb::PlaceRecognition::Stub& stub, const pb::StreamConfig& config,
+    const std::vector<pb::Frame>& frames, grpc::Status* status,
+    std::unique_ptr<grpc::ClientContext> context = std::make_unique<grpc::ClientContext>()) {
+  auto stream = stub.StreamFrames(context.get());
   pb::StreamFramesRequest request;
   *request.mutable_config() = config;
   std::vector<pb::StreamFramesResponse> answers;
@@ -544,6 +545,132 @@ TEST_F(PlaceServiceTest, ARelocalizeWithoutFramesOrMapsOrWithABadFrameIsRefusedN
     EXPECT_EQ(status.error_code(), code) << named << ": " << status.error_message();
     EXPECT_NE(status.error_message().find(named), std::string::npos) << status.error_message();
   }
+}
+
+// A fleet's token file: robot A writes its own maps and reads its group's; the operator reaches
+// every map.
+TEST_F(PlaceServiceTest, AScopedTokenReachesOnlyItsOwnMapsAndReadsItsGroups) {
+  constexpr char kRobotA[] = "robot-a-token-0123456789", kOperator[] = "operator-token-0123456789";
+  const std::string tokens = data_dir_.Sub("tokens.yaml");
+  std::ofstream(tokens) << "tokens:\n"
+                        << "  - name: robot-a\n    token: " << kRobotA << "\n"
+                        << "    rights: [write]\n"
+                        << "    maps: {write: [\"robot-a*\"], read: [\"group:fleet\"]}\n"
+                        << "  - name: operator\n    token: " << kOperator << "\n"
+                        << "    rights: [write]\n";
+  StopServer();
+  config().token_file = tokens;
+  StartServer();
+  const auto denied_naming = [](const grpc::Status& status, const std::string& map) {
+    return status.error_code() == grpc::StatusCode::PERMISSION_DENIED &&
+           status.error_message().find("'" + map + "'") != std::string::npos;
+  };
+  const auto create = [&](const char* token, const std::string& name, const std::string& group) {
+    pb::CreateMapRequest request;
+    request.set_name(name);
+    if (!group.empty()) request.mutable_settings()->set_group(group);
+    pb::CreateMapResponse response;
+    return places_->CreateMap(Context(token).get(), request, &response);
+  };
+  const auto add = [&](const char* token, const std::string& map, int frame) {
+    pb::AddFrameRequest request;
+    request.set_map(map);
+    *request.mutable_frame() = JpegFrame(CorridorJpeg(frame));
+    pb::AddFrameResponse response;
+    return places_->AddFrame(Context(token).get(), request, &response);
+  };
+  const auto frames_of = [&](const std::string& map) {
+    pb::GetMapRequest request;
+    request.set_name(map);
+    pb::GetMapResponse response;
+    EXPECT_TRUE(places_->GetMap(Context(kOperator).get(), request, &response).ok()) << map;
+    return response.map().frames();
+  };
+  ASSERT_TRUE(create(kOperator, "robot-b", "fleet").ok());
+  ASSERT_TRUE(create(kOperator, "secret", "").ok());
+  ASSERT_TRUE(add(kOperator, "robot-b", 1).ok());
+  ASSERT_TRUE(add(kOperator, "secret", 1).ok());
+  ASSERT_TRUE(create(kRobotA, "robot-a", "fleet").ok());
+  ASSERT_TRUE(create(kRobotA, "robot-a-tuesday", "").ok());  // the prefix
+  EXPECT_TRUE(denied_naming(create(kRobotA, "other", "fleet"), "other"));
+  EXPECT_TRUE(denied_naming(add(kRobotA, "robot-b", 41), "robot-b"));
+  ASSERT_TRUE(add(kRobotA, "robot-a", 20).ok());
+
+  pb::ListMapsResponse listed;
+  ASSERT_TRUE(places_->ListMaps(Context(kRobotA).get(), {}, &listed).ok());
+  std::vector<std::string> names;
+  for (const pb::MapInfo& m : listed.maps()) names.push_back(m.name());
+  EXPECT_EQ(names, (std::vector<std::string>{"robot-a", "robot-a-tuesday", "robot-b"}));
+  ASSERT_TRUE(places_->ListMaps(Context(kOperator).get(), {}, &listed).ok());
+  EXPECT_EQ(listed.maps_size(), 4);
+
+  // Its own map with its group's searched: allowed; with a map outside its reach: refused, and
+  // the frame is not added.
+  pb::QueryPlaceRequest query;
+  query.set_map("robot-a");
+  query.set_add_frame(true);
+  query.set_search_group("fleet");
+  *query.mutable_frame() = JpegFrame(CorridorJpeg(41));
+  pb::QueryPlaceResponse answer;
+  ASSERT_TRUE(places_->QueryPlace(Context(kRobotA).get(), query, &answer).ok());
+  ASSERT_EQ(answer.inter_map_size(), 1);
+  EXPECT_EQ(answer.inter_map(0).map(), "robot-b");
+  query.add_search_maps("secret");
+  EXPECT_TRUE(denied_naming(places_->QueryPlace(Context(kRobotA).get(), query, &answer), "secret"));
+  EXPECT_EQ(frames_of("robot-a"), 2u);
+  query.clear_search_maps();
+  query.set_map("robot-b");
+  EXPECT_TRUE(
+      denied_naming(places_->QueryPlace(Context(kRobotA).get(), query, &answer), "robot-b"));
+  query.set_add_frame(false);  // reading its group's map is allowed
+  EXPECT_TRUE(places_->QueryPlace(Context(kRobotA).get(), query, &answer).ok());
+
+  pb::RelocalizeRequest relocalize;
+  *relocalize.add_frames() = JpegFrame(CorridorJpeg(41));
+  relocalize.set_group("fleet");
+  pb::RelocalizeResponse places;
+  EXPECT_TRUE(places_->Relocalize(Context(kRobotA).get(), relocalize, &places).ok());
+  relocalize.add_maps("secret");
+  EXPECT_TRUE(
+      denied_naming(places_->Relocalize(Context(kRobotA).get(), relocalize, &places), "secret"));
+
+  pb::GetMapRequest get;
+  get.set_name("secret");
+  pb::GetMapResponse got;
+  EXPECT_TRUE(denied_naming(places_->GetMap(Context(kRobotA).get(), get, &got), "secret"));
+  pb::DeleteMapRequest remove;
+  remove.set_name("robot-b");
+  pb::DeleteMapResponse removed;
+  EXPECT_TRUE(
+      denied_naming(places_->DeleteMap(Context(kRobotA).get(), remove, &removed), "robot-b"));
+  pb::RemoveFrameRequest cull;
+  cull.set_map("robot-b");
+  cull.set_frame_id(0);
+  pb::RemoveFrameResponse culled;
+  EXPECT_TRUE(
+      denied_naming(places_->RemoveFrame(Context(kRobotA).get(), cull, &culled), "robot-b"));
+  EXPECT_EQ(frames_of("robot-b"), 1u);
+
+  pb::StreamConfig config;
+  config.set_map("robot-b");
+  grpc::Status status;
+  Stream(*places_, config, {JpegFrame(CorridorJpeg(41))}, &status, Context(kRobotA));
+  EXPECT_TRUE(denied_naming(status, "robot-b")) << status.error_message();
+  config.set_map("outsider");
+  config.set_create_if_missing(true);
+  Stream(*places_, config, {JpegFrame(CorridorJpeg(41))}, &status, Context(kRobotA));
+  EXPECT_TRUE(denied_naming(status, "outsider")) << status.error_message();
+  config.set_map("robot-b");
+  config.set_create_if_missing(false);
+  config.set_query_only(true);
+  const auto answers =
+      Stream(*places_, config, {JpegFrame(CorridorJpeg(41))}, &status, Context(kRobotA));
+  EXPECT_TRUE(status.ok()) << status.error_message();
+  EXPECT_EQ(answers.size(), 1u);
+  EXPECT_EQ(frames_of("robot-b"), 1u);
+  EXPECT_EQ(places_->ListMaps(Context(kOperator).get(), {}, &listed).ok() ? listed.maps_size() : 0,
+            4)
+      << "the refused stream created no map";
 }
 
 TEST_F(PlaceServiceTest, ASlamGetsItsKeyframeIdsTopCandidatesAndInlierPixelsBack) {
@@ -1033,6 +1160,78 @@ TEST_F(PlaceServiceTest, AShardServesOnlyTheMapsThePlacementTableGivesIt) {
   std::ofstream(table) << "mine shard_a\n";  // no semicolon
   EXPECT_EQ(server_->ReloadPlacement().code(), StatusCode::kInvalidArgument);
   EXPECT_TRUE(GetMap("theirs").ok());
+}
+
+// Groups are placed whole (`group:NAME shard;`): their maps are created on that shard only, and a
+// search of a map or group placed on another shard is refused, never silently left out.
+TEST_F(PlaceServiceTest, AGroupLivesOnItsShardAndASearchNeverLeavesItSilently) {
+  const std::string table = data_dir_.Sub("placement.map");
+  std::ofstream(table) << "mine shard_a;\nrobot-2 shard_a;\ntheirs shard_b;\n"
+                       << "group:fleet shard_a;\ngroup:far shard_b;\n";
+  StopServer();
+  config().shard = {"shard_a", table};
+  StartServer();
+  const auto refused = [](const grpc::Status& status, const std::string& says) {
+    return status.error_code() == grpc::StatusCode::FAILED_PRECONDITION &&
+           status.error_message().find(says) != std::string::npos;
+  };
+  pb::MapSettings fleet, far, unplaced;
+  fleet.set_group("fleet");
+  far.set_group("far");
+  unplaced.set_group("unplaced");
+  ASSERT_TRUE(CreateMap("mine", fleet).ok());
+  EXPECT_TRUE(refused(CreateMap("robot-2", far), "group 'far' belongs to shard 'shard_b'"));
+  EXPECT_TRUE(refused(CreateMap("robot-2", unplaced), "add `group:unplaced <shard>;`"));
+  pb::StreamConfig config;
+  config.set_map("robot-2");
+  config.set_create_if_missing(true);
+  *config.mutable_settings() = far;
+  grpc::Status streamed;
+  Stream(*places_, config, {JpegFrame(CorridorJpeg(1))}, &streamed);
+  EXPECT_TRUE(refused(streamed, "group 'far'")) << streamed.error_message();
+  ASSERT_TRUE(CreateMap("robot-2", fleet).ok());
+  pb::AddFrameResponse added;
+  ASSERT_TRUE(AddFrame("robot-2", JpegFrame(CorridorJpeg(1)), &added).ok());
+
+  pb::QueryPlaceRequest query;
+  query.set_map("mine");
+  query.set_add_frame(true);
+  *query.mutable_frame() = JpegFrame(CorridorJpeg(41));
+  pb::QueryPlaceResponse answer;
+  query.add_search_maps("theirs");
+  EXPECT_TRUE(refused(places_->QueryPlace(Context().get(), query, &answer),
+                      "map 'theirs' belongs to shard 'shard_b'"));
+  query.clear_search_maps();
+  query.set_search_group("far");
+  EXPECT_TRUE(refused(places_->QueryPlace(Context().get(), query, &answer),
+                      "group 'far' belongs to shard 'shard_b'"));
+  pb::MapInfo info;
+  ASSERT_TRUE(GetMap("mine", &info).ok());
+  EXPECT_EQ(info.frames(), 0u) << "the refused queries added nothing";
+  query.set_search_group("fleet");
+  ASSERT_TRUE(places_->QueryPlace(Context().get(), query, &answer).ok());
+  ASSERT_EQ(answer.inter_map_size(), 1);
+  EXPECT_EQ(answer.inter_map(0).map(), "robot-2");
+
+  pb::RelocalizeRequest relocalize;
+  *relocalize.add_frames() = JpegFrame(CorridorJpeg(41));
+  relocalize.set_group("far");
+  pb::RelocalizeResponse places;
+  EXPECT_TRUE(refused(places_->Relocalize(Context().get(), relocalize, &places), "group 'far'"));
+  relocalize.set_group("fleet");
+  ASSERT_TRUE(places_->Relocalize(Context().get(), relocalize, &places).ok());
+  EXPECT_GE(places.places_size(), 1);
+
+  // A table that moves the group away from the maps this shard holds of it is refused.
+  std::ofstream(table) << "mine shard_a;\nrobot-2 shard_a;\ngroup:fleet shard_b;\n";
+  const Status moved = server_->ReloadPlacement();
+  EXPECT_EQ(moved.code(), StatusCode::kFailedPrecondition);
+  EXPECT_NE(moved.message().find("its map 'mine' is on this shard"), std::string::npos)
+      << moved.ToString();
+  EXPECT_TRUE(places_->Relocalize(Context().get(), relocalize, &places).ok()) << "old table kept";
+  StopServer();  // nor does the shard start with it
+  EXPECT_EQ(RecognitionServer::Start(ServerFixture::config()).status().code(),
+            StatusCode::kFailedPrecondition);
 }
 
 TEST_F(PlaceServiceTest, AShardWithABrokenPlacementTableDoesNotStart) {

@@ -381,7 +381,9 @@ class RecognitionClient:
         request = place_pb2.RelocalizeRequest(
             frames=[as_frame(image) for image in images], maps=maps, group=group,
             options=_result_options(result_options), max_results=max_results)
-        return self._unary(self._places.Relocalize, request, maps[0] if maps else None)
+        # a router sends it to the shard of the first map, or of the group ("group:NAME")
+        routed_by = maps[0] if maps else (f"group:{group}" if group else None)
+        return self._unary(self._places.Relocalize, request, routed_by)
 
     def remove_frame(self, map_name: str, frame_id: int | None = None,
                      client_frame_id: str | None = None, *, request_id: str | None = None
