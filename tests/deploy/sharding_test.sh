@@ -28,6 +28,9 @@ cat >"$tmp/router/placement.map" <<MAP
 # test placement
 corridor-a   shard_a;
 corridor-b   shard_b;
+fleet-a      shard_b;
+fleet-x      shard_a;
+group:fleet  shard_b;
 MAP
 printf 'shard_a 127.0.0.1:%s;\nshard_b 127.0.0.1:%s;\n' "$port_a" "$port_b" >"$tmp/router/shards.map"
 printf 'primary 127.0.0.1:%s;\nany 127.0.0.1:%s;\n' "$port_primary" "$port_primary" >"$tmp/router/models.map"
@@ -67,6 +70,21 @@ expect_error "nginx refuses an unplaced map" "FAILED_PRECONDITION.*placement tab
   "$recog" maps create elsewhere "${router[@]}"
 expect_error "maps list needs a shard through nginx" "FAILED_PRECONDITION" \
   "$recog" maps list "${router[@]}"
+
+# A group lives on its shard: a Relocalize that names only the group is routed there by nginx;
+# a map of the group cannot be created elsewhere, nor can another shard's map search the group.
+expect_ok "stream into fleet-a, of group fleet, through nginx" "$recog" stream --map fleet-a \
+  --create --group fleet --images "$images" -q "${router[@]}"
+expect_ok "relocalize in the group through nginx" "$recog" relocalize "$images/41.jpg" \
+  --group fleet --json "${router[@]}"
+json_check "the group's shard finds 41.jpg in fleet-a" \
+  "p=d['places']; assert [x['map'] for x in p]==['fleet-a'] and p[0]['result']['match']==2, d"
+expect_error "a map of the group on another shard" \
+  "FAILED_PRECONDITION.*group 'fleet' belongs to shard 'shard_b'" \
+  "$recog" maps create fleet-x --group fleet "${router[@]}"
+expect_error "shard_a's map searching the group" \
+  "FAILED_PRECONDITION.*group 'fleet' belongs to shard 'shard_b'" \
+  "$recog" stream --map corridor-a --images "$images/41.jpg" --search-group fleet -q "${router[@]}"
 
 # shard_b dies: its maps are UNAVAILABLE, shard_a's keep working; restarted, it has every frame.
 kill -KILL "$pid_shard_b"
