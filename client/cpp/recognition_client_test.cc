@@ -97,14 +97,21 @@ TEST_F(RecognitionClientTest, AnAddedPlaceIsFoundByARelocalisationQueryThatChang
             grpc::StatusCode::NOT_FOUND);
 }
 
-TEST_F(RecognitionClientTest, AQueryAcrossAGroupFindsThePlaceInAnotherRobotsMap) {
-  auto client = Connect();
-  ASSERT_NE(client, nullptr);
+// A client of a server with robots A and B in group "fleet", A holding corridor frame 1; null
+// when that failed.
+std::unique_ptr<RecognitionClient> ConnectToFleet(std::unique_ptr<RecognitionClient> client) {
+  if (client == nullptr) return nullptr;
   pb::MapSettings fleet;
   fleet.set_group("fleet");
-  ASSERT_TRUE(client->CreateMap("robot-a", fleet).ok());
-  ASSERT_TRUE(client->CreateMap("robot-b", fleet).ok());
-  ASSERT_TRUE(client->AddFrame("robot-a", JpegFrame(CorridorJpeg(1))).ok());
+  const bool created = client->CreateMap("robot-a", fleet).ok() &&
+                       client->CreateMap("robot-b", fleet).ok() &&
+                       client->AddFrame("robot-a", JpegFrame(CorridorJpeg(1))).ok();
+  return created ? std::move(client) : nullptr;
+}
+
+TEST_F(RecognitionClientTest, AQueryAcrossAGroupFindsThePlaceInAnotherRobotsMap) {
+  auto client = ConnectToFleet(Connect());
+  ASSERT_NE(client, nullptr);
   Result<pb::QueryPlaceResponse> found = client->QueryPlace(
       "robot-b", JpegFrame(CorridorJpeg(41)), QueryMode::kAddFrame, {}, {}, {.group = "fleet"});
   ASSERT_TRUE(found.ok()) << found.status().error_message();
@@ -121,13 +128,8 @@ TEST_F(RecognitionClientTest, AQueryAcrossAGroupFindsThePlaceInAnotherRobotsMap)
 }
 
 TEST_F(RecognitionClientTest, RelocalizeFindsTheFramesInTheGroupsMaps) {
-  auto client = Connect();
+  auto client = ConnectToFleet(Connect());
   ASSERT_NE(client, nullptr);
-  pb::MapSettings fleet;
-  fleet.set_group("fleet");
-  ASSERT_TRUE(client->CreateMap("robot-a", fleet).ok());
-  ASSERT_TRUE(client->CreateMap("robot-b", fleet).ok());
-  ASSERT_TRUE(client->AddFrame("robot-a", JpegFrame(CorridorJpeg(1))).ok());
   ASSERT_TRUE(client->AddFrame("robot-b", JpegFrame(CorridorJpeg(60))).ok());
   const std::vector<pb::Frame> frames = {JpegFrame(CorridorJpeg(41)), JpegFrame(CorridorJpeg(60))};
   Result<pb::RelocalizeResponse> found = client->Relocalize(frames, {.group = "fleet"});

@@ -19,7 +19,28 @@
 namespace recog::server::testing {
 namespace {
 
-class PlaceServiceTest : public ServerFixture {};
+class PlaceServiceTest : public ServerFixture {
+ protected:
+  // Robots A, B and the `others` in group "fleet", and a map "elsewhere" outside it: robot A
+  // holds corridor frames 1 and 20 (client ids a-1, a-20), robot B frame 60, elsewhere frame 1.
+  void CreateFleet(const std::vector<std::string>& others = {}) {
+    pb::MapSettings fleet;
+    fleet.set_group("fleet");
+    for (const std::string& robot : {std::string("robot-a"), std::string("robot-b")}) {
+      ASSERT_TRUE(CreateMap(robot, fleet).ok());
+    }
+    for (const std::string& robot : others) ASSERT_TRUE(CreateMap(robot, fleet).ok());
+    ASSERT_TRUE(CreateMap("elsewhere").ok());
+    pb::AddFrameResponse added;
+    for (int n : {1, 20}) {
+      pb::Frame frame = JpegFrame(CorridorJpeg(n));
+      frame.set_client_frame_id("a-" + std::to_string(n));
+      ASSERT_TRUE(AddFrame("robot-a", frame, &added).ok());
+    }
+    ASSERT_TRUE(AddFrame("robot-b", JpegFrame(CorridorJpeg(60)), &added).ok());
+    ASSERT_TRUE(AddFrame("elsewhere", JpegFrame(CorridorJpeg(1)), &added).ok());
+  }
+};
 
 pb::Frame FeaturesFrame(const std::string& jpeg) {
   const cv::Mat image =
@@ -340,20 +361,7 @@ TEST_F(PlaceServiceTest, AKeyframeMapKeepsItsPresetAcrossARestartAndAnUnknownPre
 // Robot A's map holds corridor frames 1 and 20, robot B's frame 60; robot C, in the same group,
 // has been elsewhere. B's view of frame 41 (a revisit of 1) is looked up across the fleet.
 TEST_F(PlaceServiceTest, AQueryAcrossAGroupFindsThePlaceInAnotherRobotsMap) {
-  pb::MapSettings fleet;
-  fleet.set_group("fleet");
-  for (const char* robot : {"robot-a", "robot-b", "robot-c"}) {
-    ASSERT_TRUE(CreateMap(robot, fleet).ok());
-  }
-  ASSERT_TRUE(CreateMap("elsewhere").ok());
-  pb::AddFrameResponse added;
-  for (int n : {1, 20}) {
-    pb::Frame frame = JpegFrame(CorridorJpeg(n));
-    frame.set_client_frame_id("a-" + std::to_string(n));
-    ASSERT_TRUE(AddFrame("robot-a", frame, &added).ok());
-  }
-  ASSERT_TRUE(AddFrame("robot-b", JpegFrame(CorridorJpeg(60)), &added).ok());
-  ASSERT_TRUE(AddFrame("elsewhere", JpegFrame(CorridorJpeg(1)), &added).ok());
+  CreateFleet({"robot-c"});
   RestartServer();  // the group is kept with the maps
   pb::MapInfo info;
   ASSERT_TRUE(GetMap("robot-c", &info).ok());
@@ -455,19 +463,7 @@ TEST_F(PlaceServiceTest, AnUnknownMapOrGroupInTheSearchSetIsNotFoundAndAddsNothi
 }
 
 TEST_F(PlaceServiceTest, RelocalizeFindsAFewFramesInTheMapsOfAGroupAndAddsNothing) {
-  pb::MapSettings fleet;
-  fleet.set_group("fleet");
-  ASSERT_TRUE(CreateMap("robot-a", fleet).ok());
-  ASSERT_TRUE(CreateMap("robot-b", fleet).ok());
-  ASSERT_TRUE(CreateMap("elsewhere").ok());
-  pb::AddFrameResponse added;
-  for (int n : {1, 20}) {
-    pb::Frame frame = JpegFrame(CorridorJpeg(n));
-    frame.set_client_frame_id("a-" + std::to_string(n));
-    ASSERT_TRUE(AddFrame("robot-a", frame, &added).ok());
-  }
-  ASSERT_TRUE(AddFrame("robot-b", JpegFrame(CorridorJpeg(60)), &added).ok());
-  ASSERT_TRUE(AddFrame("elsewhere", JpegFrame(CorridorJpeg(1)), &added).ok());
+  CreateFleet();
 
   pb::RelocalizeRequest request;
   request.set_group("fleet");
