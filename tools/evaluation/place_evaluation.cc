@@ -335,6 +335,24 @@ StatusOr<PlaceEvaluation> EvaluatePlace(const SequenceFeatures& sequence, const 
   return eval;
 }
 
+void AppendSequence(SequenceFeatures robot_b, SequenceFeatures* robot_a) {
+  const size_t a_frames = robot_a->features.size(), b_frames = robot_b.features.size();
+  // Appends `from` to `to`, giving the frames of the side that lacks the data `blank`.
+  const auto append = [&](auto& to, auto& from, const auto& blank) {
+    if (to.empty() && from.empty()) return;
+    if (to.empty()) to.assign(a_frames, blank);
+    if (from.empty()) from.assign(b_frames, blank);
+    to.insert(to.end(), std::make_move_iterator(from.begin()), std::make_move_iterator(from.end()));
+  };
+  append(robot_a->features, robot_b.features, FeatureSet());
+  append(robot_a->names, robot_b.names, std::string());
+  append(robot_a->feature_ms, robot_b.feature_ms, 0.0);
+  append(robot_a->geometry, robot_b.geometry, FrameGeometry());
+  append(robot_a->points_ms, robot_b.points_ms, 0.0);
+  append(robot_a->timestamps, robot_b.timestamps, std::optional<double>());
+  append(robot_a->images, robot_b.images, cv::Mat());
+}
+
 StatusOr<AcrossMapsEvaluation> EvaluateAcrossMaps(const SequenceFeatures& sequence,
                                                   const GroundTruth& truth, int split,
                                                   std::shared_ptr<const Vocabulary> vocabulary,

@@ -156,6 +156,12 @@ StatusOr<AcrossMapsEvaluation> EvaluateAcrossMaps(const SequenceFeatures& sequen
                                                   std::shared_ptr<const Vocabulary> vocabulary,
                                                   const PlaceEvaluationOptions& options);
 
+// Two robots' own sequences as one for EvaluateAcrossMaps (`recog eval place --robot-b`): robot
+// B's frames numbered after robot A's, as a ground truth across the two sequences numbers them
+// (split = A's frame count). Per-frame data that only one of them has (timestamps, 3D points,
+// images) is left empty for the other's frames; each robot keeps its own clock.
+void AppendSequence(SequenceFeatures robot_b, SequenceFeatures* robot_a);
+
 // Median of a copy of the values (0 for none).
 double Median(std::vector<double> values);
 

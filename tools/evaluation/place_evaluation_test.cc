@@ -153,6 +153,24 @@ TEST(PlaceEvaluationTest, ASecondRobotFindsTheFirstRobotsPlacesAsInterMapLoops) 
   EXPECT_EQ(e->own_map.timing_ms.count("features"), 1u);
 }
 
+TEST(PlaceEvaluationTest, RobotBsSequenceFollowsRobotAsWithItsOwnClock) {
+  SequenceFeatures a = Extract(testing::ProjectTestData("corridor"));
+  SequenceFeatures b = a;
+  a.timestamps.clear();  // robot A's frames have no time, robot B's have their own clock
+  b.timestamps = {0.0, 1.0, 2.0, 3.0};
+  b.names = {"b1", "b2", "b3", "b4"};
+  AppendSequence(b, &a);
+  ASSERT_EQ(a.features.size(), 8u);
+  ASSERT_EQ(a.names.size(), 8u);
+  EXPECT_EQ(a.names[4], "b1");
+  EXPECT_EQ(a.feature_ms.size(), 8u);
+  ASSERT_EQ(a.timestamps.size(), 8u);
+  EXPECT_FALSE(a.timestamps[3].has_value());
+  EXPECT_EQ(a.timestamps[4], 0.0);
+  EXPECT_EQ(a.features[5].keypoints.size(), b.features[1].keypoints.size());
+  EXPECT_TRUE(a.geometry.empty()) << "neither has 3D points";
+}
+
 TEST(PlaceEvaluationTest, ASplitThatLeavesARobotNoFrameIsRefused) {
   const SequenceFeatures sequence = Extract(testing::ProjectTestData("corridor"));
   GroundTruth truth;

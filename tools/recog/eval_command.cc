@@ -35,6 +35,7 @@ struct EvalPlaceArgs {
   int features = 1000;
   int min_short_side = kPlaceMinShortSide;
   int split = 0;  // > 0: frames 1..split are robot A's map, the rest robot B's (EvaluateAcrossMaps)
+  std::string robot_b;  // robot B's own sequence: A's frames (--images) are then A's map
   bool json = false;
   bool quiet = false;
 };
@@ -188,17 +189,18 @@ Status DrawDetections(const std::string& dir, const SequenceFeatures& seq,
   return Status::Ok();
 }
 
-// --split: robot A's map from the first `split` frames, robot B streaming the rest with A in its
-// search set; B's revisits of A's places are inter-map loops, the others B's own.
-int ReportAcrossMaps(const EvalPlaceArgs& args, const SequenceFeatures& sequence,
+// --split (or --robot-b, after A's frames): robot A's map from the first `split` frames, robot B
+// streaming the rest with A in its search set; B's revisits of A's places are inter-map loops,
+// the others B's own.
+int ReportAcrossMaps(const EvalPlaceArgs& args, int split, const SequenceFeatures& sequence,
                      const GroundTruth& truth, std::shared_ptr<const Vocabulary> vocabulary,
                      const PlaceEvaluationOptions& options, nlohmann::json parameters) {
-  auto evaluation = EvaluateAcrossMaps(sequence, truth, args.split, std::move(vocabulary), options);
+  auto evaluation = EvaluateAcrossMaps(sequence, truth, split, std::move(vocabulary), options);
   if (!evaluation.ok()) return Fail(evaluation.status());
   const int frames = int(sequence.features.size());
   if (args.json) {
-    const nlohmann::json out = {{"robot_a_frames", {1, args.split}},
-                                {"robot_b_frames", {args.split + 1, frames}},
+    const nlohmann::json out = {{"robot_a_frames", {1, split}},
+                                {"robot_b_frames", {split + 1, frames}},
                                 {"inter_map", ToJson(evaluation->inter_map, sequence)},
                                 {"own_map", ToJson(evaluation->own_map, sequence)},
                                 {"parameters", std::move(parameters)},
@@ -209,7 +211,7 @@ int ReportAcrossMaps(const EvalPlaceArgs& args, const SequenceFeatures& sequence
   std::printf(
       "robot A: frames 1-%d (its map); robot B: frames %d-%d (its own map, A's in its "
       "search set)\n",
-      args.split, args.split + 1, frames);
+      split, split + 1, frames);
   const auto report = [&](const char* what, const PlaceEvaluation& e) {
     std::printf(
         "%s: B's frames with a true match there %d, detections %d, correct %d: precision "
@@ -249,9 +251,10 @@ int RunEvalPlace(const EvalPlaceArgs& args) {
   if (!args.sweep.empty() && args.ground_truth.empty()) {
     return Fail(Status::InvalidArgument("--sweep needs --ground-truth"));
   }
-  if (args.split > 0 &&
-      (args.ground_truth.empty() || !args.sweep.empty() || !args.draw_dir.empty())) {
-    return Fail(Status::InvalidArgument("--split needs --ground-truth, without --sweep or --draw"));
+  const bool two_robots = args.split > 0 || !args.robot_b.empty();
+  if (two_robots && (args.ground_truth.empty() || !args.sweep.empty() || !args.draw_dir.empty())) {
+    return Fail(Status::InvalidArgument(std::string(args.split > 0 ? "--split" : "--robot-b") +
+                                        " needs --ground-truth, without --sweep or --draw"));
   }
   std::optional<DatasetLayout> layout;
   if (args.layout != "auto") {
@@ -302,6 +305,18 @@ int RunEvalPlace(const EvalPlaceArgs& args) {
       geometry);
   progress.Finish();
   if (!sequence.ok()) return Fail(sequence.status());
+  int split = args.split;
+  if (!args.robot_b.empty()) {  // robot B's frames after robot A's, as the ground truth has them
+    auto source_b = FrameSource::Open(args.robot_b, layout);
+    if (!source_b.ok()) return Fail(source_b.status());
+    split = int(sequence->features.size());
+    auto sequence_b = ExtractSequence(
+        *source_b, feature_options, false,
+        [&](size_t n) { progress.Update("robot B's features", n, source_b->size()); }, geometry);
+    progress.Finish();
+    if (!sequence_b.ok()) return Fail(sequence_b.status());
+    AppendSequence(std::move(sequence_b).value(), &*sequence);
+  }
   if (!has_truth) {
     truth->frames = int(sequence->features.size());
     truth->matches.resize(sequence->features.size());
@@ -316,8 +331,8 @@ int RunEvalPlace(const EvalPlaceArgs& args) {
       {"direct_index_levels_up", options.direct_index_levels_up},
       {"features", features},
       {"vocabulary", vocabulary_path}};
-  if (args.split > 0) {
-    return ReportAcrossMaps(args, *sequence, *truth, shared, options, std::move(parameters));
+  if (split > 0) {
+    return ReportAcrossMaps(args, split, *sequence, *truth, shared, options, std::move(parameters));
   }
 
   std::vector<LoopResult> results;
@@ -464,11 +479,18 @@ void AddEvalCommand(CLI::App& app, int* exit_code) {
                    "Frames whose shorter side is under this many pixels are enlarged to it before "
                    "ORB (0 = never)")
       ->capture_default_str();
+  CLI::Option* split =
+      place
+          ->add_option("--split", args->split,
+                       "Two robots: frames 1..N are robot A's map, the rest stream into robot B's "
+                       "map with A's in its search set (inter-map loops and B's own, scored "
+                       "apart)")
+          ->check(CLI::PositiveNumber);
   place
-      ->add_option("--split", args->split,
-                   "Two robots: frames 1..N are robot A's map, the rest stream into robot B's map "
-                   "with A's in its search set (inter-map loops and B's own, scored apart)")
-      ->check(CLI::PositiveNumber);
+      ->add_option("--robot-b", args->robot_b,
+                   "Two robots, two sequences: --images is robot A's (its map), this robot B's "
+                   "(streamed, A's map searched); --ground-truth covers A's frames, then B's")
+      ->excludes(split);
   place->add_option("--sweep", args->sweep, "'alpha': precision-recall curve over alpha 0..1");
   place
       ->add_option(

@@ -215,6 +215,7 @@ expect_error "eval sequence with a missing truth" "NOT_FOUND" "$recog" eval sequ
 
 # recog eval place on the 4 bundled frames (41 revisits 1, 60 revisits 20).
 printf '0 0 0 0\n0 0 0 0\n1 0 0 0\n0 1 0 0\n' >"$tmp/gt4.txt"
+printf '0 0\n0 0\n' >"$tmp/gt_robot_a.txt"
 expect_ok "eval place on the bundled frames" "$recog" eval place --images "$images" \
   --ground-truth "$tmp/gt4.txt" --vocab "$tmp/v.rvoc" --json -q --sweep alpha --plot "$tmp/pr.png" \
   --draw "$tmp/draw"
@@ -251,6 +252,22 @@ i = d['inter_map']; assert i['query_frames_with_truth'] == 2 and i['detections']
 found = [l for l in i['loops'] if l['status'] == 'loop_detected']
 assert [(l['query'], l['match'], l['acceptance']) for l in found] == [(3, 1, 'relocalisation')], i['loops']
 assert d['own_map']['query_frames_with_truth'] == 0 and d['own_map']['detections'] == 0, d['own_map']"
+# The same two robots as two sequences: robot A's frames 1.jpg and 20.jpg, robot B's 41.jpg and
+# 60.jpg, the ground truth across both (B's frames numbered after A's).
+printf '%s\n' "$images/1.jpg" "$images/20.jpg" >"$tmp/robot_a.txt"
+printf '%s\n' "$images/41.jpg" "$images/60.jpg" >"$tmp/robot_b.txt"
+expect_ok "eval place --robot-b (two sequences)" "$recog" eval place --images "$tmp/robot_a.txt" \
+  --robot-b "$tmp/robot_b.txt" --ground-truth "$tmp/gt4.txt" --json -q
+json_check "eval place --robot-b scores B's revisits of A's places" "
+assert d['robot_a_frames'] == [1, 2] and d['robot_b_frames'] == [3, 4], d
+i = d['inter_map']; assert i['query_frames_with_truth'] == 2 and i['detections'] == i['correct'] == 1, i"
+expect_error "eval place --robot-b with a ground truth of A's frames only" "INVALID_ARGUMENT" \
+  "$recog" eval place --images "$tmp/robot_a.txt" --robot-b "$tmp/robot_b.txt" \
+  --ground-truth "$tmp/gt_robot_a.txt" -q
+expect_usage_error "eval place --robot-b with --split" "--split" "$recog" eval place \
+  --images "$tmp/robot_a.txt" --robot-b "$tmp/robot_b.txt" --ground-truth "$tmp/gt4.txt" --split 1 -q
+expect_error "eval place --robot-b of a missing folder" "NOT_FOUND" "$recog" eval place \
+  --images "$tmp/robot_a.txt" --robot-b "$tmp/nowhere" --ground-truth "$tmp/gt4.txt" -q
 expect_error "eval place --split without a ground truth" "--split needs --ground-truth" \
   "$recog" eval place --images "$images" --split 2 -q
 expect_error "eval place --split that leaves robot B no frame" "INVALID_ARGUMENT.*split" \
