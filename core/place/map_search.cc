@@ -51,6 +51,7 @@ StatusOr<std::vector<MapMatch>> SearchMaps(std::span<const std::shared_ptr<Place
   for (const Searched& s : searched) {
     StatusOr<PlaceFrameResult> found =
         s.map->Recognise(features, *s.frame, s.shortlist, reference, options, geometry);
+    if (found.status().code() == StatusCode::kNotFound && s.map->deleted()) continue;  // meanwhile
     if (!found.ok()) return found.status().WithContext("map '" + s.map->name() + "'");
     if (found->loop.status != LoopStatus::kLoopDetected) continue;
     matches.push_back({s.map->name(), std::move(found).value()});
