@@ -439,7 +439,8 @@ Status DecodeDirect(std::string_view bytes, const RecordContext& context, Featur
 
 StatusOr<std::string> EncodeFeatures(const std::vector<cv::KeyPoint>& keypoints,
                                      const cv::Mat& descriptors,
-                                     const std::vector<cv::Point3f>& points) {
+                                     const std::vector<cv::Point3f>& points,
+                                     const cv::Matx33d& camera) {
   if (descriptors.dims > 2 || descriptors.channels() > 4) {
     return Status::InvalidArgument(
         "descriptors must be a matrix of at most two dimensions and four channels");
@@ -450,10 +451,15 @@ StatusOr<std::string> EncodeFeatures(const std::vector<cv::KeyPoint>& keypoints,
                                    " keypoints");
   }
   const size_t row_bytes = size_t(descriptors.cols) * descriptors.elemSize();
-  // Place frames keep the first layout; object entries, with 3D points, use the second.
-  std::string out(1, char(points.empty() ? kRecordFormat : kFeaturesWithPointsFormat));
-  out.reserve(1 + 4 + keypoints.size() * kKeyPointBytes + 12 + descriptors.rows * row_bytes + 4 +
-              points.size() * 12);
+  // Frames without a camera matrix keep the first layout, object entries (3D points, no camera)
+  // the second; frames with a camera matrix use the third.
+  const bool has_camera = camera != cv::Matx33d::zeros();
+  const uint8_t format = has_camera       ? kFeaturesWithCameraFormat
+                         : points.empty() ? kRecordFormat
+                                          : kFeaturesWithPointsFormat;
+  std::string out(1, char(format));
+  out.reserve(1 + 4 + keypoints.size() * kKeyPointBytes + 12 + descriptors.rows * row_bytes + 72 +
+              4 + points.size() * 12);
   Put<uint32_t>(&out, uint32_t(keypoints.size()));
   for (const cv::KeyPoint& k : keypoints) {
     Put<float>(&out, k.pt.x);
@@ -469,7 +475,10 @@ StatusOr<std::string> EncodeFeatures(const std::vector<cv::KeyPoint>& keypoints,
   for (int r = 0; r < descriptors.rows; ++r) {
     out.append(reinterpret_cast<const char*>(descriptors.ptr(r)), row_bytes);
   }
-  if (!points.empty()) {
+  if (has_camera) {
+    for (int i = 0; i < 9; ++i) Put<double>(&out, camera.val[i]);
+  }
+  if (has_camera || !points.empty()) {
     Put<uint32_t>(&out, uint32_t(points.size()));
     for (const cv::Point3f& p : points) {
       Put<float>(&out, p.x);
@@ -482,12 +491,13 @@ StatusOr<std::string> EncodeFeatures(const std::vector<cv::KeyPoint>& keypoints,
 
 Status DecodeFeatures(std::string_view bytes, const RecordContext& context,
                       std::vector<cv::KeyPoint>* keypoints, cv::Mat* descriptors,
-                      std::vector<cv::Point3f>* points) {
+                      std::vector<cv::Point3f>* points, cv::Matx33d* camera) {
   constexpr std::string_view kWhat = "features";
   Reader reader(bytes);
   uint8_t format = 0;
   if (!reader.Read(&format)) return Malformed(kWhat, context, "empty record");
-  if (format != kRecordFormat && format != kFeaturesWithPointsFormat) {
+  if (format != kRecordFormat && format != kFeaturesWithPointsFormat &&
+      format != kFeaturesWithCameraFormat) {
     return Malformed(kWhat, context, "unknown record format " + std::to_string(format));
   }
   uint32_t num_keypoints = 0;
@@ -529,11 +539,23 @@ Status DecodeFeatures(std::string_view bytes, const RecordContext& context,
   const char* data = nullptr;
   reader.Skip(size_t(rows * row_bytes), &data);
   if (rows * row_bytes != 0) std::memcpy(matrix.data, data, size_t(rows * row_bytes));
+  cv::Matx33d matrix_of_camera = cv::Matx33d::zeros();
+  if (format == kFeaturesWithCameraFormat) {
+    for (double& value : matrix_of_camera.val) {
+      if (!reader.Read(&value)) return Truncated(kWhat, context, reader);
+    }
+    if (!(matrix_of_camera(0, 0) > 0.0 && matrix_of_camera(1, 1) > 0.0 &&
+          cv::checkRange(matrix_of_camera))) {
+      return Malformed(kWhat, context, "camera matrix without finite, positive focal lengths");
+    }
+  }
   std::vector<cv::Point3f> positions;
-  if (format == kFeaturesWithPointsFormat) {
+  if (format != kRecordFormat) {
     uint32_t num_points = 0;
     if (!reader.Read(&num_points)) return Truncated(kWhat, context, reader);
-    if (num_points != num_keypoints || uint64_t(num_points) * 12 != reader.left()) {
+    const bool points_optional = format == kFeaturesWithCameraFormat;
+    if ((num_points != num_keypoints && !(points_optional && num_points == 0)) ||
+        uint64_t(num_points) * 12 != reader.left()) {
       return Malformed(kWhat, context,
                        std::to_string(num_points) + " 3D points for " +
                            std::to_string(num_keypoints) + " keypoints in " +
@@ -552,6 +574,7 @@ Status DecodeFeatures(std::string_view bytes, const RecordContext& context,
   *keypoints = std::move(keys);
   *descriptors = std::move(matrix);
   *points = std::move(positions);
+  *camera = matrix_of_camera;
   return Status::Ok();
 }
 

@@ -31,8 +31,11 @@
 //                (increasing under each node)
 //   features   : format | keypoints k u32 | k x (x, y, size, angle, response f32, octave i32) |
 //                descriptor rows u32 | cols u32 | OpenCV type i32 | rows x cols x element bytes |
-//                and, for object entries only (format byte kFeaturesWithPointsFormat),
-//                | points k u32 | k x (x, y, z f32)
+//                and, for entries with 3D points and no camera matrix (object entries, and
+//                frames older versions stored with depth; format byte kFeaturesWithPointsFormat), |
+//                points k u32 | k x (x, y, z f32); for entries with a camera matrix (place frames
+//                with intrinsics; format byte kFeaturesWithCameraFormat), | camera 9 x f64
+//                (row-major) | points n u32 (0 or k) | n x (x, y, z f32)
 //
 // Every decoder checks every length against what is left before reading or allocating, and
 // returns DATA_LOSS naming the record ("bow of map 3 entry 17: ...") on anything malformed: a
@@ -54,6 +57,8 @@ namespace recog::storage {
 inline constexpr uint8_t kRecordFormat = 1;
 // Features records of object entries (with 3D points) start with this byte instead.
 inline constexpr uint8_t kFeaturesWithPointsFormat = 2;
+// Features records of entries with a camera matrix (and 3D points or not) start with this byte.
+inline constexpr uint8_t kFeaturesWithCameraFormat = 3;
 // Metadata records written before timestamps were optional, with a client id (read only).
 inline constexpr uint8_t kMetadataWithClientIdFormat = 2;
 // Metadata records as written now: the timestamp is optional (0.0 is a time).
@@ -115,12 +120,15 @@ std::string EncodeDirect(const FeatureVector& direct);
 Status DecodeDirect(std::string_view bytes, const RecordContext& context, FeatureVector* out);
 
 // INVALID_ARGUMENT when the descriptor matrix has more than two dimensions or four channels, or
-// when `points` is neither empty nor one per keypoint.
+// when `points` is neither empty nor one per keypoint. A `camera` of all zeros is no camera (the
+// record then has the layout it had before cameras were stored); a decoded record without one
+// gives all zeros.
 StatusOr<std::string> EncodeFeatures(const std::vector<cv::KeyPoint>& keypoints,
                                      const cv::Mat& descriptors,
-                                     const std::vector<cv::Point3f>& points);
+                                     const std::vector<cv::Point3f>& points,
+                                     const cv::Matx33d& camera = cv::Matx33d::zeros());
 Status DecodeFeatures(std::string_view bytes, const RecordContext& context,
                       std::vector<cv::KeyPoint>* keypoints, cv::Mat* descriptors,
-                      std::vector<cv::Point3f>* points);
+                      std::vector<cv::Point3f>* points, cv::Matx33d* camera);
 
 }  // namespace recog::storage

@@ -35,9 +35,9 @@ std::vector<Part> EncodeParts(const EntryRecord& e) {
        [](std::string_view b, EntryRecord* r) { return DecodeBow(b, kContext, &r->bow); }},
       {"direct", kEntryDirect, EncodeDirect(e.direct),
        [](std::string_view b, EntryRecord* r) { return DecodeDirect(b, kContext, &r->direct); }},
-      {"features", kEntryFeatures, *EncodeFeatures(e.keypoints, e.descriptors, e.points),
+      {"features", kEntryFeatures, *EncodeFeatures(e.keypoints, e.descriptors, e.points, e.camera),
        [](std::string_view b, EntryRecord* r) {
-         return DecodeFeatures(b, kContext, &r->keypoints, &r->descriptors, &r->points);
+         return DecodeFeatures(b, kContext, &r->keypoints, &r->descriptors, &r->points, &r->camera);
        }},
   };
 }
@@ -152,8 +152,39 @@ TEST(RecordCodecTest, NonContinuousDescriptorsAreStoredRowByRow) {
   std::vector<cv::KeyPoint> keypoints;
   cv::Mat decoded;
   std::vector<cv::Point3f> points;
-  ASSERT_TRUE(DecodeFeatures(*bytes, kContext, &keypoints, &decoded, &points).ok());
+  cv::Matx33d camera;
+  ASSERT_TRUE(DecodeFeatures(*bytes, kContext, &keypoints, &decoded, &points, &camera).ok());
   EXPECT_TRUE(recog::testing::SameMatrix(decoded, view));
+}
+
+// Features records keep the layouts older versions wrote when the entry has no camera matrix, so
+// a store written by this version reads back in an older one as long as no frame came with one.
+TEST(RecordCodecTest, FeaturesWithoutACameraKeepTheirOlderLayouts) {
+  EntryRecord entry = MakeTestEntry(1, 0, DescriptorFormat::Orb(), 20);  // 3D points
+  ASSERT_FALSE(entry.points.empty());
+  EXPECT_EQ(EncodeFeatures(entry.keypoints, entry.descriptors, entry.points)->front(),
+            char(kFeaturesWithPointsFormat));
+  EXPECT_EQ(EncodeFeatures(entry.keypoints, entry.descriptors, {})->front(), char(kRecordFormat));
+  const cv::Matx33d K(500, 0, 320, 0, 500, 240, 0, 0, 1);
+  const std::string with_camera = *EncodeFeatures(entry.keypoints, entry.descriptors, {}, K);
+  EXPECT_EQ(with_camera.front(), char(kFeaturesWithCameraFormat));
+  std::vector<cv::KeyPoint> keypoints;
+  cv::Mat descriptors;
+  std::vector<cv::Point3f> points = {{1, 2, 3}};
+  cv::Matx33d camera;
+  ASSERT_TRUE(
+      DecodeFeatures(with_camera, kContext, &keypoints, &descriptors, &points, &camera).ok());
+  EXPECT_EQ(camera, K);
+  EXPECT_TRUE(points.empty());
+  EXPECT_EQ(keypoints.size(), entry.keypoints.size());
+  // A camera matrix without a positive focal length is damage.
+  std::string damaged = with_camera;
+  const size_t fx_offset = with_camera.size() - 4 - 72;
+  const double negative = -500;
+  damaged.replace(fx_offset, 8, reinterpret_cast<const char*>(&negative), 8);
+  const Status s = DecodeFeatures(damaged, kContext, &keypoints, &descriptors, &points, &camera);
+  EXPECT_EQ(s.code(), StatusCode::kDataLoss);
+  EXPECT_NE(s.message().find("camera matrix"), std::string::npos) << s.message();
 }
 
 TEST(RecordCodecTest, CatalogRecordsRoundTrip) {
@@ -177,8 +208,14 @@ TEST(RecordCodecTest, CatalogRecordsRoundTrip) {
 }
 
 TEST(RecordCodecTest, EveryTruncationIsDataLossNamingTheRecord) {
-  const EntryRecord entry = MakeTestEntry(1, 2, DescriptorFormat::Orb(), 20);
-  for (const Part& part : EncodeParts(entry)) {
+  // Entries 1 (3D points), 3 (points and a camera) and 6 (a camera only): every features layout.
+  std::vector<Part> parts;
+  for (const EntryId id : {1, 3, 6}) {
+    for (Part& part : EncodeParts(MakeTestEntry(id, 2, DescriptorFormat::Orb(), 20))) {
+      parts.push_back(std::move(part));
+    }
+  }
+  for (const Part& part : parts) {
     for (size_t n = 0; n < part.bytes.size(); ++n) {
       EntryRecord decoded;
       const Status s = part.decode(std::string_view(part.bytes).substr(0, n), &decoded);
@@ -232,7 +269,8 @@ TEST(RecordCodecTest, HugeCountsAreRejectedBeforeAllocating) {
   std::vector<cv::KeyPoint> k;
   cv::Mat d;
   std::vector<cv::Point3f> p;
-  EXPECT_EQ(DecodeFeatures(features, kContext, &k, &d, &p).code(), StatusCode::kDataLoss);
+  cv::Matx33d camera;
+  EXPECT_EQ(DecodeFeatures(features, kContext, &k, &d, &p, &camera).code(), StatusCode::kDataLoss);
 }
 
 TEST(RecordCodecTest, BrokenInvariantsAreDataLoss) {

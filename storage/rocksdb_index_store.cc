@@ -648,8 +648,9 @@ Status RocksDbIndexStore::CommitEntry(MapId map, const EntryRecord& entry) {
   RECOG_RETURN_IF_ERROR(CheckStorable(entry));
   // Encode before taking the map's lock.
   const std::string key = EntryKey(map, entry.id);
-  RECOG_ASSIGN_OR_RETURN(const std::string features,
-                         EncodeFeatures(entry.keypoints, entry.descriptors, entry.points));
+  RECOG_ASSIGN_OR_RETURN(
+      const std::string features,
+      EncodeFeatures(entry.keypoints, entry.descriptors, entry.points, entry.camera));
   rocksdb::WriteBatch batch;
   batch.Put(Cf(kMetaCf), key, EncodeMetadata(entry.metadata));
   batch.Put(Cf(kBowCf), key, EncodeBow(entry.bow));
@@ -708,7 +709,7 @@ Status RocksDbIndexStore::DecodePart(ColumnFamily cf, std::string_view value,
       return DecodeDirect(value, context, &record->direct);
     case kFeaturesCf:
       return DecodeFeatures(value, context, &record->keypoints, &record->descriptors,
-                            &record->points);
+                            &record->points, &record->camera);
     default:
       return Status::Internal("column family " + std::to_string(cf) + " holds no entry part");
   }
@@ -724,6 +725,7 @@ void MoveParts(EntryRecord&& from, uint32_t parts, EntryRecord* to) {
     to->keypoints = std::move(from.keypoints);
     to->descriptors = std::move(from.descriptors);
     to->points = std::move(from.points);
+    to->camera = from.camera;
   }
 }
 

@@ -183,6 +183,8 @@ inline EntryRecord MakeTestEntry(EntryId id, uint32_t seed = 0,
     for (int i = 0; i < n; ++i)
       e.points.emplace_back(uniform(-1, 1), uniform(-1, 1), uniform(0, 2));
   }
+  // Every third id is a frame that came with its camera matrix (with 3D points or not).
+  if (id % 3 == 0) e.camera = {uniform(400, 600), 0, 320, 0, uniform(400, 600), 240, 0, 0, 1};
   return e;
 }
 
@@ -215,6 +217,7 @@ inline std::string EntryDifference(const EntryRecord& a, const EntryRecord& b,
     if (!same) out += "keypoints differ; ";
     if (!SameMatrix(a.descriptors, b.descriptors)) out += "descriptors differ; ";
     if (a.points != b.points) out += "3D points differ; ";
+    if (a.camera != b.camera) out += "camera matrices differ; ";
   }
   return out;
 }

@@ -47,4 +47,24 @@ bool ComputePoseCovariance(const cv::Matx33d& K, const cv::Matx33d& R, const cv:
   return true;
 }
 
+PoseCovariance6 InversePoseCovariance(const cv::Matx33d& R, const cv::Vec3d& t,
+                                      const PoseCovariance6& covariance) {
+  using RowMajor6 = Eigen::Matrix<double, 6, 6, Eigen::RowMajor>;
+  Eigen::Matrix3d rotation_transposed;
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) rotation_transposed(r, c) = R(c, r);
+  }
+  Eigen::Matrix3d skew_t;
+  skew_t << 0, -t[2], t[1], t[2], 0, -t[0], -t[1], t[0], 0;
+  RowMajor6 jacobian = RowMajor6::Zero();
+  jacobian.topLeftCorner<3, 3>() = -rotation_transposed;
+  jacobian.bottomLeftCorner<3, 3>() = -rotation_transposed * skew_t;
+  jacobian.bottomRightCorner<3, 3>() = -rotation_transposed;
+  const RowMajor6 result =
+      jacobian * Eigen::Map<const RowMajor6>(covariance.data()) * jacobian.transpose();
+  PoseCovariance6 out;
+  Eigen::Map<RowMajor6>(out.data()) = 0.5 * (result + result.transpose());
+  return out;
+}
+
 }  // namespace recog

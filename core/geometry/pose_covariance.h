@@ -27,4 +27,10 @@ bool ComputePoseCovariance(const cv::Matx33d& K, const cv::Matx33d& R, const cv:
                            const std::vector<cv::Point2f>& pixels, double min_sigma_px,
                            PoseCovariance6* covariance);
 
+// The covariance of the inverse pose, X = Rᵀ X_camera − Rᵀ t, in the same parametrisation, from
+// the covariance of (R, t): first order, Cov' = J Cov Jᵀ with J = [[−Rᵀ, 0], [−Rᵀ[t]×, −Rᵀ]].
+// For a pose solved the other way round (the 3D points on the other side of a loop).
+PoseCovariance6 InversePoseCovariance(const cv::Matx33d& R, const cv::Vec3d& t,
+                                      const PoseCovariance6& covariance);
+
 }  // namespace recog

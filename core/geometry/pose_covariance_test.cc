@@ -104,5 +104,51 @@ TEST(PoseCovarianceTest, RejectsTooFewPointsAndPointsBehindTheCamera) {
   EXPECT_EQ(Trace(covariance), 0);  // untouched
 }
 
+// Perturbations drawn from a pose's covariance, pushed through the exact inversion, have the
+// covariance InversePoseCovariance predicts (small perturbations: first order holds).
+TEST(PoseCovarianceTest, InverseMatchesSampledInversions) {
+  const Scene scene = MakeScene(1, 0);
+  Eigen::Matrix<double, 6, 6> covariance = Eigen::Matrix<double, 6, 6>::Zero();
+  const double sigmas[6] = {2e-3, 1e-3, 3e-3, 4e-3, 1e-3, 2e-3};
+  for (int i = 0; i < 6; ++i) covariance(i, i) = sigmas[i] * sigmas[i];
+  covariance(0, 4) = covariance(4, 0) = 0.5 * sigmas[0] * sigmas[4];
+  PoseCovariance6 given;
+  Eigen::Map<RowMajor6>(given.data()) = covariance;
+  const PoseCovariance6 predicted = InversePoseCovariance(scene.R, scene.t, given);
+
+  const Eigen::Matrix<double, 6, 6> L = covariance.llt().matrixL();
+  const cv::Matx33d R_inverse = scene.R.t();
+  const cv::Vec3d t_inverse = -(R_inverse * scene.t);
+  std::mt19937 rng(11);
+  std::normal_distribution<double> normal;
+  const int samples = 20000;
+  Eigen::Matrix<double, 6, 6> sampled = Eigen::Matrix<double, 6, 6>::Zero();
+  for (int s = 0; s < samples; ++s) {
+    Eigen::Matrix<double, 6, 1> z;
+    for (int i = 0; i < 6; ++i) z(i) = normal(rng);
+    const Eigen::Matrix<double, 6, 1> d = L * z;
+    cv::Matx33d rotation_delta;
+    cv::Rodrigues(cv::Vec3d(d(0), d(1), d(2)), rotation_delta);
+    const cv::Matx33d R = rotation_delta * scene.R;
+    const cv::Vec3d t = scene.t + cv::Vec3d(d(3), d(4), d(5));
+    // The inverse of the perturbed pose, as a perturbation of the exact inverse.
+    const cv::Matx33d R_perturbed_inverse = R.t();
+    cv::Vec3d delta;
+    cv::Rodrigues(R_perturbed_inverse * R_inverse.t(), delta);
+    const cv::Vec3d dt = -(R_perturbed_inverse * t) - t_inverse;
+    Eigen::Matrix<double, 6, 1> e;
+    e << delta[0], delta[1], delta[2], dt[0], dt[1], dt[2];
+    sampled += e * e.transpose();
+  }
+  sampled /= samples;
+  const RowMajor6 expected = Eigen::Map<const RowMajor6>(predicted.data());
+  EXPECT_LT((sampled - expected).norm(), 0.05 * expected.norm()) << "sampled\n"
+                                                                 << sampled << "\npredicted\n"
+                                                                 << expected;
+  // Inverting twice gives the covariance back.
+  const PoseCovariance6 twice = InversePoseCovariance(R_inverse, t_inverse, predicted);
+  for (size_t i = 0; i < 36; ++i) EXPECT_NEAR(twice[i], given[i], 1e-12);
+}
+
 }  // namespace
 }  // namespace recog

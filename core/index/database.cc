@@ -193,7 +193,8 @@ StatusOr<EntryId> Database::Add(const FeatureSet& features, EntryMetadata metada
 
 StatusOr<EntryId> Database::AddConverted(const BowVector& bow, const FeatureVector& direct,
                                          const FeatureSet& features, EntryMetadata metadata,
-                                         std::vector<cv::Point3f> points) {
+                                         std::vector<cv::Point3f> points,
+                                         const cv::Matx33d& camera) {
   RECOG_RETURN_IF_ERROR(CheckDescriptorMatrix(features.descriptors, info_.config.descriptor));
   const size_t rows = features.descriptors.empty() ? 0 : size_t(features.descriptors.rows);
   if (features.keypoints.size() != rows) {
@@ -203,6 +204,10 @@ StatusOr<EntryId> Database::AddConverted(const BowVector& bow, const FeatureVect
   if (!points.empty() && points.size() != rows) {
     return Status::InvalidArgument("entry has " + std::to_string(points.size()) +
                                    " 3D points but " + std::to_string(rows) + " descriptors");
+  }
+  if (camera != cv::Matx33d::zeros() &&
+      !(camera(0, 0) > 0.0 && camera(1, 1) > 0.0 && cv::checkRange(camera))) {
+    return Status::InvalidArgument("entry camera matrix needs finite fx, fy > 0");
   }
   if (metadata.user_data.size() > kMaxUserDataBytes) {
     return Status::InvalidArgument("entry user data exceeds 64 KiB");
@@ -230,6 +235,7 @@ StatusOr<EntryId> Database::AddConverted(const BowVector& bow, const FeatureVect
   record.keypoints = features.keypoints;
   record.descriptors = features.descriptors;
   record.points = std::move(points);
+  record.camera = camera;
   // The store write happens outside the index lock: queries go on meanwhile.
   RECOG_RETURN_IF_ERROR(store_->CommitEntry(info_.id, record));
   std::unique_lock index_lock(index_mutex_);

@@ -81,11 +81,13 @@ class Database {
   StatusOr<EntryId> Add(const FeatureSet& features, EntryMetadata metadata = {});
   // Adds an entry the caller has already converted with this database's vocabulary, with the
   // normalisation of the map's scoring and the direct index at the map's level. `points` is the
-  // 3D point of every feature (object entries) or empty. INVALID_ARGUMENT when the parts do not
-  // fit the vocabulary or each other.
+  // 3D point of every feature (object entries, frames with depth) or empty; `camera` the pinhole
+  // matrix of the keypoints, or all zeros when unknown. INVALID_ARGUMENT when the parts do not
+  // fit the vocabulary or each other, or a camera matrix has no positive, finite focal lengths.
   StatusOr<EntryId> AddConverted(const BowVector& bow, const FeatureVector& direct,
                                  const FeatureSet& features, EntryMetadata metadata = {},
-                                 std::vector<cv::Point3f> points = {});
+                                 std::vector<cv::Point3f> points = {},
+                                 const cv::Matx33d& camera = cv::Matx33d::zeros());
 
   // Scores the query against every entry sharing a word with it, with the map's scoring, and
   // returns the best `max_results` (best first; equal scores by increasing id). The query must

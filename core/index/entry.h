@@ -3,7 +3,9 @@
 // An entry is its bag of words (what the inverted index is built from), its direct-index
 // feature vector (vocabulary node -> features, for fast correspondences), its keypoints and
 // descriptors (for geometric verification), and metadata. Object entries also carry the 3D point
-// (object frame) of every feature, for pose estimation. Entries of a map get increasing ids
+// (object frame) of every feature, for pose estimation; place frames may carry the 3D point of
+// every feature (camera frame, from depth or stereo) and the camera matrix of their keypoints,
+// for metric loops. Entries of a map get increasing ids
 // 0, 1, 2, ... in the order they are added; a removed id is never reused.
 #pragma once
 
@@ -55,7 +57,12 @@ struct EntryRecord {
   FeatureVector direct;
   std::vector<cv::KeyPoint> keypoints;
   cv::Mat descriptors;              // one row per keypoint, in the map's descriptor format
-  std::vector<cv::Point3f> points;  // one per keypoint (object entries) or empty (place frames)
+  std::vector<cv::Point3f> points;  // one per keypoint (object entries, frames with depth) or empty
+  // The pinhole camera matrix of the keypoints when the frame came with one (place frames with
+  // intrinsics); all zeros when unknown.
+  cv::Matx33d camera = cv::Matx33d::zeros();
+
+  bool has_camera() const { return camera(0, 0) > 0.0 && camera(1, 1) > 0.0; }
 };
 
 // Fixed when a map is created.

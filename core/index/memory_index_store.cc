@@ -13,6 +13,7 @@ void CopyEntryParts(const EntryRecord& from, uint32_t parts, EntryRecord* to) {
     to->keypoints = from.keypoints;
     to->descriptors = from.descriptors.clone();
     to->points = from.points;
+    to->camera = from.camera;
   }
 }
 

@@ -510,10 +510,14 @@ StatusOr<EntryId> LoopDetector::Insert(const FeatureSet& features, const BowVect
   metadata.timestamp = timestamp;
   metadata.client_id = client_id;
   std::vector<cv::Point3f> points;
-  if (geometry != nullptr) points = geometry->points;
-  RECOG_ASSIGN_OR_RETURN(
-      const EntryId id,
-      database_->AddConverted(bow, direct, features, std::move(metadata), std::move(points)));
+  cv::Matx33d camera = cv::Matx33d::zeros();
+  if (geometry != nullptr) {
+    points = geometry->points;
+    camera = geometry->K;
+  }
+  RECOG_ASSIGN_OR_RETURN(const EntryId id,
+                         database_->AddConverted(bow, direct, features, std::move(metadata),
+                                                 std::move(points), camera));
   if (timestamp.has_value()) {
     entry_timestamps_.push_back(
         entry_timestamps_.empty() ? *timestamp : std::max(*timestamp, entry_timestamps_.back()));
@@ -561,25 +565,37 @@ Status LoopDetector::VerifyMetric(const FeatureSet& features, const FrameGeometr
   if (params_.geometry == GeometryCheck::kNone) return Status::Ok();
   const auto start = Clock::now();
   RECOG_ASSIGN_OR_RETURN(EntryRecord candidate, database_->Get(result->match, kEntryFeatures));
-  if (candidate.points.empty()) return Status::Ok();
+  // The 3D points come from the match, seen by the query's camera; or, when the match has none,
+  // from the query, seen by the match's camera (stored when the match came with intrinsics). The
+  // pose is then solved the other way round and inverted.
+  const bool points_of_match = !candidate.points.empty();
+  if (!points_of_match && (geometry.points.empty() || !candidate.has_camera())) {
+    return Status::Ok();
+  }
+  const std::vector<cv::Point3f>& points = points_of_match ? candidate.points : geometry.points;
+  const std::vector<cv::KeyPoint>& keypoints =
+      points_of_match ? features.keypoints : candidate.keypoints;
+  const cv::Matx33d& K = points_of_match ? geometry.K : candidate.camera;
   MetricLoop& metric = result->metric;
   metric.checked = true;
   std::vector<Match> pairs;
   std::vector<cv::Point3f> object;
   std::vector<cv::Point2f> image;
   for (const Match& m : result->inliers) {
-    if (m.b >= candidate.points.size() || !IsUsablePoint(candidate.points[m.b])) continue;
+    const uint32_t point = points_of_match ? m.b : m.a;
+    const uint32_t pixel = points_of_match ? m.a : m.b;
+    if (point >= points.size() || !IsUsablePoint(points[point])) continue;
     pairs.push_back(m);
-    object.push_back(candidate.points[m.b]);
-    image.push_back(features.keypoints[m.a].pt);
+    object.push_back(points[point]);
+    image.push_back(keypoints[pixel].pt);
   }
   metric.correspondences = uint32_t(pairs.size());
   const MetricCheckOptions& options = params_.metric;
   cv::Vec3d rvec, tvec;
   std::vector<int> ransac_inliers;
   const bool solved = pairs.size() >= options.min_inliers &&
-                      cv::solvePnPRansac(object, image, geometry.K, cv::noArray(), rvec, tvec,
-                                         false, options.max_iterations, float(options.threshold_px),
+                      cv::solvePnPRansac(object, image, K, cv::noArray(), rvec, tvec, false,
+                                         options.max_iterations, float(options.threshold_px),
                                          options.confidence, ransac_inliers, cv::SOLVEPNP_EPNP);
   std::vector<cv::Point3f> inlier_object;
   std::vector<cv::Point2f> inlier_image;
@@ -588,10 +604,10 @@ Status LoopDetector::VerifyMetric(const FeatureSet& features, const FrameGeometr
       inlier_object.push_back(object[size_t(i)]);
       inlier_image.push_back(image[size_t(i)]);
     }
-    cv::solvePnPRefineLM(inlier_object, inlier_image, geometry.K, cv::noArray(), rvec, tvec);
+    cv::solvePnPRefineLM(inlier_object, inlier_image, K, cv::noArray(), rvec, tvec);
     // The inliers of the refined pose.
     std::vector<cv::Point2f> projected;
-    cv::projectPoints(object, rvec, tvec, geometry.K, cv::noArray(), projected);
+    cv::projectPoints(object, rvec, tvec, K, cv::noArray(), projected);
     inlier_object.clear();
     inlier_image.clear();
     cv::Matx33d R;
@@ -616,11 +632,19 @@ Status LoopDetector::VerifyMetric(const FeatureSet& features, const FrameGeometr
   metric.verified = inliers >= options.min_inliers &&
                     double(inliers) >= options.min_inlier_ratio * double(pairs.size());
   if (metric.verified) {
-    cv::Rodrigues(rvec, metric.R);
-    metric.t = tvec;
-    if (!ComputePoseCovariance(geometry.K, metric.R, metric.t, inlier_object, inlier_image,
-                               options.min_sigma_px, &metric.covariance)) {
+    cv::Matx33d R;
+    cv::Rodrigues(rvec, R);
+    if (!ComputePoseCovariance(K, R, tvec, inlier_object, inlier_image, options.min_sigma_px,
+                               &metric.covariance)) {
       metric.covariance.fill(0.0);
+    }
+    if (points_of_match) {
+      metric.R = R;
+      metric.t = tvec;
+    } else {  // solved as X_match = R X_query + t
+      metric.R = R.t();
+      metric.t = -(R.t() * tvec);
+      metric.covariance = InversePoseCovariance(R, tvec, metric.covariance);
     }
   } else {
     result->status = LoopStatus::kFailedGeometry;

@@ -29,14 +29,16 @@
 // CRF-Matching; this detector uses a PnP check instead, as the metric verification the thesis
 // cites there, and returns the metric pose a SLAM needs): a frame may come with a FrameGeometry,
 // its camera matrix and the 3D point of each keypoint (from depth or stereo,
-// core/geometry/frame_points.h). The entry keeps the points. When a loop passes step 6 and the
-// query came with a camera matrix and the matched entry has 3D points, VerifyMetric checks the loop
-// in 3D: PnP RANSAC between the query's keypoints and the match's points over the epipolar inliers,
-// then Levenberg-Marquardt on the PnP inliers; the loop must agree in structure
-// (MetricCheckOptions: enough inliers, and enough of the 2D-3D correspondences) or its status
-// becomes kFailedGeometry. A verified loop carries the metric relative pose and its covariance
-// (LoopResult::metric). Frames without a FrameGeometry, and matches without points, are handled
-// exactly as before.
+// core/geometry/frame_points.h). The entry keeps the points and the camera matrix. When a loop
+// passes step 6 and either side has 3D points the other side's camera can see, VerifyMetric checks
+// the loop in 3D: PnP RANSAC over the epipolar inliers between the match's points and the query's
+// keypoints (query camera), or, when the match has no points (a map without depth), between the
+// query's points and the match's keypoints (the match's stored camera matrix), then
+// Levenberg-Marquardt on the PnP inliers; the loop must agree in structure (MetricCheckOptions:
+// enough inliers, and enough of the 2D-3D correspondences) or its status becomes kFailedGeometry.
+// A verified loop carries the metric relative pose and its covariance (LoopResult::metric), in one
+// convention whichever side gave the points. Frames without a FrameGeometry, and loops where
+// neither side has points with a camera on the other, are handled exactly as before.
 //
 // Add() is step 7 alone (a robot uploading its keyframes): the frame joins the sequence exactly
 // as a processed frame would — it gets the next entry id, becomes the previous usable frame when
@@ -96,7 +98,7 @@ enum class GeometryCheck {
 std::string_view GeometryCheckName(GeometryCheck check);  // "direct_index", "exhaustive", "none"
 StatusOr<GeometryCheck> ParseGeometryCheck(std::string_view name);
 
-// The 3D check of a loop whose match has 3D points (VerifyMetric). Defaults: 2 px as the
+// The 3D check of a loop where one side has 3D points (VerifyMetric). Defaults: 2 px as the
 // epipolar check's threshold and 12 inliers as its minimum (Table 4.4); 70 % of the 2D-3D
 // correspondences (the epipolar inliers with a 3D point): on the synthetic sequences of
 // tools/evaluation/metric_sequence_test.cc, true loops keep at least 82 % (stereo) and 87 %
@@ -215,9 +217,11 @@ struct LoopTimings {  // milliseconds spent in each stage for one frame
 
 // The 3D check of a loop (VerifyMetric) and the metric relative pose it gives.
 struct MetricLoop {
-  bool checked = false;          // the query had a camera matrix and the match 3D points
+  // One side had 3D points and the other a camera matrix: the match's points and the query's
+  // camera, or (a match without points) the query's points and the match's stored camera.
+  bool checked = false;
   bool verified = false;         // the check passed (the loop agrees in structure)
-  uint32_t correspondences = 0;  // epipolar inliers whose match feature has a 3D point
+  uint32_t correspondences = 0;  // epipolar inliers whose feature on that side has a 3D point
   std::vector<Match> inliers;    // PnP inliers (a = query feature, b = match feature)
   double rms_error_px = 0;       // reprojection RMS over the inliers
   // X_query = R * X_match + t: the match's camera frame into the query's, metres (set when
@@ -269,7 +273,8 @@ class LoopDetector {
   // to the database, with the client's id of the frame (stored in its metadata, at most
   // kMaxClientIdBytes). Errors are only for bad input (e.g. descriptors of another format) or a
   // failing store; "no loop" is a result.
-  // With `geometry` (may be null), the entry keeps its points and a loop is checked in 3D.
+  // With `geometry` (may be null), the entry keeps its points and camera matrix, and a loop is
+  // checked in 3D.
   // `excluded`: entries that are never candidates for this frame, beside tau_c's recent ones —
   // the client's own keyframes covisible with this one (ORB-SLAM leaves out the keyframes
   // connected to the query), which share its scene without being a revisit. Any order; ids the
@@ -285,7 +290,7 @@ class LoopDetector {
   // move it for a frame that is not queried: the frame counts in the sequence (and so in the gap
   // between queries for temporal consistency), is the previous usable frame when it has enough
   // features, and its timestamp bounds tau_c. The client id and the errors are as for Process.
-  // With `geometry` (may be null), the entry keeps its 3D points.
+  // With `geometry` (may be null), the entry keeps its 3D points and camera matrix.
   StatusOr<EntryId> Add(const FeatureSet& features, std::optional<double> timestamp = std::nullopt,
                         std::string_view client_id = {}, const FrameGeometry* geometry = nullptr);
 
@@ -303,8 +308,9 @@ class LoopDetector {
   // a recognised place has acceptance kRelocalisation.
   // Errors are only for bad input or a failing store. Safe to call from any number of threads,
   // concurrently with Process and Add.
-  // With `geometry` (may be null; its points are not used), a recognised place whose entry has
-  // 3D points is checked in 3D and gets the metric pose. `excluded` as for Process.
+  // With `geometry` (may be null), a recognised place is checked in 3D and gets the metric pose
+  // when its entry has 3D points, or the query has them and the entry a camera matrix. `excluded`
+  // as for Process.
   StatusOr<LoopResult> Query(const FeatureSet& features,
                              std::optional<double> timestamp = std::nullopt,
                              const FrameGeometry* geometry = nullptr,
@@ -365,10 +371,10 @@ class LoopDetector {
   // kNone), filling correspondences, inliers, fundamental matrix and verification time; the
   // status becomes kFailedGeometry when the check fails.
   Status Verify(const FeatureSet& features, const FeatureVector& direct, LoopResult* result) const;
-  // The 3D check (§3.3.3), after Verify passed: when the match has 3D points, fills
+  // The 3D check (§3.3.3), after Verify passed: when one side has 3D points (see above), fills
   // result->metric (PnP RANSAC over the epipolar inliers with a 3D point, LM refinement, the
   // covariance) and sets kFailedGeometry when the loop does not agree in structure. Nothing when
-  // the match has no points or the geometry check is kNone (no correspondences).
+  // neither side has points the other's camera can see, or the geometry check is kNone.
   Status VerifyMetric(const FeatureSet& features, const FrameGeometry& geometry,
                       LoopResult* result) const;
 

@@ -1057,6 +1057,38 @@ TEST_F(PlaceServiceTest, RgbdAndStereoFramesGiveMetricLoopsCloseToTheTruth) {
   ExpectMetricPose(response.result(), revisit, keyframes[response.result().match_frame_id()]);
 }
 
+// The other side has the depth: robot A's map was built with intrinsics only (the server keeps
+// each frame's camera matrix), robot B relocalises in it with an RGB-D frame. The pose is solved
+// from B's points and A's pixels, in the same convention as above.
+TEST_F(PlaceServiceTest, AnRgbdQueryGetsTheMetricPoseInAMapBuiltWithoutDepth) {
+  const std::vector<cli::CameraPose> keyframes = {
+      {cli::Yaw(0), {-0.3, 0, 0}}, {cli::Yaw(0), {0, 0, 0}}, {cli::Yaw(0), {0.3, 0, 0}}};
+  const cli::CameraPose revisit{cli::Yaw(3), {0.05, 0.08, 0.25}};
+  ASSERT_TRUE(CreateMap("calibrated").ok());
+  ASSERT_TRUE(CreateMap("uncalibrated").ok());
+  for (const cli::CameraPose& pose : keyframes) {
+    const cli::RenderedFrame rendered = Render(pose);
+    pb::AddFrameResponse added;
+    ASSERT_TRUE(AddFrame("calibrated", CalibratedFrame(rendered), &added).ok());
+    ASSERT_TRUE(
+        AddFrame("uncalibrated", client::FrameFromImage(rendered.image).value(), &added).ok());
+  }
+  pb::RelocalizeRequest request;
+  request.add_maps("calibrated");
+  request.add_maps("uncalibrated");
+  *request.add_frames() = RgbdFrame(Render(revisit));
+  pb::RelocalizeResponse response;
+  ASSERT_TRUE(places_->Relocalize(Context().get(), request, &response).ok());
+  std::map<std::string, pb::LoopResult> by_map;
+  for (const pb::Relocalization& place : response.places()) by_map[place.map()] = place.result();
+  ASSERT_TRUE(by_map.count("calibrated") && by_map.count("uncalibrated")) << response.DebugString();
+  const pb::LoopResult& calibrated = by_map["calibrated"];
+  ASSERT_LT(calibrated.match_frame_id(), keyframes.size());
+  ExpectMetricPose(calibrated, revisit, keyframes[calibrated.match_frame_id()]);
+  // Frames added without intrinsics have no camera to project the query's points into.
+  EXPECT_FALSE(by_map["uncalibrated"].metric().checked());
+}
+
 TEST_F(PlaceServiceTest, DepthAndStereoThatCannotGoWithTheFrameAreRefusedAndAddNothing) {
   ASSERT_TRUE(CreateMap("strict").ok());
   const cli::RenderedFrame rendered = Render({});

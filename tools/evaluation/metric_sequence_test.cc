@@ -84,6 +84,15 @@ struct DetectorRun {
   double points_ms = 0, detector_ms = 0;  // per frame given
 };
 
+// Relocalise: lap 1 is uploaded (Add), each frame of lap 2 asks where it is (Query); the
+// side given `depth` has its 3D points, the other only its camera matrix (or, with
+// `map_camera` false, a map that has nothing: no metric check can be made).
+struct RelocalisationSides {
+  bool map_depth = false;
+  bool query_depth = false;
+  bool map_camera = true;
+};
+
 class MetricSequenceTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
@@ -165,6 +174,42 @@ class MetricSequenceTest : public ::testing::Test {
     return run;
   }
 
+  static DetectorRun Relocalise(const RelocalisationSides& sides) {
+    MemoryIndexStore store;
+    auto db = Database::Create(&store, "metric", *vocabulary_);
+    EXPECT_TRUE(db.ok()) << db.status().ToString();
+    auto detector = LoopDetector::Create(db->get(), LoopDetectorParams{});
+    EXPECT_TRUE(detector.ok()) << detector.status().ToString();
+    auto geometry_of = [](size_t i, bool depth) {
+      FrameGeometry geometry{kK, {}};
+      if (depth) {
+        EXPECT_TRUE(PointsFromDepth((*features_)[i].keypoints, kSize, kK, (*frames_)[i].depth_mm,
+                                    0.001, &geometry.points)
+                        .ok());
+      }
+      return geometry;
+    };
+    for (size_t i = 0; i < size_t(kLapFrames); ++i) {
+      const FrameGeometry geometry = geometry_of(i, sides.map_depth);
+      EXPECT_TRUE(
+          detector->Add((*features_)[i], std::nullopt, {}, sides.map_camera ? &geometry : nullptr)
+              .ok());
+    }
+    DetectorRun run;
+    run.results.resize(size_t(kLapFrames));  // lap 1: not queried
+    run.processed = size_t(kLapFrames);
+    for (size_t i = kLapFrames; i < features_->size(); ++i) {
+      const FrameGeometry geometry = geometry_of(i, sides.query_depth);
+      const auto start = Clock::now();
+      auto r = detector->Query((*features_)[i], 0.0, &geometry);
+      run.detector_ms += MsSince(start) / kLapFrames;
+      EXPECT_TRUE(r.ok()) << r.status().ToString();
+      EXPECT_EQ(r->status, LoopStatus::kLoopDetected) << i;
+      run.results.push_back(std::move(r).value());
+    }
+    return run;
+  }
+
   // Checks the metric loops of lap 2 against the true poses and prints the figures.
   static void CheckMetricLoops(const char* name, const DetectorRun& run) {
     std::vector<double> translation_errors, rotation_errors, distances;
@@ -236,33 +281,21 @@ TEST_F(MetricSequenceTest, StereoLoopsGiveTheMetricRelativePose) {
 }
 
 TEST_F(MetricSequenceTest, AQueryWithoutDepthInAnRgbdMapGetsTheMetricPose) {
-  // Relocalisation: lap 1 is uploaded with depth (Add), each frame of lap 2 asks where it is
-  // (Query) with its camera matrix only.
-  MemoryIndexStore store;
-  auto db = Database::Create(&store, "metric", *vocabulary_);
-  ASSERT_TRUE(db.ok());
-  auto detector = LoopDetector::Create(db->get(), LoopDetectorParams{});
-  ASSERT_TRUE(detector.ok());
-  for (size_t i = 0; i < size_t(kLapFrames); ++i) {
-    FrameGeometry geometry{kK, {}};
-    ASSERT_TRUE(PointsFromDepth((*features_)[i].keypoints, kSize, kK, (*frames_)[i].depth_mm, 0.001,
-                                &geometry.points)
-                    .ok());
-    ASSERT_TRUE(detector->Add((*features_)[i], std::nullopt, {}, &geometry).ok());
+  CheckMetricLoops("query", Relocalise({.map_depth = true}));
+}
+
+// The other way round: a map built without depth (its frames keep their camera matrix), an RGB-D
+// query. The pose is solved from the query's points and inverted, in the same convention.
+TEST_F(MetricSequenceTest, AnRgbdQueryInAMapWithoutDepthGetsTheMetricPose) {
+  CheckMetricLoops("query with depth", Relocalise({.query_depth = true}));
+}
+
+TEST_F(MetricSequenceTest, AnRgbdQueryInAMapWithoutCamerasHasNoMetricCheck) {
+  const DetectorRun run = Relocalise({.query_depth = true, .map_camera = false});
+  for (size_t i = kLapFrames; i < run.results.size(); ++i) {
+    EXPECT_EQ(run.results[i].status, LoopStatus::kLoopDetected) << i;
+    EXPECT_FALSE(run.results[i].metric.checked) << i;
   }
-  DetectorRun run;
-  run.results.resize(size_t(kLapFrames));  // lap 1: not queried
-  run.processed = size_t(kLapFrames);
-  const FrameGeometry calibrated{kK, {}};
-  for (size_t i = kLapFrames; i < features_->size(); ++i) {
-    const auto start = Clock::now();
-    auto r = detector->Query((*features_)[i], 0.0, &calibrated);
-    run.detector_ms += MsSince(start) / kLapFrames;
-    ASSERT_TRUE(r.ok()) << r.status().ToString();
-    EXPECT_EQ(r->status, LoopStatus::kLoopDetected) << i;
-    run.results.push_back(std::move(r).value());
-  }
-  CheckMetricLoops("query", run);
 }
 
 // recog eval place on the same frames written as a TUM RGB-D folder (depth in TUM's 1/5000 m) and

@@ -14,6 +14,7 @@
 #include <future>
 #include <map>
 #include <memory>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -372,6 +373,21 @@ struct QueryArgs {
   uint32_t top_k = 0;
 };
 
+// Attaches the depth image in `depth` or the right image in `right` (whichever is not empty) to
+// the frame, for metric loops; the server checks the rest (intrinsics, sizes, the baseline).
+Status AttachStructure(const std::string& depth, double depth_scale, const std::string& right,
+                       double baseline, pb::Frame* frame) {
+  if (depth.empty() && right.empty()) return Status::Ok();
+  const std::string& file = depth.empty() ? right : depth;
+  const cv::Mat image =
+      cv::imread(file, depth.empty() ? cv::IMREAD_GRAYSCALE : cv::IMREAD_ANYDEPTH);
+  if (image.empty()) return Status::InvalidArgument("cannot read '" + file + "'");
+  const grpc::Status attached = depth.empty() ? client::AttachStereoRight(image, baseline, frame)
+                                              : client::AttachDepth(image, depth_scale, frame);
+  if (!attached.ok()) return Status::InvalidArgument(file + ": " + attached.error_message());
+  return Status::Ok();
+}
+
 int RunQuery(const QueryArgs& args, RecognitionClient& client) {
   auto gray = ReadGrayImage(args.image);
   if (!gray.ok()) return Fail("query", gray.status());
@@ -387,17 +403,9 @@ int RunQuery(const QueryArgs& args, RecognitionClient& client) {
     SetIntrinsics(*camera, &*frame);
     options.set_include_relative_pose(true);
   }
-  if (!args.depth.empty() || !args.right.empty()) {  // metric loops: the server checks the rest
-    const std::string& file = args.depth.empty() ? args.right : args.depth;
-    const cv::Mat image =
-        cv::imread(file, args.depth.empty() ? cv::IMREAD_GRAYSCALE : cv::IMREAD_ANYDEPTH);
-    if (image.empty()) return Fail("query", Status::InvalidArgument("cannot read '" + file + "'"));
-    const grpc::Status attached = args.depth.empty()
-                                      ? client::AttachStereoRight(image, args.baseline, &*frame)
-                                      : client::AttachDepth(image, args.depth_scale, &*frame);
-    if (!attached.ok()) {
-      return Fail("query", Status::InvalidArgument(file + ": " + attached.error_message()));
-    }
+  if (Status s = AttachStructure(args.depth, args.depth_scale, args.right, args.baseline, &*frame);
+      !s.ok()) {
+    return Fail("query", s);
   }
   auto answer = client.QueryPlace(
       args.map, *frame, args.add ? client::QueryMode::kAddFrame : client::QueryMode::kRelocalise,
@@ -462,27 +470,43 @@ int RunQuery(const QueryArgs& args, RecognitionClient& client) {
 
 struct RelocalizeArgs {
   ServerFlags server;
-  std::vector<std::string> images, maps;
+  std::vector<std::string> images, maps, depths;
   std::string group, camera;
+  double depth_scale = 1000;
   uint32_t max_results = 0;
 };
 
 int RunRelocalize(const RelocalizeArgs& args, RecognitionClient& client) {
+  if (!args.depths.empty() && args.depths.size() != args.images.size()) {
+    return Fail("relocalize",
+                Status::InvalidArgument("--depth needs one depth image per image: " +
+                                        std::to_string(args.depths.size()) + " for " +
+                                        std::to_string(args.images.size()) + " images"));
+  }
+  std::optional<CameraIntrinsics> camera;
+  pb::ResultOptions options;
+  if (!args.camera.empty()) {
+    auto parsed = ParseCamera(args.camera);
+    if (!parsed.ok()) return Fail("relocalize", parsed.status());
+    camera = *parsed;
+    options.set_include_relative_pose(true);
+  }
   std::vector<pb::Frame> frames;
-  for (const std::string& image : args.images) {
+  for (size_t i = 0; i < args.images.size(); ++i) {
+    const std::string& image = args.images[i];
     auto gray = ReadGrayImage(image);
     if (!gray.ok()) return Fail("relocalize", gray.status());
     auto frame = FrameFromImageFile(image, *gray);
     if (!frame.ok()) return Fail("relocalize", frame.status());
     frame->set_client_frame_id(fs::path(image).filename().string());
+    if (camera.has_value()) SetIntrinsics(*camera, &*frame);
+    const std::string no_depth;
+    if (Status s = AttachStructure(args.depths.empty() ? no_depth : args.depths[i],
+                                   args.depth_scale, {}, 0, &*frame);
+        !s.ok()) {
+      return Fail("relocalize", s);
+    }
     frames.push_back(std::move(frame).value());
-  }
-  pb::ResultOptions options;
-  if (!args.camera.empty()) {
-    auto camera = ParseCamera(args.camera);
-    if (!camera.ok()) return Fail("relocalize", camera.status());
-    for (pb::Frame& frame : frames) SetIntrinsics(*camera, &frame);
-    options.set_include_relative_pose(true);
   }
   auto answer = client.Relocalize(frames, {.maps = args.maps, .group = args.group}, options,
                                   args.max_results);
@@ -632,8 +656,18 @@ void AddStreamCommands(CLI::App& app, int* exit_code) {
       ->add_option("--max-results", relocalize_args->max_results,
                    "Report the best N maps only (0: every map that recognised an image)")
       ->capture_default_str();
-  relocalize->add_option("--camera", relocalize_args->camera,
-                         "fx,fy,cx,cy[,k1,k2,p1,p2[,k3]]: also report the relative pose");
+  CLI::Option* relocalize_camera =
+      relocalize->add_option("--camera", relocalize_args->camera,
+                             "fx,fy,cx,cy[,k1,k2,p1,p2[,k3]]: also report the relative pose");
+  relocalize
+      ->add_option("--depth", relocalize_args->depths,
+                   "Depth images aligned with the images, one per image (A,B or repeated; "
+                   "needs --camera without distortion): metric poses in maps built with or "
+                   "without depth")
+      ->delimiter(',')
+      ->needs(relocalize_camera);
+  relocalize->add_option("--depth-scale", relocalize_args->depth_scale, "Depth units per metre")
+      ->capture_default_str();
   ConnectCommand(relocalize, &relocalize_args->server, exit_code,
                  [relocalize_args](RecognitionClient& client) {
                    return RunRelocalize(*relocalize_args, client);
