@@ -248,24 +248,32 @@ double InlierSpread(const std::vector<cv::KeyPoint>& a_keypoints,
   return std::min(CoveredShare(a_keypoints, used_a, grid), CoveredShare(b_keypoints, used_b, grid));
 }
 
-bool RelativePoseFromFundamental(const cv::Matx33d& fundamental, const cv::Matx33d& K,
+bool RelativePoseFromFundamental(const cv::Matx33d& fundamental, const cv::Matx33d& K_a,
+                                 const cv::Matx33d& K_b,
                                  const std::vector<cv::KeyPoint>& a_keypoints,
                                  const std::vector<cv::KeyPoint>& b_keypoints,
                                  const std::vector<Match>& inliers, cv::Matx33d* R, cv::Vec3d* t) {
   if (cv::norm(fundamental) == 0.0 || inliers.size() < 5) return false;
+  // Pixels normalised by their own camera, so that one identity camera serves recoverPose.
+  const cv::Matx33d a_inverse = K_a.inv(), b_inverse = K_b.inv();
+  auto normalised = [](const cv::Matx33d& inverse, const cv::Point2f& pixel) {
+    const cv::Vec3d ray = inverse * cv::Vec3d(pixel.x, pixel.y, 1.0);
+    return cv::Point2d(ray[0] / ray[2], ray[1] / ray[2]);
+  };
   std::vector<cv::Point2d> pa, pb;
   pa.reserve(inliers.size());
   pb.reserve(inliers.size());
   for (const Match& m : inliers) {
     if (m.a >= a_keypoints.size() || m.b >= b_keypoints.size()) return false;
-    pa.emplace_back(a_keypoints[m.a].pt);
-    pb.emplace_back(b_keypoints[m.b].pt);
+    pa.push_back(normalised(a_inverse, a_keypoints[m.a].pt));
+    pb.push_back(normalised(b_inverse, b_keypoints[m.b].pt));
   }
-  const cv::Matx33d essential = K.t() * fundamental * K;
+  const cv::Matx33d essential = K_b.t() * fundamental * K_a;
   cv::Mat rotation, translation;
   int in_front = 0;
   try {
-    in_front = cv::recoverPose(cv::Mat(essential), pa, pb, cv::Mat(K), rotation, translation);
+    in_front = cv::recoverPose(cv::Mat(essential), pa, pb, cv::Mat::eye(3, 3, CV_64F), rotation,
+                               translation);
   } catch (const cv::Exception&) {
     return false;  // degenerate essential matrix
   }

@@ -104,12 +104,14 @@ double InlierSpread(const std::vector<cv::KeyPoint>& a_keypoints,
                     const std::vector<cv::KeyPoint>& b_keypoints, const std::vector<Match>& matches,
                     int grid);
 
-// The relative pose of two views of one camera (intrinsics K) from their fundamental matrix
-// (x_b^T F x_a = 0) and its inlier matches: X_b = R * X_a + t with |t| = 1 (two views fix the
-// translation up to scale). The essential matrix K^T F K is decomposed and the one of its four
-// solutions that puts the most inliers in front of both cameras is kept. False when F is zero or
-// fewer than 5 inliers triangulate in front of both cameras.
-bool RelativePoseFromFundamental(const cv::Matx33d& fundamental, const cv::Matx33d& K,
+// The relative pose of two views, by cameras of intrinsics K_a and K_b (the same camera: pass its
+// K twice), from their fundamental matrix (x_b^T F x_a = 0) and its inlier matches:
+// X_b = R * X_a + t with |t| = 1 (two views fix the translation up to scale). The essential matrix
+// K_b^T F K_a is decomposed and the one of its four solutions that puts the most inliers (pixels
+// normalised by their own camera) in front of both cameras is kept. False when F is zero or fewer
+// than 5 inliers triangulate in front of both cameras.
+bool RelativePoseFromFundamental(const cv::Matx33d& fundamental, const cv::Matx33d& K_a,
+                                 const cv::Matx33d& K_b,
                                  const std::vector<cv::KeyPoint>& a_keypoints,
                                  const std::vector<cv::KeyPoint>& b_keypoints,
                                  const std::vector<Match>& inliers, cv::Matx33d* R, cv::Vec3d* t);

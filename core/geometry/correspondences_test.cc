@@ -87,8 +87,10 @@ TEST(CorrespondencesTest, NonBinaryOrMismatchedDescriptorsAreRefused) {
       StatusCode::kInvalidArgument);
 }
 
-// Two views of random 3D points: camera A at the origin, camera B moved sideways and turned.
-void TwoViews(int n, uint64_t seed, std::vector<cv::KeyPoint>* ka, std::vector<cv::KeyPoint>* kb) {
+// Two views of random 3D points: camera A at the origin, camera B moved sideways and turned; both
+// with fx = fy = 500 and the principal point (320, 240), or camera B with `b_camera`.
+void TwoViews(int n, uint64_t seed, std::vector<cv::KeyPoint>* ka, std::vector<cv::KeyPoint>* kb,
+              const cv::Matx33d& b_camera = {500, 0, 320, 0, 500, 240, 0, 0, 1}) {
   std::mt19937_64 rng(seed);
   std::uniform_real_distribution<double> xy(-2, 2), z(4, 8);
   const cv::Matx33d rotation(std::cos(0.1), 0, std::sin(0.1), 0, 1, 0, -std::sin(0.1), 0,
@@ -98,7 +100,8 @@ void TwoViews(int n, uint64_t seed, std::vector<cv::KeyPoint>* ka, std::vector<c
     const cv::Vec3d p(xy(rng), xy(rng), z(rng));
     const cv::Vec3d q = rotation * p + translation;
     ka->emplace_back(float(500 * p[0] / p[2] + 320), float(500 * p[1] / p[2] + 240), 31.f);
-    kb->emplace_back(float(500 * q[0] / q[2] + 320), float(500 * q[1] / q[2] + 240), 31.f);
+    kb->emplace_back(float(b_camera(0, 0) * q[0] / q[2] + b_camera(0, 2)),
+                     float(b_camera(1, 1) * q[1] / q[2] + b_camera(1, 2)), 31.f);
   }
 }
 
@@ -139,13 +142,36 @@ TEST(RelativePoseTest, TheMotionBetweenTwoViewsIsRecoveredUpToScale) {
   const cv::Matx33d K(500, 0, 320, 0, 500, 240, 0, 0, 1);
   cv::Matx33d R;
   cv::Vec3d t;
-  ASSERT_TRUE(RelativePoseFromFundamental(r.fundamental, K, ka, kb, r.inliers, &R, &t));
+  ASSERT_TRUE(RelativePoseFromFundamental(r.fundamental, K, K, ka, kb, r.inliers, &R, &t));
   const cv::Matx33d expected(std::cos(0.1), 0, std::sin(0.1), 0, 1, 0, -std::sin(0.1), 0,
                              std::cos(0.1));
   EXPECT_LT(cv::norm(R - expected), 0.02);
   const cv::Vec3d direction = cv::normalize(cv::Vec3d(0.5, 0.05, 0.1));
   EXPECT_NEAR(cv::norm(t), 1.0, 1e-6);
   EXPECT_GT(t.dot(direction), 0.995);
+}
+
+// Two cameras with other intrinsics (two robots, or two cameras of a rig): each view's pixels are
+// normalised with its own camera matrix. Taking A's for both gives a wrong motion.
+TEST(RelativePoseTest, TwoCamerasWithTheirOwnIntrinsicsGiveTheMotion) {
+  const cv::Matx33d Ka(500, 0, 320, 0, 500, 240, 0, 0, 1), Kb(760, 0, 300, 0, 740, 260, 0, 0, 1);
+  std::vector<cv::KeyPoint> ka, kb;
+  TwoViews(80, 3, &ka, &kb, Kb);
+  std::vector<Match> matches;
+  for (uint32_t i = 0; i < 80; ++i) matches.push_back({i, i, 0});
+  const EpipolarResult r = VerifyEpipolar(ka, kb, matches, {});
+  ASSERT_TRUE(r.verified);
+  const cv::Matx33d expected(std::cos(0.1), 0, std::sin(0.1), 0, 1, 0, -std::sin(0.1), 0,
+                             std::cos(0.1));
+  const cv::Vec3d direction = cv::normalize(cv::Vec3d(0.5, 0.05, 0.1));
+  cv::Matx33d R;
+  cv::Vec3d t;
+  ASSERT_TRUE(RelativePoseFromFundamental(r.fundamental, Ka, Kb, ka, kb, r.inliers, &R, &t));
+  EXPECT_LT(cv::norm(R - expected), 0.02);
+  EXPECT_GT(t.dot(direction), 0.995);
+  const bool one_camera =
+      RelativePoseFromFundamental(r.fundamental, Ka, Ka, ka, kb, r.inliers, &R, &t);
+  EXPECT_FALSE(one_camera && cv::norm(R - expected) < 0.02 && t.dot(direction) > 0.995);
 }
 
 TEST(RelativePoseTest, AZeroMatrixOrTooFewInliersGiveNoPose) {
@@ -156,12 +182,12 @@ TEST(RelativePoseTest, AZeroMatrixOrTooFewInliersGiveNoPose) {
   cv::Vec3d t;
   std::vector<Match> all;
   for (uint32_t i = 0; i < 10; ++i) all.push_back({i, i, 0});
-  EXPECT_FALSE(RelativePoseFromFundamental(cv::Matx33d::zeros(), K, ka, kb, all, &R, &t));
+  EXPECT_FALSE(RelativePoseFromFundamental(cv::Matx33d::zeros(), K, K, ka, kb, all, &R, &t));
   std::vector<Match> few(all.begin(), all.begin() + 4);
-  EXPECT_FALSE(RelativePoseFromFundamental(cv::Matx33d::eye(), K, ka, kb, few, &R, &t));
+  EXPECT_FALSE(RelativePoseFromFundamental(cv::Matx33d::eye(), K, K, ka, kb, few, &R, &t));
   std::vector<Match> out_of_range = all;
   out_of_range[0].b = 99;
-  EXPECT_FALSE(RelativePoseFromFundamental(cv::Matx33d::eye(), K, ka, kb, out_of_range, &R, &t));
+  EXPECT_FALSE(RelativePoseFromFundamental(cv::Matx33d::eye(), K, K, ka, kb, out_of_range, &R, &t));
 }
 
 // Two views of points on one plane (z = 5 - 0.2 x), with the motion of TwoViews and 0.3 px of

@@ -196,9 +196,12 @@ Status PlaceMap::AddExtras(const FeatureSet& features, const PlaceResultOptions&
   }
   if (pose) {
     RelativePose relative;
-    if (RelativePoseFromFundamental(loop.fundamental, *options.camera_matrix, features.keypoints,
-                                    match.value().keypoints, loop.inliers, &relative.R,
-                                    &relative.t)) {
+    // The matched frame's own camera when it came with one (another robot's), else the query's.
+    const cv::Matx33d& match_camera =
+        match.value().has_camera() ? match.value().camera : *options.camera_matrix;
+    if (RelativePoseFromFundamental(loop.fundamental, *options.camera_matrix, match_camera,
+                                    features.keypoints, match.value().keypoints, loop.inliers,
+                                    &relative.R, &relative.t)) {
       result->relative_pose = relative;
     }
   }

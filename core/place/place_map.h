@@ -55,7 +55,9 @@ struct PlaceResultOptions {
   // The best top_k candidates of the query, 0..kMaxTopK (fewer when the map's max_query_results
   // is lower or the query returns fewer).
   uint32_t top_k = 0;
-  std::optional<cv::Matx33d> camera_matrix;  // K of the query frame; the relative pose needs it
+  // K of the query frame; the relative pose needs it. The matched frame's own camera matrix is
+  // used for its side when it was added with one (another robot's camera), else this one.
+  std::optional<cv::Matx33d> camera_matrix;
 
   // INVALID_ARGUMENT when top_k is above kMaxTopK.
   Status Validate() const;

@@ -934,7 +934,7 @@ cv::Mat CorridorPhoto(int n) {
                       cv::IMREAD_GRAYSCALE);
 }
 
-cli::RenderedFrame Render(const cli::CameraPose& pose) {
+cli::RenderedFrame Render(const cli::CameraPose& pose, const cv::Matx33d& K = kK) {
   cv::Mat back;
   cv::hconcat(CorridorPhoto(41), CorridorPhoto(60), back);
   const std::vector<cli::TexturedPlane> scene = {
@@ -942,24 +942,24 @@ cli::RenderedFrame Render(const cli::CameraPose& pose) {
       {CorridorPhoto(1), {-0.7, 0.1, 2.6}, cli::Yaw(25) * cv::Vec3d(1, 0, 0), {0, 1, 0}, 1.6, 1.2},
       {CorridorPhoto(20), {0.55, -0.2, 1.6}, {1, 0, 0}, {0, 1, 0}, 0.9, 0.675},
   };
-  auto frame = cli::RenderPlanes(scene, kK, kSize, pose, kBaseline);
+  auto frame = cli::RenderPlanes(scene, K, kSize, pose, kBaseline);
   EXPECT_TRUE(frame.ok()) << frame.status().ToString();
   return std::move(frame).value();
 }
 
-// The rendered image with the pinhole intrinsics of kK.
-pb::Frame CalibratedFrame(const cli::RenderedFrame& rendered) {
+// The rendered image with the pinhole intrinsics it was rendered with.
+pb::Frame CalibratedFrame(const cli::RenderedFrame& rendered, const cv::Matx33d& K = kK) {
   pb::Frame frame = client::FrameFromImage(rendered.image).value();
   pb::CameraIntrinsics* k = frame.mutable_intrinsics();
-  k->set_fx(kK(0, 0));
-  k->set_fy(kK(1, 1));
-  k->set_cx(kK(0, 2));
-  k->set_cy(kK(1, 2));
+  k->set_fx(K(0, 0));
+  k->set_fy(K(1, 1));
+  k->set_cx(K(0, 2));
+  k->set_cy(K(1, 2));
   return frame;
 }
 
-pb::Frame RgbdFrame(const cli::RenderedFrame& rendered) {
-  pb::Frame frame = CalibratedFrame(rendered);
+pb::Frame RgbdFrame(const cli::RenderedFrame& rendered, const cv::Matx33d& K = kK) {
+  pb::Frame frame = CalibratedFrame(rendered, K);
   EXPECT_TRUE(client::AttachDepth(rendered.depth_mm, 1000, &frame).ok());
   return frame;
 }
@@ -1058,8 +1058,9 @@ TEST_F(PlaceServiceTest, RgbdAndStereoFramesGiveMetricLoopsCloseToTheTruth) {
 }
 
 // The other side has the depth: robot A's map was built with intrinsics only (the server keeps
-// each frame's camera matrix), robot B relocalises in it with an RGB-D frame. The pose is solved
-// from B's points and A's pixels, in the same convention as above.
+// each frame's camera matrix), robot B relocalises in it with an RGB-D frame of its own camera
+// (other intrinsics). The metric pose is solved from B's points and A's pixels, in the same
+// convention as above; the two-view relative pose normalises each side with its own camera.
 TEST_F(PlaceServiceTest, AnRgbdQueryGetsTheMetricPoseInAMapBuiltWithoutDepth) {
   const std::vector<cli::CameraPose> keyframes = {
       {cli::Yaw(0), {-0.3, 0, 0}}, {cli::Yaw(0), {0, 0, 0}}, {cli::Yaw(0), {0.3, 0, 0}}};
@@ -1076,7 +1077,9 @@ TEST_F(PlaceServiceTest, AnRgbdQueryGetsTheMetricPoseInAMapBuiltWithoutDepth) {
   pb::RelocalizeRequest request;
   request.add_maps("calibrated");
   request.add_maps("uncalibrated");
-  *request.add_frames() = RgbdFrame(Render(revisit));
+  const cv::Matx33d robot_b_camera(600, 0, 330, 0, 590, 250, 0, 0, 1);
+  *request.add_frames() = RgbdFrame(Render(revisit, robot_b_camera), robot_b_camera);
+  request.mutable_options()->set_include_relative_pose(true);
   pb::RelocalizeResponse response;
   ASSERT_TRUE(places_->Relocalize(Context().get(), request, &response).ok());
   std::map<std::string, pb::LoopResult> by_map;
@@ -1085,6 +1088,20 @@ TEST_F(PlaceServiceTest, AnRgbdQueryGetsTheMetricPoseInAMapBuiltWithoutDepth) {
   const pb::LoopResult& calibrated = by_map["calibrated"];
   ASSERT_LT(calibrated.match_frame_id(), keyframes.size());
   ExpectMetricPose(calibrated, revisit, keyframes[calibrated.match_frame_id()]);
+  // T_match<-query up to scale: the inverse rotation of the metric pose's, the direction of its
+  // inverse translation.
+  cv::Matx33d R_true;
+  cv::Vec3d t_true;
+  cli::RelativePose(revisit, keyframes[calibrated.match_frame_id()], &R_true, &t_true);
+  ASSERT_EQ(calibrated.relative_pose().rotation_size(), 9);
+  cv::Matx33d R;
+  cv::Vec3d t;
+  for (int i = 0; i < 9; ++i) R.val[i] = calibrated.relative_pose().rotation(i);
+  for (int i = 0; i < 3; ++i) t[i] = calibrated.relative_pose().translation(i);
+  cv::Vec3d rotation_error;
+  cv::Rodrigues(cv::Mat(R * R_true), rotation_error);  // R should be R_true^T
+  EXPECT_LT(cv::norm(rotation_error) * 180 / CV_PI, 1.0);
+  EXPECT_GT(t.dot(cv::normalize(-(R_true.t() * t_true))), 0.98) << "t " << t;
   // Frames added without intrinsics have no camera to project the query's points into.
   EXPECT_FALSE(by_map["uncalibrated"].metric().checked());
 }
