@@ -352,17 +352,17 @@ StatusOr<ObjectSequenceGenerator> ObjectSequenceGenerator::Create(
   return g;
 }
 
-StatusOr<RenderedFrame> ObjectSequenceGenerator::Frame(int i) const {
+StatusOr<RenderedObjectFrame> ObjectSequenceGenerator::Frame(int i) const {
   if (i < 0 || i >= num_frames()) {
     return Status::InvalidArgument("frame " + std::to_string(i) + " is outside 0.." +
                                    std::to_string(num_frames() - 1));
   }
-  RECOG_ASSIGN_OR_RETURN(RenderedFrame frame, Render(frames_[size_t(i)]));
+  RECOG_ASSIGN_OR_RETURN(RenderedObjectFrame frame, Render(frames_[size_t(i)]));
   frame.truth.image = FrameName(i);
   return frame;
 }
 
-StatusOr<RenderedFrame> ObjectSequenceGenerator::TrainingView(int k) const {
+StatusOr<RenderedObjectFrame> ObjectSequenceGenerator::TrainingView(int k) const {
   if (k < 0 || k >= int(training_.size())) {
     return Status::InvalidArgument("training view " + std::to_string(k) + " is outside 0.." +
                                    std::to_string(int(training_.size()) - 1));
@@ -370,12 +370,12 @@ StatusOr<RenderedFrame> ObjectSequenceGenerator::TrainingView(int k) const {
   return Render(training_[size_t(k)]);
 }
 
-StatusOr<RenderedFrame> ObjectSequenceGenerator::Render(const Shot& shot) const {
+StatusOr<RenderedObjectFrame> ObjectSequenceGenerator::Render(const Shot& shot) const {
   const ObjectSequenceOptions& o = options_;
   const cv::Size size(o.image_width, o.image_height);
   const cv::Matx33d K = camera_.K();
   const RigidTransform& pose = shot.camera_from_object;
-  RenderedFrame frame;
+  RenderedObjectFrame frame;
   frame.truth.camera_from_object = pose;
 
   // The wall: a textured plane, mirrored beyond its tiles.
@@ -618,7 +618,7 @@ StatusOr<ObjectSequenceWriteResult> WriteObjectSequence(
   views
       << "# rgb depth fx fy cx cy depth_scale r11..r33 t1 t2 t3 mask (recog model build --rgbd)\n";
   for (int k = 0; k < o.training_views; ++k) {
-    RECOG_ASSIGN_OR_RETURN(const RenderedFrame view, generator.TrainingView(k));
+    RECOG_ASSIGN_OR_RETURN(const RenderedObjectFrame view, generator.TrainingView(k));
     char stem[16];
     std::snprintf(stem, sizeof(stem), "%02d.png", k + 1);
     const std::string rgb = "train/rgb_" + std::string(stem),
@@ -642,7 +642,7 @@ StatusOr<ObjectSequenceWriteResult> WriteObjectSequence(
   truth.width = o.image_width;
   truth.height = o.image_height;
   for (int i = 0; i < o.frames; ++i) {
-    RECOG_ASSIGN_OR_RETURN(const RenderedFrame frame, generator.Frame(i));
+    RECOG_ASSIGN_OR_RETURN(const RenderedObjectFrame frame, generator.Frame(i));
     const std::string name = frame.truth.image;
     RECOG_RETURN_IF_ERROR(WriteImage((root / "images" / name).string(), frame.image));
     RECOG_RETURN_IF_ERROR(WriteImage((root / "depth" / name).string(), frame.depth));

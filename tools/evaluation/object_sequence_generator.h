@@ -100,7 +100,7 @@ struct ObjectSequenceTruth {
 Status WriteObjectSequenceTruth(const ObjectSequenceTruth& truth, const std::string& path);
 StatusOr<ObjectSequenceTruth> ReadObjectSequenceTruth(const std::string& path);
 
-struct RenderedFrame {
+struct RenderedObjectFrame {
   cv::Mat image;  // CV_8UC3
   cv::Mat depth;  // CV_16U, millimetres, 0 = none
   cv::Mat mask;   // CV_8U, 255 on the object
@@ -129,8 +129,8 @@ class ObjectSequenceGenerator {
   const std::vector<ObjectFace>& faces() const { return faces_; }
 
   // Sequence frame i / training view k; INVALID_ARGUMENT when out of range.
-  StatusOr<RenderedFrame> Frame(int i) const;
-  StatusOr<RenderedFrame> TrainingView(int k) const;
+  StatusOr<RenderedObjectFrame> Frame(int i) const;
+  StatusOr<RenderedObjectFrame> TrainingView(int k) const;
 
  private:
   struct Scene;
@@ -142,7 +142,7 @@ class ObjectSequenceGenerator {
     bool effects = true;
   };
   ObjectSequenceGenerator() = default;
-  StatusOr<RenderedFrame> Render(const Shot& shot) const;
+  StatusOr<RenderedObjectFrame> Render(const Shot& shot) const;
 
   ObjectSequenceOptions options_;
   CameraIntrinsics camera_;

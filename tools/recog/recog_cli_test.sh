@@ -91,6 +91,29 @@ expect_error "seqgen with a bad revisit fraction" "INVALID_ARGUMENT" "$recog" se
 expect_error "seqgen with an unknown format" "unknown image format" "$recog" seqgen --images "$images" -o "$tmp/seq3" --format gif
 [ ! -e "$tmp/seq3" ] && pass || fail "seqgen creates nothing on bad input"
 
+# seqgen rig: a front + rear rig out and back, 2 frames a leg, over 36 tiles of the photos.
+mkdir -p "$tmp/tiles"
+/usr/bin/python3 -c "
+import cv2, glob
+for path in sorted(glob.glob('$images/*.jpg')):
+    photo = cv2.imread(path, cv2.IMREAD_GRAYSCALE); h, w = photo.shape[0] // 3, photo.shape[1] // 3
+    for q in range(9):
+        name = path.split('/')[-1][:-4]
+        cv2.imwrite(f'$tmp/tiles/{name}_{q}.png', photo[(q // 3) * h:(q // 3 + 1) * h, (q % 3) * w:(q % 3 + 1) * w])
+"
+expect_ok "seqgen rig" "$recog" seqgen rig --images "$tmp/tiles" -o "$tmp/rig" --frames-per-leg 2 \
+  --width 160 --height 120 --focal 80 --depth --json
+json_check "seqgen rig writes 4 rig frames, 2 of them revisits" \
+  "assert d['frames']==4 and d['revisiting_frames']==2 and d['cameras']==['front','rear'], d"
+[ -f "$tmp/rig/rig.yaml" ] && [ "$(grep -vc '^#' "$tmp/rig/rear/rgb.txt")" -eq 4 ] \
+  && [ -f "$tmp/rig/front/depth/000003.png" ] && [ "$(wc -l <"$tmp/rig/ground_truth.txt")" -eq 4 ] \
+  && pass || fail "seqgen rig writes the rig file, a TUM folder per camera and the ground truth"
+expect_error "seqgen rig with too few photos" "needs 28 photos, .* has 4" "$recog" seqgen rig \
+  --images "$images" -o "$tmp/rig2" --frames-per-leg 2
+expect_error "seqgen rig with one frame a leg" "frames_per_leg must be at least 2" "$recog" seqgen rig \
+  --images "$tmp/tiles" -o "$tmp/rig2" --frames-per-leg 1
+[ ! -e "$tmp/rig2" ] && pass || fail "seqgen rig creates nothing on bad input"
+
 # seqgen objects: a tiny poster sequence, a model of its face and eval sequence --truth.
 mkdir -p "$tmp/object_photos" "$tmp/background_photos"
 cp "$images/1.jpg" "$tmp/object_photos/" && cp "$images/20.jpg" "$images/60.jpg" "$tmp/background_photos/"

@@ -1,15 +1,21 @@
 // recog seqgen: a long synthetic image sequence with exact loop ground truth, from real photos;
-// recog seqgen objects: an RGB-D sequence of one object with exact pose ground truth.
+// recog seqgen objects: an RGB-D sequence of one object with exact pose ground truth;
+// recog seqgen rig: a front + rear camera rig driven out and back the other way.
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <memory>
+#include <random>
 #include <string>
 
 #include <nlohmann/json.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "tools/common/cli_support.h"
 #include "tools/evaluation/object_sequence_generator.h"
+#include "tools/evaluation/rig_sequence.h"
 #include "tools/evaluation/sequence_generator.h"
+#include "tools/evaluation/synthetic_images.h"
 #include "tools/recog/commands.h"
 
 namespace recog::cli {
@@ -247,6 +253,110 @@ void AddObjectSeqgenCommand(CLI::App& seqgen, int* exit_code) {
   cmd->callback([args, exit_code] { *exit_code = RunObjectSeqgen(*args); });
 }
 
+struct RigSeqgenArgs {
+  std::string images, output;
+  RigSequenceOptions options;
+  bool depth = false, json = false, quiet = false;
+};
+
+int RunRigSeqgen(const RigSeqgenArgs& args) {
+  const auto fail = [](const Status& status) {
+    std::fprintf(stderr, "recog seqgen rig: %s\n", status.ToString().c_str());
+    return 1;
+  };
+  const RigSequenceOptions& o = args.options;
+  if (Status s = o.Validate(); !s.ok()) return fail(s);
+  const auto start = std::chrono::steady_clock::now();
+  auto paths = ListImages(args.images);
+  if (!paths.ok()) return fail(paths.status().WithContext("--images"));
+  // Only the photos the avenue needs are read: a seeded draw from the folder.
+  const size_t needed = RigPhotosNeeded(o);
+  if (paths->size() < needed) {
+    return fail(Status::InvalidArgument("the avenue needs " + std::to_string(needed) +
+                                        " photos, '" + args.images + "' has " +
+                                        std::to_string(paths->size())));
+  }
+  std::mt19937_64 rng(o.seed);
+  std::shuffle(paths->begin(), paths->end(), rng);
+  std::vector<cv::Mat> photos;
+  for (size_t i = 0; i < needed; ++i) {
+    auto photo = ReadPhoto((*paths)[i]);
+    if (!photo.ok()) return fail(photo.status());
+    if (photo->channels() == 3) cv::cvtColor(*photo, *photo, cv::COLOR_BGR2GRAY);
+    photos.push_back(std::move(photo).value());
+  }
+  ProgressBar progress(!args.quiet && !args.json);
+  auto sequence = GenerateRigSequence(photos, o, [&](uint64_t done, uint64_t total) {
+    progress.Update("rig frames", done, total);
+  });
+  progress.Finish();
+  if (!sequence.ok()) return fail(sequence.status());
+  if (Status s = WriteRigSequence(*sequence, args.depth, args.output); !s.ok()) return fail(s);
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  const int revisits = sequence->truth.QueriesWithMatches();
+  if (args.json) {
+    nlohmann::json cameras = nlohmann::json::array();
+    for (const RigCamera& c : sequence->cameras) cameras.push_back(c.name);
+    const nlohmann::json j = {{"frames", sequence->frames.size()},
+                              {"frames_per_leg", o.frames_per_leg},
+                              {"cameras", cameras},
+                              {"revisiting_frames", revisits},
+                              {"width", o.image_size.width},
+                              {"height", o.image_size.height},
+                              {"focal", o.focal_px},
+                              {"depth", args.depth},
+                              {"seed", o.seed},
+                              {"output", args.output},
+                              {"seconds", seconds}};
+    std::printf("%s\n", j.dump(2).c_str());
+    return 0;
+  }
+  std::printf(
+      "wrote %zu rig frames (front and rear, %dx%d, fx = fy = %g): %d out, %d back the other way, "
+      "seed %llu\n"
+      "way-back frames revisiting the way out: %d (seen by the rear camera)\n"
+      "rig: %s/rig.yaml; cameras: %s/front, %s/rear (TUM layout%s); ground truth: "
+      "%s/ground_truth.txt; body poses: %s/body_poses.txt\ntime: %.1f s\n",
+      sequence->frames.size(), o.image_size.width, o.image_size.height, o.focal_px,
+      o.frames_per_leg, o.frames_per_leg, static_cast<unsigned long long>(o.seed), revisits,
+      args.output.c_str(), args.output.c_str(), args.output.c_str(),
+      args.depth ? ", with depth" : "", args.output.c_str(), args.output.c_str(), seconds);
+  return 0;
+}
+
+void AddRigSeqgenCommand(CLI::App& seqgen, int* exit_code) {
+  auto args = std::make_shared<RigSeqgenArgs>();
+  RigSequenceOptions& o = args->options;
+  CLI::App* cmd = seqgen.add_subcommand(
+      "rig",
+      "Generate a drive of a front + rear camera rig along an avenue of photo panels, out and back "
+      "the other way, with exact geometry: the way back's rear camera sees the way out's front "
+      "views");
+  cmd->add_option("--images", args->images, "Folder of photos for the panels")->required();
+  cmd->add_option("-o,--output", args->output, "Output folder (must not exist or be empty)")
+      ->required();
+  cmd->add_option("--frames-per-leg", o.frames_per_leg, "Rig frames out, and as many back")
+      ->capture_default_str();
+  cmd->add_option("--step", o.step_m, "Metres between frames")->capture_default_str();
+  cmd->add_option("--return-offset", o.return_lateral_offset_m,
+                  "Sideways offset of the way back, metres")
+      ->capture_default_str();
+  cmd->add_option("--return-yaw", o.return_yaw_deg, "Turn of the way back, degrees")
+      ->capture_default_str();
+  cmd->add_option("--revisit-radius", o.revisit_radius_m,
+                  "Body positions this close (metres) are a revisit in the ground truth")
+      ->capture_default_str();
+  cmd->add_option("--width", o.image_size.width, "Frame width")->capture_default_str();
+  cmd->add_option("--height", o.image_size.height, "Frame height")->capture_default_str();
+  cmd->add_option("--focal", o.focal_px, "Focal length fx = fy, pixels")->capture_default_str();
+  cmd->add_flag("--depth", args->depth, "Also write each camera's depth images (TUM, 1/5000 m)");
+  cmd->add_option("--seed", o.seed, "Random seed")->capture_default_str();
+  cmd->add_flag("--json", args->json, "Print the summary as JSON");
+  cmd->add_flag("-q,--quiet", args->quiet, "No progress output");
+  cmd->callback([args, exit_code] { *exit_code = RunRigSeqgen(*args); });
+}
+
 }  // namespace
 
 void AddSeqgenCommand(CLI::App& app, int* exit_code) {
@@ -287,9 +397,10 @@ void AddSeqgenCommand(CLI::App& app, int* exit_code) {
   cmd->add_flag("--json", args->json, "Print the summary as JSON");
   cmd->add_flag("-q,--quiet", args->quiet, "No progress output");
   AddObjectSeqgenCommand(*cmd, exit_code);
+  AddRigSeqgenCommand(*cmd, exit_code);
   cmd->require_subcommand(0, 1);
   cmd->callback([cmd, args, exit_code] {
-    if (cmd->got_subcommand("objects")) return;  // its own callback ran
+    if (cmd->got_subcommand("objects") || cmd->got_subcommand("rig")) return;  // ran its own
     *exit_code = RunSeqgen(*args);
   });
 }
