@@ -9,7 +9,6 @@
 #include <random>
 
 #include <Eigen/Geometry>
-#include <yaml-cpp/yaml.h>
 
 #include "tools/evaluation/synthetic_images.h"
 
@@ -42,8 +41,7 @@ int PanelsPerSide(const RigSequenceOptions& o) {
   return int(std::floor(PathEnd(o) / o.panel_spacing_m + 1e-9)) + 1 + 2 * kPanelsBeyondTheEnds;
 }
 
-std::vector<TexturedPlane> Avenue(const std::vector<cv::Mat>& photos,
-                                  const RigSequenceOptions& o) {
+std::vector<TexturedPlane> Avenue(const std::vector<cv::Mat>& photos, const RigSequenceOptions& o) {
   std::mt19937_64 rng(o.seed);
   std::vector<size_t> order(photos.size());
   std::iota(order.begin(), order.end(), size_t(0));
@@ -72,29 +70,6 @@ Status WriteLines(const fs::path& path, const std::string& text) {
   file.close();
   if (!file) return Status::Internal("cannot write '" + path.string() + "'");
   return Status::Ok();
-}
-
-YAML::Node RigYaml(const std::vector<RigCamera>& cameras) {
-  YAML::Node root;
-  for (const RigCamera& camera : cameras) {
-    YAML::Node node;
-    node["name"] = camera.name;
-    node["width"] = camera.size.width;
-    node["height"] = camera.size.height;
-    node["fx"] = camera.K(0, 0);
-    node["fy"] = camera.K(1, 1);
-    node["cx"] = camera.K(0, 2);
-    node["cy"] = camera.K(1, 2);
-    node["distortion"] = YAML::Node(YAML::NodeType::Sequence);
-    YAML::Node pose;
-    for (double v : camera.body_from_camera.world_from_camera.val) pose["rotation"].push_back(v);
-    for (int i = 0; i < 3; ++i) pose["translation"].push_back(camera.body_from_camera.center[i]);
-    pose["rotation"].SetStyle(YAML::EmitterStyle::Flow);
-    pose["translation"].SetStyle(YAML::EmitterStyle::Flow);
-    node["body_from_camera"] = pose;
-    root["cameras"].push_back(node);
-  }
-  return root;
 }
 
 }  // namespace
@@ -130,9 +105,11 @@ size_t RigPhotosNeeded(const RigSequenceOptions& o) {
   return size_t(PanelsPerSide(o)) * 2 * 2;  // two sides, two photos a panel
 }
 
-CameraPose CameraInWorld(const CameraPose& body, const RigCamera& camera) {
-  return {body.world_from_camera * camera.body_from_camera.world_from_camera,
-          body.center + body.world_from_camera * camera.body_from_camera.center};
+std::vector<RigCamera> DefaultRig(const RigSequenceOptions& o) {
+  const cv::Matx33d K(o.focal_px, 0, 0.5 * (o.image_size.width - 1), 0, o.focal_px,
+                      0.5 * (o.image_size.height - 1), 0, 0, 1);
+  return {{"front", o.image_size, K, {}, {cv::Matx33d::eye(), {0, 0, o.camera_offset_m}}},
+          {"rear", o.image_size, K, {}, {Yaw(180), {0, 0, -o.camera_offset_m}}}};
 }
 
 StatusOr<RigSequence> GenerateRigSequence(
@@ -145,17 +122,21 @@ StatusOr<RigSequence> GenerateRigSequence(
                                    std::to_string(photos.size()));
   }
   for (const cv::Mat& p : photos) {
-    if (p.empty() || p.type() != CV_8UC1) return Status::InvalidArgument("photos must be 8-bit grey");
+    if (p.empty() || p.type() != CV_8UC1)
+      return Status::InvalidArgument("photos must be 8-bit grey");
   }
   const std::vector<TexturedPlane> scene = Avenue(photos, o);
 
   RigSequence sequence;
-  const cv::Matx33d K(o.focal_px, 0, 0.5 * (o.image_size.width - 1), 0, o.focal_px,
-                      0.5 * (o.image_size.height - 1), 0, 0, 1);
-  sequence.cameras = {
-      {"front", K, o.image_size, {cv::Matx33d::eye(), {0, 0, o.camera_offset_m}}},
-      {"rear", K, o.image_size, {Yaw(180), {0, 0, -o.camera_offset_m}}},
-  };
+  sequence.cameras = o.cameras.empty() ? DefaultRig(o) : o.cameras;
+  RECOG_RETURN_IF_ERROR(ValidateRig(sequence.cameras));
+  for (const RigCamera& camera : sequence.cameras) {
+    if (!camera.distortion.empty()) {
+      return Status::InvalidArgument("rig camera '" + camera.name +
+                                     "' has lens distortion: the generator renders pinhole "
+                                     "cameras only");
+    }
+  }
   const int n = o.frames_per_leg;
   for (int i = 0; i < n; ++i) {  // out, heading +z
     sequence.body_poses.push_back({cv::Matx33d::eye(), {0, 0, o.step_m * i}});
@@ -163,8 +144,7 @@ StatusOr<RigSequence> GenerateRigSequence(
   }
   for (int i = 0; i < n; ++i) {  // back, heading -z, offset and turned
     const double z = o.step_m * (n - 1 - i) + o.step_m / 2;
-    sequence.body_poses.push_back(
-        {Yaw(180 + o.return_yaw_deg), {o.return_lateral_offset_m, 0, z}});
+    sequence.body_poses.push_back({Yaw(180 + o.return_yaw_deg), {o.return_lateral_offset_m, 0, z}});
     sequence.timestamps.push_back(o.frame_interval_s * (n - 1 + i) + o.round_the_block_s);
   }
 
@@ -234,10 +214,9 @@ Status WriteRigSequence(const RigSequence& sequence, bool depth, const std::stri
     poses += line;
   }
   RECOG_RETURN_IF_ERROR(WriteLines(root / "body_poses.txt", poses));
-  RECOG_RETURN_IF_ERROR(WriteDenseGroundTruth(sequence.truth, (root / "ground_truth.txt").string()));
-  YAML::Emitter yaml;
-  yaml << RigYaml(sequence.cameras);
-  return WriteLines(root / "rig.yaml", std::string(yaml.c_str()) + "\n");
+  RECOG_RETURN_IF_ERROR(
+      WriteDenseGroundTruth(sequence.truth, (root / "ground_truth.txt").string()));
+  return WriteRigFile(sequence.cameras, (root / "rig.yaml").string());
 }
 
 }  // namespace recog::cli

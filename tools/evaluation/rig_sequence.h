@@ -34,17 +34,9 @@
 #include "core/common/status.h"
 #include "tools/evaluation/ground_truth.h"
 #include "tools/evaluation/metric_sequence.h"
+#include "tools/evaluation/rig_file.h"
 
 namespace recog::cli {
-
-// One camera of a rig: its pinhole intrinsics (no distortion) and its pose in the body frame,
-// X_body = body_from_camera.world_from_camera * X_camera + body_from_camera.center.
-struct RigCamera {
-  std::string name;
-  cv::Matx33d K = cv::Matx33d::eye();
-  cv::Size size;
-  CameraPose body_from_camera;
-};
 
 struct RigSequenceOptions {
   int frames_per_leg = 40;
@@ -57,9 +49,13 @@ struct RigSequenceOptions {
   double panel_spacing_m = 1.5;
   double road_half_width_m = 1.0;
   double panel_width_m = 1.6, panel_height_m = 1.2;
-  cv::Size image_size{640, 480};
-  double focal_px = 400;           // fx = fy; the principal point is the image centre
-  double camera_offset_m = 0.4;    // front camera this far ahead of the body origin, rear behind
+  // The rig: empty for the default front + rear pair (DefaultRig), else any cameras without
+  // lens distortion (the scene is rendered through pinholes).
+  std::vector<RigCamera> cameras;
+  cv::Size image_size{640, 480};  // of the default rig's cameras
+  double focal_px = 400;          // fx = fy of the default rig; the principal point is the centre
+  double camera_offset_m = 0.4;   // the default front camera this far ahead of the body origin,
+                                  // its rear camera as far behind
   uint64_t seed = 1;
 
   // INVALID_ARGUMENT naming the first option out of range.
@@ -67,29 +63,29 @@ struct RigSequenceOptions {
 };
 
 struct RigSequence {
-  std::vector<RigCamera> cameras;        // front, rear
-  std::vector<CameraPose> body_poses;    // world_from_body, one per frame
-  std::vector<double> timestamps;        // seconds, one per frame
+  std::vector<RigCamera> cameras;                  // options.cameras, or the default front and rear
+  std::vector<CameraPose> body_poses;              // world_from_body, one per frame
+  std::vector<double> timestamps;                  // seconds, one per frame
   std::vector<std::vector<RenderedFrame>> frames;  // frames[i][c]: frame i seen by camera c
-  GroundTruth truth;                     // over the rig frames
+  GroundTruth truth;                               // over the rig frames
 };
 
 // How many photos the avenue of `options` needs (valid options).
 size_t RigPhotosNeeded(const RigSequenceOptions& options);
 
-// INVALID_ARGUMENT for bad options or fewer photos than the scene needs (naming how many);
-// photos are 8-bit grey.
+// INVALID_ARGUMENT for bad options, a rig that does not validate or has lens distortion, or fewer
+// photos than the scene needs (naming how many); photos are 8-bit grey.
 // `progress` (may be empty) is told the frames rendered so far and their total.
 StatusOr<RigSequence> GenerateRigSequence(
     const std::vector<cv::Mat>& photos, const RigSequenceOptions& options,
     const std::function<void(uint64_t done, uint64_t total)>& progress = {});
 
-// The pose of camera `camera` of the rig at body pose `body` (world_from_camera).
-CameraPose CameraInWorld(const CameraPose& body, const RigCamera& camera);
+// The default rig of `options`: "front" looking along the body's z axis, camera_offset_m ahead
+// of its origin, and "rear" looking back, as far behind; image_size, fx = fy = focal_px.
+std::vector<RigCamera> DefaultRig(const RigSequenceOptions& options);
 
 // Writes the sequence into `dir` (created; INVALID_ARGUMENT when it exists and is not empty):
-//  - rig.yaml: `cameras:` a list of {name, width, height, fx, fy, cx, cy, distortion: [],
-//    body_from_camera: {rotation: 9 row-major numbers, translation: 3 numbers, metres}};
+//  - rig.yaml: the rig file of its cameras (rig_file.h);
 //  - one folder per camera, named after it, in the TUM RGB-D layout (rgb.txt, rgb/NNNNNN.png, and
 //    with `depth`, depth.txt and depth/NNNNNN.png in TUM's 1/5000 m), so that each camera's
 //    images read as a dataset of their own (`recog eval place --images DIR/front`);

@@ -108,6 +108,19 @@ json_check "seqgen rig writes 4 rig frames, 2 of them revisits" \
 [ -f "$tmp/rig/rig.yaml" ] && [ "$(grep -vc '^#' "$tmp/rig/rear/rgb.txt")" -eq 4 ] \
   && [ -f "$tmp/rig/front/depth/000003.png" ] && [ "$(wc -l <"$tmp/rig/ground_truth.txt")" -eq 4 ] \
   && pass || fail "seqgen rig writes the rig file, a TUM folder per camera and the ground truth"
+cat >"$tmp/side.yaml" <<'YAML'
+cameras:
+  - {name: left, width: 160, height: 120, fx: 90, fy: 90, cx: 79.5, cy: 59.5, distortion: [],
+     body_from_camera: {rotation: [0, 0, -1, 0, 1, 0, 1, 0, 0], translation: [-0.2, 0, 0]}}
+YAML
+expect_ok "seqgen rig --rig" "$recog" seqgen rig --images "$tmp/tiles" -o "$tmp/rig_side" \
+  --frames-per-leg 2 --rig "$tmp/side.yaml" --json
+json_check "seqgen rig --rig drives the rig of the file" "assert d['cameras']==['left'], d"
+[ -f "$tmp/rig_side/left/rgb/000003.png" ] && grep -q "name: left" "$tmp/rig_side/rig.yaml" \
+  && pass || fail "seqgen rig --rig writes the file's camera"
+sed 's/rotation: \[0, 0, -1,/rotation: [0, 0, 1,/' "$tmp/side.yaml" >"$tmp/mirror.yaml"
+expect_error "seqgen rig with a reflected camera" "rig camera 'left'.* not a rotation" "$recog" \
+  seqgen rig --images "$tmp/tiles" -o "$tmp/rig2" --rig "$tmp/mirror.yaml"
 expect_error "seqgen rig with too few photos" "needs 28 photos, .* has 4" "$recog" seqgen rig \
   --images "$images" -o "$tmp/rig2" --frames-per-leg 2
 expect_error "seqgen rig with one frame a leg" "frames_per_leg must be at least 2" "$recog" seqgen rig \

@@ -13,6 +13,7 @@
 
 #include "tools/common/cli_support.h"
 #include "tools/evaluation/object_sequence_generator.h"
+#include "tools/evaluation/rig_file.h"
 #include "tools/evaluation/rig_sequence.h"
 #include "tools/evaluation/sequence_generator.h"
 #include "tools/evaluation/synthetic_images.h"
@@ -254,7 +255,7 @@ void AddObjectSeqgenCommand(CLI::App& seqgen, int* exit_code) {
 }
 
 struct RigSeqgenArgs {
-  std::string images, output;
+  std::string images, output, rig;
   RigSequenceOptions options;
   bool depth = false, json = false, quiet = false;
 };
@@ -264,7 +265,12 @@ int RunRigSeqgen(const RigSeqgenArgs& args) {
     std::fprintf(stderr, "recog seqgen rig: %s\n", status.ToString().c_str());
     return 1;
   };
-  const RigSequenceOptions& o = args.options;
+  RigSequenceOptions o = args.options;
+  if (!args.rig.empty()) {
+    auto cameras = ReadRigFile(args.rig);
+    if (!cameras.ok()) return fail(cameras.status());
+    o.cameras = std::move(cameras).value();
+  }
   if (Status s = o.Validate(); !s.ok()) return fail(s);
   const auto start = std::chrono::steady_clock::now();
   auto paths = ListImages(args.images);
@@ -295,16 +301,17 @@ int RunRigSeqgen(const RigSeqgenArgs& args) {
   const double seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   const int revisits = sequence->truth.QueriesWithMatches();
+  nlohmann::json cameras = nlohmann::json::array();
+  std::string folders;
+  for (const RigCamera& c : sequence->cameras) {
+    cameras.push_back(c.name);
+    folders += (folders.empty() ? "" : ", ") + args.output + "/" + c.name;
+  }
   if (args.json) {
-    nlohmann::json cameras = nlohmann::json::array();
-    for (const RigCamera& c : sequence->cameras) cameras.push_back(c.name);
     const nlohmann::json j = {{"frames", sequence->frames.size()},
                               {"frames_per_leg", o.frames_per_leg},
                               {"cameras", cameras},
                               {"revisiting_frames", revisits},
-                              {"width", o.image_size.width},
-                              {"height", o.image_size.height},
-                              {"focal", o.focal_px},
                               {"depth", args.depth},
                               {"seed", o.seed},
                               {"output", args.output},
@@ -313,14 +320,12 @@ int RunRigSeqgen(const RigSeqgenArgs& args) {
     return 0;
   }
   std::printf(
-      "wrote %zu rig frames (front and rear, %dx%d, fx = fy = %g): %d out, %d back the other way, "
-      "seed %llu\n"
-      "way-back frames revisiting the way out: %d (seen by the rear camera)\n"
-      "rig: %s/rig.yaml; cameras: %s/front, %s/rear (TUM layout%s); ground truth: "
-      "%s/ground_truth.txt; body poses: %s/body_poses.txt\ntime: %.1f s\n",
-      sequence->frames.size(), o.image_size.width, o.image_size.height, o.focal_px,
-      o.frames_per_leg, o.frames_per_leg, static_cast<unsigned long long>(o.seed), revisits,
-      args.output.c_str(), args.output.c_str(), args.output.c_str(),
+      "wrote %zu rig frames (%zu cameras): %d out, %d back the other way, seed %llu\n"
+      "way-back frames revisiting the way out: %d\n"
+      "rig: %s/rig.yaml; cameras: %s (TUM layout%s); ground truth: %s/ground_truth.txt; body "
+      "poses: %s/body_poses.txt\ntime: %.1f s\n",
+      sequence->frames.size(), sequence->cameras.size(), o.frames_per_leg, o.frames_per_leg,
+      static_cast<unsigned long long>(o.seed), revisits, args.output.c_str(), folders.c_str(),
       args.depth ? ", with depth" : "", args.output.c_str(), args.output.c_str(), seconds);
   return 0;
 }
@@ -330,9 +335,9 @@ void AddRigSeqgenCommand(CLI::App& seqgen, int* exit_code) {
   RigSequenceOptions& o = args->options;
   CLI::App* cmd = seqgen.add_subcommand(
       "rig",
-      "Generate a drive of a front + rear camera rig along an avenue of photo panels, out and back "
-      "the other way, with exact geometry: the way back's rear camera sees the way out's front "
-      "views");
+      "Generate a drive of a camera rig (by default a front and a rear camera) along an avenue of "
+      "photo panels, out and back the other way, with exact geometry: the way back's rear camera "
+      "sees the way out's front views");
   cmd->add_option("--images", args->images, "Folder of photos for the panels")->required();
   cmd->add_option("-o,--output", args->output, "Output folder (must not exist or be empty)")
       ->required();
@@ -347,9 +352,20 @@ void AddRigSeqgenCommand(CLI::App& seqgen, int* exit_code) {
   cmd->add_option("--revisit-radius", o.revisit_radius_m,
                   "Body positions this close (metres) are a revisit in the ground truth")
       ->capture_default_str();
-  cmd->add_option("--width", o.image_size.width, "Frame width")->capture_default_str();
-  cmd->add_option("--height", o.image_size.height, "Frame height")->capture_default_str();
-  cmd->add_option("--focal", o.focal_px, "Focal length fx = fy, pixels")->capture_default_str();
+  CLI::Option* rig =
+      cmd->add_option("--rig", args->rig,
+                      "Rig file of the cameras (without lens distortion); default: a front and a "
+                      "rear camera of --width x --height, fx = fy = --focal, 0.4 m before and "
+                      "behind the body");
+  cmd->add_option("--width", o.image_size.width, "Frame width")
+      ->capture_default_str()
+      ->excludes(rig);
+  cmd->add_option("--height", o.image_size.height, "Frame height")
+      ->capture_default_str()
+      ->excludes(rig);
+  cmd->add_option("--focal", o.focal_px, "Focal length fx = fy, pixels")
+      ->capture_default_str()
+      ->excludes(rig);
   cmd->add_flag("--depth", args->depth, "Also write each camera's depth images (TUM, 1/5000 m)");
   cmd->add_option("--seed", o.seed, "Random seed")->capture_default_str();
   cmd->add_flag("--json", args->json, "Print the summary as JSON");

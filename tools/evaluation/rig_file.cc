@@ -1,0 +1,167 @@
+#include "tools/evaluation/rig_file.h"
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <set>
+
+#include <yaml-cpp/yaml.h>
+
+#include "core/common/names.h"
+
+namespace recog::cli {
+namespace {
+
+constexpr double kRotationTolerance = 1e-6;
+
+bool Finite(double v) { return std::isfinite(v); }
+
+Status CameraFault(const RigCamera& camera, const std::string& what) {
+  return Status::InvalidArgument("rig camera '" + camera.name + "': " + what);
+}
+
+Status ValidateCamera(const RigCamera& c) {
+  if (c.size.width <= 0 || c.size.height <= 0)
+    return CameraFault(c, "width and height must be > 0");
+  if (!(c.K(0, 0) > 0.0) || !(c.K(1, 1) > 0.0) || !Finite(c.K(0, 0)) || !Finite(c.K(1, 1))) {
+    return CameraFault(c, "fx and fy must be finite and > 0");
+  }
+  if (!Finite(c.K(0, 2)) || !Finite(c.K(1, 2))) return CameraFault(c, "cx and cy must be finite");
+  const size_t d = c.distortion.size();
+  if (d != 0 && d != 4 && d != 5 && d != 8) {
+    return CameraFault(c, "distortion has " + std::to_string(d) + " values (0, 4, 5 or 8)");
+  }
+  for (double v : c.distortion) {
+    if (!Finite(v)) return CameraFault(c, "distortion values must be finite");
+  }
+  const cv::Matx33d& R = c.body_from_camera.world_from_camera;
+  if (!cv::checkRange(R) || cv::norm(R * R.t() - cv::Matx33d::eye()) > kRotationTolerance ||
+      cv::determinant(R) < 0.0) {
+    return CameraFault(c, "body_from_camera.rotation is not a rotation (R Rᵀ = I, det R = +1)");
+  }
+  const cv::Vec3d& t = c.body_from_camera.center;
+  if (!Finite(t[0]) || !Finite(t[1]) || !Finite(t[2])) {
+    return CameraFault(c, "body_from_camera.translation must be finite");
+  }
+  return Status::Ok();
+}
+
+// The numbers of a YAML sequence of `count` (any count when 0) numbers.
+std::vector<double> Numbers(const YAML::Node& node, size_t count, const std::string& key) {
+  if (!node.IsSequence() || (count != 0 && node.size() != count)) {
+    throw YAML::Exception(node.Mark(), key + " must be a list of " +
+                                           (count ? std::to_string(count) + " " : "") + "numbers");
+  }
+  std::vector<double> out;
+  for (const YAML::Node& v : node) out.push_back(v.as<double>());
+  return out;
+}
+
+YAML::Node Required(const YAML::Node& node, const std::string& key) {
+  const YAML::Node value = node[key];
+  if (!value) throw YAML::Exception(node.Mark(), "missing key '" + key + "'");
+  return value;
+}
+
+RigCamera ParseCamera(const YAML::Node& node) {
+  RigCamera c;
+  c.name = Required(node, "name").as<std::string>();
+  c.size = {Required(node, "width").as<int>(), Required(node, "height").as<int>()};
+  c.K = {Required(node, "fx").as<double>(),
+         0,
+         Required(node, "cx").as<double>(),
+         0,
+         Required(node, "fy").as<double>(),
+         Required(node, "cy").as<double>(),
+         0,
+         0,
+         1};
+  if (node["distortion"]) c.distortion = Numbers(node["distortion"], 0, "distortion");
+  const YAML::Node pose = Required(node, "body_from_camera");
+  const std::vector<double> r = Numbers(Required(pose, "rotation"), 9, "rotation");
+  const std::vector<double> t = Numbers(Required(pose, "translation"), 3, "translation");
+  for (int i = 0; i < 9; ++i) c.body_from_camera.world_from_camera.val[i] = r[size_t(i)];
+  c.body_from_camera.center = {t[0], t[1], t[2]};
+  return c;
+}
+
+}  // namespace
+
+Status ValidateRig(const std::vector<RigCamera>& cameras) {
+  if (cameras.empty()) return Status::InvalidArgument("a rig needs at least one camera");
+  std::set<std::string> names;
+  for (size_t i = 0; i < cameras.size(); ++i) {
+    const RigCamera& c = cameras[i];
+    // Names become folder names: a name of dots only would climb out of the rig's folder.
+    Status name = ValidateName("rig camera", c.name);
+    if (name.ok() && c.name.find_first_not_of('.') == std::string::npos) {
+      name = Status::InvalidArgument("rig camera name '" + c.name + "' is not a folder name");
+    }
+    if (!name.ok()) return name.WithContext("camera " + std::to_string(i));
+    if (!names.insert(c.name).second) {
+      return Status::InvalidArgument("rig camera name '" + c.name + "' is used twice");
+    }
+    RECOG_RETURN_IF_ERROR(ValidateCamera(c));
+  }
+  return Status::Ok();
+}
+
+StatusOr<std::vector<RigCamera>> ReadRigFile(const std::string& path) {
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec)) {
+    return Status::NotFound("rig file '" + path + "' does not exist");
+  }
+  std::vector<RigCamera> cameras;
+  try {
+    const YAML::Node root = YAML::LoadFile(path);
+    const YAML::Node list = root["cameras"];
+    if (!list || !list.IsSequence()) {
+      return Status::InvalidArgument("rig file '" + path + "' needs a list 'cameras'");
+    }
+    for (const YAML::Node& node : list) cameras.push_back(ParseCamera(node));
+  } catch (const YAML::Exception& e) {
+    return Status::InvalidArgument("rig file '" + path + "': " + e.what());
+  }
+  if (Status s = ValidateRig(cameras); !s.ok()) return s.WithContext("rig file '" + path + "'");
+  return cameras;
+}
+
+Status WriteRigFile(const std::vector<RigCamera>& cameras, const std::string& path) {
+  RECOG_RETURN_IF_ERROR(ValidateRig(cameras));
+  YAML::Node root;
+  for (const RigCamera& camera : cameras) {
+    YAML::Node node;
+    node["name"] = camera.name;
+    node["width"] = camera.size.width;
+    node["height"] = camera.size.height;
+    node["fx"] = camera.K(0, 0);
+    node["fy"] = camera.K(1, 1);
+    node["cx"] = camera.K(0, 2);
+    node["cy"] = camera.K(1, 2);
+    node["distortion"] = YAML::Node(YAML::NodeType::Sequence);
+    for (double v : camera.distortion) node["distortion"].push_back(v);
+    node["distortion"].SetStyle(YAML::EmitterStyle::Flow);
+    YAML::Node pose;
+    for (double v : camera.body_from_camera.world_from_camera.val) pose["rotation"].push_back(v);
+    for (int i = 0; i < 3; ++i) pose["translation"].push_back(camera.body_from_camera.center[i]);
+    pose["rotation"].SetStyle(YAML::EmitterStyle::Flow);
+    pose["translation"].SetStyle(YAML::EmitterStyle::Flow);
+    node["body_from_camera"] = pose;
+    root["cameras"].push_back(node);
+  }
+  YAML::Emitter yaml;
+  yaml.SetDoublePrecision(17);
+  yaml << root;
+  std::ofstream file(path);
+  file << yaml.c_str() << "\n";
+  file.close();
+  if (!file) return Status::Internal("cannot write '" + path + "'");
+  return Status::Ok();
+}
+
+CameraPose CameraInWorld(const CameraPose& body, const RigCamera& camera) {
+  return {body.world_from_camera * camera.body_from_camera.world_from_camera,
+          body.center + body.world_from_camera * camera.body_from_camera.center};
+}
+
+}  // namespace recog::cli
