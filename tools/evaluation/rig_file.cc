@@ -3,48 +3,11 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
-#include <set>
 
 #include <yaml-cpp/yaml.h>
 
-#include "core/common/names.h"
-
 namespace recog::cli {
 namespace {
-
-constexpr double kRotationTolerance = 1e-6;
-
-bool Finite(double v) { return std::isfinite(v); }
-
-Status CameraFault(const RigCamera& camera, const std::string& what) {
-  return Status::InvalidArgument("rig camera '" + camera.name + "': " + what);
-}
-
-Status ValidateCamera(const RigCamera& c) {
-  if (c.size.width <= 0 || c.size.height <= 0)
-    return CameraFault(c, "width and height must be > 0");
-  if (!(c.K(0, 0) > 0.0) || !(c.K(1, 1) > 0.0) || !Finite(c.K(0, 0)) || !Finite(c.K(1, 1))) {
-    return CameraFault(c, "fx and fy must be finite and > 0");
-  }
-  if (!Finite(c.K(0, 2)) || !Finite(c.K(1, 2))) return CameraFault(c, "cx and cy must be finite");
-  const size_t d = c.distortion.size();
-  if (d != 0 && d != 4 && d != 5 && d != 8) {
-    return CameraFault(c, "distortion has " + std::to_string(d) + " values (0, 4, 5 or 8)");
-  }
-  for (double v : c.distortion) {
-    if (!Finite(v)) return CameraFault(c, "distortion values must be finite");
-  }
-  const cv::Matx33d& R = c.body_from_camera.world_from_camera;
-  if (!cv::checkRange(R) || cv::norm(R * R.t() - cv::Matx33d::eye()) > kRotationTolerance ||
-      cv::determinant(R) < 0.0) {
-    return CameraFault(c, "body_from_camera.rotation is not a rotation (R Rᵀ = I, det R = +1)");
-  }
-  const cv::Vec3d& t = c.body_from_camera.center;
-  if (!Finite(t[0]) || !Finite(t[1]) || !Finite(t[2])) {
-    return CameraFault(c, "body_from_camera.translation must be finite");
-  }
-  return Status::Ok();
-}
 
 // The numbers of a YAML sequence of `count` (any count when 0) numbers.
 std::vector<double> Numbers(const YAML::Node& node, size_t count, const std::string& key) {
@@ -80,31 +43,12 @@ RigCamera ParseCamera(const YAML::Node& node) {
   const YAML::Node pose = Required(node, "body_from_camera");
   const std::vector<double> r = Numbers(Required(pose, "rotation"), 9, "rotation");
   const std::vector<double> t = Numbers(Required(pose, "translation"), 3, "translation");
-  for (int i = 0; i < 9; ++i) c.body_from_camera.world_from_camera.val[i] = r[size_t(i)];
-  c.body_from_camera.center = {t[0], t[1], t[2]};
+  for (int i = 0; i < 9; ++i) c.body_R_camera.val[i] = r[size_t(i)];
+  c.body_t_camera = {t[0], t[1], t[2]};
   return c;
 }
 
 }  // namespace
-
-Status ValidateRig(const std::vector<RigCamera>& cameras) {
-  if (cameras.empty()) return Status::InvalidArgument("a rig needs at least one camera");
-  std::set<std::string> names;
-  for (size_t i = 0; i < cameras.size(); ++i) {
-    const RigCamera& c = cameras[i];
-    // Names become folder names: a name of dots only would climb out of the rig's folder.
-    Status name = ValidateName("rig camera", c.name);
-    if (name.ok() && c.name.find_first_not_of('.') == std::string::npos) {
-      name = Status::InvalidArgument("rig camera name '" + c.name + "' is not a folder name");
-    }
-    if (!name.ok()) return name.WithContext("camera " + std::to_string(i));
-    if (!names.insert(c.name).second) {
-      return Status::InvalidArgument("rig camera name '" + c.name + "' is used twice");
-    }
-    RECOG_RETURN_IF_ERROR(ValidateCamera(c));
-  }
-  return Status::Ok();
-}
 
 StatusOr<std::vector<RigCamera>> ReadRigFile(const std::string& path) {
   std::error_code ec;
@@ -142,8 +86,8 @@ Status WriteRigFile(const std::vector<RigCamera>& cameras, const std::string& pa
     for (double v : camera.distortion) node["distortion"].push_back(v);
     node["distortion"].SetStyle(YAML::EmitterStyle::Flow);
     YAML::Node pose;
-    for (double v : camera.body_from_camera.world_from_camera.val) pose["rotation"].push_back(v);
-    for (int i = 0; i < 3; ++i) pose["translation"].push_back(camera.body_from_camera.center[i]);
+    for (double v : camera.body_R_camera.val) pose["rotation"].push_back(v);
+    for (int i = 0; i < 3; ++i) pose["translation"].push_back(camera.body_t_camera[i]);
     pose["rotation"].SetStyle(YAML::EmitterStyle::Flow);
     pose["translation"].SetStyle(YAML::EmitterStyle::Flow);
     node["body_from_camera"] = pose;
@@ -160,8 +104,8 @@ Status WriteRigFile(const std::vector<RigCamera>& cameras, const std::string& pa
 }
 
 CameraPose CameraInWorld(const CameraPose& body, const RigCamera& camera) {
-  return {body.world_from_camera * camera.body_from_camera.world_from_camera,
-          body.center + body.world_from_camera * camera.body_from_camera.center};
+  return {body.world_from_camera * camera.body_R_camera,
+          body.center + body.world_from_camera * camera.body_t_camera};
 }
 
 }  // namespace recog::cli

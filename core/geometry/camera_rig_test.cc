@@ -1,0 +1,74 @@
+#include "core/geometry/camera_rig.h"
+
+#include <cmath>
+
+#include <gtest/gtest.h>
+
+namespace recog {
+namespace {
+
+cv::Matx33d TurnAboutY(double degrees) {
+  const double a = degrees * CV_PI / 180.0;
+  return {std::cos(a), 0, std::sin(a), 0, 1, 0, -std::sin(a), 0, std::cos(a)};
+}
+
+// A front camera and a left camera (EuRoC-like intrinsics and distortion).
+std::vector<RigCamera> FrontAndLeft() {
+  return {{"front",
+           {640, 480},
+           {400, 0, 319.5, 0, 401, 239.5, 0, 0, 1},
+           {},
+           cv::Matx33d::eye(),
+           {0, 0, 0.4}},
+          {"left",
+           {752, 480},
+           {458.654, 0, 367.215, 0, 457.296, 248.375, 0, 0, 1},
+           {-0.28340811, 0.07395907, 0.00019359, 1.76187114e-05},
+           TurnAboutY(-90),
+           {-0.25, 0.01, 0.1}}};
+}
+
+TEST(CameraRigTest, ARigOfRigidCamerasValidates) { EXPECT_TRUE(ValidateRig(FrontAndLeft()).ok()); }
+
+// What a robotics engineer gets wrong in a rig is refused, naming the camera.
+TEST(CameraRigTest, AFaultyRigIsRefusedNamingTheCamera) {
+  struct Case {
+    std::string fault;
+    void (*apply)(RigCamera*);
+  };
+  const std::vector<Case> cases = {
+      {"is not a rotation", [](RigCamera* c) { c->body_R_camera *= 1.01; }},  // scaled
+      {"is not a rotation",  // a reflection: orthonormal, det -1
+       [](RigCamera* c) { c->body_R_camera = {-1, 0, 0, 0, 1, 0, 0, 0, 1}; }},
+      {"is not a rotation", [](RigCamera* c) { c->body_R_camera(0, 1) = NAN; }},
+      {"fx and fy", [](RigCamera* c) { c->K(1, 1) = 0; }},
+      {"cx and cy", [](RigCamera* c) { c->K(0, 2) = INFINITY; }},
+      {"width and height", [](RigCamera* c) { c->size.width = 0; }},
+      {"distortion has 3 values",
+       [](RigCamera* c) {
+         c->distortion = {0.1, 0.2, 0.3};
+       }},
+      {"translation must be finite", [](RigCamera* c) { c->body_t_camera[1] = NAN; }},
+  };
+  for (const Case& test : cases) {
+    std::vector<RigCamera> rig = FrontAndLeft();
+    test.apply(&rig[1]);
+    const Status s = ValidateRig(rig);
+    EXPECT_EQ(s.code(), StatusCode::kInvalidArgument) << test.fault;
+    EXPECT_NE(s.message().find("rig camera 'left'"), std::string::npos) << s.message();
+    EXPECT_NE(s.message().find(test.fault), std::string::npos) << s.message();
+  }
+  std::vector<RigCamera> twice = FrontAndLeft();
+  twice[1].name = "front";
+  EXPECT_NE(ValidateRig(twice).message().find("'front' is used twice"), std::string::npos);
+  std::vector<RigCamera> dots = FrontAndLeft();
+  dots[0].name = "..";
+  EXPECT_NE(ValidateRig(dots).message().find("not a folder name"), std::string::npos);
+  std::vector<RigCamera> spaced = FrontAndLeft();
+  spaced[1].name = "left camera";
+  EXPECT_NE(ValidateRig(spaced).message().find("camera 1"), std::string::npos);
+  EXPECT_EQ(ValidateRig({}).code(), StatusCode::kInvalidArgument);
+}
+
+}  // namespace
+}  // namespace recog
