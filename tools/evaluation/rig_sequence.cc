@@ -122,8 +122,9 @@ StatusOr<RigSequence> GenerateRigSequence(
                                    std::to_string(photos.size()));
   }
   for (const cv::Mat& p : photos) {
-    if (p.empty() || p.type() != CV_8UC1)
+    if (p.empty() || p.type() != CV_8UC1) {
       return Status::InvalidArgument("photos must be 8-bit grey");
+    }
   }
   const std::vector<TexturedPlane> scene = Avenue(photos, o);
 
