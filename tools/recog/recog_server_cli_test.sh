@@ -116,6 +116,12 @@ expect_error "relocalize with fewer depth images than images" \
   "INVALID_ARGUMENT.*one depth image per image: 1 for 2" "$recog" relocalize "$images/41.jpg" \
   "$images/60.jpg" --maps corridor --camera 500,500,320,240 --depth "$images/41.jpg" \
   "${server[@]}"
+expect_error "relocalize with a missing depth image" \
+  "NOT_FOUND.*'$tmp/no-depth.png' does not exist" "$recog" relocalize "$images/41.jpg" \
+  --maps corridor --camera 500,500,320,240 --depth "$tmp/no-depth.png" "${server[@]}"
+expect_error "query with a missing depth image" \
+  "NOT_FOUND.*'$tmp/no-depth.png' does not exist" "$recog" query --map corridor \
+  "$images/41.jpg" --camera 500,500,320,240 --depth "$tmp/no-depth.png" "${server[@]}"
 expect_ok "maps stats robot-b" "$recog" maps stats robot-b --json "${server[@]}"
 json_check "the refused stream added nothing" "assert d['frames']==1, d"
 expect_ok "maps delete robot-b" "$recog" maps delete robot-b "${server[@]}"

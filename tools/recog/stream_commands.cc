@@ -375,10 +375,13 @@ struct QueryArgs {
 
 // Attaches the depth image in `depth` or the right image in `right` (whichever is not empty) to
 // the frame, for metric loops; the server checks the rest (intrinsics, sizes, the baseline).
+// NOT_FOUND for a missing file, INVALID_ARGUMENT for one that does not decode.
 Status AttachStructure(const std::string& depth, double depth_scale, const std::string& right,
                        double baseline, pb::Frame* frame) {
   if (depth.empty() && right.empty()) return Status::Ok();
   const std::string& file = depth.empty() ? right : depth;
+  std::error_code error;
+  if (!fs::exists(file, error)) return Status::NotFound("image file '" + file + "' does not exist");
   const cv::Mat image =
       cv::imread(file, depth.empty() ? cv::IMREAD_GRAYSCALE : cv::IMREAD_ANYDEPTH);
   if (image.empty()) return Status::InvalidArgument("cannot read '" + file + "'");
