@@ -3,6 +3,8 @@
 #include <cmath>
 #include <set>
 
+#include <opencv2/calib3d.hpp>
+
 #include "core/common/names.h"
 
 namespace recog {
@@ -60,6 +62,14 @@ Status ValidateRig(std::span<const RigCamera> cameras) {
     RECOG_RETURN_IF_ERROR(ValidateCamera(c));
   }
   return Status::Ok();
+}
+
+void UndistortKeypoints(const RigCamera& camera, std::vector<cv::KeyPoint>* keypoints) {
+  if (camera.distortion.empty() || keypoints->empty()) return;
+  std::vector<cv::Point2f> pixels(keypoints->size());
+  for (size_t i = 0; i < pixels.size(); ++i) pixels[i] = (*keypoints)[i].pt;
+  cv::undistortPoints(pixels, pixels, camera.K, camera.distortion, cv::noArray(), camera.K);
+  for (size_t i = 0; i < pixels.size(); ++i) (*keypoints)[i].pt = pixels[i];
 }
 
 }  // namespace recog

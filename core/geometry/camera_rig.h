@@ -36,4 +36,8 @@ inline constexpr double kRigRotationTolerance = 1e-6;
 // reflection): extrinsics must be rigid transforms.
 Status ValidateRig(std::span<const RigCamera> cameras);
 
+// Moves keypoints of `camera`'s (distorted) images into the pinhole model of its K, which the
+// geometry of a rig's loops assumes. Nothing for a camera without distortion.
+void UndistortKeypoints(const RigCamera& camera, std::vector<cv::KeyPoint>* keypoints);
+
 }  // namespace recog

@@ -3,6 +3,7 @@
 #include <cmath>
 
 #include <gtest/gtest.h>
+#include <opencv2/calib3d.hpp>
 
 namespace recog {
 namespace {
@@ -68,6 +69,31 @@ TEST(CameraRigTest, AFaultyRigIsRefusedNamingTheCamera) {
   spaced[1].name = "left camera";
   EXPECT_NE(ValidateRig(spaced).message().find("camera 1"), std::string::npos);
   EXPECT_EQ(ValidateRig({}).code(), StatusCode::kInvalidArgument);
+}
+
+// A keypoint where the lens put a point lands, after undistortion, where the pinhole K puts it.
+TEST(CameraRigTest, UndistortedKeypointsFollowThePinholeModel) {
+  RigCamera camera = FrontAndLeft()[0];
+  camera.distortion = {-0.25, 0.08, 0.001, -0.0005, 0};
+  const std::vector<cv::Point3d> points = {{0.3, -0.2, 1.0}, {-0.4, 0.3, 1.5}, {0, 0, 2}};
+  std::vector<cv::Point2d> distorted, pinhole;
+  cv::projectPoints(points, cv::Vec3d(0, 0, 0), cv::Vec3d(0, 0, 0), camera.K, camera.distortion,
+                    distorted);
+  cv::projectPoints(points, cv::Vec3d(0, 0, 0), cv::Vec3d(0, 0, 0), camera.K, cv::noArray(),
+                    pinhole);
+  std::vector<cv::KeyPoint> keypoints;
+  for (const cv::Point2d& p : distorted) keypoints.emplace_back(cv::Point2f(p), 7.f);
+  UndistortKeypoints(camera, &keypoints);
+  for (size_t i = 0; i < points.size(); ++i) {
+    EXPECT_NEAR(keypoints[i].pt.x, pinhole[i].x, 0.05) << i;
+    EXPECT_NEAR(keypoints[i].pt.y, pinhole[i].y, 0.05) << i;
+    EXPECT_EQ(keypoints[i].size, 7.f);
+  }
+  EXPECT_GT(cv::norm(distorted[0] - pinhole[0]), 1.0) << "the lens moved the point";
+  camera.distortion.clear();
+  std::vector<cv::KeyPoint> untouched = keypoints;
+  UndistortKeypoints(camera, &untouched);
+  EXPECT_EQ(untouched[0].pt, keypoints[0].pt);
 }
 
 }  // namespace

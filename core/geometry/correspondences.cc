@@ -248,32 +248,40 @@ double InlierSpread(const std::vector<cv::KeyPoint>& a_keypoints,
   return std::min(CoveredShare(a_keypoints, used_a, grid), CoveredShare(b_keypoints, used_b, grid));
 }
 
-bool RelativePoseFromFundamental(const cv::Matx33d& fundamental, const cv::Matx33d& K_a,
-                                 const cv::Matx33d& K_b,
-                                 const std::vector<cv::KeyPoint>& a_keypoints,
-                                 const std::vector<cv::KeyPoint>& b_keypoints,
-                                 const std::vector<Match>& inliers, cv::Matx33d* R, cv::Vec3d* t) {
-  if (cv::norm(fundamental) == 0.0 || inliers.size() < 5) return false;
-  // Pixels normalised by their own camera, so that one identity camera serves recoverPose.
+namespace {
+
+// The inliers' pixels normalised by their own camera (K^-1 x), so that one identity camera serves
+// the essential matrix of two different cameras. False for a match out of range.
+bool NormalisedPairs(const cv::Matx33d& K_a, const cv::Matx33d& K_b,
+                     const std::vector<cv::KeyPoint>& a_keypoints,
+                     const std::vector<cv::KeyPoint>& b_keypoints,
+                     const std::vector<Match>& matches, std::vector<cv::Point2d>* pa,
+                     std::vector<cv::Point2d>* pb) {
   const cv::Matx33d a_inverse = K_a.inv(), b_inverse = K_b.inv();
   auto normalised = [](const cv::Matx33d& inverse, const cv::Point2f& pixel) {
     const cv::Vec3d ray = inverse * cv::Vec3d(pixel.x, pixel.y, 1.0);
     return cv::Point2d(ray[0] / ray[2], ray[1] / ray[2]);
   };
-  std::vector<cv::Point2d> pa, pb;
-  pa.reserve(inliers.size());
-  pb.reserve(inliers.size());
-  for (const Match& m : inliers) {
+  pa->reserve(matches.size());
+  pb->reserve(matches.size());
+  for (const Match& m : matches) {
     if (m.a >= a_keypoints.size() || m.b >= b_keypoints.size()) return false;
-    pa.push_back(normalised(a_inverse, a_keypoints[m.a].pt));
-    pb.push_back(normalised(b_inverse, b_keypoints[m.b].pt));
+    pa->push_back(normalised(a_inverse, a_keypoints[m.a].pt));
+    pb->push_back(normalised(b_inverse, b_keypoints[m.b].pt));
   }
-  const cv::Matx33d essential = K_b.t() * fundamental * K_a;
+  return true;
+}
+
+// The pose of the essential matrix that puts the most points (with `mask`, those it marks) in
+// front of both cameras; false when fewer than 5 are or E is degenerate.
+bool PoseFromEssential(const cv::Mat& essential, const std::vector<cv::Point2d>& pa,
+                       const std::vector<cv::Point2d>& pb, cv::InputOutputArray mask,
+                       cv::Matx33d* R, cv::Vec3d* t) {
   cv::Mat rotation, translation;
   int in_front = 0;
   try {
-    in_front = cv::recoverPose(cv::Mat(essential), pa, pb, cv::Mat::eye(3, 3, CV_64F), rotation,
-                               translation);
+    in_front =
+        cv::recoverPose(essential, pa, pb, cv::Mat::eye(3, 3, CV_64F), rotation, translation, mask);
   } catch (const cv::Exception&) {
     return false;  // degenerate essential matrix
   }
@@ -283,6 +291,44 @@ bool RelativePoseFromFundamental(const cv::Matx33d& fundamental, const cv::Matx3
   *R = cv::Matx33d(rotation);
   *t = cv::Vec3d(translation);
   return true;
+}
+
+}  // namespace
+
+bool RelativePoseFromFundamental(const cv::Matx33d& fundamental, const cv::Matx33d& K_a,
+                                 const cv::Matx33d& K_b,
+                                 const std::vector<cv::KeyPoint>& a_keypoints,
+                                 const std::vector<cv::KeyPoint>& b_keypoints,
+                                 const std::vector<Match>& inliers, cv::Matx33d* R, cv::Vec3d* t) {
+  if (cv::norm(fundamental) == 0.0 || inliers.size() < 5) return false;
+  std::vector<cv::Point2d> pa, pb;
+  if (!NormalisedPairs(K_a, K_b, a_keypoints, b_keypoints, inliers, &pa, &pb)) return false;
+  const cv::Matx33d essential = K_b.t() * fundamental * K_a;
+  return PoseFromEssential(cv::Mat(essential), pa, pb, cv::noArray(), R, t);
+}
+
+bool RelativePoseFromMatches(const cv::Matx33d& K_a, const cv::Matx33d& K_b,
+                             const std::vector<cv::KeyPoint>& a_keypoints,
+                             const std::vector<cv::KeyPoint>& b_keypoints,
+                             const std::vector<Match>& matches, double threshold_px, cv::Matx33d* R,
+                             cv::Vec3d* t) {
+  if (matches.size() < 5) return false;
+  std::vector<cv::Point2d> pa, pb;
+  if (!NormalisedPairs(K_a, K_b, a_keypoints, b_keypoints, matches, &pa, &pb)) return false;
+  // The pixel threshold in normalised units, by the mean focal length of the two cameras.
+  const double focal = (K_a(0, 0) + K_a(1, 1) + K_b(0, 0) + K_b(1, 1)) / 4.0;
+  cv::Mat mask;
+  cv::Mat essential;
+  try {
+    essential = cv::findEssentialMat(pa, pb, cv::Mat::eye(3, 3, CV_64F), cv::RANSAC, 0.999,
+                                     threshold_px / focal, mask);
+  } catch (const cv::Exception&) {
+    return false;
+  }
+  // Several solutions come stacked (3 x 3 each) when the 5-point problem is ambiguous on the
+  // best sample: the first is RANSAC's.
+  if (essential.rows < 3 || essential.cols != 3) return false;
+  return PoseFromEssential(essential.rowRange(0, 3), pa, pb, mask, R, t);
 }
 
 }  // namespace recog

@@ -430,11 +430,20 @@ StatusOr<EntryId> LoopDetector::Add(const FeatureSet& features, std::optional<do
                                     std::string_view client_id, const FrameGeometry* geometry) {
   RECOG_RETURN_IF_ERROR(CheckClientId(client_id));
   RECOG_RETURN_IF_ERROR(CheckGeometry(features, geometry));
+  ConvertedFrame frame;
+  RECOG_RETURN_IF_ERROR(Convert(features, &frame.bow, &frame.direct));
+  return AddConverted(features, frame, timestamp, client_id, geometry);
+}
+
+StatusOr<EntryId> LoopDetector::AddConverted(const FeatureSet& features,
+                                             const ConvertedFrame& frame,
+                                             std::optional<double> timestamp,
+                                             std::string_view client_id,
+                                             const FrameGeometry* geometry) {
+  RECOG_RETURN_IF_ERROR(CheckClientId(client_id));
+  RECOG_RETURN_IF_ERROR(CheckGeometry(features, geometry));
   ++frames_seen_;
-  BowVector bow;
-  FeatureVector direct;
-  RECOG_RETURN_IF_ERROR(Convert(features, &bow, &direct));
-  return Insert(features, bow, direct, timestamp, client_id, geometry);
+  return Insert(features, frame.bow, frame.direct, timestamp, client_id, geometry);
 }
 
 StatusOr<LoopResult> LoopDetector::Query(const FeatureSet& features,
@@ -486,20 +495,36 @@ StatusOr<LoopResult> LoopDetector::Recognise(const FeatureSet& features,
   if (found) result.status = LoopStatus::kLoopDetected;
   result.timings.islands = MsSince(start);
 
-  if (found) {
-    // One frame's evidence, with no consistent queries behind it: a higher floor of inliers.
-    EpipolarOptions epipolar = params_.epipolar;
-    epipolar.min_inliers =
-        std::max<size_t>(epipolar.min_inliers, params_.relocalisation_min_inliers);
-    RECOG_RETURN_IF_ERROR(Verify(features, frame.direct, epipolar, &result));
-    if (result.status == LoopStatus::kLoopDetected) {
-      result.acceptance = LoopAcceptance::kRelocalisation;
-    }
-  }
-  if (found && result.status == LoopStatus::kLoopDetected && geometry != nullptr) {
-    RECOG_RETURN_IF_ERROR(VerifyMetric(features, *geometry, &result));
-  }
+  if (found) RECOG_RETURN_IF_ERROR(VerifyAlone(features, frame, geometry, &result));
   return result;
+}
+
+StatusOr<LoopResult> LoopDetector::VerifyEntry(const FeatureSet& features,
+                                               const ConvertedFrame& frame, EntryId entry,
+                                               const FrameGeometry* geometry) const {
+  RECOG_RETURN_IF_ERROR(CheckGeometry(features, geometry));
+  LoopResult result;
+  result.timings.conversion = frame.conversion_ms;
+  if (!HasEnoughFeatures(features)) {
+    result.status = LoopStatus::kTooFewFeatures;
+    return result;
+  }
+  result.status = LoopStatus::kLoopDetected;
+  result.match = entry;
+  RECOG_RETURN_IF_ERROR(VerifyAlone(features, frame, geometry, &result));
+  return result;
+}
+
+Status LoopDetector::VerifyAlone(const FeatureSet& features, const ConvertedFrame& frame,
+                                 const FrameGeometry* geometry, LoopResult* result) const {
+  // One frame's evidence, with no consistent queries behind it: a higher floor of inliers.
+  EpipolarOptions epipolar = params_.epipolar;
+  epipolar.min_inliers = std::max<size_t>(epipolar.min_inliers, params_.relocalisation_min_inliers);
+  RECOG_RETURN_IF_ERROR(Verify(features, frame.direct, epipolar, result));
+  if (result->status != LoopStatus::kLoopDetected) return Status::Ok();
+  result->acceptance = LoopAcceptance::kRelocalisation;
+  if (geometry != nullptr) RECOG_RETURN_IF_ERROR(VerifyMetric(features, *geometry, result));
+  return Status::Ok();
 }
 
 StatusOr<EntryId> LoopDetector::Insert(const FeatureSet& features, const BowVector& bow,

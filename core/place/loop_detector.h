@@ -339,6 +339,20 @@ class LoopDetector {
                                  const Shortlist& shortlist, double reference_score,
                                  const FrameGeometry* geometry = nullptr) const;
 
+  // Add for a frame ConvertForQuery already converted (a rig frame is queried, then added).
+  StatusOr<EntryId> AddConverted(const FeatureSet& features, const ConvertedFrame& frame,
+                                 std::optional<double> timestamp = std::nullopt,
+                                 std::string_view client_id = {},
+                                 const FrameGeometry* geometry = nullptr);
+
+  // Step 6 alone, as Recognise runs it, against a given entry of the map (a multi-camera rig
+  // picks its candidates across cameras, core/place/rig_loop_detector.h): the relocalisation
+  // floor of inliers, then the 3D check with `geometry`. `match` is `entry`; the status is
+  // kLoopDetected, kTooFewFeatures or kFailedGeometry. NOT_FOUND for an entry the map does not
+  // hold. Thread safety as Query.
+  StatusOr<LoopResult> VerifyEntry(const FeatureSet& features, const ConvertedFrame& frame,
+                                   EntryId entry, const FrameGeometry* geometry = nullptr) const;
+
   const LoopDetectorParams& params() const { return params_; }
 
  private:
@@ -367,22 +381,22 @@ class LoopDetector {
   // left.
   bool FindBestIsland(const std::vector<QueryResult>& results, double reference,
                       LoopResult* result) const;
-  // Step 6: verifies `result->match` with the geometry check of the parameters (nothing for
-  // kNone), filling correspondences, inliers, fundamental matrix and verification time; the
-  // status becomes kFailedGeometry when the check fails.
-  Status Verify(const FeatureSet& features, const FeatureVector& direct, LoopResult* result) const;
   // The 3D check (§3.3.3), after Verify passed: when one side has 3D points (see above), fills
   // result->metric (PnP RANSAC over the epipolar inliers with a 3D point, LM refinement, the
   // covariance) and sets kFailedGeometry when the loop does not agree in structure. Nothing when
   // neither side has points the other's camera can see, or the geometry check is kNone.
   Status VerifyMetric(const FeatureSet& features, const FrameGeometry& geometry,
                       LoopResult* result) const;
-
+  // Step 6: verifies `result->match` with the geometry check of the parameters (nothing for
   // kNone) and `epipolar`, filling correspondences, inliers, fundamental matrix and verification
-  // time; the status becomes kFailedGeometry when the check fails. With `strength`, also sets
+  // time; the status becomes kFailedGeometry when the check fails. With `strong`, also sets
   // *strong to whether a verified match is strong evidence (inliers, spread, R_H).
   Status Verify(const FeatureSet& features, const FeatureVector& direct,
                 const EpipolarOptions& epipolar, LoopResult* result, bool* strong = nullptr) const;
+  // Verify with the relocalisation floor of inliers (one frame's evidence), then VerifyMetric
+  // with `geometry` (may be null); acceptance kRelocalisation when the loop holds.
+  Status VerifyAlone(const FeatureSet& features, const ConvertedFrame& frame,
+                     const FrameGeometry* geometry, LoopResult* result) const;
   // Step 7: adds the converted frame to the database and moves the detector's state on (the
   // previous usable frame, the timestamps for tau_c). Returns the frame's entry id.
   StatusOr<EntryId> Insert(const FeatureSet& features, const BowVector& bow,
