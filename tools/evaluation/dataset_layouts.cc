@@ -136,8 +136,47 @@ StatusOr<std::vector<DatasetFrame>> ReadTum(const fs::path& dir) {
   return frames;
 }
 
-// An EuRoC camera folder's data.csv: (timestamp in ns, image path) in order.
-StatusOr<std::vector<std::pair<int64_t, std::string>>> ReadEurocCamera(const fs::path& camera) {
+StatusOr<std::vector<DatasetFrame>> ReadEuroc(const fs::path& dir) {
+  std::error_code ec;
+  const fs::path root = fs::exists(dir / "mav0" / "cam0" / "data.csv", ec) ? dir / "mav0" : dir;
+  RECOG_ASSIGN_OR_RETURN(const auto left, ReadEurocCameraList((root / "cam0").string()));
+  std::map<int64_t, std::string> right;
+  if (fs::exists(root / "cam1" / "data.csv", ec)) {
+    RECOG_ASSIGN_OR_RETURN(const auto entries, ReadEurocCameraList((root / "cam1").string()));
+    right.insert(entries.begin(), entries.end());
+  }
+  std::vector<DatasetFrame> frames;
+  for (const auto& [ns, image] : left) {
+    const auto it = right.find(ns);
+    frames.push_back(
+        DatasetFrame{double(ns) * 1e-9, image, "", it == right.end() ? "" : it->second});
+  }
+  return frames;
+}
+
+StatusOr<std::vector<DatasetFrame>> ReadKitti(const fs::path& dir) {
+  RECOG_ASSIGN_OR_RETURN(const std::vector<double> times, ReadKittiTimes(dir.string()));
+  std::vector<DatasetFrame> frames;
+  std::error_code ec;
+  for (const double timestamp : times) {
+    char name[32];
+    std::snprintf(name, sizeof(name), "%06zu.png", frames.size());
+    const fs::path left = dir / "image_0" / name, right = dir / "image_1" / name;
+    if (!fs::is_regular_file(left, ec)) {
+      return Status::NotFound(Quoted(left) + ", frame " + std::to_string(frames.size()) + " of " +
+                              Quoted(dir / "times.txt") + ", does not exist");
+    }
+    frames.push_back(DatasetFrame{timestamp, left.string(), "",
+                                  fs::is_regular_file(right, ec) ? right.string() : ""});
+  }
+  return frames;
+}
+
+}  // namespace
+
+StatusOr<std::vector<std::pair<int64_t, std::string>>> ReadEurocCameraList(
+    const std::string& camera_dir) {
+  const fs::path camera(camera_dir);
   const fs::path list = camera / "data.csv";
   RECOG_ASSIGN_OR_RETURN(const std::vector<ListLine> lines, ReadListLines(list));
   std::vector<std::pair<int64_t, std::string>> entries;
@@ -160,46 +199,18 @@ StatusOr<std::vector<std::pair<int64_t, std::string>>> ReadEurocCamera(const fs:
   return entries;
 }
 
-StatusOr<std::vector<DatasetFrame>> ReadEuroc(const fs::path& dir) {
-  std::error_code ec;
-  const fs::path root = fs::exists(dir / "mav0" / "cam0" / "data.csv", ec) ? dir / "mav0" : dir;
-  RECOG_ASSIGN_OR_RETURN(const auto left, ReadEurocCamera(root / "cam0"));
-  std::map<int64_t, std::string> right;
-  if (fs::exists(root / "cam1" / "data.csv", ec)) {
-    RECOG_ASSIGN_OR_RETURN(const auto entries, ReadEurocCamera(root / "cam1"));
-    right.insert(entries.begin(), entries.end());
-  }
-  std::vector<DatasetFrame> frames;
-  for (const auto& [ns, image] : left) {
-    const auto it = right.find(ns);
-    frames.push_back(
-        DatasetFrame{double(ns) * 1e-9, image, "", it == right.end() ? "" : it->second});
-  }
-  return frames;
-}
-
-StatusOr<std::vector<DatasetFrame>> ReadKitti(const fs::path& dir) {
-  const fs::path list = dir / "times.txt";
+StatusOr<std::vector<double>> ReadKittiTimes(const std::string& dir) {
+  const fs::path list = fs::path(dir) / "times.txt";
   RECOG_ASSIGN_OR_RETURN(const std::vector<ListLine> lines, ReadListLines(list));
-  std::vector<DatasetFrame> frames;
-  std::error_code ec;
+  std::vector<double> times;
   for (const ListLine& line : lines) {
     double timestamp = 0;
     if (!ParseSeconds(line.text, &timestamp)) return Malformed(list, line, "a time in seconds");
-    if (!frames.empty()) {
-      RECOG_RETURN_IF_ERROR(CheckIncreasing(frames.back().timestamp, timestamp, list, line));
-    }
-    char name[32];
-    std::snprintf(name, sizeof(name), "%06zu.png", frames.size());
-    const fs::path left = dir / "image_0" / name, right = dir / "image_1" / name;
-    RECOG_RETURN_IF_ERROR(CheckExists(left, list, line));
-    frames.push_back(DatasetFrame{timestamp, left.string(), "",
-                                  fs::is_regular_file(right, ec) ? right.string() : ""});
+    if (!times.empty()) RECOG_RETURN_IF_ERROR(CheckIncreasing(times.back(), timestamp, list, line));
+    times.push_back(timestamp);
   }
-  return frames;
+  return times;
 }
-
-}  // namespace
 
 std::string_view DatasetLayoutName(DatasetLayout layout) {
   switch (layout) {

@@ -14,8 +14,10 @@
 // a list without frames are INVALID_ARGUMENT; a missing list file is NOT_FOUND.
 #pragma once
 
+#include <cstdint>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include "core/common/status.h"
@@ -45,5 +47,14 @@ struct DatasetFrame {
 // The frames of the dataset in `dir`, in order. kFolder is INVALID_ARGUMENT (no timestamps:
 // list its images with ListImages).
 StatusOr<std::vector<DatasetFrame>> ReadDatasetFrames(const std::string& dir, DatasetLayout layout);
+
+// The list parsers behind ReadDatasetFrames, shared with the rig readers (rig_dataset.h); the
+// checks above apply, but a list without frames is not an error here.
+// An EuRoC camera folder's data.csv (images in camera_dir/data/): (timestamp [ns], image path)
+// per line, in order.
+StatusOr<std::vector<std::pair<int64_t, std::string>>> ReadEurocCameraList(
+    const std::string& camera_dir);
+// A KITTI odometry folder's times.txt: each frame's time in seconds, in order.
+StatusOr<std::vector<double>> ReadKittiTimes(const std::string& dir);
 
 }  // namespace recog::cli

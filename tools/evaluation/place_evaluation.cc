@@ -218,7 +218,9 @@ const FrameGeometry* GeometryOf(const SequenceFeatures& sequence, size_t i) {
   return i < sequence.geometry.size() ? &sequence.geometry[i] : nullptr;
 }
 
-StageStats Stats(const std::vector<double>& values) {
+}  // namespace
+
+StageStats StatsOf(const std::vector<double>& values) {
   StageStats s;
   if (values.empty()) return s;
   s.mean = std::accumulate(values.begin(), values.end(), 0.0) / double(values.size());
@@ -226,8 +228,6 @@ StageStats Stats(const std::vector<double>& values) {
   s.max = *std::max_element(values.begin(), values.end());
   return s;
 }
-
-}  // namespace
 
 StatusOr<std::vector<LoopResult>> DetectLoops(const SequenceFeatures& sequence,
                                               std::shared_ptr<const Vocabulary> vocabulary,
@@ -291,7 +291,7 @@ void CountResult(const LoopResult& r, int query, int match, const GroundTruth& t
 }
 
 void Finish(const std::map<std::string, std::vector<double>>& times, PlaceEvaluation* eval) {
-  for (const auto& [stage, values] : times) eval->timing_ms[stage] = Stats(values);
+  for (const auto& [stage, values] : times) eval->timing_ms[stage] = StatsOf(values);
   eval->precision = eval->detections > 0 ? double(eval->correct) / eval->detections : 1.0;
   eval->recall = eval->query_frames_with_truth > 0
                      ? double(eval->correct) / eval->query_frames_with_truth

@@ -164,5 +164,7 @@ void AppendSequence(SequenceFeatures robot_b, SequenceFeatures* robot_a);
 
 // Median of a copy of the values (0 for none).
 double Median(std::vector<double> values);
+// Mean, median and max of the values (zeros for none).
+StageStats StatsOf(const std::vector<double>& values);
 
 }  // namespace recog::cli

@@ -9,17 +9,6 @@
 namespace recog::cli {
 namespace {
 
-// The numbers of a YAML sequence of `count` (any count when 0) numbers.
-std::vector<double> Numbers(const YAML::Node& node, size_t count, const std::string& key) {
-  if (!node.IsSequence() || (count != 0 && node.size() != count)) {
-    throw YAML::Exception(node.Mark(), key + " must be a list of " +
-                                           (count ? std::to_string(count) + " " : "") + "numbers");
-  }
-  std::vector<double> out;
-  for (const YAML::Node& v : node) out.push_back(v.as<double>());
-  return out;
-}
-
 YAML::Node Required(const YAML::Node& node, const std::string& key) {
   const YAML::Node value = node[key];
   if (!value) throw YAML::Exception(node.Mark(), "missing key '" + key + "'");
@@ -39,16 +28,26 @@ RigCamera ParseCamera(const YAML::Node& node) {
          0,
          0,
          1};
-  if (node["distortion"]) c.distortion = Numbers(node["distortion"], 0, "distortion");
+  if (node["distortion"]) c.distortion = YamlNumbers(node["distortion"], 0, "distortion");
   const YAML::Node pose = Required(node, "body_from_camera");
-  const std::vector<double> r = Numbers(Required(pose, "rotation"), 9, "rotation");
-  const std::vector<double> t = Numbers(Required(pose, "translation"), 3, "translation");
+  const std::vector<double> r = YamlNumbers(Required(pose, "rotation"), 9, "rotation");
+  const std::vector<double> t = YamlNumbers(Required(pose, "translation"), 3, "translation");
   for (int i = 0; i < 9; ++i) c.body_R_camera.val[i] = r[size_t(i)];
   c.body_t_camera = {t[0], t[1], t[2]};
   return c;
 }
 
 }  // namespace
+
+std::vector<double> YamlNumbers(const YAML::Node& node, size_t count, const std::string& key) {
+  if (!node.IsSequence() || (count != 0 && node.size() != count)) {
+    throw YAML::Exception(node.Mark(), key + " must be a list of " +
+                                           (count ? std::to_string(count) + " " : "") + "numbers");
+  }
+  std::vector<double> out;
+  for (const YAML::Node& v : node) out.push_back(v.as<double>());
+  return out;
+}
 
 StatusOr<std::vector<RigCamera>> ReadRigFile(const std::string& path) {
   std::error_code ec;

@@ -22,6 +22,10 @@
 #include "core/geometry/camera_rig.h"
 #include "tools/evaluation/metric_sequence.h"
 
+namespace YAML {
+class Node;
+}
+
 namespace recog::cli {
 
 // Reads and validates a rig file. NOT_FOUND when it does not exist; INVALID_ARGUMENT naming the
@@ -32,6 +36,10 @@ StatusOr<std::vector<RigCamera>> ReadRigFile(const std::string& path);
 // Writes a rig that validates (INVALID_ARGUMENT otherwise); INTERNAL when the file cannot be
 // written. ReadRigFile gives the cameras back exactly.
 Status WriteRigFile(const std::vector<RigCamera>& cameras, const std::string& path);
+
+// The numbers of YAML sequence `node` of `count` numbers (any count when 0); throws a
+// YAML::Exception naming `key` otherwise (rig files and EuRoC sensor.yaml files).
+std::vector<double> YamlNumbers(const YAML::Node& node, size_t count, const std::string& key);
 
 // The pose of `camera` in the world when the body is at `body` (world_from_camera).
 CameraPose CameraInWorld(const CameraPose& body, const RigCamera& camera);

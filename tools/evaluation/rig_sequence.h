@@ -45,7 +45,7 @@ struct RigSequenceOptions {
   double round_the_block_s = 60.0;  // between the last frame out and the first frame back
   double return_lateral_offset_m = 0.15;
   double return_yaw_deg = 3.0;
-  double revisit_radius_m = 0.5;
+  double revisit_radius_m = 1.0;
   double panel_spacing_m = 1.5;
   double road_half_width_m = 1.0;
   double panel_width_m = 1.6, panel_height_m = 1.2;

@@ -12,24 +12,14 @@
 
 #include "tests/testing/data_paths.h"
 #include "tools/evaluation/dataset_layouts.h"
+#include "tools/evaluation/rig_test_photos.h"
 
 namespace recog::cli {
 namespace {
 
 namespace fs = std::filesystem;
 
-// 36 textures: the 3 x 3 tiles of the four project corridor photos.
-std::vector<cv::Mat> Photos() {
-  std::vector<cv::Mat> photos;
-  for (const char* name : {"1.jpg", "20.jpg", "41.jpg", "60.jpg"}) {
-    const cv::Mat photo =
-        cv::imread(testing::ProjectTestData(std::string("corridor/") + name), cv::IMREAD_GRAYSCALE);
-    EXPECT_FALSE(photo.empty()) << name;
-    const int w = photo.cols / 3, h = photo.rows / 3;
-    for (int q = 0; q < 9; ++q) photos.push_back(photo(cv::Rect((q % 3) * w, (q / 3) * h, w, h)));
-  }
-  return photos;
-}
+std::vector<cv::Mat> Photos() { return testing::CorridorTiles(); }
 
 RigSequenceOptions Small() {
   RigSequenceOptions o;
