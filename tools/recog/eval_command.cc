@@ -1,6 +1,7 @@
 // recog eval place: runs the loop detector over a sequence (a folder, a TUM RGB-D / EuRoC / KITTI
-// dataset folder with timestamps, a list or a video) and reports the detections and per-stage
-// timings, with a ground truth also precision and recall; --sweep alpha draws the PR curve.
+// dataset folder with timestamps, a list or a video; or with --rig a multi-camera rig sequence)
+// and reports the detections and per-stage timings, with a ground truth also precision and
+// recall; --sweep alpha draws the PR curve.
 #include <cstdio>
 #include <filesystem>
 #include <memory>
@@ -18,6 +19,7 @@
 #include "tools/evaluation/object_evaluation.h"  // ParseCamera
 #include "tools/evaluation/place_evaluation.h"
 #include "tools/evaluation/plot.h"
+#include "tools/evaluation/rig_evaluation.h"
 #include "tools/recog/commands.h"
 
 namespace recog::cli {
@@ -35,7 +37,11 @@ struct EvalPlaceArgs {
   int features = 1000;
   int min_short_side = kPlaceMinShortSide;
   int split = 0;  // > 0: frames 1..split are robot A's map, the rest robot B's (EvaluateAcrossMaps)
-  std::string robot_b;  // robot B's own sequence: A's frames (--images) are then A's map
+  std::string robot_b;     // robot B's own sequence: A's frames (--images) are then A's map
+  std::string rig;         // a rig sequence (rig_dataset.h) instead of --images
+  std::string body_poses;  // with --rig: the body's poses, for the loops' pose errors
+  std::vector<std::string> rig_cameras;  // with --rig: only these cameras
+  bool no_depth = false;                 // with --rig: ignore the cameras' depth images
   bool json = false;
   bool quiet = false;
 };
@@ -236,6 +242,134 @@ int ReportAcrossMaps(const EvalPlaceArgs& args, int split, const SequenceFeature
   return 0;
 }
 
+// --rig: the rig detector over a rig sequence (every camera image searched against every camera
+// image of the map, loops verified across the rig), scored over rig frames.
+int RunEvalRig(const EvalPlaceArgs& args, const PlaceEvaluationOptions& options, int features,
+               std::shared_ptr<const Vocabulary> vocabulary, const std::string& vocabulary_path) {
+  auto dataset = ReadRigDataset(args.rig);
+  if (!dataset.ok()) return Fail(dataset.status());
+  RigExtractionOptions extraction;
+  extraction.features = PlaceFeatureOptions();
+  extraction.features.orb.max_features = features;
+  extraction.features.orb.min_short_side = args.min_short_side;
+  extraction.use_depth = !args.no_depth;
+  extraction.depth_scale = 1.0 / (args.depth_scale > 0 ? args.depth_scale : 5000.0);
+  extraction.cameras = args.rig_cameras;
+  ProgressBar progress(!args.quiet);
+  auto sequence = ExtractRigSequence(*dataset, extraction, [&](size_t done, size_t total) {
+    progress.Update("rig frames", done, total);
+  });
+  progress.Finish();
+  if (!sequence.ok()) return Fail(sequence.status());
+  const bool has_truth = !args.ground_truth.empty();
+  StatusOr<GroundTruth> truth = GroundTruth{};
+  if (has_truth) {
+    truth = ReadGroundTruth(args.ground_truth);
+    if (!truth.ok()) return Fail(truth.status());
+  } else {
+    truth->frames = int(sequence->frames.size());
+    truth->matches.resize(sequence->frames.size());
+  }
+  std::optional<std::vector<CameraPose>> poses;
+  if (!args.body_poses.empty()) {
+    auto read = ReadTrajectory(args.body_poses);
+    if (!read.ok()) return Fail(read.status());
+    poses = std::move(read).value();
+  }
+  RigPlaceOptions rig_options;
+  rig_options.detector.detector = options.detector;
+  rig_options.scoring = options.scoring;
+  rig_options.direct_index_levels_up = options.direct_index_levels_up;
+  auto e = EvaluateRigPlace(*sequence, *truth, std::move(vocabulary), rig_options,
+                            poses ? &*poses : nullptr);
+  if (!e.ok()) return Fail(e.status());
+
+  std::vector<std::string> cameras;
+  for (const RigCamera& c : sequence->cameras) cameras.push_back(c.name);
+  if (args.json) {
+    nlohmann::json timing, loops = nlohmann::json::array();
+    for (const auto& [stage, s] : e->timing_ms) {
+      timing[stage] = {{"mean", s.mean}, {"median", s.median}, {"max", s.max}};
+    }
+    for (const RigDetectedLoop& l : e->loops) {
+      nlohmann::json loop = {{"query", l.query + 1},
+                             {"match", l.match + 1},
+                             {"status", std::string(RigLoopStatusName(l.status))},
+                             {"camera_pairs", l.camera_pairs},
+                             {"inliers", l.inliers},
+                             {"rotation_disagreement_deg", l.rotation_disagreement_deg},
+                             {"posed", l.posed},
+                             {"metric", l.metric}};
+      if (has_truth) loop["correct"] = l.correct;
+      if (l.posed) {  // X_body_query = R X_body_match + t
+        loop["rotation"] = std::vector<double>(l.result.R.val, l.result.R.val + 9);
+        if (l.metric) {
+          loop["translation"] = {l.result.t[0], l.result.t[1], l.result.t[2]};
+          loop["covariance"] = l.result.covariance;
+        }
+      }
+      if (l.rotation_error_deg) loop["rotation_error_deg"] = *l.rotation_error_deg;
+      if (l.translation_error_pct) loop["translation_error_pct"] = *l.translation_error_pct;
+      loops.push_back(std::move(loop));
+    }
+    nlohmann::json out = {{"layout", std::string(RigLayoutName(dataset->layout))},
+                          {"cameras", cameras},
+                          {"frames", e->frames},
+                          {"detections", e->detections},
+                          {"statuses", e->statuses},
+                          {"timing_ms", timing},
+                          {"loops", loops},
+                          {"vocabulary", vocabulary_path}};
+    if (has_truth) {
+      out["query_frames_with_truth"] = e->query_frames_with_truth;
+      out["correct"] = e->correct;
+      out["precision"] = e->precision;
+      out["recall"] = e->recall;
+    }
+    if (poses) {
+      out["pose_error"] = {{"posed_correct", e->posed_correct},
+                           {"metric_correct", e->metric_correct},
+                           {"median_rotation_deg", e->median_rotation_error_deg},
+                           {"median_translation_pct", e->median_translation_error_pct}};
+    }
+    std::printf("%s\n", out.dump(2).c_str());
+    return 0;
+  }
+  std::string joined;
+  for (const std::string& c : cameras) joined += (joined.empty() ? "" : ", ") + c;
+  std::printf("rig (%s layout): cameras %s; %d rig frames\n",
+              std::string(RigLayoutName(dataset->layout)).c_str(), joined.c_str(), e->frames);
+  if (has_truth) {
+    std::printf("query frames with a true match %d\n", e->query_frames_with_truth);
+    std::printf("detections %d, correct %d: precision %.1f %%, recall %.1f %%\n", e->detections,
+                e->correct, 100 * e->precision, 100 * e->recall);
+  } else {
+    std::printf("detections %d (no ground truth)\n", e->detections);
+  }
+  if (poses) {
+    std::printf(
+        "body pose of the correct loops: rotation error %.3f deg (median over %d posed), "
+        "translation error %.2f %% of the distance (median over %d metric)\n",
+        e->median_rotation_error_deg, e->posed_correct, e->median_translation_error_pct,
+        e->metric_correct);
+  }
+  std::printf("%-13s %8s %8s %8s  (ms per rig frame)\n", "stage", "mean", "median", "max");
+  for (const char* stage : {"features", "points", "conversion", "query", "verification",
+                            "insertion", "detector", "total"}) {
+    if (!e->timing_ms.count(stage)) continue;  // points: with depth images
+    const StageStats& s = e->timing_ms.at(stage);
+    std::printf("%-13s %8.3f %8.3f %8.3f\n", stage, s.mean, s.median, s.max);
+  }
+  for (const RigDetectedLoop& l : e->loops) {
+    if (l.status != RigLoopStatus::kLoopDetected) continue;
+    std::string pairs;
+    for (const std::string& p : l.camera_pairs) pairs += (pairs.empty() ? "" : " ") + p;
+    std::printf("loop %d -> %d (%s%u inliers; cameras %s)\n", l.query + 1, l.match + 1,
+                has_truth ? (l.correct ? "correct, " : "WRONG, ") : "", l.inliers, pairs.c_str());
+  }
+  return 0;
+}
+
 int RunEvalPlace(const EvalPlaceArgs& args) {
   PlaceEvaluationOptions options;
   auto preset = ParseLoopDetectorMode(args.mode);
@@ -262,11 +396,25 @@ int RunEvalPlace(const EvalPlaceArgs& args) {
     if (!parsed.ok()) return Fail(parsed.status());
     layout = *parsed;
   }
+  if (args.rig.empty() == args.images.empty()) {
+    return Fail(Status::InvalidArgument("give the sequence with either --images or --rig"));
+  }
+  if (!args.rig.empty() && (two_robots || !args.sweep.empty() || !args.draw_dir.empty() ||
+                            !args.camera.empty() || args.baseline > 0)) {
+    return Fail(Status::InvalidArgument(
+        "--rig takes its cameras from the rig: without --camera, --baseline, --split, "
+        "--robot-b, --sweep or --draw"));
+  }
+  if (args.rig.empty() &&
+      (!args.body_poses.empty() || !args.rig_cameras.empty() || args.no_depth)) {
+    return Fail(Status::InvalidArgument("--body-poses, --cameras and --no-depth need --rig"));
+  }
   const std::string vocabulary_path =
       args.vocabulary.empty() ? DefaultPlaceVocabularyPath() : args.vocabulary;
   auto vocabulary = LoadAnyVocabulary(vocabulary_path);
   if (!vocabulary.ok()) return Fail(vocabulary.status());
   auto shared = std::make_shared<const Vocabulary>(std::move(vocabulary).value());
+  if (!args.rig.empty()) return RunEvalRig(args, options, features, shared, vocabulary_path);
 
   auto source = FrameSource::Open(args.images, layout);
   if (!source.ok()) return Fail(source.status());
@@ -440,11 +588,24 @@ void AddEvalCommand(CLI::App& app, int* exit_code) {
   auto args = std::make_shared<EvalPlaceArgs>();
   CLI::App* place = eval->add_subcommand(
       "place", "Run the loop detector over a sequence (scored when a ground truth is given)");
+  place->add_option("--images", args->images,
+                    "Folder of frames (or a TUM RGB-D, EuRoC or KITTI dataset folder), a list "
+                    "file, or a video");
+  place->add_option("--rig", args->rig,
+                    "A multi-camera rig sequence instead of --images: a rig file with one folder "
+                    "per camera beside it (what recog seqgen rig writes), or a EuRoC (camN/"
+                    "sensor.yaml) or KITTI (calib.txt, image_N/) folder; every camera's images "
+                    "are searched against every camera's, loops verified across the rig");
   place
-      ->add_option("--images", args->images,
-                   "Folder of frames (or a TUM RGB-D, EuRoC or KITTI dataset folder), a list "
-                   "file, or a video")
-      ->required();
+      ->add_option("--cameras", args->rig_cameras,
+                   "With --rig: only these cameras, comma-separated (e.g. front: the "
+                   "single-camera control)")
+      ->delimiter(',');
+  place->add_option("--body-poses", args->body_poses,
+                    "With --rig: the body's poses (TUM trajectory, world from body, one line per "
+                    "rig frame; recog seqgen rig writes body_poses.txt): each loop's pose error");
+  place->add_flag("--no-depth", args->no_depth,
+                  "With --rig: ignore the cameras' depth images (a monocular rig)");
   place
       ->add_option("--layout", args->layout,
                    "Folder layout: auto (detected), tum, euroc, kitti or folder; the datasets' "

@@ -127,6 +127,30 @@ expect_error "seqgen rig with one frame a leg" "frames_per_leg must be at least 
   --images "$tmp/tiles" -o "$tmp/rig2" --frames-per-leg 1
 [ ! -e "$tmp/rig2" ] && pass || fail "seqgen rig creates nothing on bad input"
 
+# eval place --rig: the rig sequence just written (4 rig frames), the control, and bad input.
+expect_ok "eval place --rig" "$recog" eval place --rig "$tmp/rig" --ground-truth \
+  "$tmp/rig/ground_truth.txt" --body-poses "$tmp/rig/body_poses.txt" --json -q
+json_check "eval place --rig reads both cameras and scores rig frames" \
+  "assert d['frames']==4 and d['cameras']==['front','rear'] and d['layout']=='plain' \
+   and d['query_frames_with_truth']==2 and 'pose_error' in d and d['detections']==d['correct'], d"
+expect_ok "eval place --rig --cameras front" "$recog" eval place --rig "$tmp/rig/rig.yaml" \
+  --cameras front --json -q
+json_check "eval place --rig --cameras front keeps the front camera" \
+  "assert d['cameras']==['front'] and d['frames']==4 and 'recall' not in d, d"
+expect_error "eval place --rig with an unknown camera" "no camera 'side' .*front, rear" "$recog" \
+  eval place --rig "$tmp/rig" --cameras side -q
+expect_error "eval place with --rig and --images" "either --images or --rig" "$recog" eval place \
+  --rig "$tmp/rig" --images "$images" -q
+expect_error "eval place --body-poses without --rig" "need --rig" "$recog" eval place \
+  --images "$images" --body-poses "$tmp/rig/body_poses.txt" -q
+cp -r "$tmp/rig" "$tmp/rig_bad"
+/usr/bin/python3 -c "import cv2, numpy; cv2.imwrite('$tmp/rig_bad/rear/rgb/000001.png', numpy.zeros((100, 100), numpy.uint8))"
+expect_error "eval place --rig with an image of the wrong size" \
+  "rig camera 'rear': '.*000001.png' is 100x100, its camera's images are 160x120" "$recog" eval \
+  place --rig "$tmp/rig_bad" -q
+expect_error "eval place --rig with a missing rig" "NOT_FOUND" "$recog" eval place \
+  --rig "$tmp/no_such_rig" -q
+
 # seqgen objects: a tiny poster sequence, a model of its face and eval sequence --truth.
 mkdir -p "$tmp/object_photos" "$tmp/background_photos"
 cp "$images/1.jpg" "$tmp/object_photos/" && cp "$images/20.jpg" "$images/60.jpg" "$tmp/background_photos/"
