@@ -13,6 +13,14 @@
 //   Relocalize_Group10x2600_vs_One26K  a relocalisation (core Relocalize, one frame) in a group
 //                 of 10 maps of 2,600 frames each against the same 26,000 frames in one map:
 //                 median ms of each and their ratio (see RelocalisationFleet).
+//   Rig_2Cameras_26K  the rig detector (core RigLoopDetector) per rig frame of a front + rear
+//                 rig once its map holds 26,000 camera images (13,000 rig frames), then 200 rig
+//                 frames driving back the other way: each camera sees, with its keypoints moved
+//                 half a pixel, a subset of what the other camera saw on the way out. Median ms
+//                 of the detector per rig frame (conversion of both images, both queries, the
+//                 pairs' verification, the check across the rig, insertion); ORB is not in it
+//                 (two 640x480 extractions, reported apart). A cost benchmark: the views are
+//                 photos, not a 3D scene (accuracy: recog eval place --rig, rig_place_test).
 // Needs the shared Caltech photos (falls back to the 4 bundled frames, which gives a degenerate
 // tour). Long: about 40 minutes in all on 2 cores (the distinct-place filter of the 4,400-photo
 // tour takes most of it). Run: build/bin/bench_place [--benchmark_filter=...]
@@ -33,6 +41,7 @@
 #include "core/index/memory_index_store.h"
 #include "core/place/map_registry.h"
 #include "core/place/map_search.h"
+#include "core/place/rig_loop_detector.h"
 #include "tests/testing/data_paths.h"
 #include "tools/common/cli_support.h"
 #include "tools/evaluation/place_evaluation.h"
@@ -252,6 +261,35 @@ FeatureSet FeatureSubset(const FeatureSet& all, std::mt19937_64& rng) {
   return subset;
 }
 
+// The features of the shared Caltech photos with at least 50 keypoints (the 4 bundled frames
+// without them), and the median ms of their extraction.
+std::vector<FeatureSet> PhotoFeatures(double* extraction_median_ms) {
+  cli::SequenceOptions unused;
+  auto extractor = std::move(CreateFeatureExtractor(PlaceFeatureOptions())).value();
+  std::vector<FeatureSet> photos;
+  std::vector<double> ms;
+  FeatureSet features;
+  for (const std::string& file : TourPhotos(&unused)) {
+    auto image = ReadGrayImage(file);
+    if (!image.ok()) continue;
+    const auto start = std::chrono::steady_clock::now();
+    if (!extractor->Extract(*image, &features).ok()) continue;
+    ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
+                     .count());
+    if (features.size() >= 50) photos.push_back(features);
+  }
+  std::fprintf(stderr, "bench_place: features of %zu photos\n", photos.size());
+  if (extraction_median_ms != nullptr) *extraction_median_ms = cli::Median(ms);
+  return photos;
+}
+
+// `frame`'s keypoints moved by Gaussian noise of `sigma_px` (another exposure of the same view).
+FeatureSet Jittered(FeatureSet frame, double sigma_px, std::mt19937_64& rng) {
+  std::normal_distribution<float> noise(0.0f, float(sigma_px));
+  for (cv::KeyPoint& k : frame.keypoints) k.pt += cv::Point2f(noise(rng), noise(rng));
+  return frame;
+}
+
 // A fleet's 26,000 frames twice over: as 10 maps of 2,600 frames (one group: each robot has seen
 // its own tenth of the shared Caltech photos, every photo about five times as 60-100 % subsets of
 // its features) and as one map of the same 26,000 frames. The queries are 200 fresh subsets of
@@ -268,19 +306,7 @@ const RelocalisationFleet& GetRelocalisationFleet() {
   static RelocalisationFleet* fleet = [] {
     constexpr size_t kMaps = 10, kFramesPerMap = 2600, kQueries = 200;
     auto* f = new RelocalisationFleet;
-    std::vector<FeatureSet> photos;
-    {
-      cli::SequenceOptions unused;
-      auto extractor = std::move(CreateFeatureExtractor(PlaceFeatureOptions())).value();
-      FeatureSet features;
-      for (const std::string& file : TourPhotos(&unused)) {
-        auto image = ReadGrayImage(file);
-        if (image.ok() && extractor->Extract(*image, &features).ok() && features.size() >= 50) {
-          photos.push_back(features);
-        }
-      }
-    }
-    std::fprintf(stderr, "bench_place: features of %zu photos\n", photos.size());
+    const std::vector<FeatureSet> photos = PhotoFeatures(nullptr);
     auto vocabulary = std::make_shared<const Vocabulary>(LoadBundledPlaceVocabulary());
     f->registry = std::move(MapRegistry::Open(&f->store, vocabulary)).value();
     f->one.push_back(std::move(f->registry->Create("one", {})).value());
@@ -378,6 +404,59 @@ BENCHMARK(BM_Relocalize_Group10x2600_vs_One26K)
     ->Unit(benchmark::kSecond)
     ->Iterations(1)
     ->UseRealTime();
+
+void BM_Rig_2Cameras_26K(benchmark::State& state) {
+  constexpr size_t kRigFrames = 13000, kQueries = 200;
+  double extraction_ms = 0;
+  const std::vector<FeatureSet> photos = PhotoFeatures(&extraction_ms);
+  const cv::Matx33d K(400, 0, 319.5, 0, 400, 239.5, 0, 0, 1);
+  const std::vector<RigCamera> rig = {
+      {"front", {640, 480}, K, {}, cv::Matx33d::eye(), {0, 0, 0.4}},
+      {"rear", {640, 480}, K, {}, cv::Matx33d(-1, 0, 0, 0, 1, 0, 0, 0, -1), {0, 0, -0.4}}};
+  auto vocabulary = std::make_shared<const Vocabulary>(LoadBundledPlaceVocabulary());
+  std::mt19937_64 rng(13);
+  std::map<std::string, std::vector<double>> times;
+  std::map<std::string, int> statuses;
+  for (auto _ : state) {
+    MemoryIndexStore store;
+    auto db = std::move(Database::Create(&store, "rig", vocabulary)).value();
+    auto detector = std::move(RigLoopDetector::Create(db.get(), rig, {})).value();
+    // One rig frame a second; the way out's front and rear cameras see photos 2f and 2f + 1.
+    std::vector<RigFrame> out(kRigFrames);
+    for (size_t f = 0; f < kRigFrames; ++f) {
+      out[f].cameras = {FeatureSubset(photos[(2 * f) % photos.size()], rng),
+                        FeatureSubset(photos[(2 * f + 1) % photos.size()], rng)};
+      out[f].timestamp = double(f);
+      if (!detector.Add(out[f]).ok()) std::exit(2);
+      if ((f + 1) % 1000 == 0) {
+        std::fprintf(stderr, "bench_place: rig map %zu / %zu frames\n", f + 1, kRigFrames);
+      }
+    }
+    for (size_t q = 0; q < kQueries; ++q) {
+      const RigFrame& seen = out[rng() % kRigFrames];
+      RigFrame back;  // driving the other way: front sees the rear's view, rear the front's
+      back.cameras = {Jittered(seen.cameras[1], 0.5, rng), Jittered(seen.cameras[0], 0.5, rng)};
+      back.timestamp = double(kRigFrames + 60 + q);
+      auto r = detector.Process(back);
+      if (!r.ok()) std::exit(2);
+      const RigLoopTimings& t = r->timings;
+      times["conversion"].push_back(t.conversion);
+      times["query"].push_back(t.query);
+      times["verification"].push_back(t.verification);
+      times["insertion"].push_back(t.insertion);
+      times["detector"].push_back(t.conversion + t.query + t.verification + t.insertion);
+      ++statuses[std::string(RigLoopStatusName(r->status))];
+    }
+    state.counters["map_camera_images"] = double(2 * kRigFrames);
+  }
+  for (const auto& [stage, values] : times) {
+    state.counters["median_ms_" + stage] = cli::Median(values);
+  }
+  state.counters["median_ms_features_one_image"] = extraction_ms;
+  state.counters["rig_frames_measured"] = double(times["detector"].size());
+  for (const auto& [status, count] : statuses) state.counters["status_" + status] = count;
+}
+BENCHMARK(BM_Rig_2Cameras_26K)->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
 
 }  // namespace
 }  // namespace recog::bench

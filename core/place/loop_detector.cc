@@ -482,11 +482,7 @@ StatusOr<LoopResult> LoopDetector::Recognise(const FeatureSet& features,
                                              const FrameGeometry* geometry) const {
   RECOG_RETURN_IF_ERROR(CheckGeometry(features, geometry));
   LoopResult result;
-  result.timings.conversion = frame.conversion_ms;
-  if (!HasEnoughFeatures(features)) {
-    result.status = LoopStatus::kTooFewFeatures;
-    return result;
-  }
+  if (!StartAlone(features, frame, &result)) return result;
   result.timings.query = shortlist.query_ms;
 
   const auto start = Clock::now();
@@ -504,15 +500,19 @@ StatusOr<LoopResult> LoopDetector::VerifyEntry(const FeatureSet& features,
                                                const FrameGeometry* geometry) const {
   RECOG_RETURN_IF_ERROR(CheckGeometry(features, geometry));
   LoopResult result;
-  result.timings.conversion = frame.conversion_ms;
-  if (!HasEnoughFeatures(features)) {
-    result.status = LoopStatus::kTooFewFeatures;
-    return result;
-  }
+  if (!StartAlone(features, frame, &result)) return result;
   result.status = LoopStatus::kLoopDetected;
   result.match = entry;
   RECOG_RETURN_IF_ERROR(VerifyAlone(features, frame, geometry, &result));
   return result;
+}
+
+bool LoopDetector::StartAlone(const FeatureSet& features, const ConvertedFrame& frame,
+                              LoopResult* result) const {
+  result->timings.conversion = frame.conversion_ms;
+  if (HasEnoughFeatures(features)) return true;
+  result->status = LoopStatus::kTooFewFeatures;
+  return false;
 }
 
 Status LoopDetector::VerifyAlone(const FeatureSet& features, const ConvertedFrame& frame,

@@ -393,6 +393,10 @@ class LoopDetector {
   // *strong to whether a verified match is strong evidence (inliers, spread, R_H).
   Status Verify(const FeatureSet& features, const FeatureVector& direct,
                 const EpipolarOptions& epipolar, LoopResult* result, bool* strong = nullptr) const;
+  // The start of a one-frame result (Recognise, VerifyEntry): its conversion time; false, with
+  // kTooFewFeatures, when the frame has too few features to be looked up.
+  bool StartAlone(const FeatureSet& features, const ConvertedFrame& frame,
+                  LoopResult* result) const;
   // Verify with the relocalisation floor of inliers (one frame's evidence), then VerifyMetric
   // with `geometry` (may be null); acceptance kRelocalisation when the loop holds.
   Status VerifyAlone(const FeatureSet& features, const ConvertedFrame& frame,

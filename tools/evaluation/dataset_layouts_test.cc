@@ -1,54 +1,23 @@
 #include "tools/evaluation/dataset_layouts.h"
 
-#include <unistd.h>
-
 #include <filesystem>
-#include <fstream>
 
 #include <gtest/gtest.h>
-#include <opencv2/imgcodecs.hpp>
 
 #include "tools/evaluation/place_evaluation.h"
+#include "tools/evaluation/test_folder.h"
 
 namespace recog::cli {
 namespace {
 
 namespace fs = std::filesystem;
 
-// A fresh folder under the temp directory, removed at the end of the test, with helpers that write
-// 16x16 PNGs and text files in it.
-class Fixture {
+class Fixture : public testing::TestFolder {
  public:
-  explicit Fixture(const std::string& name)
-      : root_(fs::temp_directory_path() /
-              ("recog_layouts_" + name + "_" + std::to_string(::getpid()))) {
-    fs::remove_all(root_);
-    fs::create_directories(root_);
-  }
-  ~Fixture() { fs::remove_all(root_); }
-  std::string path() const { return root_.string(); }
-  std::string operator/(const std::string& child) const { return (root_ / child).string(); }
-
-  void Png(const std::string& name, int value) const {
-    fs::create_directories((root_ / name).parent_path());
-    ASSERT_TRUE(cv::imwrite(*this / name, cv::Mat(16, 16, CV_8UC1, cv::Scalar(value))));
-  }
-  void Text(const std::string& name, const std::string& text) const {
-    fs::create_directories((root_ / name).parent_path());
-    std::ofstream(*this / name) << text;
-  }
-
- private:
-  fs::path root_;
+  explicit Fixture(const std::string& name) : TestFolder("layouts_" + name) {}
 };
 
-void ExpectError(const StatusOr<std::vector<DatasetFrame>>& frames, StatusCode code,
-                 const std::string& needle) {
-  ASSERT_FALSE(frames.ok());
-  EXPECT_EQ(frames.status().code(), code) << frames.status().ToString();
-  EXPECT_NE(frames.status().message().find(needle), std::string::npos)
-      << frames.status().ToString();
-}
+using testing::ExpectError;
 
 // TUM RGB-D: three colour images; depth images 0.01 s after the first, none within 0.02 s of the
 // second (0.026 s before, 0.03 s after), and 0.002 s before, exactly on and 0.015 s after the

@@ -2,55 +2,25 @@
 // frames, and faulty ones refused with the code and the name of what is wrong.
 #include "tools/evaluation/rig_dataset.h"
 
-#include <unistd.h>
-
 #include <filesystem>
-#include <fstream>
 
 #include <gtest/gtest.h>
-#include <opencv2/imgcodecs.hpp>
 
 #include "tools/evaluation/rig_file.h"
+#include "tools/evaluation/test_folder.h"
 
 namespace recog::cli {
 namespace {
 
 namespace fs = std::filesystem;
 
-// A fresh folder under the test's temp directory, removed at the end of the test, with helpers
-// that write 64x48 grey PNGs and text files in it.
-class Folder {
+using testing::ExpectError;
+
+// Fixtures of 64x48 images, the size of the rig's cameras.
+class Folder : public testing::TestFolder {
  public:
-  explicit Folder(const std::string& name)
-      : root_(fs::path(::testing::TempDir()) /
-              ("recog_rig_dataset_" + name + "_" + std::to_string(::getpid()))) {
-    fs::remove_all(root_);
-    fs::create_directories(root_);
-  }
-  ~Folder() { fs::remove_all(root_); }
-  std::string path() const { return root_.string(); }
-  std::string operator/(const std::string& child) const { return (root_ / child).string(); }
-
-  void Png(const std::string& name) const {
-    fs::create_directories((root_ / name).parent_path());
-    ASSERT_TRUE(cv::imwrite(*this / name, cv::Mat(48, 64, CV_8UC1, cv::Scalar(128))));
-  }
-  void Text(const std::string& name, const std::string& text) const {
-    fs::create_directories((root_ / name).parent_path());
-    std::ofstream(*this / name) << text;
-  }
-
- private:
-  fs::path root_;
+  explicit Folder(const std::string& name) : TestFolder("rig_dataset_" + name, {64, 48}) {}
 };
-
-template <typename T>
-void ExpectError(const StatusOr<T>& result, StatusCode code, const std::string& needle) {
-  ASSERT_FALSE(result.ok());
-  EXPECT_EQ(result.status().code(), code) << result.status().ToString();
-  EXPECT_NE(result.status().message().find(needle), std::string::npos)
-      << "no '" << needle << "' in: " << result.status().ToString();
-}
 
 // A front camera at the body origin and a rear one 0.4 m behind it, turned round.
 std::vector<RigCamera> FrontAndRear() {
