@@ -150,6 +150,12 @@ expect_error "eval place --rig with an image of the wrong size" \
   place --rig "$tmp/rig_bad" -q
 expect_error "eval place --rig with a missing rig" "NOT_FOUND" "$recog" eval place \
   --rig "$tmp/no_such_rig" -q
+printf '0.0 1 2 3 0 0 0 1\n0.5 not a pose\n' >"$tmp/bad_poses.txt"
+expect_error "eval place --rig with a malformed trajectory" "bad_poses.txt' line 2: expected" \
+  "$recog" eval place --rig "$tmp/rig" --body-poses "$tmp/bad_poses.txt" -q
+head -n 3 "$tmp/rig/body_poses.txt" >"$tmp/short_poses.txt"
+expect_error "eval place --rig with too few body poses" "body poses cover 2 frames but the rig sequence has 4" \
+  "$recog" eval place --rig "$tmp/rig" --body-poses "$tmp/short_poses.txt" -q
 
 # seqgen objects: a tiny poster sequence, a model of its face and eval sequence --truth.
 mkdir -p "$tmp/object_photos" "$tmp/background_photos"
