@@ -401,6 +401,11 @@ bool Database::Contains(EntryId id) const {
   return id < present_.size() && present_[id] != 0;
 }
 
+Status Database::ScanEntries(uint32_t parts,
+                             const std::function<Status(EntryRecord&)>& visit) const {
+  return store_->ScanEntries(info_.id, parts, visit);
+}
+
 Status Database::Remove(EntryId id) {
   std::lock_guard write_lock(write_mutex_);
   if (!Contains(id)) {

@@ -21,6 +21,7 @@
 #pragma once
 
 #include <atomic>
+#include <functional>
 #include <memory>
 #include <mutex>
 #include <shared_mutex>
@@ -106,6 +107,9 @@ class Database {
   // Reads parts of an entry from the store. NOT_FOUND for an unknown or removed entry.
   StatusOr<EntryRecord> Get(EntryId id, uint32_t parts = kEntryAllParts) const;
   bool Contains(EntryId id) const;
+  // Calls `visit` with the requested parts of every stored entry, in increasing id order (read
+  // from the store: linear in the map's size); stops at the first error `visit` returns.
+  Status ScanEntries(uint32_t parts, const std::function<Status(EntryRecord&)>& visit) const;
   // Removes an entry from the store and the index. NOT_FOUND when absent.
   Status Remove(EntryId id);
   // Removes every entry (ids keep increasing afterwards).

@@ -430,20 +430,11 @@ StatusOr<EntryId> LoopDetector::Add(const FeatureSet& features, std::optional<do
                                     std::string_view client_id, const FrameGeometry* geometry) {
   RECOG_RETURN_IF_ERROR(CheckClientId(client_id));
   RECOG_RETURN_IF_ERROR(CheckGeometry(features, geometry));
-  ConvertedFrame frame;
-  RECOG_RETURN_IF_ERROR(Convert(features, &frame.bow, &frame.direct));
-  return AddConverted(features, frame, timestamp, client_id, geometry);
-}
-
-StatusOr<EntryId> LoopDetector::AddConverted(const FeatureSet& features,
-                                             const ConvertedFrame& frame,
-                                             std::optional<double> timestamp,
-                                             std::string_view client_id,
-                                             const FrameGeometry* geometry) {
-  RECOG_RETURN_IF_ERROR(CheckClientId(client_id));
-  RECOG_RETURN_IF_ERROR(CheckGeometry(features, geometry));
   ++frames_seen_;
-  return Insert(features, frame.bow, frame.direct, timestamp, client_id, geometry);
+  BowVector bow;
+  FeatureVector direct;
+  RECOG_RETURN_IF_ERROR(Convert(features, &bow, &direct));
+  return Insert(features, bow, direct, timestamp, client_id, geometry);
 }
 
 StatusOr<LoopResult> LoopDetector::Query(const FeatureSet& features,
@@ -464,13 +455,14 @@ Status LoopDetector::ConvertForQuery(const FeatureSet& features, ConvertedFrame*
   return Status::Ok();
 }
 
-StatusOr<LoopDetector::Shortlist> LoopDetector::ShortlistFor(
-    const ConvertedFrame& frame, std::span<const EntryId> excluded) const {
+StatusOr<LoopDetector::Shortlist> LoopDetector::ShortlistFor(const ConvertedFrame& frame,
+                                                             std::span<const EntryId> excluded,
+                                                             EntryId bound) const {
   Shortlist shortlist;
   const auto start = Clock::now();
   // The whole map, without tau_c: entry_ids_/entry_timestamps_ belong to Process and Add.
   // (Not query_results_: Process may be using it.)
-  RECOG_RETURN_IF_ERROR(QueryDatabase(frame.bow, kInvalidEntryId, excluded, &shortlist.results));
+  RECOG_RETURN_IF_ERROR(QueryDatabase(frame.bow, bound, excluded, &shortlist.results));
   shortlist.best_score = BestScore(shortlist.results);
   shortlist.query_ms = MsSince(start);
   return shortlist;

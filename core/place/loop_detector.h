@@ -334,16 +334,11 @@ class LoopDetector {
   };
   Status ConvertForQuery(const FeatureSet& features, ConvertedFrame* frame) const;
   StatusOr<Shortlist> ShortlistFor(const ConvertedFrame& frame,
-                                   std::span<const EntryId> excluded = {}) const;
+                                   std::span<const EntryId> excluded = {},
+                                   EntryId bound = kInvalidEntryId) const;
   StatusOr<LoopResult> Recognise(const FeatureSet& features, const ConvertedFrame& frame,
                                  const Shortlist& shortlist, double reference_score,
                                  const FrameGeometry* geometry = nullptr) const;
-
-  // Add for a frame ConvertForQuery already converted (a rig frame is queried, then added).
-  StatusOr<EntryId> AddConverted(const FeatureSet& features, const ConvertedFrame& frame,
-                                 std::optional<double> timestamp = std::nullopt,
-                                 std::string_view client_id = {},
-                                 const FrameGeometry* geometry = nullptr);
 
   // Step 6 alone, as Recognise runs it, against a given entry of the map (a multi-camera rig
   // picks its candidates across cameras, core/place/rig_loop_detector.h): the relocalisation

@@ -15,7 +15,49 @@ std::string SettingsKey(const std::string& name) { return kSettingsPrefix + name
 
 }  // namespace
 
-std::string EncodePlaceSettings(const LoopDetectorParams& p, const std::string& group) {
+// One "rig_camera" line of the settings (EncodePlaceSettings).
+std::string EncodeRigCamera(const RigCamera& camera) {
+  std::string line = "rig_camera ";
+  line += camera.name;
+  char number[32];
+  std::snprintf(number, sizeof(number), " %d %d", camera.size.width, camera.size.height);
+  line += number;
+  const auto add = [&](double value) {
+    std::snprintf(number, sizeof(number), " %.17g", value);
+    line += number;
+  };
+  for (const double v : {camera.K(0, 0), camera.K(1, 1), camera.K(0, 2), camera.K(1, 2)}) add(v);
+  for (const double v : camera.body_R_camera.val) add(v);
+  for (const double v : camera.body_t_camera.val) add(v);
+  std::snprintf(number, sizeof(number), " %zu", camera.distortion.size());
+  line += number;
+  for (const double v : camera.distortion) add(v);
+  line += '\n';
+  return line;
+}
+
+// The rest of a "rig_camera" line whose name `in` has read.
+StatusOr<RigCamera> DecodeRigCamera(const std::string& name, std::istream& in) {
+  RigCamera camera;
+  camera.name = name;
+  double fx = 0, fy = 0, cx = 0, cy = 0;
+  size_t distortion = 0;
+  in >> camera.size.width >> camera.size.height >> fx >> fy >> cx >> cy;
+  for (double& v : camera.body_R_camera.val) in >> v;
+  for (double& v : camera.body_t_camera.val) in >> v;
+  in >> distortion;
+  if (!in || distortion > 14) {
+    return Status::DataLoss("place settings: a malformed rig camera '" + name + "'");
+  }
+  camera.distortion.resize(distortion);
+  for (double& v : camera.distortion) in >> v;
+  if (!in) return Status::DataLoss("place settings: a malformed rig camera '" + name + "'");
+  camera.K = cv::Matx33d(fx, 0, cx, 0, fy, cy, 0, 0, 1);
+  return camera;
+}
+
+std::string EncodePlaceSettings(const LoopDetectorParams& p, const std::string& group,
+                                const std::vector<RigCamera>& rig) {
   char buffer[512];
   std::snprintf(buffer, sizeof(buffer),
                 "version 1\npreset %s\nalpha %.17g\ntemporal_matches %u\nmin_inliers "
@@ -23,10 +65,14 @@ std::string EncodePlaceSettings(const LoopDetectorParams& p, const std::string& 
                 std::string(DetectorPresetName(p.preset)).c_str(), p.alpha, p.temporal_matches,
                 p.epipolar.min_inliers, p.recent_seconds, p.recent_frames,
                 std::string(GeometryCheckName(p.geometry)).c_str());
-  return group.empty() ? std::string(buffer) : buffer + ("group " + group + "\n");
+  std::string text = buffer;
+  if (!group.empty()) text += "group " + group + "\n";
+  for (const RigCamera& camera : rig) text += EncodeRigCamera(camera);
+  return text;
 }
 
-StatusOr<LoopDetectorParams> DecodePlaceSettings(std::string_view text, std::string* group) {
+StatusOr<LoopDetectorParams> DecodePlaceSettings(std::string_view text, std::string* group,
+                                                 std::vector<RigCamera>* rig) {
   // The preset line comes first: the other keys apply over its values. Settings written before
   // presets were stored have none and start from the default.
   LoopDetectorParams p;
@@ -34,6 +80,7 @@ StatusOr<LoopDetectorParams> DecodePlaceSettings(std::string_view text, std::str
   std::string key, value;
   bool versioned = false;
   if (group != nullptr) group->clear();
+  std::vector<RigCamera> cameras;
   while (in >> key >> value) {
     char* end = nullptr;
     const double number = std::strtod(value.c_str(), &end);
@@ -52,6 +99,9 @@ StatusOr<LoopDetectorParams> DecodePlaceSettings(std::string_view text, std::str
         return Status::DataLoss("place settings: a malformed group name");
       }
       if (group != nullptr) *group = value;
+    } else if (key == "rig_camera") {
+      RECOG_ASSIGN_OR_RETURN(RigCamera camera, DecodeRigCamera(value, in));
+      cameras.push_back(std::move(camera));
     } else if (key == "geometry") {
       StatusOr<GeometryCheck> geometry = ParseGeometryCheck(value);
       if (!geometry.ok()) {
@@ -75,6 +125,11 @@ StatusOr<LoopDetectorParams> DecodePlaceSettings(std::string_view text, std::str
   if (!versioned) return Status::DataLoss("place settings without a version line");
   const Status valid = p.Validate();
   if (!valid.ok()) return valid.WithContext("place settings", StatusCode::kDataLoss);
+  if (!cameras.empty()) {
+    const Status rig_valid = ValidateRig(cameras);
+    if (!rig_valid.ok()) return rig_valid.WithContext("place settings", StatusCode::kDataLoss);
+  }
+  if (rig != nullptr) *rig = std::move(cameras);
   return p;
 }
 
@@ -88,10 +143,11 @@ StatusOr<std::unique_ptr<MapRegistry>> MapRegistry::Open(
     const std::string name = key.substr(sizeof(kSettingsPrefix) - 1);
     RECOG_ASSIGN_OR_RETURN(std::string text, store->GetBlob(key));
     std::string group;
-    StatusOr<LoopDetectorParams> params = DecodePlaceSettings(text, &group);
+    std::vector<RigCamera> rig;
+    StatusOr<LoopDetectorParams> params = DecodePlaceSettings(text, &group, &rig);
     if (!params.ok()) return params.status().WithContext("map '" + name + "'");
     StatusOr<std::shared_ptr<PlaceMap>> map =
-        PlaceMap::Open(store, name, params.value(), registry->vocabulary_);
+        PlaceMap::Open(store, name, params.value(), registry->vocabulary_, std::move(rig));
     if (map.ok()) map.value()->group_ = group;
     if (map.status().code() == StatusCode::kNotFound) {
       // Settings left behind by a deletion that was interrupted: finish it.
@@ -108,9 +164,11 @@ StatusOr<std::unique_ptr<MapRegistry>> MapRegistry::Open(
 
 StatusOr<std::shared_ptr<PlaceMap>> MapRegistry::Create(const std::string& name,
                                                         const LoopDetectorParams& params,
-                                                        const std::string& group) {
+                                                        const std::string& group,
+                                                        const std::vector<RigCamera>& rig) {
   RECOG_RETURN_IF_ERROR(params.Validate());
   if (!group.empty()) RECOG_RETURN_IF_ERROR(ValidateName("group", group));
+  if (!rig.empty()) RECOG_RETURN_IF_ERROR(ValidateRig(rig));
   std::lock_guard write(write_mutex_);
   {
     std::shared_lock read(maps_mutex_);
@@ -120,7 +178,8 @@ StatusOr<std::shared_ptr<PlaceMap>> MapRegistry::Create(const std::string& name,
   }
   // Settings first, then the map: a crash in between leaves settings without a map, which Open
   // drops (the other order would leave a map that Open does not list but whose name is taken).
-  RECOG_RETURN_IF_ERROR(store_->PutBlob(SettingsKey(name), EncodePlaceSettings(params, group)));
+  RECOG_RETURN_IF_ERROR(
+      store_->PutBlob(SettingsKey(name), EncodePlaceSettings(params, group, rig)));
   StatusOr<std::unique_ptr<Database>> created = Database::Create(store_, name, vocabulary_);
   if (!created.ok()) {
     if (created.status().code() != StatusCode::kAlreadyExists) {
@@ -129,7 +188,7 @@ StatusOr<std::shared_ptr<PlaceMap>> MapRegistry::Create(const std::string& name,
     return created.status();
   }
   RECOG_ASSIGN_OR_RETURN(std::shared_ptr<PlaceMap> map,
-                         PlaceMap::Open(store_, name, params, vocabulary_));
+                         PlaceMap::Open(store_, name, params, vocabulary_, rig));
   map->group_ = group;
   std::unique_lock lock(maps_mutex_);
   maps_[name] = map;

@@ -2,12 +2,12 @@
 // detector).
 //
 // The registry opens every map of the store at start-up (rebuilding the in-memory inverted
-// indexes), creates and deletes maps, and persists each map's detector parameters and group beside
-// it in the store (a blob "place-settings/<name>"), so that a restarted server runs every map as
-// before. A map group (a fleet's maps, or one robot's sessions) is a name given at creation that
-// queries across maps search together (Group); all maps of a registry share its vocabulary.
-// Maps other than place maps (the object map) are not touched: the registry only opens maps that
-// have settings.
+// indexes), creates and deletes maps, and persists each map's detector parameters, group and rig
+// (for a rig map) beside it in the store (a blob "place-settings/<name>"), so that a restarted
+// server runs every map as before. A map group (a fleet's maps, or one robot's sessions) is a name
+// given at creation that queries across maps search together (Group); all maps of a registry share
+// its vocabulary. Maps other than place maps (the object map) are not touched: the registry only
+// opens maps that have settings.
 //
 // Thread safety: every method may be called from any thread. Deleting a map while it is in use is
 // safe: it waits for the frame being added to the map, and the map's holders then get NOT_FOUND
@@ -38,12 +38,13 @@ class MapRegistry {
       IndexStore* store, std::shared_ptr<const Vocabulary> vocabulary,
       const std::function<void(size_t, size_t)>& progress = {});
 
-  // Creates an empty map in `group` (empty: none). ALREADY_EXISTS when the name is taken (by any
-  // map of the store), INVALID_ARGUMENT for a bad name, group name (the map name rule) or
-  // parameters.
+  // Creates an empty map in `group` (empty: none), a rig map when `rig` has cameras.
+  // ALREADY_EXISTS when the name is taken (by any map of the store), INVALID_ARGUMENT for a bad
+  // name, group name (the map name rule), parameters or rig (ValidateRig, naming the camera).
   StatusOr<std::shared_ptr<PlaceMap>> Create(const std::string& name,
                                              const LoopDetectorParams& params,
-                                             const std::string& group = {});
+                                             const std::string& group = {},
+                                             const std::vector<RigCamera>& rig = {});
   // NOT_FOUND for an unknown map.
   StatusOr<std::shared_ptr<PlaceMap>> Get(const std::string& name) const;
   // The maps of `group`, by name. NOT_FOUND naming the group when no map is in it.
@@ -69,10 +70,14 @@ class MapRegistry {
 
 // The parameters a map's settings blob holds, as text ("key value" lines), and back: the preset
 // the map started from (DetectorPreset), then alpha, k, the RANSAC inliers, tau_c and the
-// geometry check, applied over that preset's values; and the map's group (no line for none, as
-// in settings written before groups).
-std::string EncodePlaceSettings(const LoopDetectorParams& params, const std::string& group = {});
+// geometry check, applied over that preset's values; the map's group (no line for none, as in
+// settings written before groups); and a rig map's cameras, one "rig_camera" line each (name,
+// width, height, fx, fy, cx, cy, body_R_camera row-major, body_t_camera, the number of
+// distortion coefficients, then them), in rig order.
+std::string EncodePlaceSettings(const LoopDetectorParams& params, const std::string& group = {},
+                                const std::vector<RigCamera>& rig = {});
 StatusOr<LoopDetectorParams> DecodePlaceSettings(std::string_view text,
-                                                 std::string* group = nullptr);
+                                                 std::string* group = nullptr,
+                                                 std::vector<RigCamera>* rig = nullptr);
 
 }  // namespace recog

@@ -135,6 +135,41 @@ TEST(MapRegistryTest, SettingsRoundTripThroughTheirText) {
   EXPECT_EQ(group, "fleet-7");
 }
 
+TEST(MapRegistryTest, ARigRoundTripsThroughTheSettingsTextExactly) {
+  RigCamera front;
+  front.name = "front";
+  front.size = {752, 480};
+  front.K = cv::Matx33d(458.654, 0, 367.215, 0, 457.296, 248.375, 0, 0, 1);
+  front.distortion = {-0.28340811, 0.07395907, 0.00019359, 1.76187114e-05};
+  front.body_t_camera = {0.1 / 3.0, 0, 0.4};
+  RigCamera rear = front;
+  rear.name = "rear";
+  rear.distortion.clear();
+  rear.body_R_camera = cv::Matx33d(-1, 0, 0, 0, 1, 0, 0, 0, -1);
+  const std::string text = EncodePlaceSettings({}, "fleet", {front, rear});
+  std::vector<RigCamera> rig;
+  std::string group;
+  ASSERT_TRUE(DecodePlaceSettings(text, &group, &rig).ok());
+  EXPECT_EQ(group, "fleet");
+  ASSERT_EQ(rig.size(), 2u);
+  EXPECT_EQ(rig[0].name, "front");
+  EXPECT_EQ(rig[0].size, front.size);
+  EXPECT_EQ(rig[0].K, front.K);
+  EXPECT_EQ(rig[0].distortion, front.distortion);
+  EXPECT_EQ(rig[0].body_t_camera, front.body_t_camera);
+  EXPECT_EQ(rig[1].body_R_camera, rear.body_R_camera);
+  EXPECT_TRUE(rig[1].distortion.empty());
+
+  // A line cut short, and a camera that is not a rigid transform, are damage.
+  const std::string cut = text.substr(0, text.rfind(' '));
+  EXPECT_EQ(DecodePlaceSettings(cut, nullptr, &rig).status().code(), StatusCode::kDataLoss);
+  std::string scaled = EncodePlaceSettings({}, "", {front});
+  scaled.replace(scaled.find(" 1 0 0 0 1 0 0 0 1 "), 19, " 2 0 0 0 1 0 0 0 1 ");
+  const Status bad = DecodePlaceSettings(scaled, nullptr, &rig).status();
+  EXPECT_EQ(bad.code(), StatusCode::kDataLoss);
+  EXPECT_NE(bad.message().find("'front'"), std::string::npos) << bad.ToString();
+}
+
 TEST(MapRegistryTest, AMapKeepsItsPresetAcrossAReopenWithItsOwnValuesOverIt) {
   MemoryIndexStore store;
   LoopDetectorParams keyframes = LoopDetectorParams::Keyframes();

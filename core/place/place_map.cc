@@ -16,19 +16,111 @@ Status PlaceResultOptions::Validate() const {
 
 StatusOr<std::shared_ptr<PlaceMap>> PlaceMap::Open(IndexStore* store, const std::string& name,
                                                    const LoopDetectorParams& params,
-                                                   std::shared_ptr<const Vocabulary> vocabulary) {
+                                                   std::shared_ptr<const Vocabulary> vocabulary,
+                                                   std::vector<RigCamera> rig) {
   RECOG_ASSIGN_OR_RETURN(std::unique_ptr<Database> database,
                          Database::Open(store, name, std::move(vocabulary)));
   StatusOr<LoopDetector> detector = LoopDetector::Create(database.get(), params);
   if (!detector.ok()) return detector.status();
-  return std::shared_ptr<PlaceMap>(
-      new PlaceMap(store, name, params, std::move(database), std::move(detector).value()));
+  std::optional<RigLoopDetector> rig_detector;
+  if (!rig.empty()) {
+    RigLoopParams rig_params;
+    rig_params.detector = params;
+    StatusOr<RigLoopDetector> created =
+        RigLoopDetector::Create(database.get(), std::move(rig), rig_params);
+    if (!created.ok()) return created.status();
+    rig_detector.emplace(std::move(created).value());
+  }
+  return std::shared_ptr<PlaceMap>(new PlaceMap(store, name, params, std::move(database),
+                                                std::move(detector).value(),
+                                                std::move(rig_detector)));
+}
+
+size_t PlaceMap::frames() const {
+  if (!has_rig()) return database_->size();
+  std::lock_guard lock(mutex_);
+  return rig_detector_->frames();
+}
+
+Status PlaceMap::RequireRig(bool rig) const {
+  if (rig && !has_rig()) {
+    return Status::InvalidArgument("map '" + name_ + "' has no rig: send one image per frame");
+  }
+  if (!rig && has_rig()) {
+    std::string cameras;
+    for (const RigCamera& camera : rig_) cameras += (cameras.empty() ? "" : ", ") + camera.name;
+    return Status::InvalidArgument("map '" + name_ + "' is a rig map: a frame needs one view per " +
+                                   "camera (" + cameras + ")");
+  }
+  return Status::Ok();
+}
+
+StatusOr<RigPlaceResult> PlaceMap::AddRig(const RigFrame& frame) {
+  RECOG_RETURN_IF_ERROR(RequireRig(true));
+  RigPlaceResult result;
+  std::lock_guard lock(mutex_);
+  if (deleted_) return Status::NotFound("map '" + name_ + "' was deleted");
+  RECOG_ASSIGN_OR_RETURN(result.loop.frame, rig_detector_->Add(frame));
+  return result;
+}
+
+StatusOr<RigPlaceResult> PlaceMap::DetectRig(const RigFrame& frame, bool correspondences,
+                                             std::span<const uint64_t> excluded) {
+  RECOG_RETURN_IF_ERROR(RequireRig(true));
+  RigPlaceResult result;
+  std::lock_guard lock(mutex_);
+  if (deleted_) return Status::NotFound("map '" + name_ + "' was deleted");
+  RECOG_ASSIGN_OR_RETURN(result.loop, rig_detector_->Process(frame, excluded));
+  RECOG_RETURN_IF_ERROR(AddRigExtras(frame, correspondences, &result));
+  return result;
+}
+
+StatusOr<RigPlaceResult> PlaceMap::QueryRig(const RigFrame& frame, bool correspondences,
+                                            std::span<const uint64_t> excluded) const {
+  RECOG_RETURN_IF_ERROR(RequireRig(true));
+  RigPlaceResult result;
+  std::lock_guard lock(mutex_);
+  if (deleted_) return Status::NotFound("map '" + name_ + "' was deleted");
+  RECOG_ASSIGN_OR_RETURN(result.loop, rig_detector_->Query(frame, excluded));
+  RECOG_RETURN_IF_ERROR(AddRigExtras(frame, correspondences, &result));
+  return result;
+}
+
+Status PlaceMap::AddRigExtras(const RigFrame& frame, bool correspondences,
+                              RigPlaceResult* result) const {
+  const RigLoopResult& loop = result->loop;
+  if (!loop.match_frame.has_value()) return Status::Ok();
+  // Any stored camera image of the match carries its timestamp and client id.
+  const EntryId any_image =
+      loop.pairs.empty() ? EntryId(*loop.match_frame) : loop.pairs.front().entry;
+  StatusOr<EntryRecord> match = database_->Get(any_image, kEntryMetadata);
+  if (match.ok()) {
+    result->match_timestamp = match->metadata.timestamp;
+    result->match_client_id = std::move(match->metadata.client_id);
+  } else if (match.status().code() != StatusCode::kNotFound) {  // a partial frame: no extras
+    return match.status();
+  }
+  if (!correspondences || loop.status != RigLoopStatus::kLoopDetected) return Status::Ok();
+  for (const RigCameraMatch& pair : loop.pairs) {
+    RECOG_ASSIGN_OR_RETURN(const EntryRecord stored, database_->Get(pair.entry, kEntryFeatures));
+    const std::vector<cv::KeyPoint>& query = frame.cameras[pair.query_camera].keypoints;
+    std::vector<PlaceCorrespondence>& out = result->correspondences.emplace_back();
+    out.reserve(pair.verification.inliers.size());
+    for (const Match& m : pair.verification.inliers) {
+      if (m.a >= query.size() || m.b >= stored.keypoints.size()) {
+        return Status::Internal("an inlier of the rig loop refers to no keypoint");
+      }
+      out.push_back({m.a, query[m.a].pt, m.b, stored.keypoints[m.b].pt});
+    }
+  }
+  return Status::Ok();
 }
 
 StatusOr<PlaceFrameResult> PlaceMap::Add(const FeatureSet& features,
                                          std::optional<double> timestamp,
                                          std::string_view client_id,
                                          const FrameGeometry* geometry) {
+  RECOG_RETURN_IF_ERROR(RequireRig(false));
   PlaceFrameResult result;
   std::lock_guard lock(mutex_);
   if (deleted_) return Status::NotFound("map '" + name_ + "' was deleted");
@@ -40,6 +132,7 @@ StatusOr<PlaceFrameResult> PlaceMap::Add(const FeatureSet& features,
 StatusOr<PlaceFrameResult> PlaceMap::Detect(
     const FeatureSet& features, std::optional<double> timestamp, const PlaceResultOptions& options,
     std::string_view client_id, const FrameGeometry* geometry, std::span<const EntryId> excluded) {
+  RECOG_RETURN_IF_ERROR(RequireRig(false));
   RECOG_RETURN_IF_ERROR(options.Validate());
   PlaceFrameResult result;
   {
@@ -57,6 +150,7 @@ StatusOr<PlaceFrameResult> PlaceMap::Query(const FeatureSet& features,
                                            const PlaceResultOptions& options,
                                            const FrameGeometry* geometry,
                                            std::span<const EntryId> excluded) const {
+  RECOG_RETURN_IF_ERROR(RequireRig(false));
   RECOG_RETURN_IF_ERROR(options.Validate());
   PlaceFrameResult result;
   StatusOr<LoopResult> loop = detector_.Query(features, timestamp, geometry, excluded);
@@ -85,6 +179,7 @@ bool PlaceMap::ConvertsLike(const PlaceMap& other) const {
 
 StatusOr<LoopDetector::Shortlist> PlaceMap::Shortlist(
     const LoopDetector::ConvertedFrame& frame) const {
+  RECOG_RETURN_IF_ERROR(RequireRig(false));
   return detector_.ShortlistFor(frame);
 }
 
@@ -116,7 +211,7 @@ bool PlaceMap::deleted() const {
 
 StatusOr<size_t> PlaceMap::DeleteFrames() {
   std::lock_guard lock(mutex_);  // waits for the frame being added, then stops the others
-  const size_t frames = database_->size();
+  const size_t frames = has_rig() ? rig_detector_->frames() : database_->size();
   RECOG_RETURN_IF_ERROR(store_->DeleteMap(name_));
   deleted_ = true;
   return frames;
@@ -125,6 +220,7 @@ StatusOr<size_t> PlaceMap::DeleteFrames() {
 Status PlaceMap::RemoveFrame(EntryId id) {
   std::lock_guard lock(mutex_);  // not in the middle of the detector's step
   if (deleted_) return Status::NotFound("map '" + name_ + "' was deleted");
+  if (has_rig()) return rig_detector_->RemoveFrame(id);
   const Status removed = database_->Remove(id);
   if (removed.code() == StatusCode::kNotFound) {
     return Status::NotFound("map '" + name_ + "' has no frame " + std::to_string(id));
@@ -137,15 +233,22 @@ StatusOr<std::vector<EntryId>> PlaceMap::RemoveFramesByClientId(const std::strin
   std::lock_guard lock(mutex_);
   if (deleted_) return Status::NotFound("map '" + name_ + "' was deleted");
   std::vector<EntryId> ids;
-  RECOG_RETURN_IF_ERROR(
-      store_->ScanEntries(info().id, kEntryMetadata, [&](EntryRecord& entry) -> Status {
-        if (entry.metadata.client_id == client_id) ids.push_back(entry.id);
-        return Status::Ok();
-      }));
+  if (has_rig()) {
+    RECOG_ASSIGN_OR_RETURN(const std::vector<uint64_t> frames,
+                           rig_detector_->FramesWithClientId(client_id));
+    ids.assign(frames.begin(), frames.end());
+  } else {
+    RECOG_RETURN_IF_ERROR(database_->ScanEntries(kEntryMetadata, [&](EntryRecord& entry) -> Status {
+      if (entry.metadata.client_id == client_id) ids.push_back(entry.id);
+      return Status::Ok();
+    }));
+  }
   if (ids.empty()) {
     return Status::NotFound("map '" + name_ + "' has no frame with client id '" + client_id + "'");
   }
-  for (EntryId id : ids) RECOG_RETURN_IF_ERROR(database_->Remove(id));
+  for (EntryId id : ids) {
+    RECOG_RETURN_IF_ERROR(has_rig() ? rig_detector_->RemoveFrame(id) : database_->Remove(id));
+  }
   return ids;
 }
 

@@ -15,6 +15,13 @@
 // RemoveFrame removes frames (keyframe culling): a removed frame is never a candidate again, in
 // this process or after a restart. Ids are never reused.
 //
+// A map created with a rig (MapRegistry::Create) is a rig map: its frames are rig frames, one
+// image per camera, run by a RigLoopDetector (rig_loop_detector.h) through AddRig, DetectRig and
+// QueryRig, and the single-camera calls refuse it (INVALID_ARGUMENT), as the rig calls refuse a
+// map without a rig. Its frame ids are rig frame ids; RemoveFrame removes every camera image of a
+// rig frame. A rig map's queries take the map's lock (the rig detector's frame table changes with
+// every frame added), so they wait for the frame being added instead of running beside it.
+//
 // Maps are opened, created and deleted by MapRegistry (map_registry.h); holders of a map that the
 // registry deleted keep a valid object whose writes fail.
 //
@@ -42,6 +49,7 @@
 #include "core/index/database.h"
 #include "core/index/index_store.h"
 #include "core/place/loop_detector.h"
+#include "core/place/rig_loop_detector.h"
 
 namespace recog {
 
@@ -103,13 +111,26 @@ struct PlaceFrameResult {
   std::optional<RelativePose> relative_pose;         // asked for, verified, K given and recoverable
 };
 
+// What a rig frame did to a rig map: the rig detector's result (AddRig fills only loop.frame),
+// with the match's timestamp and client id when it is still stored, and on request the inlier
+// correspondences of each camera pair.
+struct RigPlaceResult {
+  RigLoopResult loop;
+  std::optional<double> match_timestamp;
+  std::string match_client_id;
+  // Asked for: one list per pair of loop.pairs, in its order (query keypoints as given).
+  std::vector<std::vector<PlaceCorrespondence>> correspondences;
+};
+
 class PlaceMap {
  public:
-  // Opens the map `name` of `store` (its database must exist) with its detector parameters.
-  // NOT_FOUND when the store has no such map, INVALID_ARGUMENT for bad parameters.
+  // Opens the map `name` of `store` (its database must exist) with its detector parameters, as a
+  // rig map when `rig` has cameras. NOT_FOUND when the store has no such map, INVALID_ARGUMENT for
+  // bad parameters or a bad rig, DATA_LOSS for a rig map whose frames are not rig frames.
   static StatusOr<std::shared_ptr<PlaceMap>> Open(IndexStore* store, const std::string& name,
                                                   const LoopDetectorParams& params,
-                                                  std::shared_ptr<const Vocabulary> vocabulary);
+                                                  std::shared_ptr<const Vocabulary> vocabulary,
+                                                  std::vector<RigCamera> rig = {});
 
   // Adds the frame (timestamp in seconds, none when unknown) without querying. `client_id` (at most
   // kMaxClientIdBytes) is stored with the frame and returned whenever it is a match. `geometry`
@@ -146,6 +167,16 @@ class PlaceMap {
                                        const PlaceResultOptions& options = {},
                                        const FrameGeometry* geometry = nullptr) const;
 
+  // Rig maps: RigLoopDetector::Add, Process and Query under the map's lock, with the match's
+  // timestamp and client id and, with `correspondences`, each pair's inliers. `excluded` rig
+  // frames are never candidates. INVALID_ARGUMENT for a map without a rig, or a frame that does
+  // not fit the rig (naming the camera; nothing is added).
+  StatusOr<RigPlaceResult> AddRig(const RigFrame& frame);
+  StatusOr<RigPlaceResult> DetectRig(const RigFrame& frame, bool correspondences = false,
+                                     std::span<const uint64_t> excluded = {});
+  StatusOr<RigPlaceResult> QueryRig(const RigFrame& frame, bool correspondences = false,
+                                    std::span<const uint64_t> excluded = {}) const;
+
   // Removes frame `id` (keyframe culling). NOT_FOUND when the map has no such frame (never added,
   // or removed already) or was deleted.
   Status RemoveFrame(EntryId id);
@@ -160,20 +191,33 @@ class PlaceMap {
   const LoopDetectorParams& params() const { return params_; }
   const MapInfo& info() const { return database_->info(); }
   const Vocabulary& vocabulary() const { return database_->vocabulary(); }
-  size_t frames() const { return database_->size(); }
+  // Frames stored (rig frames for a rig map), and the id the next one will get.
+  size_t frames() const;
   EntryId next_frame_id() const { return database_->next_entry_id(); }
   bool deleted() const;
+  // The rig of a rig map; empty for a single-camera map.
+  const std::vector<RigCamera>& rig() const { return rig_; }
+  bool has_rig() const { return !rig_.empty(); }
 
  private:
   friend class MapRegistry;
 
   PlaceMap(IndexStore* store, std::string name, const LoopDetectorParams& params,
-           std::unique_ptr<Database> database, LoopDetector detector)
+           std::unique_ptr<Database> database, LoopDetector detector,
+           std::optional<RigLoopDetector> rig_detector)
       : store_(store),
         name_(std::move(name)),
         params_(params),
         database_(std::move(database)),
-        detector_(std::move(detector)) {}
+        detector_(std::move(detector)),
+        rig_detector_(std::move(rig_detector)) {
+    if (rig_detector_.has_value()) rig_ = rig_detector_->rig();
+  }
+
+  // INVALID_ARGUMENT unless the map is (`rig`) or is not a rig map.
+  Status RequireRig(bool rig) const;
+  // The rig extras of `result` (RigPlaceResult); requires the lock.
+  Status AddRigExtras(const RigFrame& frame, bool correspondences, RigPlaceResult* result) const;
 
   // Deletes the map's frames from the store and marks the map deleted, under the lock (for
   // MapRegistry::Delete). Returns how many frames it had.
@@ -187,8 +231,10 @@ class PlaceMap {
   std::string group_;  // set by MapRegistry before it publishes the map, then never changed
   const LoopDetectorParams params_;
   const std::unique_ptr<Database> database_;  // declared before the detector, which points to it
-  mutable std::mutex mutex_;                  // guards detector_'s Add/Process and deleted_
-  LoopDetector detector_;
+  mutable std::mutex mutex_;  // guards detector_'s Add/Process, rig_detector_ and deleted_
+  LoopDetector detector_;     // single-camera maps
+  std::optional<RigLoopDetector> rig_detector_;  // rig maps
+  std::vector<RigCamera> rig_;                   // rig maps: rig_detector_'s cameras
   bool deleted_ = false;
 };
 

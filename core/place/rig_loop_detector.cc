@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <unordered_map>
 
 #include <opencv2/calib3d.hpp>
@@ -71,6 +72,23 @@ RigPairRays PairRays(const RigCamera& query, const RigCamera& match,
   return rays;
 }
 
+// The tag of a rig frame's camera image (EntryMetadata::user_data), and back.
+std::string RigTag(uint64_t frame, uint32_t camera) {
+  return "rig-frame " + std::to_string(frame) + " camera " + std::to_string(camera);
+}
+bool ParseRigTag(const std::string& tag, uint64_t* frame, uint32_t* camera) {
+  unsigned long long f = 0;
+  unsigned c = 0;
+  int end = 0;
+  if (std::sscanf(tag.c_str(), "rig-frame %llu camera %u%n", &f, &c, &end) != 2 ||
+      size_t(end) != tag.size()) {
+    return false;
+  }
+  *frame = f;
+  *camera = c;
+  return true;
+}
+
 }  // namespace
 
 struct RigLoopDetector::Converted {
@@ -108,10 +126,37 @@ StatusOr<RigLoopDetector> RigLoopDetector::Create(Database* database, std::vecto
   RECOG_RETURN_IF_ERROR(ValidateRig(rig));
   RECOG_RETURN_IF_ERROR(params.Validate());
   RECOG_ASSIGN_OR_RETURN(LoopDetector detector, LoopDetector::Create(database, params.detector));
-  return RigLoopDetector(database, std::move(rig), params, std::move(detector));
+  RigLoopDetector rig_detector(database, std::move(rig), params, std::move(detector));
+  RECOG_RETURN_IF_ERROR(rig_detector.Rebuild());
+  return rig_detector;
+}
+
+Status RigLoopDetector::Rebuild() {
+  return database_->ScanEntries(kEntryMetadata, [&](EntryRecord& entry) -> Status {
+    uint64_t frame = 0;
+    uint32_t camera = 0;
+    const std::string where =
+        "map '" + database_->info().config.name + "' entry " + std::to_string(entry.id);
+    if (!ParseRigTag(entry.metadata.user_data, &frame, &camera)) {
+      return Status::DataLoss(where + " is not tagged with its rig frame and camera");
+    }
+    if (camera >= rig_.size() || frame > entry.id) {
+      return Status::DataLoss(where + " has a rig tag this rig cannot have (frame " +
+                              std::to_string(frame) + ", camera " + std::to_string(camera) + ")");
+    }
+    images_.push_back({entry.id, frame, camera});
+    if (frames_.empty() || frames_.back().id != frame) {
+      frames_.push_back({frame, entry.metadata.timestamp});
+    }
+    return Status::Ok();
+  });
 }
 
 Status RigLoopDetector::CheckFrame(const RigFrame& frame) const {
+  if (frame.client_id.size() > kMaxClientIdBytes) {
+    return Status::InvalidArgument("a client frame id is at most " +
+                                   std::to_string(kMaxClientIdBytes) + " bytes");
+  }
   if (frame.cameras.size() != rig_.size()) {
     std::string missing;
     if (frame.cameras.size() < rig_.size()) {
@@ -133,6 +178,17 @@ Status RigLoopDetector::CheckFrame(const RigFrame& frame) const {
                                      "': " + std::to_string(points) + " 3D points for " +
                                      std::to_string(frame.cameras[c].size()) + " keypoints");
     }
+    const cv::Size size = rig_[c].size;
+    for (const cv::KeyPoint& k : frame.cameras[c].keypoints) {
+      if (!(k.pt.x >= -0.5f && k.pt.y >= -0.5f && k.pt.x < float(size.width) - 0.5f &&
+            k.pt.y < float(size.height) - 0.5f)) {
+        char message[160];
+        std::snprintf(message, sizeof(message),
+                      "a keypoint at (%.1f, %.1f) is outside its %dx%d images", k.pt.x, k.pt.y,
+                      size.width, size.height);
+        return Status::InvalidArgument("rig camera '" + rig_[c].name + "': " + message);
+      }
+    }
   }
   return Status::Ok();
 }
@@ -149,31 +205,45 @@ Status RigLoopDetector::Convert(const RigFrame& frame, Converted* converted) con
   return Status::Ok();
 }
 
-uint64_t RigLoopDetector::RecentBound(std::optional<double> timestamp) const {
+EntryId RigLoopDetector::RecentBound(std::optional<double> timestamp) const {
   const LoopDetectorParams& p = params_.detector;
-  uint64_t bound = frames();
-  if (!timestamp.has_value()) return bound > p.recent_frames ? bound - p.recent_frames : 0;
-  const double limit = *timestamp - p.recent_seconds;
-  while (bound > 0 && frame_timestamps_[bound - 1].has_value() &&
-         *frame_timestamps_[bound - 1] > limit) {
-    --bound;
+  size_t first_recent = frames_.size();
+  if (!timestamp.has_value()) {
+    first_recent = first_recent > p.recent_frames ? first_recent - p.recent_frames : 0;
+  } else {
+    const double limit = *timestamp - p.recent_seconds;
+    while (first_recent > 0 && frames_[first_recent - 1].timestamp.has_value() &&
+           *frames_[first_recent - 1].timestamp > limit) {
+      --first_recent;
+    }
   }
-  return bound;
+  return first_recent == frames_.size() ? kInvalidEntryId : EntryId(frames_[first_recent].id);
 }
 
 std::optional<std::pair<uint64_t, uint32_t>> RigLoopDetector::FrameOf(EntryId entry) const {
-  const auto it = std::lower_bound(entry_ids_.begin(), entry_ids_.end(), entry);
-  if (it == entry_ids_.end() || *it != entry) return std::nullopt;
-  const size_t index = size_t(it - entry_ids_.begin());
-  return std::make_pair(uint64_t(index / rig_.size()), uint32_t(index % rig_.size()));
+  const auto it = std::lower_bound(images_.begin(), images_.end(), entry,
+                                   [](const StoredImage& i, EntryId e) { return i.entry < e; });
+  if (it == images_.end() || it->entry != entry) return std::nullopt;
+  return std::make_pair(it->frame, it->camera);
+}
+
+std::vector<EntryId> RigLoopDetector::EntriesOf(std::span<const uint64_t> frames) const {
+  std::vector<EntryId> entries;
+  for (const uint64_t id : frames) {
+    auto it = std::lower_bound(images_.begin(), images_.end(), id,
+                               [](const StoredImage& i, uint64_t f) { return i.frame < f; });
+    for (; it != images_.end() && it->frame == id; ++it) entries.push_back(it->entry);
+  }
+  std::sort(entries.begin(), entries.end());
+  return entries;
 }
 
 StatusOr<RigLoopResult> RigLoopDetector::Search(const RigFrame& frame, const Converted& converted,
-                                                uint64_t first_excluded_frame) const {
+                                                EntryId bound,
+                                                std::span<const uint64_t> excluded_frames) const {
   RigLoopResult result;
   const size_t n = rig_.size();
-  const std::span<const EntryId> excluded(entry_ids_.begin() + long(first_excluded_frame * n),
-                                          entry_ids_.end());
+  const std::vector<EntryId> excluded = EntriesOf(excluded_frames);
   // Steps 1-2: per camera shortlists, pooled by rig frame.
   struct CameraBest {
     double score = 0;
@@ -193,7 +263,7 @@ StatusOr<RigLoopResult> RigLoopDetector::Search(const RigFrame& frame, const Con
     if (frame.cameras[c].size() < params_.detector.min_features) continue;
     queried = true;
     RECOG_ASSIGN_OR_RETURN(const LoopDetector::Shortlist shortlist,
-                           detector_.ShortlistFor(converted.cameras[c], excluded));
+                           detector_.ShortlistFor(converted.cameras[c], excluded, bound));
     result.timings.query += shortlist.query_ms;
     for (const QueryResult& r : shortlist.results) {
       const auto where = FrameOf(r.id);
@@ -395,22 +465,30 @@ void RigLoopDetector::FuseMetricPairs(const std::vector<RigCameraMatch*>& posed,
 }
 
 StatusOr<uint64_t> RigLoopDetector::Insert(const RigFrame& frame, const Converted& converted) {
-  for (size_t c = 0; c < rig_.size(); ++c) {
-    RECOG_ASSIGN_OR_RETURN(const EntryId id,
-                           detector_.AddConverted(frame.cameras[c], converted.cameras[c],
-                                                  frame.timestamp, {}, &converted.geometry[c]));
-    entry_ids_.push_back(id);
+  const uint64_t id = database_->next_entry_id();
+  for (uint32_t c = 0; c < rig_.size(); ++c) {
+    EntryMetadata metadata;
+    metadata.timestamp = frame.timestamp;
+    metadata.client_id = frame.client_id;
+    metadata.user_data = RigTag(id, c);
+    const FrameGeometry& geometry = converted.geometry[c];
+    RECOG_ASSIGN_OR_RETURN(const EntryId entry,
+                           database_->AddConverted(
+                               converted.cameras[c].bow, converted.cameras[c].direct,
+                               frame.cameras[c], std::move(metadata), geometry.points, geometry.K));
+    if (frames_.empty() || frames_.back().id != id) frames_.push_back({id, frame.timestamp});
+    images_.push_back({entry, id, c});
   }
-  frame_timestamps_.push_back(frame.timestamp);
-  return frames() - 1;
+  return id;
 }
 
-StatusOr<RigLoopResult> RigLoopDetector::Process(const RigFrame& frame) {
+StatusOr<RigLoopResult> RigLoopDetector::Process(const RigFrame& frame,
+                                                 std::span<const uint64_t> excluded) {
   RECOG_RETURN_IF_ERROR(CheckFrame(frame));
   Converted converted;
   RECOG_RETURN_IF_ERROR(Convert(frame, &converted));
   RECOG_ASSIGN_OR_RETURN(RigLoopResult result,
-                         Search(frame, converted, RecentBound(frame.timestamp)));
+                         Search(frame, converted, RecentBound(frame.timestamp), excluded));
   const auto start = Clock::now();
   RECOG_ASSIGN_OR_RETURN(result.frame, Insert(frame, converted));
   result.timings.insertion = MsSince(start);
@@ -424,13 +502,43 @@ StatusOr<uint64_t> RigLoopDetector::Add(const RigFrame& frame) {
   return Insert(frame, converted);
 }
 
-StatusOr<RigLoopResult> RigLoopDetector::Query(const RigFrame& frame) const {
+StatusOr<RigLoopResult> RigLoopDetector::Query(const RigFrame& frame,
+                                               std::span<const uint64_t> excluded) const {
   RECOG_RETURN_IF_ERROR(CheckFrame(frame));
   Converted converted;
   RECOG_RETURN_IF_ERROR(Convert(frame, &converted));
-  RECOG_ASSIGN_OR_RETURN(RigLoopResult result, Search(frame, converted, frames()));
-  result.frame = frames();
-  return result;
+  return Search(frame, converted, kInvalidEntryId, excluded);
+}
+
+Status RigLoopDetector::RemoveFrame(uint64_t id) {
+  const auto frame = std::lower_bound(frames_.begin(), frames_.end(), id,
+                                      [](const StoredFrame& f, uint64_t i) { return f.id < i; });
+  if (frame == frames_.end() || frame->id != id) {
+    return Status::NotFound("map '" + database_->info().config.name + "' has no rig frame " +
+                            std::to_string(id));
+  }
+  const uint64_t ids[] = {id};
+  for (const EntryId entry : EntriesOf(ids)) {
+    RECOG_RETURN_IF_ERROR(database_->Remove(entry));
+    images_.erase(std::lower_bound(images_.begin(), images_.end(), entry,
+                                   [](const StoredImage& i, EntryId e) { return i.entry < e; }));
+  }
+  frames_.erase(frame);
+  return Status::Ok();
+}
+
+StatusOr<std::vector<uint64_t>> RigLoopDetector::FramesWithClientId(
+    std::string_view client_id) const {
+  std::vector<uint64_t> ids;
+  RECOG_RETURN_IF_ERROR(database_->ScanEntries(kEntryMetadata, [&](EntryRecord& entry) -> Status {
+    const auto where = FrameOf(entry.id);
+    if (entry.metadata.client_id == client_id && where.has_value() &&
+        (ids.empty() || ids.back() != where->first)) {
+      ids.push_back(where->first);
+    }
+    return Status::Ok();
+  }));
+  return ids;
 }
 
 }  // namespace recog

@@ -23,19 +23,28 @@
 //     the frame is refused (kInconsistentCameras): two cameras that saw a place from poses the rig
 //     cannot take at once were not both looking at it, and a rig whose extrinsics are wrong is
 //     caught here. A loop seen by one camera pair alone has that pair's verification only;
-//  5. the frame's camera images are added to the database.
+//  5. the frame's camera images are added to the database, each tagged with its rig frame and
+//     camera (EntryMetadata::user_data), so that the map rebuilds its frames when it is opened
+//     again.
+// A rig frame's id is the entry id of its first camera image: ids increase in insertion order and
+// are never reused, but are not consecutive (n cameras take n entry ids a frame).
 // The loop's body-frame pose: with metric pairs, their poses carried into the body frame and fused
 // by their covariances (the information-weighted mean); else the rotation of the pair with the
 // most epipolar inliers (one camera pair fixes the translation only up to scale). A loop whose
 // pairs all hold without fixing a motion (views a pure image shift apart) is a loop without a pose.
 //
 // Keypoints must be in the pinhole model of their camera's K (distortion removed,
-// UndistortKeypoints in core/geometry/camera_rig.h). Thread safety: as LoopDetector — Process and
-// Add from one thread at a time, Query from any number, concurrently.
+// UndistortKeypoints in core/geometry/camera_rig.h). Thread safety: Process, Add and RemoveFrame
+// change the frame table, so they run one at a time and not during a Query; Queries may run
+// concurrently with each other (PlaceMap serialises a rig map's calls accordingly). A rig frame is
+// committed one camera image at a time: a crash in the middle leaves a frame with fewer cameras,
+// which is searched like any other.
 #pragma once
 
 #include <cstdint>
 #include <optional>
+#include <span>
+#include <string>
 #include <string_view>
 #include <vector>
 
@@ -71,6 +80,7 @@ struct RigFrame {
   std::vector<std::vector<cv::Point3f>> points;  // empty, or one list per camera (each empty or
                                                  // one point per keypoint)
   std::optional<double> timestamp;               // seconds; none when unknown
+  std::string client_id;  // the client's own id, stored with every camera image (kMaxClientIdBytes)
 };
 
 enum class RigLoopStatus {
@@ -107,8 +117,8 @@ struct RigLoopTimings {  // milliseconds for one rig frame, all cameras
 
 struct RigLoopResult {
   RigLoopStatus status = RigLoopStatus::kNoCandidates;
-  uint64_t frame = 0;  // this rig frame's index in the map (Query: the map's frame count)
-  std::optional<uint64_t> match_frame;   // the loop's (or last refused candidate's) rig frame
+  std::optional<uint64_t> frame;         // the id this rig frame got (Process); none for Query
+  std::optional<uint64_t> match_frame;   // the loop's (or last refused candidate's) rig frame id
   double score = 0;                      // the match frame's pooled score
   std::vector<RigCameraMatch> pairs;     // the match frame's verified camera pairs
   double rotation_disagreement_deg = 0;  // largest angle between the posed pairs' body rotations
@@ -125,21 +135,34 @@ struct RigLoopResult {
 class RigLoopDetector {
  public:
   // `database` must outlive the detector and hold only this rig's frames (it is a map of its
-  // own). INVALID_ARGUMENT for a rig that does not validate, or bad parameters.
+  // own); the frames it already holds are read back from their tags (a map opened again).
+  // INVALID_ARGUMENT for a rig that does not validate, or bad parameters; DATA_LOSS for a stored
+  // entry without a rig tag or with a camera the rig does not have.
   static StatusOr<RigLoopDetector> Create(Database* database, std::vector<RigCamera> rig,
                                           const RigLoopParams& params);
 
-  // Steps 1-5 for the next rig frame. INVALID_ARGUMENT naming the camera for a frame without an
-  // image for every camera, keypoints outside a camera's image size, or a points list of the
-  // wrong length; nothing is added then. "No loop" is a result.
-  StatusOr<RigLoopResult> Process(const RigFrame& frame);
-  // Step 5 alone (a robot uploading its keyframes); returns the frame's index.
+  // Steps 1-5 for the next rig frame; the `excluded` rig frames (ids; unknown ones are ignored)
+  // are never candidates for it, beside tau_c's recent ones. INVALID_ARGUMENT naming the camera
+  // for a frame without an image for every camera, keypoints outside a camera's image size, or a
+  // points list of the wrong length, and for a client id that is too long; nothing is added then.
+  // "No loop" is a result.
+  StatusOr<RigLoopResult> Process(const RigFrame& frame, std::span<const uint64_t> excluded = {});
+  // Step 5 alone (a robot uploading its keyframes); returns the frame's id.
   StatusOr<uint64_t> Add(const RigFrame& frame);
-  // Steps 1-4 against every frame of the map (no tau_c), without adding the frame.
-  StatusOr<RigLoopResult> Query(const RigFrame& frame) const;
+  // Steps 1-4 against every frame of the map (no tau_c) but the `excluded` ones, without adding
+  // the frame.
+  StatusOr<RigLoopResult> Query(const RigFrame& frame,
+                                std::span<const uint64_t> excluded = {}) const;
+  // Removes rig frame `id` (every camera image of it): it is never a candidate again. NOT_FOUND
+  // when the map holds no such frame.
+  Status RemoveFrame(uint64_t id);
+  // The ids of the stored rig frames added with `client_id`, increasing (reads every entry's
+  // metadata: linear in the map's size).
+  StatusOr<std::vector<uint64_t>> FramesWithClientId(std::string_view client_id) const;
 
   const std::vector<RigCamera>& rig() const { return rig_; }
-  uint64_t frames() const { return frame_timestamps_.size(); }
+  uint64_t frames() const { return frames_.size(); }  // rig frames stored
+  EntryId next_frame_id() const { return database_->next_entry_id(); }
 
  private:
   struct Converted;  // a frame's camera images, converted
@@ -152,27 +175,42 @@ class RigLoopDetector {
         detector_(std::move(detector)) {}
   Status CheckFrame(const RigFrame& frame) const;
   Status Convert(const RigFrame& frame, Converted* converted) const;
-  // Steps 1-4 with the entries of frames from `first_excluded_frame` on left out.
-  StatusOr<RigLoopResult> Search(const RigFrame& frame, const Converted& converted,
-                                 uint64_t first_excluded_frame) const;
+  // Steps 1-4 with the entries of frames from id `bound` on, and of the `excluded` frames, left
+  // out.
+  StatusOr<RigLoopResult> Search(const RigFrame& frame, const Converted& converted, EntryId bound,
+                                 std::span<const uint64_t> excluded) const;
   // Step 4 for one candidate frame: the pairs' body motions and whether they agree.
   void CheckAcrossRig(const RigFrame& frame, RigLoopResult* result) const;
   // The metric pairs' body poses fused by their covariances into result's R, t and covariance.
   void FuseMetricPairs(const std::vector<RigCameraMatch*>& posed, const RigCameraMatch& reference,
                        RigLoopResult* result) const;
   StatusOr<uint64_t> Insert(const RigFrame& frame, const Converted& converted);
-  // The first rig frame too recent to be a candidate for a frame at `timestamp` (tau_c).
-  uint64_t RecentBound(std::optional<double> timestamp) const;
-  // The rig frame and camera of an entry this detector added (nullopt for others).
+  // Reads the stored frames back from their entries' tags (Create).
+  Status Rebuild();
+  // The id of the first rig frame too recent to be a candidate for a frame at `timestamp` (tau_c;
+  // kInvalidEntryId when none is).
+  EntryId RecentBound(std::optional<double> timestamp) const;
+  // The rig frame and camera of a stored entry (nullopt for others).
   std::optional<std::pair<uint64_t, uint32_t>> FrameOf(EntryId entry) const;
+  // The entries of the `frames` this detector stores, increasing.
+  std::vector<EntryId> EntriesOf(std::span<const uint64_t> frames) const;
+
+  struct StoredImage {
+    EntryId entry;
+    uint64_t frame;
+    uint32_t camera;
+  };
+  struct StoredFrame {
+    uint64_t id;
+    std::optional<double> timestamp;
+  };
 
   Database* database_;
   std::vector<RigCamera> rig_;
   RigLoopParams params_;
-  LoopDetector detector_;  // per camera image
-  // Frame f's camera c is entry_ids_[f * rig size + c] (increasing: the database's ids).
-  std::vector<EntryId> entry_ids_;
-  std::vector<std::optional<double>> frame_timestamps_;
+  LoopDetector detector_;            // per camera image
+  std::vector<StoredImage> images_;  // by increasing entry id
+  std::vector<StoredFrame> frames_;  // by increasing id
 };
 
 }  // namespace recog

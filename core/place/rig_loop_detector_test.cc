@@ -1,6 +1,7 @@
 // The rig detector on the place test frames: a front + rear rig whose rear camera, on the way
 // back, sees what its front camera saw on the way out (a loop no single camera closes), tau_c over
-// rig frames, Query leaving the map alone, and bad frames refused naming the camera. The
+// rig frames, Query leaving the map alone, frames that survive reopening and removal, and bad
+// frames refused naming the camera. The
 // geometry across cameras (real 3D motions, extrinsics 10° off) is tested on rendered rig drives
 // in tools/evaluation/rig_place_test.cc.
 #include "core/place/rig_loop_detector.h"
@@ -8,6 +9,7 @@
 #include <gtest/gtest.h>
 
 #include "core/index/memory_index_store.h"
+#include "core/place/map_registry.h"
 #include "core/place/place_test_frames.h"
 
 namespace recog {
@@ -94,7 +96,7 @@ TEST_F(RigLoopDetectorTest, TheRearCameraClosesTheLoopTheFrontCameraSaw) {
   for (size_t i = 0; i < frames.size(); ++i) {
     auto result = detector->Process(frames[i]);
     ASSERT_TRUE(result.ok()) << result.status().ToString();
-    EXPECT_EQ(result->frame, i);
+    EXPECT_EQ(result->frame, std::optional<uint64_t>(2 * i));  // the first camera image's id
     if (i < 6) {
       EXPECT_NE(result->status, RigLoopStatus::kLoopDetected) << i;
       continue;
@@ -103,7 +105,7 @@ TEST_F(RigLoopDetectorTest, TheRearCameraClosesTheLoopTheFrontCameraSaw) {
         << i << ": " << RigLoopStatusName(result->status);
     ++loops;
     ASSERT_TRUE(result->match_frame.has_value());
-    EXPECT_LT(*result->match_frame, 4u) << i;
+    EXPECT_LT(*result->match_frame, 8u) << i;  // rig frames 0-3 of the way out
     // Only the rear camera saw the place before, with the front camera.
     ASSERT_EQ(result->pairs.size(), 1u) << i;
     EXPECT_EQ(result->pairs[0].query_camera, 1u);
@@ -125,7 +127,7 @@ TEST_F(RigLoopDetectorTest, TheFrontCameraAloneFindsNoneOfThoseLoops) {
     front.cameras = {both.cameras[0]};
     auto result = detector->Process(front);
     ASSERT_TRUE(result.ok()) << result.status().ToString();
-    EXPECT_NE(result->status, RigLoopStatus::kLoopDetected) << result->frame;
+    EXPECT_NE(result->status, RigLoopStatus::kLoopDetected) << *result->frame;
   }
 }
 
@@ -160,7 +162,7 @@ TEST_F(RigLoopDetectorTest, QueryFindsThePlaceWithoutAddingTheFrame) {
   auto found = detector->Query(frames[7]);  // the way back's rear camera
   ASSERT_TRUE(found.ok()) << found.status().ToString();
   EXPECT_EQ(found->status, RigLoopStatus::kLoopDetected) << RigLoopStatusName(found->status);
-  EXPECT_EQ(found->frame, 4u);
+  EXPECT_FALSE(found->frame.has_value());
   EXPECT_EQ(detector->frames(), 4u);
   EXPECT_EQ(db->size(), 8u);
 }
@@ -191,8 +193,143 @@ TEST_F(RigLoopDetectorTest, BadFramesAreRefusedNamingTheCameraAndAddNothing) {
   EXPECT_NE(descriptors.status().message().find("'rear'"), std::string::npos)
       << descriptors.status().ToString();
 
+  RigFrame outside = frame;
+  outside.cameras[0].keypoints[0].pt.x = float(size_.width) + 3.0f;
+  auto keypoint = detector->Process(outside);
+  EXPECT_EQ(keypoint.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(keypoint.status().message().find("'front'"), std::string::npos)
+      << keypoint.status().ToString();
+
+  RigFrame long_id = frame;
+  long_id.client_id = std::string(kMaxClientIdBytes + 1, 'k');
+  EXPECT_EQ(detector->Add(long_id).status().code(), StatusCode::kInvalidArgument);
+
   EXPECT_EQ(detector->frames(), 0u);
   EXPECT_EQ(db->size(), 0u);
+}
+
+TEST_F(RigLoopDetectorTest, AReopenedMapKnowsItsRigFramesAndRemovedOnesStayGone) {
+  auto db = NewDatabase("reopened");
+  const std::vector<RigFrame> frames = OutAndBack();
+  {
+    auto detector = RigLoopDetector::Create(db.get(), FrontAndRear(size_), params_);
+    ASSERT_TRUE(detector.ok());
+    for (size_t i = 0; i < 4; ++i) {
+      RigFrame frame = frames[i];
+      frame.client_id = i == 1 ? "kf-1" : "kf";
+      ASSERT_TRUE(detector->Add(frame).ok());
+    }
+  }
+  auto reopened = RigLoopDetector::Create(db.get(), FrontAndRear(size_), params_);
+  ASSERT_TRUE(reopened.ok()) << reopened.status().ToString();
+  EXPECT_EQ(reopened->frames(), 4u);
+  EXPECT_EQ(reopened->next_frame_id(), 8u);
+  auto found = reopened->Query(frames[7]);
+  ASSERT_TRUE(found.ok());
+  ASSERT_EQ(found->status, RigLoopStatus::kLoopDetected) << RigLoopStatusName(found->status);
+  const uint64_t match = *found->match_frame;
+  EXPECT_EQ(match % 2, 0u);  // a rig frame's id, not its rear camera image's
+
+  auto with_id = reopened->FramesWithClientId("kf-1");
+  ASSERT_TRUE(with_id.ok());
+  EXPECT_EQ(with_id.value(), std::vector<uint64_t>{2});
+
+  // Excluded, then removed: the match is never a candidate again.
+  const uint64_t excluded[] = {match};
+  auto without = reopened->Query(frames[7], excluded);
+  ASSERT_TRUE(without.ok());
+  EXPECT_NE(without->match_frame, std::optional<uint64_t>(match));
+  ASSERT_TRUE(reopened->RemoveFrame(match).ok());
+  EXPECT_EQ(reopened->RemoveFrame(match).code(), StatusCode::kNotFound);
+  EXPECT_EQ(reopened->RemoveFrame(match + 1).code(), StatusCode::kNotFound);  // a camera image
+  EXPECT_EQ(reopened->frames(), 3u);
+  EXPECT_EQ(db->size(), 6u);
+  auto again = RigLoopDetector::Create(db.get(), FrontAndRear(size_), params_);
+  ASSERT_TRUE(again.ok());
+  EXPECT_EQ(again->frames(), 3u);
+  auto after = again->Query(frames[7]);
+  ASSERT_TRUE(after.ok());
+  EXPECT_NE(after->match_frame, std::optional<uint64_t>(match));
+  auto added = again->Add(frames[8]);
+  ASSERT_TRUE(added.ok());
+  EXPECT_EQ(added.value(), 8u);  // ids are never reused
+}
+
+TEST_F(RigLoopDetectorTest, ARigPlaceMapKeepsItsRigAcrossAReopenAndRefusesSingleCameraFrames) {
+  const std::vector<RigFrame> frames = OutAndBack();
+  uint64_t match = 0;
+  {
+    auto registry = MapRegistry::Open(&store_, *vocabulary_);
+    ASSERT_TRUE(registry.ok());
+    std::vector<RigCamera> skewed = FrontAndRear(size_);
+    skewed[1].body_R_camera = cv::Matx33d(1, 0.1, 0, 0, 1, 0, 0, 0, 1);
+    const Status refused = (*registry)->Create("skewed", params_.detector, "", skewed).status();
+    EXPECT_EQ(refused.code(), StatusCode::kInvalidArgument);
+    EXPECT_NE(refused.message().find("'rear'"), std::string::npos) << refused.ToString();
+    EXPECT_EQ((*registry)->Get("skewed").status().code(), StatusCode::kNotFound);
+
+    auto map = (*registry)->Create("rig-map", params_.detector, "", FrontAndRear(size_));
+    ASSERT_TRUE(map.ok()) << map.status().ToString();
+    auto mono = (*registry)->Create("mono", params_.detector);
+    ASSERT_TRUE(mono.ok());
+    const Status single = (*map)->Add(frames[0].cameras[0], std::nullopt).status();
+    EXPECT_EQ(single.code(), StatusCode::kInvalidArgument);
+    EXPECT_NE(single.message().find("front, rear"), std::string::npos) << single.ToString();
+    EXPECT_EQ((*mono)->AddRig(frames[0]).status().code(), StatusCode::kInvalidArgument);
+
+    for (size_t i = 0; i < 4; ++i) {
+      RigFrame frame = frames[i];
+      frame.timestamp = double(i);
+      frame.client_id = "kf-" + std::to_string(i);
+      auto added = (*map)->AddRig(frame);
+      ASSERT_TRUE(added.ok()) << added.status().ToString();
+      EXPECT_EQ(added->loop.frame, std::optional<uint64_t>(2 * i));
+    }
+    EXPECT_EQ((*map)->frames(), 4u);
+    auto found = (*map)->QueryRig(frames[7], /*correspondences=*/true);
+    ASSERT_TRUE(found.ok()) << found.status().ToString();
+    ASSERT_EQ(found->loop.status, RigLoopStatus::kLoopDetected);
+    match = *found->loop.match_frame;
+    EXPECT_EQ(found->match_client_id, "kf-" + std::to_string(match / 2));
+    EXPECT_EQ(found->match_timestamp, std::optional<double>(double(match / 2)));
+    ASSERT_EQ(found->correspondences.size(), found->loop.pairs.size());
+    for (size_t p = 0; p < found->loop.pairs.size(); ++p) {
+      const RigCameraMatch& pair = found->loop.pairs[p];
+      ASSERT_EQ(found->correspondences[p].size(), pair.verification.inliers.size());
+      const PlaceCorrespondence& first = found->correspondences[p].front();
+      EXPECT_EQ(first.query_pixel,
+                frames[7].cameras[pair.query_camera].keypoints[first.query_index].pt);
+    }
+    auto plain = (*map)->QueryRig(frames[7]);
+    ASSERT_TRUE(plain.ok());
+    EXPECT_TRUE(plain->correspondences.empty()) << "only on request";
+  }
+  auto registry = MapRegistry::Open(&store_, *vocabulary_);
+  ASSERT_TRUE(registry.ok()) << registry.status().ToString();
+  auto map = (*registry)->Get("rig-map");
+  ASSERT_TRUE(map.ok());
+  ASSERT_EQ((*map)->rig().size(), 2u);
+  EXPECT_EQ((*map)->rig()[1].name, "rear");
+  EXPECT_EQ((*map)->rig()[1].body_R_camera, FrontAndRear(size_)[1].body_R_camera);
+  EXPECT_EQ((*map)->frames(), 4u);
+  auto again = (*map)->QueryRig(frames[7]);
+  ASSERT_TRUE(again.ok());
+  EXPECT_EQ(again->loop.match_frame, std::optional<uint64_t>(match));
+  auto removed = (*map)->RemoveFramesByClientId("kf-" + std::to_string(match / 2));
+  ASSERT_TRUE(removed.ok()) << removed.status().ToString();
+  EXPECT_EQ(removed.value(), std::vector<EntryId>{EntryId(match)});
+  EXPECT_EQ((*map)->RemoveFrame(EntryId(match)).code(), StatusCode::kNotFound);
+  EXPECT_EQ((*map)->frames(), 3u);
+  EXPECT_EQ((*registry)->Delete("rig-map").value(), 3u);
+}
+
+TEST_F(RigLoopDetectorTest, AMapWithAnUntaggedEntryIsNotARigMap) {
+  auto db = NewDatabase("untagged");
+  ASSERT_TRUE(db->Add(OutAndBack().front().cameras[0]).ok());  // a single-camera frame
+  auto detector = RigLoopDetector::Create(db.get(), FrontAndRear(size_), params_);
+  EXPECT_EQ(detector.status().code(), StatusCode::kDataLoss);
+  EXPECT_NE(detector.status().message().find("entry 0"), std::string::npos)
+      << detector.status().ToString();
 }
 
 TEST_F(RigLoopDetectorTest, ARigWithoutRigidExtrinsicsOrBadParametersIsRefused) {

@@ -137,8 +137,10 @@ StatusOr<RigPlaceEvaluation> EvaluateRigPlace(const RigSequenceFeatures& sequenc
   eval.query_frames_with_truth = truth.QueriesWithMatches();
   std::map<std::string, std::vector<double>> times;
   std::vector<double> rotation_errors, translation_errors;
+  std::vector<uint64_t> frame_ids;  // the id each rig frame got, by sequence index
   for (size_t i = 0; i < frames; ++i) {
     RECOG_ASSIGN_OR_RETURN(RigLoopResult r, detector.Process(sequence.frames[i]));
+    frame_ids.push_back(*r.frame);
     const double points_ms = sequence.points_ms.empty() ? 0.0 : sequence.points_ms[i];
     times["features"].push_back(sequence.feature_ms[i]);
     if (!sequence.points_ms.empty()) times["points"].push_back(points_ms);
@@ -153,7 +155,8 @@ StatusOr<RigPlaceEvaluation> EvaluateRigPlace(const RigSequenceFeatures& sequenc
     if (!r.match_frame.has_value()) continue;
     RigDetectedLoop loop;
     loop.query = int(i);
-    loop.match = int(*r.match_frame);
+    loop.match = int(std::lower_bound(frame_ids.begin(), frame_ids.end(), *r.match_frame) -
+                     frame_ids.begin());
     loop.status = r.status;
     loop.correct = truth.Matches(loop.query, loop.match);
     for (const RigCameraMatch& pair : r.pairs) {
@@ -167,7 +170,7 @@ StatusOr<RigPlaceEvaluation> EvaluateRigPlace(const RigSequenceFeatures& sequenc
     if (body_poses != nullptr && r.posed) {
       // X_body_query = R X_body_match + t, from world_from_body of both frames.
       const CameraPose& q = (*body_poses)[i];
-      const CameraPose& m = (*body_poses)[*r.match_frame];
+      const CameraPose& m = (*body_poses)[size_t(loop.match)];
       const cv::Matx33d R_true = q.world_from_camera.t() * m.world_from_camera;
       const cv::Vec3d t_true = q.world_from_camera.t() * (m.center - q.center);
       loop.rotation_error_deg = AngleBetweenDeg(r.R, R_true);
