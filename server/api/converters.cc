@@ -273,9 +273,22 @@ Status DecodeStructure(const pb::Frame& frame, DecodedFrame* out) {
   return Status::Ok();
 }
 
+void AddCorrespondences(const std::vector<PlaceCorrespondence>& in,
+                        google::protobuf::RepeatedPtrField<pb::Correspondence>* out) {
+  for (const PlaceCorrespondence& c : in) {
+    pb::Correspondence* correspondence = out->Add();
+    correspondence->set_query_index(c.query_index);
+    correspondence->set_query_x(c.query_pixel.x);
+    correspondence->set_query_y(c.query_pixel.y);
+    correspondence->set_match_index(c.match_index);
+    correspondence->set_match_x(c.match_pixel.x);
+    correspondence->set_match_y(c.match_pixel.y);
+  }
+}
+
 }  // namespace
 
-StatusOr<DecodedFrame> DecodeFrame(const pb::Frame& frame, const DescriptorFormat& format) {
+Status DecodeFrameHeader(const pb::Frame& frame, DecodedFrame* out) {
   if (frame.camera_id().size() > kMaxFrameIdBytes ||
       frame.client_frame_id().size() > kMaxFrameIdBytes) {
     return Status::InvalidArgument(
@@ -284,10 +297,9 @@ StatusOr<DecodedFrame> DecodeFrame(const pb::Frame& frame, const DescriptorForma
   if (frame.has_timestamp() && (!Finite(frame.timestamp()) || frame.timestamp() < 0)) {
     return Status::InvalidArgument("frame.timestamp must be finite and >= 0");
   }
-  DecodedFrame out;
-  if (frame.has_timestamp()) out.timestamp = frame.timestamp();
-  out.camera_id = frame.camera_id();
-  out.client_frame_id = frame.client_frame_id();
+  if (frame.has_timestamp()) out->timestamp = frame.timestamp();
+  out->camera_id = frame.camera_id();
+  out->client_frame_id = frame.client_frame_id();
   if (frame.exclude_frame_ids_size() > kMaxExcludedFrames) {
     return Status::InvalidArgument("frame.exclude_frame_ids has " +
                                    std::to_string(frame.exclude_frame_ids_size()) +
@@ -295,7 +307,17 @@ StatusOr<DecodedFrame> DecodeFrame(const pb::Frame& frame, const DescriptorForma
   }
   for (const uint64_t id : frame.exclude_frame_ids()) {
     // An id no map can hold (frame ids are 32-bit) excludes nothing.
-    if (id < kInvalidEntryId) out.excluded_frames.push_back(EntryId(id));
+    if (id < kInvalidEntryId) out->excluded_frames.push_back(EntryId(id));
+  }
+  return Status::Ok();
+}
+
+StatusOr<DecodedFrame> DecodeFrame(const pb::Frame& frame, const DescriptorFormat& format) {
+  DecodedFrame out;
+  RECOG_RETURN_IF_ERROR(DecodeFrameHeader(frame, &out));
+  if (frame.views_size() > 0) {
+    return Status::InvalidArgument(
+        "frame.views are for rig maps (MapSettings.rig); this call takes one image in the frame");
   }
   if (frame.has_intrinsics()) {
     CameraIntrinsics intrinsics;
@@ -383,6 +405,109 @@ void ToProto(const LoopDetectorParams& params, pb::MapSettings* out) {
   }
 }
 
+StatusOr<std::vector<RigCamera>> RigFromProto(const pb::MapSettings& settings) {
+  std::vector<RigCamera> rig;
+  for (int i = 0; i < settings.rig_size(); ++i) {
+    const pb::RigCameraSettings& in = settings.rig(i);
+    const std::string field = "settings.rig[" + std::to_string(i) + "] ('" + in.name() + "')";
+    RigCamera camera;
+    camera.name = in.name();
+    camera.size = cv::Size(int(std::min<uint32_t>(in.width(), kMaxImageSide + 1)),
+                           int(std::min<uint32_t>(in.height(), kMaxImageSide + 1)));
+    RECOG_RETURN_IF_ERROR(
+        CheckImageSize(in.width(), in.height(), (field + " width x height").c_str()));
+    const pb::CameraIntrinsics& k = in.intrinsics();
+    camera.K = cv::Matx33d(k.fx(), 0, k.cx(), 0, k.fy(), k.cy(), 0, 0, 1);
+    camera.distortion.assign(k.distortion().begin(), k.distortion().end());
+    const pb::Pose& pose = in.body_pose();
+    if (pose.rotation_size() != 0 || pose.translation_size() != 0) {
+      if (pose.rotation_size() != 9 || pose.translation_size() != 3) {
+        return Status::InvalidArgument(field + ".body_pose needs 9 rotation and 3 translation " +
+                                       "values (both empty: the body frame itself)");
+      }
+      std::copy(pose.rotation().begin(), pose.rotation().end(), camera.body_R_camera.val);
+      std::copy(pose.translation().begin(), pose.translation().end(), camera.body_t_camera.val);
+    }
+    rig.push_back(std::move(camera));
+  }
+  if (!rig.empty()) {
+    const Status valid = ValidateRig(rig);
+    if (!valid.ok()) return valid.WithContext("settings.rig", StatusCode::kInvalidArgument);
+  }
+  return rig;
+}
+
+void ToProto(const std::vector<RigCamera>& rig, pb::MapSettings* out) {
+  out->clear_rig();
+  for (const RigCamera& camera : rig) {
+    pb::RigCameraSettings* settings = out->add_rig();
+    settings->set_name(camera.name);
+    settings->set_width(uint32_t(camera.size.width));
+    settings->set_height(uint32_t(camera.size.height));
+    pb::CameraIntrinsics* k = settings->mutable_intrinsics();
+    k->set_fx(camera.K(0, 0));
+    k->set_fy(camera.K(1, 1));
+    k->set_cx(camera.K(0, 2));
+    k->set_cy(camera.K(1, 2));
+    k->mutable_distortion()->Assign(camera.distortion.begin(), camera.distortion.end());
+    ToProto(camera.body_R_camera, camera.body_t_camera, settings->mutable_body_pose());
+  }
+}
+
+pb::LoopStatus ToProto(RigLoopStatus status) {
+  switch (status) {
+    case RigLoopStatus::kLoopDetected:
+      return pb::LOOP_STATUS_LOOP_DETECTED;
+    case RigLoopStatus::kTooFewFeatures:
+      return pb::LOOP_STATUS_TOO_FEW_FEATURES;
+    case RigLoopStatus::kNoCandidates:
+      return pb::LOOP_STATUS_NO_CANDIDATES;
+    case RigLoopStatus::kFailedGeometry:
+      return pb::LOOP_STATUS_FAILED_GEOMETRY;
+    case RigLoopStatus::kInconsistentCameras:
+      return pb::LOOP_STATUS_INCONSISTENT_CAMERAS;
+  }
+  return pb::LOOP_STATUS_UNSPECIFIED;
+}
+
+void ToProto(const RigPlaceResult& result, const std::vector<RigCamera>& rig, pb::LoopResult* out) {
+  const RigLoopResult& loop = result.loop;
+  out->set_status(ToProto(loop.status));
+  if (loop.frame.has_value()) out->set_frame_id(*loop.frame);
+  if (loop.match_frame.has_value()) out->set_match_frame_id(*loop.match_frame);
+  if (result.match_timestamp.has_value()) out->set_match_timestamp(*result.match_timestamp);
+  out->set_match_client_frame_id(result.match_client_id);
+  out->set_score(loop.score);
+  if (!loop.match_frame.has_value()) return;
+  pb::RigLoop* rig_loop = out->mutable_rig();
+  uint32_t correspondences = 0, inliers = 0;
+  for (size_t p = 0; p < loop.pairs.size(); ++p) {
+    const RigCameraMatch& pair = loop.pairs[p];
+    pb::RigCameraMatch* match = rig_loop->add_pairs();
+    match->set_query_camera(rig[pair.query_camera].name);
+    match->set_match_camera(rig[pair.match_camera].name);
+    match->set_correspondences(pair.verification.correspondences);
+    match->set_inliers(uint32_t(pair.verification.inliers.size()));
+    match->set_posed(pair.posed);
+    match->set_metric(pair.metric);
+    match->set_consistent_ratio(pair.consistent_ratio);
+    if (p < result.correspondences.size()) {
+      AddCorrespondences(result.correspondences[p], match->mutable_inlier_correspondences());
+    }
+    correspondences += pair.verification.correspondences;
+    inliers += uint32_t(pair.verification.inliers.size());
+  }
+  out->set_correspondences(correspondences);
+  out->set_inliers(inliers);
+  rig_loop->set_rotation_disagreement_deg(loop.rotation_disagreement_deg);
+  rig_loop->set_posed(loop.posed);
+  if (loop.posed) ToProto(loop.R, loop.t, rig_loop->mutable_body_pose());
+  rig_loop->set_metric(loop.metric);
+  if (loop.metric) {
+    rig_loop->mutable_covariance()->Assign(loop.covariance.begin(), loop.covariance.end());
+  }
+}
+
 pb::LoopStatus ToProto(LoopStatus status) {
   switch (status) {
     case LoopStatus::kLoopDetected:
@@ -456,15 +581,7 @@ void ToProto(const PlaceFrameResult& frame, pb::LoopResult* out) {
     candidate->set_normalized_score(c.normalized_score);
     if (c.inliers.has_value()) candidate->set_inliers(*c.inliers);
   }
-  for (const PlaceCorrespondence& c : frame.correspondences) {
-    pb::Correspondence* correspondence = out->add_inlier_correspondences();
-    correspondence->set_query_index(c.query_index);
-    correspondence->set_query_x(c.query_pixel.x);
-    correspondence->set_query_y(c.query_pixel.y);
-    correspondence->set_match_index(c.match_index);
-    correspondence->set_match_x(c.match_pixel.x);
-    correspondence->set_match_y(c.match_pixel.y);
-  }
+  AddCorrespondences(frame.correspondences, out->mutable_inlier_correspondences());
 }
 
 PlaceResultOptions FromProto(const pb::ResultOptions& options,

@@ -58,15 +58,26 @@ struct DecodedFrame {
 // exclude_frame_ids.
 inline constexpr int kMaxExcludedFrames = 1000;
 StatusOr<DecodedFrame> DecodeFrame(const pb::Frame& frame, const DescriptorFormat& format);
+// The part of DecodeFrame that does not look at the content: the timestamp, the ids and
+// exclude_frame_ids (a rig frame's, whose content is in its views).
+Status DecodeFrameHeader(const pb::Frame& frame, DecodedFrame* out);
 
 // Map settings. ApplyMapSettings overwrites the fields `settings` sets and validates the result.
 Status ApplyMapSettings(const pb::MapSettings& settings, LoopDetectorParams* params);
 void ToProto(const LoopDetectorParams& params, pb::MapSettings* out);
+// A rig map's cameras (MapSettings.rig; empty for none). INVALID_ARGUMENT naming settings.rig[i]
+// for a body pose without 9 + 3 values or a distortion of another length than 0, 4, 5 or 8, and
+// naming the camera for what ValidateRig refuses (extrinsics that are not a rigid transform, ...).
+StatusOr<std::vector<RigCamera>> RigFromProto(const pb::MapSettings& settings);
+void ToProto(const std::vector<RigCamera>& rig, pb::MapSettings* out);
 
 pb::LoopStatus ToProto(LoopStatus status);
 // What a frame did to a place map: the loop result with the match's timestamp and the extras
 // that came with it. `frame_id` is the id the frame got when it was added.
 void ToProto(const PlaceFrameResult& result, pb::LoopResult* out);
+// What a rig frame did to a rig map of `rig`'s cameras (LoopResult.rig, cameras by name).
+pb::LoopStatus ToProto(RigLoopStatus status);
+void ToProto(const RigPlaceResult& result, const std::vector<RigCamera>& rig, pb::LoopResult* out);
 void ToProto(const cv::Matx33d& R, const cv::Vec3d& t, pb::Pose* out);
 void ToProto(const MetricLoop& metric, pb::MetricLoop* out);
 // The extras a request asks for; the relative pose uses the frame's intrinsics when it has them.

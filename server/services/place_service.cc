@@ -40,6 +40,7 @@ void FillMapInfo(const PlaceMap& map, pb::MapInfo* out) {
   out->set_id(info.id);
   ToProto(map.params(), out->mutable_settings());
   if (!map.group().empty()) out->mutable_settings()->set_group(map.group());
+  ToProto(map.rig(), out->mutable_settings());
   out->set_frames(map.frames());
   out->set_next_frame_id(map.next_frame_id());
   out->set_created_unix_ms(info.created_unix_ms);
@@ -94,6 +95,10 @@ StatusOr<SearchSet> ResolveSearchSet(const ServerState& state, const Caller& cal
   const auto add = [&](std::shared_ptr<PlaceMap> map) -> Status {
     RECOG_RETURN_IF_ERROR(
         TokenAuthenticator::CheckMap(caller, Right::kRead, map->name(), map->group()));
+    if (map->has_rig() && map->name() != own) {
+      return Status::InvalidArgument("map '" + map->name() +
+                                     "' is a rig map: rig maps are not searched across maps");
+    }
     const bool listed = std::any_of(maps.begin(), maps.end(),
                                     [&](const auto& m) { return m->name() == map->name(); });
     if (map->name() != own && !listed) maps.push_back(std::move(map));
@@ -186,6 +191,158 @@ class PreparedFrame {
   std::optional<FrameGeometry> geometry_;
 };
 
+// A request's rig frame ready for a rig map: each camera's view decoded with the camera's
+// intrinsics, its features (the client's, or extracted) moved into the camera's pinhole model,
+// and its 3D points from depth or a right image.
+class PreparedRigFrame {
+ public:
+  // INVALID_ARGUMENT naming the camera for a view of an unknown camera, a camera without a view
+  // or with two, a view carrying more than its image and structure, or an image of another size
+  // than its camera's; and for a frame with content of its own.
+  static StatusOr<PreparedRigFrame> Prepare(WorkerContext& worker, const pb::Frame& request,
+                                            const PlaceMap& map, pb::Timing* timing) {
+    const std::vector<RigCamera>& rig = map.rig();
+    std::string cameras;
+    for (const RigCamera& camera : rig) cameras += (cameras.empty() ? "" : ", ") + camera.name;
+    if (request.content_case() != pb::Frame::CONTENT_NOT_SET || request.has_depth() ||
+        request.has_right() || request.has_intrinsics() || request.views_size() == 0) {
+      return Status::InvalidArgument("map '" + map.name() + "' is a rig map: a frame carries " +
+                                     "its images in frame.views, one per camera (" + cameras +
+                                     "), and nothing of its own but its timestamp and ids");
+    }
+    PreparedRigFrame prepared;
+    RECOG_RETURN_IF_ERROR(DecodeFrameHeader(request, &prepared.header_));
+    std::vector<int> view_of(rig.size(), -1);
+    for (int i = 0; i < request.views_size(); ++i) {
+      const pb::Frame& view = request.views(i);
+      const std::string where = "frame.views[" + std::to_string(i) + "]";
+      const auto camera = std::find_if(
+          rig.begin(), rig.end(), [&](const RigCamera& c) { return c.name == view.camera_id(); });
+      if (camera == rig.end()) {
+        return Status::InvalidArgument(where + " is for camera '" + view.camera_id() +
+                                       "', which the rig of map '" + map.name() +
+                                       "' does not have (" + cameras + ")");
+      }
+      int& slot = view_of[size_t(camera - rig.begin())];
+      if (slot >= 0) {
+        return Status::InvalidArgument(where + ": camera '" + camera->name + "' has two views");
+      }
+      if (view.has_timestamp() || !view.client_frame_id().empty() || view.has_intrinsics() ||
+          view.exclude_frame_ids_size() > 0 || view.views_size() > 0) {
+        return Status::InvalidArgument(
+            where + " (camera '" + camera->name + "') holds more than its image and its depth " +
+            "or right image: timestamp, client_frame_id and exclude_frame_ids belong to the " +
+            "frame, intrinsics to the map's rig");
+      }
+      slot = i;
+    }
+    for (size_t c = 0; c < rig.size(); ++c) {
+      if (view_of[c] < 0) {
+        return Status::InvalidArgument("frame.views has no view for camera '" + rig[c].name +
+                                       "'; a rig frame needs one per camera (" + cameras + ")");
+      }
+    }
+    prepared.frame_.timestamp = prepared.header_.timestamp;
+    prepared.frame_.client_id = prepared.header_.client_frame_id;
+    for (size_t c = 0; c < rig.size(); ++c) {
+      const Status status = prepared.AddCamera(worker, request.views(view_of[c]), rig[c],
+                                               map.vocabulary().info().descriptor, timing);
+      if (!status.ok()) return status.WithContext("rig camera '" + rig[c].name + "'");
+    }
+    return prepared;
+  }
+
+  const RigFrame& frame() const { return frame_; }
+  // The rig frames the client left out (exclude_frame_ids).
+  std::vector<uint64_t> excluded() const {
+    return {header_.excluded_frames.begin(), header_.excluded_frames.end()};
+  }
+  size_t features() const {
+    size_t total = 0;
+    for (const FeatureSet& camera : frame_.cameras) total += camera.size();
+    return total;
+  }
+
+ private:
+  PreparedRigFrame() = default;
+
+  // Prepares `view` as a frame of `camera` and appends it to the rig frame.
+  Status AddCamera(WorkerContext& worker, const pb::Frame& view, const RigCamera& camera,
+                   const DescriptorFormat& descriptor, pb::Timing* timing) {
+    pb::Frame with_intrinsics = view;
+    pb::CameraIntrinsics* k = with_intrinsics.mutable_intrinsics();
+    k->set_fx(camera.K(0, 0));
+    k->set_fy(camera.K(1, 1));
+    k->set_cx(camera.K(0, 2));
+    k->set_cy(camera.K(1, 2));
+    k->mutable_distortion()->Assign(camera.distortion.begin(), camera.distortion.end());
+    RECOG_ASSIGN_OR_RETURN(PreparedFrame prepared,
+                           PreparedFrame::Prepare(worker, with_intrinsics, descriptor, timing));
+    const DecodedFrame& decoded = prepared.frame();
+    cv::Size size = decoded.image.size();
+    if (!decoded.has_image() && view.features().image_width() != 0) {
+      size = cv::Size(int(view.features().image_width()), int(view.features().image_height()));
+    }
+    if ((decoded.has_image() || view.features().image_width() != 0) && size != camera.size) {
+      return Status::InvalidArgument("its image is " + std::to_string(size.width) + "x" +
+                                     std::to_string(size.height) + "; the camera's are " +
+                                     std::to_string(camera.size.width) + "x" +
+                                     std::to_string(camera.size.height));
+    }
+    FeatureSet& features = frame_.cameras.emplace_back(prepared.features());
+    UndistortKeypoints(camera, &features.keypoints);
+    const FrameGeometry* geometry = prepared.geometry();
+    frame_.points.push_back(geometry != nullptr ? geometry->points : std::vector<cv::Point3f>());
+    return Status::Ok();
+  }
+
+  DecodedFrame header_;  // the rig frame's timestamp and ids
+  RigFrame frame_;
+};
+
+// What a rig map refuses of a request (INVALID_ARGUMENT): the options of single-camera loops,
+// and other maps to search. OK for a map without a rig.
+Status CheckRigRequest(const PlaceMap& map, const pb::ResultOptions& options,
+                       const SearchSet& search) {
+  if (!map.has_rig()) return Status::Ok();
+  if (options.top_k() > 0 || options.include_fundamental() || options.include_relative_pose()) {
+    return Status::InvalidArgument(
+        "map '" + map.name() + "' is a rig map: options.top_k, include_fundamental and " +
+        "include_relative_pose are for single-camera maps (a rig loop's body pose is in " +
+        "LoopResult.rig)");
+  }
+  if (!search.empty()) {
+    return Status::InvalidArgument("map '" + map.name() + "' is a rig map: its frames are " +
+                                   "not looked up in other maps (search_maps, search_group)");
+  }
+  return Status::Ok();
+}
+
+// A rig frame against a rig map (RunPlaceFrame's rig half): `num_features` over every camera.
+Status RunRigFrame(ServerState& state, WorkerContext& worker, PlaceMap& map, FrameMode mode,
+                   const pb::Frame& request, const pb::ResultOptions& options, pb::LoopResult* out,
+                   pb::Timing* timing, uint32_t* num_features) {
+  RECOG_ASSIGN_OR_RETURN(PreparedRigFrame prepared,
+                         PreparedRigFrame::Prepare(worker, request, map, timing));
+  if (num_features != nullptr) *num_features = uint32_t(prepared.features());
+  const auto start = Clock::now();
+  const std::vector<uint64_t> excluded = prepared.excluded();
+  const bool correspondences = options.include_correspondences();
+  StatusOr<RigPlaceResult> result = mode == FrameMode::kAdd ? map.AddRig(prepared.frame())
+                                    : mode == FrameMode::kDetect
+                                        ? map.DetectRig(prepared.frame(), correspondences, excluded)
+                                        : map.QueryRig(prepared.frame(), correspondences, excluded);
+  if (!result.ok()) return result.status();
+  state.metrics.AddFrames(FrameKind::kPlace);
+  if (mode != FrameMode::kAdd && result->loop.status == RigLoopStatus::kLoopDetected) {
+    state.metrics.AddLoopDetections();
+  }
+  if (mode != FrameMode::kQuery) state.metrics.SetMapEntries(map.name(), map.frames());
+  ToProto(result.value(), map.rig(), out);
+  timing->set_recognition_ms(timing->recognition_ms() + MsSince(start));
+  return Status::Ok();
+}
+
 // Decodes one frame, runs it against the map, looks it up in the `search` maps, and encodes what
 // it did (`inter_map` may be null when `search` is empty). `num_features` reports an added
 // frame's features.
@@ -194,6 +351,10 @@ Status RunPlaceFrame(ServerState& state, WorkerContext& worker, PlaceMap& map, F
                      pb::LoopResult* out, pb::Timing* timing, uint32_t* num_features = nullptr,
                      const SearchSet& search = {},
                      google::protobuf::RepeatedPtrField<pb::InterMapMatch>* inter_map = nullptr) {
+  if (map.has_rig()) {
+    RECOG_RETURN_IF_ERROR(CheckRigRequest(map, options, search));
+    return RunRigFrame(state, worker, map, mode, request, options, out, timing, num_features);
+  }
   RECOG_ASSIGN_OR_RETURN(
       PreparedFrame prepared,
       PreparedFrame::Prepare(worker, request, map.vocabulary().info().descriptor, timing));
@@ -258,13 +419,17 @@ class PlaceFrameStream final
       LoopDetectorParams params = state_.config.place;
       const Status settings = ApplyMapSettings(config.settings(), &params);
       if (!settings.ok()) return ToGrpcStatus(settings, call_.request_id);
-      map = state_.maps->Create(config.map(), params, GroupOf(config.settings()));
+      StatusOr<std::vector<RigCamera>> rig = RigFromProto(config.settings());
+      if (!rig.ok()) return ToGrpcStatus(rig.status(), call_.request_id);
+      map = state_.maps->Create(config.map(), params, GroupOf(config.settings()), rig.value());
       if (map.status().code() == StatusCode::kAlreadyExists) {
         map = CallMap(state_, call_, config.map(), right);  // created by another stream meanwhile
       }
     }
     if (!map.ok()) return ToGrpcStatus(map.status(), call_.request_id);
     map_ = std::move(map).value();
+    const Status rig = CheckRigRequest(*map_, options_, search_);
+    if (!rig.ok()) return ToGrpcStatus(rig, call_.request_id);
     return grpc::Status::OK;
   }
 
@@ -337,8 +502,10 @@ grpc::ServerUnaryReactor* PlaceService::CreateMap(grpc::CallbackServerContext* c
                     LoopDetectorParams params = state_.config.place;
                     RECOG_RETURN_IF_ERROR_AS_GRPC(ApplyMapSettings(request->settings(), &params),
                                                   call.request_id);
-                    StatusOr<std::shared_ptr<PlaceMap>> map =
-                        state_.maps->Create(request->name(), params, GroupOf(request->settings()));
+                    StatusOr<std::vector<RigCamera>> rig = RigFromProto(request->settings());
+                    if (!rig.ok()) return ToGrpcStatus(rig.status(), call.request_id);
+                    StatusOr<std::shared_ptr<PlaceMap>> map = state_.maps->Create(
+                        request->name(), params, GroupOf(request->settings()), rig.value());
                     if (!map.ok()) return ToGrpcStatus(map.status(), call.request_id);
                     FillMapInfo(*map.value(), response->mutable_map());
                     state_.metrics.SetMapEntries(request->name(), 0);

@@ -1174,6 +1174,191 @@ TEST_F(PlaceServiceTest, DepthAndStereoThatCannotGoWithTheFrameAreRefusedAndAddN
   EXPECT_EQ(info.frames(), 2u);
 }
 
+// A front + rear rig of the corridor images' size (512x384): the rear camera looks back, 0.4 m
+// behind the front one.
+pb::MapSettings FrontRearRig() {
+  pb::MapSettings settings;
+  settings.set_recent_frames(1);
+  for (const bool rear : {false, true}) {
+    pb::RigCameraSettings* camera = settings.add_rig();
+    camera->set_name(rear ? "rear" : "front");
+    camera->set_width(512);
+    camera->set_height(384);
+    camera->mutable_intrinsics()->set_fx(500);
+    camera->mutable_intrinsics()->set_fy(500);
+    camera->mutable_intrinsics()->set_cx(256);
+    camera->mutable_intrinsics()->set_cy(192);
+    const double s = rear ? -1 : 1;
+    for (const double v : {s, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, s}) {
+      camera->mutable_body_pose()->add_rotation(v);
+    }
+    for (const double v : {0.0, 0.0, 0.4 * s}) camera->mutable_body_pose()->add_translation(v);
+  }
+  return settings;
+}
+
+// A JPEG of blurred noise of the corridor images' size: a view no other image shares.
+std::string UnseenJpeg(int seed) {
+  cv::Mat noise(384 / 8, 512 / 8, CV_8U);
+  cv::RNG rng(uint64_t(seed) + 1);
+  rng.fill(noise, cv::RNG::UNIFORM, 0, 256);
+  cv::Mat image;
+  cv::resize(noise, image, {512, 384}, 0, 0, cv::INTER_NEAREST);
+  cv::GaussianBlur(image, image, cv::Size(3, 3), 0);
+  std::vector<uchar> jpeg;
+  EXPECT_TRUE(cv::imencode(".jpg", image, jpeg));
+  return std::string(jpeg.begin(), jpeg.end());
+}
+
+pb::Frame RigFrame(const std::string& front_jpeg, const std::string& rear_jpeg) {
+  pb::Frame frame;
+  for (const auto& [camera, jpeg] : {std::pair{"front", &front_jpeg}, {"rear", &rear_jpeg}}) {
+    pb::Frame* view = frame.add_views();
+    view->set_camera_id(camera);
+    view->set_encoded_image(*jpeg);
+  }
+  return frame;
+}
+
+TEST_F(PlaceServiceTest, ARigMapFindsWithItsRearCameraWhatItsFrontCameraSawAcrossARestart) {
+  pb::MapSettings skewed = FrontRearRig();
+  skewed.mutable_rig(1)->mutable_body_pose()->set_rotation(1, 0.2);  // not a rotation
+  const grpc::Status refused = CreateMap("skewed", skewed);
+  EXPECT_EQ(refused.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_NE(refused.error_message().find("'rear'"), std::string::npos) << refused.error_message();
+  EXPECT_EQ(GetMap("skewed").error_code(), grpc::StatusCode::NOT_FOUND);
+
+  ASSERT_TRUE(CreateMap("rig", FrontRearRig()).ok());
+  // The way out: the front camera sees the corridor, the rear one views nobody sees again.
+  const int corridor[] = {1, 20, 41};
+  for (int i = 0; i < 3; ++i) {
+    pb::Frame frame = RigFrame(CorridorJpeg(corridor[i]), UnseenJpeg(i));
+    frame.set_client_frame_id("out-" + std::to_string(i));
+    pb::AddFrameResponse added;
+    ASSERT_TRUE(AddFrame("rig", frame, &added).ok());
+    EXPECT_EQ(added.frame_id(), uint64_t(2 * i));  // a rig frame takes one id per camera
+    EXPECT_GT(added.num_features(), 300u);
+  }
+  RestartServer();
+  pb::MapInfo info;
+  ASSERT_TRUE(GetMap("rig", &info).ok());
+  EXPECT_EQ(info.frames(), 3u);
+  ASSERT_EQ(info.settings().rig_size(), 2);
+  EXPECT_EQ(info.settings().rig(1).name(), "rear");
+  EXPECT_EQ(info.settings().rig(1).body_pose().rotation(0), -1.0);
+  EXPECT_EQ(info.settings().rig(1).body_pose().translation(2), -0.4);
+
+  // The way back: the rear camera sees what the front one saw in rig frame 2.
+  pb::QueryPlaceRequest query;
+  query.set_map("rig");
+  *query.mutable_frame() = RigFrame(UnseenJpeg(10), CorridorJpeg(20));
+  query.mutable_options()->set_include_correspondences(true);
+  pb::QueryPlaceResponse response;
+  ASSERT_TRUE(places_->QueryPlace(Context().get(), query, &response).ok());
+  const pb::LoopResult& result = response.result();
+  ASSERT_EQ(result.status(), pb::LOOP_STATUS_LOOP_DETECTED);
+  EXPECT_EQ(result.match_frame_id(), 2u);
+  EXPECT_EQ(result.match_client_frame_id(), "out-1");
+  ASSERT_EQ(result.rig().pairs_size(), 1);
+  const pb::RigCameraMatch& pair = result.rig().pairs(0);
+  EXPECT_EQ(pair.query_camera(), "rear");
+  EXPECT_EQ(pair.match_camera(), "front");
+  EXPECT_GE(pair.inliers(), 16u);
+  EXPECT_EQ(result.inliers(), pair.inliers());
+  EXPECT_EQ(uint32_t(pair.inlier_correspondences_size()), pair.inliers());
+
+  // Bad rig frames are refused naming the camera, and add nothing.
+  std::vector<std::pair<pb::Frame, std::string>> bad;  // frame, words its error must contain
+  pb::Frame missing = RigFrame(CorridorJpeg(60), UnseenJpeg(20));
+  missing.mutable_views()->RemoveLast();
+  bad.emplace_back(missing, "no view for camera 'rear'");
+  pb::Frame unknown = RigFrame(CorridorJpeg(60), UnseenJpeg(20));
+  unknown.mutable_views(1)->set_camera_id("left");
+  bad.emplace_back(unknown, "camera 'left'");
+  pb::Frame twice = RigFrame(CorridorJpeg(60), UnseenJpeg(20));
+  twice.mutable_views(1)->set_camera_id("front");
+  bad.emplace_back(twice, "'front' has two views");
+  cv::Mat small(240, 320, CV_8U, cv::Scalar(128));
+  std::vector<uchar> small_jpeg;
+  ASSERT_TRUE(cv::imencode(".jpg", small, small_jpeg));
+  bad.emplace_back(RigFrame(CorridorJpeg(60), std::string(small_jpeg.begin(), small_jpeg.end())),
+                   "rig camera 'rear': its image is 320x240");
+  bad.emplace_back(RigFrame(CorridorJpeg(60), "not an image"), "rig camera 'rear'");
+  pb::Frame own_intrinsics = RigFrame(CorridorJpeg(60), UnseenJpeg(20));
+  own_intrinsics.mutable_views(0)->mutable_intrinsics()->set_fx(400);
+  bad.emplace_back(own_intrinsics, "camera 'front'");
+  bad.emplace_back(JpegFrame(CorridorJpeg(60)), "is a rig map");
+  for (const auto& [frame, words] : bad) {
+    pb::AddFrameResponse added;
+    const grpc::Status status = AddFrame("rig", frame, &added);
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << words;
+    EXPECT_NE(status.error_message().find(words), std::string::npos)
+        << words << " not in: " << status.error_message();
+  }
+  query.mutable_options()->set_include_relative_pose(true);
+  const grpc::Status pose = places_->QueryPlace(Context().get(), query, &response);
+  EXPECT_EQ(pose.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_NE(pose.error_message().find("rig map"), std::string::npos) << pose.error_message();
+  ASSERT_TRUE(CreateMap("single").ok());
+  pb::AddFrameResponse added;
+  EXPECT_EQ(AddFrame("single", RigFrame(CorridorJpeg(1), UnseenJpeg(1)), &added).error_code(),
+            grpc::StatusCode::INVALID_ARGUMENT);
+  query.mutable_options()->set_include_relative_pose(false);
+  query.add_search_maps("single");
+  const grpc::Status search = places_->QueryPlace(Context().get(), query, &response);
+  EXPECT_EQ(search.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << search.error_message();
+  ASSERT_TRUE(GetMap("rig", &info).ok());
+  EXPECT_EQ(info.frames(), 3u);
+}
+
+TEST_F(PlaceServiceTest, AStreamCreatesARigMapAndRemovingARigFrameRemovesEveryCamerasImage) {
+  pb::StreamConfig config;
+  config.set_map("rig-stream");
+  config.set_create_if_missing(true);
+  *config.mutable_settings() = FrontRearRig();
+  std::vector<pb::Frame> frames;
+  for (const int n : {1, 20, 41}) frames.push_back(RigFrame(CorridorJpeg(n), UnseenJpeg(n)));
+  frames.push_back(RigFrame(UnseenJpeg(7), CorridorJpeg(1)));
+  frames.push_back(RigFrame(UnseenJpeg(8), UnseenJpeg(8)));
+  frames.back().mutable_views()->RemoveLast();  // an error of its own: the stream goes on
+  frames.push_back(RigFrame(UnseenJpeg(9), CorridorJpeg(41)));
+  grpc::Status status;
+  const auto answers = Stream(*places_, config, frames, &status);
+  ASSERT_TRUE(status.ok()) << status.error_message();
+  ASSERT_EQ(answers.size(), 6u);
+  ASSERT_TRUE(answers[3].has_result()) << answers[3].error().message();
+  EXPECT_EQ(answers[3].result().status(), pb::LOOP_STATUS_LOOP_DETECTED);
+  EXPECT_EQ(answers[3].result().match_frame_id(), 0u);
+  EXPECT_EQ(answers[3].result().rig().pairs(0).query_camera(), "rear");
+  ASSERT_TRUE(answers[4].has_error());
+  EXPECT_NE(answers[4].error().message().find("'rear'"), std::string::npos);
+  ASSERT_TRUE(answers[5].has_result());
+  EXPECT_EQ(answers[5].result().frame_id(), 8u);  // the refused frame took no id
+
+  pb::RemoveFrameRequest remove;
+  remove.set_map("rig-stream");
+  remove.set_frame_id(4);
+  pb::RemoveFrameResponse removed;
+  ASSERT_TRUE(places_->RemoveFrame(Context().get(), remove, &removed).ok());
+  remove.set_frame_id(5);  // the rear image of rig frame 4: not a rig frame
+  EXPECT_EQ(places_->RemoveFrame(Context().get(), remove, &removed).error_code(),
+            grpc::StatusCode::NOT_FOUND);
+  pb::MapInfo info;
+  ASSERT_TRUE(GetMap("rig-stream", &info).ok());
+  EXPECT_EQ(info.frames(), 4u);
+  pb::QueryPlaceRequest query;
+  query.set_map("rig-stream");
+  *query.mutable_frame() = RigFrame(UnseenJpeg(11), CorridorJpeg(41));
+  pb::QueryPlaceResponse response;
+  ASSERT_TRUE(places_->QueryPlace(Context().get(), query, &response).ok());
+  EXPECT_NE(response.result().match_frame_id(), 4u) << "a removed rig frame is no candidate";
+
+  config.set_map("rig-stream");
+  config.mutable_options()->set_top_k(3);
+  Stream(*places_, config, {}, &status);
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << status.error_message();
+}
+
 TEST_F(PlaceServiceTest, AShardServesOnlyTheMapsThePlacementTableGivesIt) {
   const std::string table = data_dir_.Sub("placement.map");
   std::ofstream(table) << "mine   shard_a;\ntheirs shard_b;\n";
