@@ -161,6 +161,45 @@ grpc::Status AttachStereoRight(const cv::Mat& right, double baseline_m, pb::Fram
   return grpc::Status::OK;
 }
 
+grpc::Status AddRigView(const std::string& camera, pb::Frame view, pb::Frame* rig_frame) {
+  if (camera.empty()) return Invalid("a rig view needs its camera's name");
+  if (view.content_case() == pb::Frame::CONTENT_NOT_SET) {
+    return Invalid("the view of camera '" + camera + "' has no image or features");
+  }
+  if (view.has_timestamp() || !view.client_frame_id().empty() || view.has_intrinsics() ||
+      view.exclude_frame_ids_size() > 0 || view.views_size() > 0) {
+    return Invalid("the view of camera '" + camera + "' carries more than its image and its " +
+                   "depth or right image (set timestamps and ids on the rig frame; the map's " +
+                   "rig has the intrinsics)");
+  }
+  for (const pb::Frame& other : rig_frame->views()) {
+    if (other.camera_id() == camera) return Invalid("camera '" + camera + "' has a view already");
+  }
+  view.set_camera_id(camera);
+  *rig_frame->add_views() = std::move(view);
+  return grpc::Status::OK;
+}
+
+pb::RigCameraSettings MakeRigCamera(const std::string& name, cv::Size size, const cv::Matx33d& K,
+                                    const std::vector<double>& distortion,
+                                    const cv::Matx33d& body_R_camera,
+                                    const cv::Vec3d& body_t_camera) {
+  pb::RigCameraSettings camera;
+  camera.set_name(name);
+  camera.set_width(uint32_t(std::max(size.width, 0)));
+  camera.set_height(uint32_t(std::max(size.height, 0)));
+  pb::CameraIntrinsics* k = camera.mutable_intrinsics();
+  k->set_fx(K(0, 0));
+  k->set_fy(K(1, 1));
+  k->set_cx(K(0, 2));
+  k->set_cy(K(1, 2));
+  k->mutable_distortion()->Assign(distortion.begin(), distortion.end());
+  pb::Pose* pose = camera.mutable_body_pose();
+  pose->mutable_rotation()->Assign(body_R_camera.val, body_R_camera.val + 9);
+  pose->mutable_translation()->Assign(body_t_camera.val, body_t_camera.val + 3);
+  return camera;
+}
+
 Result<OrbFeatures> ExtractOrbFeatures(const cv::Mat& image) {
   if (grpc::Status status = CheckPixels(image); !status.ok()) return status;
   cv::Mat grey = image;

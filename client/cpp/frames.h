@@ -23,6 +23,7 @@
 
 #include "client/cpp/result.h"
 #include "recognition/v1/common.pb.h"
+#include "recognition/v1/place.pb.h"
 
 namespace recog::client {
 
@@ -66,5 +67,22 @@ grpc::Status AttachDepth(const cv::Mat& depth, double units_per_metre, pb::Frame
 // grey or BGR, sent raw), the camera moved by baseline_m metres (> 0) along its x axis.
 // INVALID_ARGUMENT for an empty image, another pixel type or a non-positive baseline.
 grpc::Status AttachStereoRight(const cv::Mat& right, double baseline_m, pb::Frame* frame);
+
+// Rig maps (MapSettings.rig): a frame of a multi-camera rig carries one view per camera in
+// Frame.views, and only its timestamp, client_frame_id and exclude_frame_ids itself. A view is a
+// frame built as above (with AttachDepth or AttachStereoRight for metric loops) without
+// intrinsics: the map's rig has them. AddRigView names `view` after `camera` and appends it to
+// `rig_frame`. INVALID_ARGUMENT for an empty camera name, a view without content, a view
+// carrying a timestamp, ids, intrinsics or views of its own, or a camera the frame has a view of
+// already.
+grpc::Status AddRigView(const std::string& camera, pb::Frame view, pb::Frame* rig_frame);
+
+// One camera of a rig map: its name, the size of its images, its pinhole matrix K with OpenCV's
+// distortion coefficients (none, or 4, 5 or 8), and its pose in the body frame
+// (X_body = body_R_camera * X_camera + body_t_camera, metres). The server checks the rest.
+pb::RigCameraSettings MakeRigCamera(const std::string& name, cv::Size size, const cv::Matx33d& K,
+                                    const std::vector<double>& distortion,
+                                    const cv::Matx33d& body_R_camera,
+                                    const cv::Vec3d& body_t_camera);
 
 }  // namespace recog::client

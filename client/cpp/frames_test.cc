@@ -203,3 +203,59 @@ TEST(FramesTest, DepthAndRightImagesAreAttachedRawAndBadOnesAreRefused) {
 
 }  // namespace
 }  // namespace recog::client
+
+namespace recog::client {
+namespace {
+
+TEST(FramesTest, RigViewsAreNamedAfterTheirCameraAndBadOnesAreRefused) {
+  const cv::Mat image(48, 64, CV_8UC1, cv::Scalar(90));
+  pb::Frame rig;
+  rig.set_timestamp(12.5);
+  ASSERT_TRUE(AddRigView("front", FrameFromImage(image).value(), &rig).ok());
+  pb::Frame rear = FrameFromImage(image).value();
+  ASSERT_TRUE(AttachDepth(cv::Mat(48, 64, CV_16UC1, cv::Scalar(1500)), 1000, &rear).ok());
+  ASSERT_TRUE(AddRigView("rear", rear, &rig).ok());
+  ASSERT_EQ(rig.views_size(), 2);
+  EXPECT_EQ(rig.views(0).camera_id(), "front");
+  EXPECT_EQ(rig.views(1).camera_id(), "rear");
+  EXPECT_TRUE(rig.views(1).has_depth());
+  EXPECT_EQ(rig.views(0).raw_image().width(), 64u);
+
+  const auto refused = [&](const std::string& camera, const pb::Frame& view,
+                           const std::string& words) {
+    const grpc::Status status = AddRigView(camera, view, &rig);
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << words;
+    EXPECT_NE(status.error_message().find(words), std::string::npos) << status.error_message();
+  };
+  refused("front", FrameFromImage(image).value(), "has a view already");
+  refused("", FrameFromImage(image).value(), "camera's name");
+  refused("left", pb::Frame(), "no image");
+  pb::Frame stamped = FrameFromImage(image).value();
+  stamped.set_timestamp(1);
+  refused("left", stamped, "'left' carries more");
+  pb::Frame calibrated = FrameFromImage(image).value();
+  calibrated.mutable_intrinsics()->set_fx(500);
+  refused("left", calibrated, "intrinsics");
+  EXPECT_EQ(rig.views_size(), 2) << "nothing added by a refused view";
+}
+
+TEST(FramesTest, ARigCameraCarriesItsSizeIntrinsicsAndBodyPose) {
+  const cv::Matx33d K(500, 0, 320, 0, 510, 240, 0, 0, 1);
+  const cv::Matx33d R(-1, 0, 0, 0, 1, 0, 0, 0, -1);
+  const pb::RigCameraSettings camera =
+      MakeRigCamera("rear", {640, 480}, K, {0.1, -0.2, 0, 0}, R, {0, 0, -0.4});
+  EXPECT_EQ(camera.name(), "rear");
+  EXPECT_EQ(camera.width(), 640u);
+  EXPECT_EQ(camera.height(), 480u);
+  EXPECT_EQ(camera.intrinsics().fy(), 510);
+  EXPECT_EQ(camera.intrinsics().cx(), 320);
+  ASSERT_EQ(camera.intrinsics().distortion_size(), 4);
+  EXPECT_EQ(camera.intrinsics().distortion(1), -0.2);
+  ASSERT_EQ(camera.body_pose().rotation_size(), 9);
+  EXPECT_EQ(camera.body_pose().rotation(8), -1);
+  ASSERT_EQ(camera.body_pose().translation_size(), 3);
+  EXPECT_EQ(camera.body_pose().translation(2), -0.4);
+}
+
+}  // namespace
+}  // namespace recog::client

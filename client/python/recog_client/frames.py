@@ -7,6 +7,9 @@ An image is one of
   BGR (OpenCV's channel order), sent as raw pixels (``RawImage``, no compression on either side);
 - a ``common_pb2.Features`` (see :func:`make_features`): keypoints and descriptors from the robot;
 - a ready ``common_pb2.Frame``.
+A rig map (``MapSettings.rig``, cameras from :func:`rig_camera`) takes frames of
+:func:`make_rig_frame`: one image per camera, each a view (:func:`rig_view` for a view with depth
+or a right image).
 NumPy is optional: arrays are recognised only when NumPy is loaded (an array cannot exist
 otherwise). Bad input raises :class:`recog_client.errors.InvalidArgument` (a ``ValueError``);
 a missing file ``OSError``.
@@ -14,13 +17,18 @@ a missing file ``OSError``.
 
 import os
 import sys
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
-from ._proto.recognition.v1 import common_pb2
+from ._proto.recognition.v1 import common_pb2, place_pb2
 from .errors import InvalidArgument
 
 Image = Any  # bytes | str | os.PathLike | numpy.ndarray | common_pb2.Features | common_pb2.Frame
+Matrix3 = Any  # 3 rows of 3 values | numpy.ndarray (3, 3) or (9,) | 9 values, row-major
+
+_IDENTITY = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+# The fields a view of a rig frame may carry (the rest is the rig's or the rig frame's).
+_VIEW_FIELDS = {"encoded_image", "raw_image", "features", "depth", "right", "camera_id"}
 
 
 def read_bytes(source: bytes | str | os.PathLike) -> bytes:
@@ -152,16 +160,24 @@ def make_frame(image: Image, timestamp: float | None = None,
     ``exclude_frame_ids`` (place maps): frame ids, as the server returned them, that are never
     candidates for this frame — a SLAM's keyframes covisible with it (at most 1000).
     """
+    if (depth is not None or right is not None) and intrinsics is None:
+        raise InvalidArgument("depth and right images need the frame's intrinsics")
     frame = common_pb2.Frame(timestamp=timestamp, client_frame_id=client_frame_id,
                              camera_id=camera_id,  # timestamp=None leaves the field unset
                              exclude_frame_ids=list(exclude_frame_ids))
     _set_image(frame, image)
     if intrinsics is not None:
         frame.intrinsics.CopyFrom(make_intrinsics(intrinsics))
+    _set_structure(frame, depth, depth_scale, right, baseline)
+    return frame
+
+
+def _set_structure(frame: common_pb2.Frame, depth, depth_scale: float, right,
+                   baseline: float) -> None:
+    """Puts the depth or the right image of :func:`make_frame` (either may be None) into
+    ``frame``."""
     if depth is not None and right is not None:
         raise InvalidArgument("a frame carries depth or a right image, not both")
-    if (depth is not None or right is not None) and intrinsics is None:
-        raise InvalidArgument("depth and right images need the frame's intrinsics")
     if isinstance(depth, common_pb2.DepthImage):
         frame.depth.CopyFrom(depth)
     elif _ndarray(depth) is not None:
@@ -178,6 +194,102 @@ def make_frame(image: Image, timestamp: float | None = None,
         else:
             frame.right.encoded_image = read_bytes(right)
         frame.right.baseline_m = baseline
+
+
+def rig_camera(name: str, size: tuple[int, int],
+               intrinsics: common_pb2.CameraIntrinsics | Sequence[float],
+               rotation: Matrix3 = _IDENTITY, translation: Sequence[float] = (0.0, 0.0, 0.0),
+               distortion: Sequence[float] = ()) -> place_pb2.RigCameraSettings:
+    """One camera of a rig map, for ``MapSettings(rig=[...])``.
+
+    ``name`` is the camera's name (1..128 characters of [A-Za-z0-9._-], unique in the rig), which
+    the views of :func:`make_rig_frame` are keyed by; ``size`` ``(width, height)`` of its images
+    in pixels; ``intrinsics`` as in :func:`make_intrinsics`, or ``distortion`` its OpenCV
+    coefficients (none, 4, 5 or 8) given apart. The camera's pose in the body frame,
+    T_body<-camera (X_body = R X_camera + t), is ``rotation`` R (3x3: rows, a NumPy array, or 9
+    values row-major) and ``translation`` t (3 values, metres). ``InvalidArgument`` for a wrong
+    number of values or distortion given twice; the server checks that R is a rotation.
+    """
+    if len(size) != 2:
+        raise InvalidArgument(f"rig camera {name!r}: size is (width, height) in pixels")
+    translation = [float(v) for v in translation]
+    if len(translation) != 3:
+        raise InvalidArgument(f"rig camera {name!r}: a translation is 3 values (metres), not "
+                              f"{len(translation)}")
+    camera = place_pb2.RigCameraSettings(
+        name=name, intrinsics=make_intrinsics(intrinsics), width=size[0], height=size[1],
+        body_pose=common_pb2.Pose(rotation=_rotation_values(name, rotation),
+                                  translation=translation))
+    if distortion:
+        if camera.intrinsics.distortion:
+            raise InvalidArgument(f"rig camera {name!r}: distortion given twice (in intrinsics "
+                                  "and apart)")
+        camera.intrinsics.distortion.extend(float(v) for v in distortion)
+    return camera
+
+
+def _rotation_values(name: str, rotation: Matrix3) -> list[float]:
+    """The 9 values, row-major, of the rotation of :func:`rig_camera` ``name``: 3 rows of 3, a
+    (3, 3) or (9,) array, or 9 values."""
+    array = _ndarray(rotation)
+    rows = array.tolist() if array is not None else list(rotation)
+    if all(isinstance(row, Iterable) for row in rows):
+        rows = [list(row) for row in rows]
+        values = [v for row in rows for v in row] if [len(r) for r in rows] == [3, 3, 3] else []
+    else:
+        values = rows
+    if len(values) != 9:
+        raise InvalidArgument(f"rig camera {name!r}: a rotation is 3x3 (3 rows of 3, or 9 values "
+                              "row-major)")
+    return [float(v) for v in values]
+
+
+def rig_view(image: Image, depth=None, depth_scale: float = 1000.0, right=None,
+             baseline: float = 0.0) -> common_pb2.Frame:
+    """A view of a rig frame with its 3D structure, for metric loops: ``image`` (any form in the
+    module comment but a Frame) with ``depth`` or ``right`` and ``baseline`` as in
+    :func:`make_frame`. The camera's intrinsics (without distortion) come from the rig, so the
+    view carries none. A view without depth or right image needs no call: give the image."""
+    view = common_pb2.Frame()
+    _set_image(view, image)
+    _set_structure(view, depth, depth_scale, right, baseline)
+    return view
+
+
+def make_rig_frame(views: Mapping[str, Image], timestamp: float | None = None,
+                   client_frame_id: str = "", exclude_frame_ids: Sequence[int] = ()
+                   ) -> common_pb2.Frame:
+    """A frame of a rig map: ``views`` maps every camera's name to its image, in any form of the
+    module comment, or to a Frame holding only the view's content and its ``depth`` or
+    ``right`` image (see :func:`rig_view`). The views are sent in the mapping's order, each
+    naming its camera (``camera_id``); the camera's intrinsics, size and pose come from the rig.
+
+    ``timestamp``, ``client_frame_id`` and ``exclude_frame_ids`` (rig frame ids) are the rig
+    frame's, as in :func:`make_frame`. The server refuses a frame that misses a camera of the
+    rig or names an unknown one, or an image of another size than its camera's.
+    ``InvalidArgument`` here for no views, or a view Frame that carries more than its content,
+    depth and right image (a timestamp, client_frame_id, intrinsics, exclude_frame_ids, views,
+    or another camera's ``camera_id``).
+    """
+    if not views:
+        raise InvalidArgument("a rig frame has one view per camera of the rig, not none")
+    frame = common_pb2.Frame(timestamp=timestamp, client_frame_id=client_frame_id,
+                             exclude_frame_ids=list(exclude_frame_ids))
+    for camera, image in views.items():
+        view = frame.views.add()
+        if isinstance(image, common_pb2.Frame):
+            extra = [field.name for field, _ in image.ListFields()
+                     if field.name not in _VIEW_FIELDS]
+            if extra:
+                raise InvalidArgument(f"the view of camera {camera!r} carries {', '.join(extra)}: "
+                                      "a view holds only its image and its depth or right image")
+            if image.camera_id not in ("", camera):
+                raise InvalidArgument(f"the view of camera {camera!r} names camera "
+                                      f"{image.camera_id!r}")
+            view.CopyFrom(image)
+        else:
+            _set_image(view, image)
+        view.camera_id = camera
     return frame
 
 

@@ -25,8 +25,9 @@ try:
     from recogd_process import Recogd
     from recog_client import (AlreadyExists, Cancelled, InvalidArgument, NotFound,
                               PermissionDenied, RecognitionClient, ResultOptions,
-                              Unauthenticated, Unavailable, make_features, make_frame, object_pb2,
-                              place_pb2, repository_pb2)
+                              Unauthenticated, Unavailable, make_features, make_frame,
+                              make_rig_frame, object_pb2, place_pb2, repository_pb2, rig_camera,
+                              rig_view)
 except ModuleNotFoundError as missing:
     if missing.name.split(".")[0] not in ("grpc", "google"):
         raise  # the package is not on PYTHONPATH: an error, not a skip
@@ -39,6 +40,7 @@ import numpy  # noqa: E402
 CORRIDOR = Path(os.environ.get("RECOG_SOURCE_DIR", ".")) / "tests" / "data" / "corridor"
 TLS = Path(os.environ.get("RECOG_SOURCE_DIR", ".")) / "tests" / "data" / "tls"
 EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "stream_folder.py"
+CORRIDOR_CAMERA = (500.0, 500.0, 256.0, 192.0)  # fx fy cx cy of the 512x384 corridor images
 
 
 def corridor(n: int) -> Path:
@@ -55,6 +57,21 @@ def depth_png(width: int, height: int, millimetres: int) -> bytes:
     header = struct.pack(">IIBBBBB", width, height, 16, 0, 0, 0, 0)  # 16-bit grey
     return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"IDAT", zlib.compress(rows))
             + chunk(b"IEND", b""))
+
+
+def noise(seed: int, size: tuple[int, int] = (512, 384)) -> numpy.ndarray:
+    """A grey image of blurred random blocks (``size`` = (width, height)) that matches no place
+    and no other seed's image."""
+    blocks = numpy.random.default_rng(seed).integers(0, 256, (48, 64), dtype=numpy.uint8)
+    return cv2.GaussianBlur(cv2.resize(blocks, size, interpolation=cv2.INTER_NEAREST), (3, 3), 0)
+
+
+def front_and_rear_rig() -> list:
+    """A rig of two corridor cameras 0.8 m apart on the body's z axis, back to back: "front" looks
+    along +z, "rear" along -z (turned half round the y axis)."""
+    return [rig_camera("front", (512, 384), CORRIDOR_CAMERA, translation=(0, 0, 0.4)),
+            rig_camera("rear", (512, 384), CORRIDOR_CAMERA,
+                       rotation=numpy.diag([-1.0, 1.0, -1.0]), translation=(0, 0, -0.4))]
 
 
 class RecognitionClientTest(unittest.TestCase):
@@ -275,6 +292,105 @@ class RecognitionClientTest(unittest.TestCase):
         with self.assertRaises(InvalidArgument):
             self.client.relocalize([], maps=["lost-a"])
         self.assertEqual(self.client.get_map("lost-a").frames, 1)  # nothing was added
+
+    def test_a_rig_s_rear_camera_finds_what_its_front_camera_saw(self):
+        rig = front_and_rear_rig()
+        self.client.create_map("rig", place_pb2.MapSettings(rig=rig, recent_frames=1))
+        for i, n in enumerate((1, 20, 41)):
+            # the front view of frame 20 has its depth (a plane 2 m away), for a metric loop
+            front = corridor(n) if n != 20 else rig_view(corridor(n),
+                                                         depth=depth_png(512, 384, 2000))
+            frame = make_rig_frame({"front": front, "rear": noise(n)}, client_frame_id=f"rig-{n}")
+            added = self.client.add_frame("rig", frame)
+            self.assertEqual(added.frame_id, 2 * i)  # the id of its first camera image
+        info = self.client.get_map("rig")
+        self.assertEqual(info.frames, 3)
+        self.assertEqual(list(info.settings.rig), rig)
+        # The robot came back turned round: its rear camera sees what the front one saw.
+        query = make_rig_frame({"front": noise(99), "rear": corridor(20)})
+        result = self.client.query_place("rig", query).result
+        self.assertEqual(result.status, place_pb2.LOOP_STATUS_LOOP_DETECTED)
+        self.assertEqual((result.match_frame_id, result.match_client_frame_id), (2, "rig-20"))
+        self.assertEqual([(p.query_camera, p.match_camera) for p in result.rig.pairs],
+                         [("rear", "front")])
+        # The rear camera where the front one was: the body turned half round, in place.
+        self.assertTrue(result.rig.metric)
+        numpy.testing.assert_allclose(result.rig.body_pose.rotation,
+                                      numpy.diag([-1.0, 1.0, -1.0]).ravel(), atol=1e-3)
+        numpy.testing.assert_allclose(result.rig.body_pose.translation, [0, 0, 0], atol=0.01)
+        self.assertEqual(self.client.get_map("rig").frames, 3)  # the query added nothing
+
+    def test_a_rig_frame_missing_a_camera_or_of_another_size_is_refused_naming_the_camera(self):
+        self.client.create_map("rig-refusals", {"rig": front_and_rear_rig()})
+        self.client.add_frame("rig-refusals",
+                              make_rig_frame({"front": corridor(1), "rear": noise(1)}))
+        refused = {"'rear'": make_rig_frame({"front": corridor(20)}),
+                   "rig camera 'rear'": make_rig_frame({"front": corridor(20),
+                                                        "rear": noise(20, (320, 240))}),
+                   "is a rig map": make_frame(corridor(20))}
+        for words, frame in refused.items():
+            with self.assertRaises(InvalidArgument) as raised:
+                self.client.add_frame("rig-refusals", frame)
+            self.assertIn(words, raised.exception.details)
+        self.assertEqual(self.client.get_map("rig-refusals").frames, 1)
+        self.client.create_map("no-rig")
+        self.assert_raises(InvalidArgument, self.client.add_frame, "no-rig",
+                           make_rig_frame({"front": corridor(1)}))
+        self.assertEqual(self.client.get_map("no-rig").frames, 0)
+
+    def test_rig_cameras_and_rig_frames_are_checked_before_they_are_sent(self):
+        quarter = [[0, -1, 0], [1, 0, 0], [0, 0, 1]]  # a quarter turn about z
+        for rotation in (quarter, numpy.array(quarter), sum(quarter, [])):
+            side = rig_camera("side", (512, 384), CORRIDOR_CAMERA, rotation=rotation)
+            self.assertEqual(list(side.body_pose.rotation), [0, -1, 0, 1, 0, 0, 0, 0, 1])
+        self.assertEqual(list(side.body_pose.translation), [0, 0, 0])
+        self.assertEqual((side.width, side.height, side.intrinsics.cx), (512, 384, 256))
+        distorted = rig_camera("side", (512, 384), CORRIDOR_CAMERA, distortion=(0.1, 0, 0, 0))
+        self.assertEqual(list(distorted.intrinsics.distortion), [0.1, 0, 0, 0])
+        with self.assertRaises(InvalidArgument):
+            rig_camera("side", (512, 384), CORRIDOR_CAMERA, translation=(0.0, 0.4))
+        with self.assertRaises(InvalidArgument):
+            rig_camera("side", (512, 384), CORRIDOR_CAMERA, rotation=quarter[:2])
+        with self.assertRaises(InvalidArgument):  # distortion in the intrinsics and apart
+            rig_camera("side", (512, 384), (*CORRIDOR_CAMERA, 0.1, 0, 0, 0),
+                       distortion=(0.1, 0, 0, 0))
+        frame = make_rig_frame({"rear": corridor(1), "front": make_frame(noise(1))},
+                               timestamp=0.0, client_frame_id="both", exclude_frame_ids=[2])
+        self.assertEqual([view.camera_id for view in frame.views], ["rear", "front"])
+        self.assertEqual(frame.views[1].raw_image.width, 512)
+        self.assertIsNone(frame.WhichOneof("content"))
+        self.assertEqual((frame.timestamp, frame.client_frame_id, list(frame.exclude_frame_ids)),
+                         (0.0, "both", [2]))
+        with self.assertRaises(InvalidArgument):
+            make_rig_frame({})
+        with self.assertRaises(InvalidArgument) as timed:
+            make_rig_frame({"front": make_frame(corridor(1), timestamp=1.0)})
+        self.assertIn("timestamp", timed.exception.details)
+        with self.assertRaises(InvalidArgument):  # the camera's intrinsics come from the rig
+            make_rig_frame({"front": make_frame(corridor(1), intrinsics=CORRIDOR_CAMERA)})
+        with self.assertRaises(InvalidArgument):
+            make_rig_frame({"front": make_frame(corridor(1), camera_id="rear")})
+        with self.assertRaises(InvalidArgument):
+            rig_view(corridor(1), depth=depth_png(512, 384, 2000), right=corridor(20), baseline=0.1)
+
+    def test_a_rig_stream_creates_its_map_and_a_bad_camera_image_fails_its_frame_only(self):
+        frames = [make_rig_frame({"front": corridor(1), "rear": noise(1)}),
+                  make_rig_frame({"front": corridor(20), "rear": b"\xff\xd8 this is not a JPEG"}),
+                  make_rig_frame({"front": corridor(20), "rear": noise(20)}),
+                  make_rig_frame({"front": noise(2), "rear": corridor(1)})]
+        settings = {"temporal_matches": 0, "recent_frames": 1, "rig": front_and_rear_rig()}
+        answers = list(self.client.stream_frames("rig-stream", frames, settings=settings))
+        self.assertEqual([answer.sequence for answer in answers], [0, 1, 2, 3])
+        self.assertIn("rig camera 'rear'", answers[1].error.message)
+        # the failed frame took no id
+        self.assertEqual([answers[i].result.frame_id for i in (0, 2, 3)], [0, 2, 4])
+        last = answers[3].result
+        self.assertEqual(last.status, place_pb2.LOOP_STATUS_LOOP_DETECTED)
+        self.assertEqual(last.match_frame_id, 0)
+        self.assertEqual(last.rig.pairs[0].query_camera, "rear")
+        self.assertEqual(last.rig.pairs[0].match_camera, "front")
+        info = self.client.get_map("rig-stream")
+        self.assertEqual((info.frames, [c.name for c in info.settings.rig]), (3, ["front", "rear"]))
 
     def test_frames_from_numpy_arrays_and_from_client_side_features_find_the_place(self):
         self.client.create_map("arrays")
