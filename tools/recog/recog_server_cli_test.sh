@@ -176,6 +176,50 @@ else fail "SIGINT ends the stream: exit $code, $(cat "$tmp/out")"; fi
 expect_error "query of an unknown map" "NOT_FOUND" "$recog" query --map nowhere "$images/41.jpg" "${server[@]}"
 expect_error "query of a missing image" "NOT_FOUND" "$recog" query --map corridor "$tmp/none.jpg" "${server[@]}"
 
+# A rig map: a front + rear rig driven out and back (seqgen rig over tiles of the corridor photos),
+# streamed with --rig; the way back's cameras find what the other camera saw on the way out.
+mkdir -p "$tmp/tiles"
+/usr/bin/python3 -c "
+import cv2, glob
+for path in sorted(glob.glob('$images/*.jpg')):
+    photo = cv2.imread(path, cv2.IMREAD_GRAYSCALE); h, w = photo.shape[0] // 3, photo.shape[1] // 3
+    for q in range(9):
+        name = path.split('/')[-1][:-4]
+        cv2.imwrite(f'$tmp/tiles/{name}_{q}.png', photo[(q // 3) * h:(q // 3 + 1) * h, (q % 3) * w:(q % 3 + 1) * w])
+"
+expect_ok "seqgen rig for the rig map" "$recog" seqgen rig --images "$tmp/tiles" -o "$tmp/rig" \
+  --frames-per-leg 8 --width 320 --height 240 --focal 160 --depth -q
+expect_ok "stream --rig into a new rig map" "$recog" stream --map rig --create --preset keyframes \
+  --rig "$tmp/rig" --draw "$tmp/rig_loops" --json -q "${server[@]}"
+/usr/bin/python3 -c "
+import json; e=[json.loads(l) for l in open('$tmp/out')]
+loops=[l for l in e if l['event']=='loop']; s=e[-1]
+assert s['frames']==16 and s['errors']==0 and len(loops)>=6, e
+back=[l for l in loops if l['frame']>=16]
+assert len(back)>=6 and all(l['match']<16 and l['frame']%2==0 for l in back), back
+assert any({'query_camera':'rear','match_camera':'front'}.items()<=p.items() for l in back for p in l['rig']['pairs']), back
+assert all(len(p['inlier_correspondences'])==p['inliers'] for l in back for p in l['rig']['pairs']), back" \
+  && pass || fail "stream --rig finds the way back's loops across cameras: $(head -c 600 "$tmp/out")"
+ls "$tmp/rig_loops"/loop_*.png >/dev/null 2>&1 && pass || fail "stream --rig --draw writes the loops"
+expect_ok "maps stats of the rig map" "$recog" maps stats rig --json "${server[@]}"
+json_check "the rig map has 16 rig frames" "assert d['frames']==16 and d['next_frame_id']==32, d"
+expect_ok "query --rig" "$recog" query --map rig --rig "$tmp/rig/rig.yaml" \
+  "$tmp/rig/front/rgb/000011.png" "$tmp/rig/rear/rgb/000011.png" --json "${server[@]}"
+json_check "query --rig finds the rig frame and the body pose" \
+  "assert d['status']=='loop_detected' and d['match']==22 and d['rig']['posed'] \
+   and len(d['rig']['pairs'])==2, d"
+expect_error "query --rig with an image short" "one image per camera" "$recog" query --map rig \
+  --rig "$tmp/rig/rig.yaml" "$tmp/rig/front/rgb/000011.png" "${server[@]}"
+expect_error "a single image into a rig map" "INVALID_ARGUMENT.*rig map" "$recog" query --map rig \
+  "$tmp/rig/front/rgb/000011.png" "${server[@]}"
+cp "$tmp/rig/rear/rgb/000003.png" "$tmp/small.png"
+/usr/bin/python3 -c "import cv2; cv2.imwrite('$tmp/small.png', cv2.imread('$tmp/small.png')[:120, :160])"
+expect_error "a camera image of the wrong size" "INVALID_ARGUMENT.*rig camera 'rear'.*160x120" \
+  "$recog" query --map rig --add --rig "$tmp/rig/rig.yaml" "$tmp/rig/front/rgb/000011.png" \
+  "$tmp/small.png" "${server[@]}"
+expect_ok "maps stats of the rig map" "$recog" maps stats rig --json "${server[@]}"
+json_check "the refused rig frames added nothing" "assert d['frames']==16, d"
+
 # A SLAM's keyframes: its own ids come back with the match and the candidates; culling.
 expect_ok "maps create slam" "$recog" maps create slam "${server[@]}"
 for n in 1 20 41 60; do

@@ -2,9 +2,10 @@
 // over the C++ client library. All take the ServerFlags; a failed call prints one line
 // "recog <cmd>: CODE: message" and exits 1.
 //
-//   stream      a recorded sequence (folder, list or video) through one StreamFrames call,
-//               printing every loop closure as it is answered
-//   query       one QueryPlace: relocalisation, or the loop detector's step with --add
+//   stream      a recorded sequence (folder, list or video; or a multi-camera rig sequence)
+//               through one StreamFrames call, printing every loop closure as it is answered
+//   query       one QueryPlace: relocalisation, or the loop detector's step with --add (one
+//               image, or one per camera of a rig)
 //   relocalize  one Relocalize: a few images looked up in maps or a group, nothing added
 #include <chrono>
 #include <csignal>
@@ -33,6 +34,8 @@
 #include "tools/common/server_flags.h"
 #include "tools/evaluation/object_evaluation.h"
 #include "tools/evaluation/place_evaluation.h"
+#include "tools/evaluation/rig_dataset.h"
+#include "tools/evaluation/rig_file.h"
 #include "tools/recog/commands.h"
 #include "wire/grpc_code_names.h"
 
@@ -47,16 +50,29 @@ std::string StatusLabel(pb::LoopStatus status) {
   return EnumLabel(pb::LoopStatus_Name(status), "LOOP_STATUS_");
 }
 
+// The correspondences as [{query_index, query: [x, y], match_index, match: [x, y]}].
+json CorrespondencesJson(const google::protobuf::RepeatedPtrField<pb::Correspondence>& in) {
+  json pairs = json::array();
+  for (const pb::Correspondence& c : in) {
+    pairs.push_back({{"query_index", c.query_index()},
+                     {"query", {c.query_x(), c.query_y()}},
+                     {"match_index", c.match_index()},
+                     {"match", {c.match_x(), c.match_y()}}});
+  }
+  return pairs;
+}
+
 json LoopJson(const pb::LoopResult& r) {
-  json out = {{"status", StatusLabel(r.status())},
-              {"score", r.score()},
-              {"normalized_score", r.normalized_score()},
-              {"previous_score", r.previous_score()},
-              {"island", {{"first", r.island_first()}, {"last", r.island_last()}}},
-              {"island_score", r.island_score()},
-              {"consistent_queries", r.consistent_queries()},
-              {"correspondences", r.correspondences()},
-              {"inliers", r.inliers()}};
+  json out = {{"status", StatusLabel(r.status())}, {"score", r.score()}};
+  if (!r.has_rig()) {  // a rig map's scores are pooled over cameras, without islands
+    out.update({{"normalized_score", r.normalized_score()},
+                {"previous_score", r.previous_score()},
+                {"island", {{"first", r.island_first()}, {"last", r.island_last()}}},
+                {"island_score", r.island_score()},
+                {"consistent_queries", r.consistent_queries()}});
+  }
+  out["correspondences"] = r.correspondences();
+  out["inliers"] = r.inliers();
   if (r.has_frame_id()) out["frame"] = r.frame_id();
   if (r.has_match_frame_id()) {
     out["match"] = r.match_frame_id();
@@ -75,20 +91,46 @@ json LoopJson(const pb::LoopResult& r) {
     out["candidates"] = std::move(candidates);
   }
   if (r.inlier_correspondences_size() > 0) {
-    json pairs = json::array();
-    for (const pb::Correspondence& c : r.inlier_correspondences()) {
-      pairs.push_back({{"query_index", c.query_index()},
-                       {"query", {c.query_x(), c.query_y()}},
-                       {"match_index", c.match_index()},
-                       {"match", {c.match_x(), c.match_y()}}});
-    }
-    out["inlier_correspondences"] = std::move(pairs);
+    out["inlier_correspondences"] = CorrespondencesJson(r.inlier_correspondences());
   }
   if (r.has_relative_pose()) {
     const pb::Pose& pose = r.relative_pose();
     out["relative_pose"] = {
         {"rotation", std::vector<double>(pose.rotation().begin(), pose.rotation().end())},
         {"translation", std::vector<double>(pose.translation().begin(), pose.translation().end())}};
+  }
+  if (r.has_rig()) {
+    const pb::RigLoop& rig = r.rig();
+    json pairs = json::array();
+    for (const pb::RigCameraMatch& pair : rig.pairs()) {
+      pairs.push_back({{"query_camera", pair.query_camera()},
+                       {"match_camera", pair.match_camera()},
+                       {"correspondences", pair.correspondences()},
+                       {"inliers", pair.inliers()},
+                       {"posed", pair.posed()},
+                       {"metric", pair.metric()},
+                       {"consistent_ratio", pair.consistent_ratio()}});
+      if (pair.inlier_correspondences_size() > 0) {
+        pairs.back()["inlier_correspondences"] = CorrespondencesJson(pair.inlier_correspondences());
+      }
+    }
+    json rig_json = {{"pairs", std::move(pairs)},
+                     {"rotation_disagreement_deg", rig.rotation_disagreement_deg()},
+                     {"posed", rig.posed()},
+                     {"metric", rig.metric()}};
+    if (rig.posed()) {
+      // X_body_query = R X_body_match + t; t in metres when metric, else zero
+      const pb::Pose& body = rig.body_pose();
+      rig_json["body_pose"] = {
+          {"rotation", std::vector<double>(body.rotation().begin(), body.rotation().end())},
+          {"translation",
+           std::vector<double>(body.translation().begin(), body.translation().end())}};
+    }
+    if (rig.metric()) {
+      rig_json["covariance"] =
+          std::vector<double>(rig.covariance().begin(), rig.covariance().end());
+    }
+    out["rig"] = std::move(rig_json);
   }
   if (r.has_metric()) {
     const pb::MetricLoop& m = r.metric();
@@ -121,7 +163,8 @@ json TimingJson(const pb::Timing& t) {
 
 struct StreamArgs {
   ServerFlags server;
-  std::string map, images, draw;
+  std::string map, images, rig, draw;
+  double depth_scale = 5000;  // --rig: units per metre of the cameras' 16-bit depth images
   std::string preset;  // with create: the new map's detector preset (the server's when empty)
   std::string group;   // with create: the new map's group
   std::vector<std::string> search_maps;  // other maps every frame is looked up in
@@ -150,10 +193,102 @@ client::Result<pb::Frame> StreamFrame(const StreamArgs& args, bool from_file,
   return from_file ? FrameFromImageFile(name, gray) : client::FrameFromImage(gray);
 }
 
+// What recog stream sends: the frames of an image sequence (--images), or the rig frames of a
+// rig sequence (--rig: one view per camera, with the camera's depth image when it has one).
+class StreamSequence {
+ public:
+  static StatusOr<StreamSequence> Open(const StreamArgs& args) {
+    StreamSequence sequence;
+    if (!args.rig.empty()) {
+      RECOG_ASSIGN_OR_RETURN(sequence.rig_, ReadRigDataset(args.rig));
+      for (const RigCamera& camera : sequence.rig_->cameras) {
+        sequence.cameras_.push_back(camera.name);
+      }
+    } else {
+      RECOG_ASSIGN_OR_RETURN(sequence.images_, FrameSource::Open(args.images));
+      sequence.cameras_ = {""};
+    }
+    return sequence;
+  }
+
+  size_t size() const { return rig_ ? rig_->images.size() : images_->size(); }
+  // The camera of each of a frame's images ("" for the one camera of an image sequence).
+  const std::vector<std::string>& cameras() const { return cameras_; }
+  // With --rig: the rig of a map --create makes.
+  void AddRig(pb::MapSettings* settings) const {
+    if (!rig_) return;
+    for (const RigCamera& c : rig_->cameras) {
+      *settings->add_rig() = client::MakeRigCamera(c.name, c.size, c.K, c.distortion,
+                                                   c.body_R_camera, c.body_t_camera);
+    }
+  }
+
+  // The next frame, its name (its first image's path) and its grey images (one per camera);
+  // false at the end. A frame that cannot be read or built is an error, and the next call goes
+  // on with the following one.
+  StatusOr<bool> Next(const StreamArgs& args, pb::Frame* frame, std::string* name,
+                      std::vector<cv::Mat>* images) {
+    images->clear();
+    std::optional<double> recorded;
+    if (rig_) {
+      if (next_ == rig_->images.size()) return false;
+      const size_t i = next_++;
+      *frame = pb::Frame();
+      *name = rig_->images[i].front();
+      for (size_t c = 0; c < cameras_.size(); ++c) {
+        RECOG_ASSIGN_OR_RETURN(cv::Mat gray, ReadGrayImage(rig_->images[i][c]));
+        client::Result<pb::Frame> view =
+            StreamFrame(args, /*from_file=*/true, rig_->images[i][c], gray);
+        if (!view.ok()) return Status::InvalidArgument(view.status().error_message());
+        RECOG_RETURN_IF_ERROR(AttachDepth(rig_->depths[i][c], args.depth_scale, &*view));
+        const grpc::Status added = client::AddRigView(cameras_[c], std::move(*view), frame);
+        if (!added.ok()) return Status::InvalidArgument(added.error_message());
+        images->push_back(std::move(gray));
+      }
+      recorded = rig_->timestamps[i];
+    } else {
+      cv::Mat gray;
+      RECOG_ASSIGN_OR_RETURN(const bool more, images_->Next(&gray, name));
+      if (!more) return false;
+      client::Result<pb::Frame> built = StreamFrame(args, !images_->is_video(), *name, gray);
+      if (!built.ok()) return Status::InvalidArgument(built.status().error_message());
+      *frame = std::move(*built);
+      images->push_back(std::move(gray));
+      recorded = images_->timestamp();
+    }
+    if (args.timestamps) {
+      frame->set_timestamp(
+          recorded.has_value()
+              ? *recorded
+              : std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch())
+                    .count());
+    }
+    return true;
+  }
+
+ private:
+  StreamSequence() = default;
+
+  // A camera's depth image (none when `path` is empty), in units of 1/units_per_metre metres.
+  static Status AttachDepth(const std::string& path, double units_per_metre, pb::Frame* view) {
+    if (path.empty()) return Status::Ok();
+    const cv::Mat depth = cv::imread(path, cv::IMREAD_ANYDEPTH);
+    if (depth.empty()) return Status::InvalidArgument("cannot read depth image '" + path + "'");
+    const grpc::Status attached = client::AttachDepth(depth, units_per_metre, view);
+    if (!attached.ok()) return Status::InvalidArgument(path + ": " + attached.error_message());
+    return Status::Ok();
+  }
+
+  std::optional<FrameSource> images_;
+  std::optional<RigDataset> rig_;
+  std::vector<std::string> cameras_;
+  size_t next_ = 0;
+};
+
 // What recog stream keeps of the frames it sent, to name (and draw) the loops.
 struct SentFrames {
   std::vector<std::string> names;             // by sequence: file names
-  std::vector<cv::Mat> images;                // by sequence, with --draw
+  std::vector<std::vector<cv::Mat>> images;   // by sequence, per camera, with --draw
   std::map<uint64_t, size_t> sequence_of_id;  // the map's frame id -> sequence
 
   // "45 (45.jpg)"; "3" for a frame that an earlier session added.
@@ -164,17 +299,56 @@ struct SentFrames {
   }
 };
 
-// Both frames of a loop side by side with a caption, as DIR/loop_<frame>_<match>.png.
-Status DrawLoop(const std::string& dir, const SentFrames& sent, uint64_t frame, uint64_t match,
-                uint32_t inliers) {
+// "rear>front, front>front": the camera pairs of a rig loop (empty for other loops).
+std::string CameraPairs(const pb::LoopResult& r) {
+  std::string pairs;
+  for (const pb::RigCameraMatch& pair : r.rig().pairs()) {
+    pairs += (pairs.empty() ? "" : ", ") + pair.query_camera() + ">" + pair.match_camera();
+  }
+  return pairs;
+}
+
+// The two images of a loop side by side with their inlier correspondences and a caption, as
+// DIR/loop_<frame>_<match>.png. A rig loop shows its first camera pair.
+Status DrawLoop(const std::string& dir, const SentFrames& sent,
+                const std::vector<std::string>& cameras, const pb::LoopResult& r) {
+  const uint64_t frame = r.frame_id(), match = r.match_frame_id();
   const size_t a = sent.sequence_of_id.at(frame), b = sent.sequence_of_id.at(match);
+  size_t query_camera = 0, match_camera = 0;
+  const google::protobuf::RepeatedPtrField<pb::Correspondence>* inliers =
+      &r.inlier_correspondences();
+  if (r.rig().pairs_size() > 0) {
+    const pb::RigCameraMatch& pair = r.rig().pairs(0);
+    const auto index = [&](const std::string& name) {
+      return size_t(std::find(cameras.begin(), cameras.end(), name) - cameras.begin());
+    };
+    query_camera = index(pair.query_camera());
+    match_camera = index(pair.match_camera());
+    if (query_camera == cameras.size() || match_camera == cameras.size()) {
+      return Status::InvalidArgument("the loop names a camera the sequence does not have");
+    }
+    inliers = &pair.inlier_correspondences();
+  }
+  std::vector<cv::KeyPoint> query_points, match_points;
+  std::vector<cv::DMatch> lines;
+  for (const pb::Correspondence& c : *inliers) {
+    lines.emplace_back(int(query_points.size()), int(match_points.size()), 0.0f);
+    query_points.emplace_back(c.query_x(), c.query_y(), 1.0f);
+    match_points.emplace_back(c.match_x(), c.match_y(), 1.0f);
+  }
   cv::Mat canvas;
-  const std::vector<cv::KeyPoint> none;
-  cv::drawMatches(sent.images[a], none, sent.images[b], none, std::vector<cv::DMatch>(), canvas);
+  cv::drawMatches(sent.images[a][query_camera], query_points, sent.images[b][match_camera],
+                  match_points, lines, canvas, cv::Scalar(0, 200, 0));
   cv::copyMakeBorder(canvas, canvas, 36, 0, 0, 0, cv::BORDER_CONSTANT, cv::Scalar(255, 255, 255));
+  const std::string pairs = CameraPairs(r);
   const std::string caption = "frame " + sent.Describe(frame) + " closes a loop with frame " +
-                              sent.Describe(match) + ": " + std::to_string(inliers) + " inliers";
-  cv::putText(canvas, caption, {8, 25}, cv::FONT_HERSHEY_SIMPLEX, 0.6, cv::Scalar(0, 0, 0), 1,
+                              sent.Describe(match) + ": " + std::to_string(r.inliers()) +
+                              " inliers" + (pairs.empty() ? "" : " (" + pairs + ")");
+  // The caption shrinks to fit small images.
+  int baseline = 0;
+  const double width = cv::getTextSize(caption, cv::FONT_HERSHEY_SIMPLEX, 0.6, 1, &baseline).width;
+  const double scale = std::min(0.6, 0.6 * (canvas.cols - 16) / width);
+  cv::putText(canvas, caption, {8, 25}, cv::FONT_HERSHEY_SIMPLEX, scale, cv::Scalar(0, 0, 0), 1,
               cv::LINE_AA);
   const std::string path =
       (fs::path(dir) / ("loop_" + std::to_string(frame) + "_" + std::to_string(match) + ".png"))
@@ -185,7 +359,10 @@ Status DrawLoop(const std::string& dir, const SentFrames& sent, uint64_t frame, 
 
 int RunStream(const StreamArgs& args, RecognitionClient& client) {
   if (!(args.rate >= 0)) return Fail("stream", Status::InvalidArgument("--rate must be >= 0"));
-  auto source = FrameSource::Open(args.images);
+  if (args.images.empty() == args.rig.empty()) {
+    return Fail("stream", Status::InvalidArgument("give --images or --rig"));
+  }
+  auto source = StreamSequence::Open(args);
   if (!source.ok()) return Fail("stream", source.status());
   if (!args.draw.empty()) {
     std::error_code ec;
@@ -202,6 +379,9 @@ int RunStream(const StreamArgs& args, RecognitionClient& client) {
   if (!args.group.empty()) config.mutable_settings()->set_group(args.group);
   for (const std::string& name : args.search_maps) config.add_search_maps(name);
   config.set_search_group(args.search_group);
+  if (args.create) source->AddRig(config.mutable_settings());
+  // Drawn loops show their inliers.
+  config.mutable_options()->set_include_correspondences(!args.draw.empty());
   auto stream = client::FrameStream::Open(client, config);
   if (!stream.ok()) return Fail("stream", stream.status());
 
@@ -258,15 +438,15 @@ int RunStream(const StreamArgs& args, RecognitionClient& client) {
       std::printf("%s\n", loop.dump().c_str());
     } else {
       progress.Finish();
-      std::printf("frame %s closes a loop with frame %s: %u inliers\n",
+      const std::string pairs = CameraPairs(r);
+      std::printf("frame %s closes a loop with frame %s: %u inliers%s\n",
                   sent.Describe(r.frame_id()).c_str(), sent.Describe(r.match_frame_id()).c_str(),
-                  r.inliers());
+                  r.inliers(), pairs.empty() ? "" : (" (" + pairs + ")").c_str());
     }
     std::fflush(stdout);
     if (!args.draw.empty() && r.has_frame_id() &&
         sent.sequence_of_id.contains(r.match_frame_id())) {
-      if (Status s = DrawLoop(args.draw, sent, r.frame_id(), r.match_frame_id(), r.inliers());
-          !s.ok()) {
+      if (Status s = DrawLoop(args.draw, sent, source->cameras(), r); !s.ok()) {
         ++errors;
         Fail("stream", s);
       }
@@ -299,19 +479,15 @@ int RunStream(const StreamArgs& args, RecognitionClient& client) {
   const auto previous_int = std::signal(SIGINT, StopStreaming);
   const auto previous_term = std::signal(SIGTERM, StopStreaming);
   while (streaming && !stop_streaming && (args.frames == 0 || sent.names.size() < args.frames)) {
-    cv::Mat gray;
+    pb::Frame frame;
     std::string name;
-    StatusOr<bool> more = source->Next(&gray, &name);
+    std::vector<cv::Mat> images;
+    StatusOr<bool> more = source->Next(args, &frame, &name, &images);
     if (!more.ok()) {
       skip(more.status());
       continue;
     }
     if (!*more) break;
-    client::Result<pb::Frame> frame = StreamFrame(args, !source->is_video(), name, gray);
-    if (!frame.ok()) {
-      skip(frame.status());
-      continue;
-    }
     if (args.rate > 0) {
       const auto due =
           start + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
@@ -319,17 +495,9 @@ int RunStream(const StreamArgs& args, RecognitionClient& client) {
       answers_until(due);
       std::this_thread::sleep_until(due);
     }
-    if (args.timestamps) {
-      const std::optional<double> recorded = source->timestamp();
-      frame->set_timestamp(
-          recorded.has_value()
-              ? *recorded
-              : std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch())
-                    .count());
-    }
     sent.names.push_back(fs::path(name).filename().string());
-    if (!args.draw.empty()) sent.images.push_back(gray);
-    pending.push_back((*stream)->Send(std::move(*frame)));
+    if (!args.draw.empty()) sent.images.push_back(std::move(images));
+    pending.push_back((*stream)->Send(std::move(frame)));
     answers_until(std::chrono::steady_clock::now());  // those that have come
     while (streaming && pending.size() > kFramesInFlight) take_oldest();
   }
@@ -367,7 +535,8 @@ int RunStream(const StreamArgs& args, RecognitionClient& client) {
 
 struct QueryArgs {
   ServerFlags server;
-  std::string map, image, camera, client_frame_id, depth, right;
+  std::vector<std::string> images;  // one, or one per camera of --rig in its order
+  std::string map, rig, camera, client_frame_id, depth, right;
   double depth_scale = 1000, baseline = 0;
   bool add = false, correspondences = false;
   uint32_t top_k = 0;
@@ -391,10 +560,43 @@ Status AttachStructure(const std::string& depth, double depth_scale, const std::
   return Status::Ok();
 }
 
+// The frame of `path` (FrameFromImageFile of its grey pixels).
+StatusOr<pb::Frame> ReadFrame(const std::string& path) {
+  RECOG_ASSIGN_OR_RETURN(const cv::Mat gray, ReadGrayImage(path));
+  client::Result<pb::Frame> frame = FrameFromImageFile(path, gray);
+  if (!frame.ok()) return Status::InvalidArgument(frame.status().error_message());
+  return std::move(frame).value();
+}
+
+// recog query's frame: its one image, or with --rig a rig frame of one view per camera.
+StatusOr<pb::Frame> QueryFrame(const QueryArgs& args) {
+  if (args.rig.empty()) {
+    if (args.images.size() != 1) {
+      return Status::InvalidArgument("give one image (or --rig and one image per camera)");
+    }
+    return ReadFrame(args.images.front());
+  }
+  if (!args.camera.empty() || !args.depth.empty() || !args.right.empty()) {
+    return Status::InvalidArgument(
+        "--camera, --depth and --right are for single-camera maps (a rig map has its cameras)");
+  }
+  RECOG_ASSIGN_OR_RETURN(const std::vector<RigCamera> rig, ReadRigFile(args.rig));
+  if (args.images.size() != rig.size()) {
+    return Status::InvalidArgument("the rig has " + std::to_string(rig.size()) +
+                                   " cameras: give one image per camera, in its order, not " +
+                                   std::to_string(args.images.size()));
+  }
+  pb::Frame frame;
+  for (size_t c = 0; c < rig.size(); ++c) {
+    RECOG_ASSIGN_OR_RETURN(pb::Frame view, ReadFrame(args.images[c]));
+    const grpc::Status added = client::AddRigView(rig[c].name, std::move(view), &frame);
+    if (!added.ok()) return Status::InvalidArgument(added.error_message());
+  }
+  return frame;
+}
+
 int RunQuery(const QueryArgs& args, RecognitionClient& client) {
-  auto gray = ReadGrayImage(args.image);
-  if (!gray.ok()) return Fail("query", gray.status());
-  auto frame = FrameFromImageFile(args.image, *gray);
+  auto frame = QueryFrame(args);
   if (!frame.ok()) return Fail("query", frame.status());
   frame->set_client_frame_id(args.client_frame_id);
   pb::ResultOptions options;
@@ -424,12 +626,37 @@ int RunQuery(const QueryArgs& args, RecognitionClient& client) {
   std::printf("status     %s\n", StatusLabel(r.status()).c_str());
   if (r.has_frame_id()) std::printf("added as   frame %llu\n", (unsigned long long)r.frame_id());
   if (r.has_match_frame_id()) {
-    std::printf("match      frame %llu (score %.3f, normalised %.3f)\n",
-                (unsigned long long)r.match_frame_id(), r.score(), r.normalized_score());
+    if (r.has_rig()) {  // a rig frame's score is pooled over its cameras: nothing to normalise
+      std::printf("match      rig frame %llu (score %.3f over the cameras)\n",
+                  (unsigned long long)r.match_frame_id(), r.score());
+    } else {
+      std::printf("match      frame %llu (score %.3f, normalised %.3f)\n",
+                  (unsigned long long)r.match_frame_id(), r.score(), r.normalized_score());
+    }
     if (!r.match_client_frame_id().empty()) {
       std::printf("match id   %s\n", r.match_client_frame_id().c_str());
     }
     std::printf("inliers    %u of %u correspondences\n", r.inliers(), r.correspondences());
+  }
+  for (const pb::RigCameraMatch& pair : r.rig().pairs()) {
+    std::printf("cameras    %s saw what %s saw: %u inliers%s\n", pair.query_camera().c_str(),
+                pair.match_camera().c_str(), pair.inliers(),
+                pair.metric() ? ", metric" : (pair.posed() ? ", posed" : ""));
+    for (const pb::Correspondence& c : pair.inlier_correspondences()) {
+      std::printf("inlier     %s %u (%.1f, %.1f) <-> %s %u (%.1f, %.1f)\n",
+                  pair.query_camera().c_str(), c.query_index(), c.query_x(), c.query_y(),
+                  pair.match_camera().c_str(), c.match_index(), c.match_x(), c.match_y());
+    }
+  }
+  if (r.rig().posed()) {
+    const pb::Pose& p = r.rig().body_pose();
+    std::printf(
+        "body pose  R = [%.4f %.4f %.4f; %.4f %.4f %.4f; %.4f %.4f %.4f], t = [%.4f %.4f %.4f]%s "
+        "(X_body_query = R X_body_match + t; rotations disagree by %.2f deg)\n",
+        p.rotation(0), p.rotation(1), p.rotation(2), p.rotation(3), p.rotation(4), p.rotation(5),
+        p.rotation(6), p.rotation(7), p.rotation(8), p.translation(0), p.translation(1),
+        p.translation(2), r.rig().metric() ? " m" : " (no scale)",
+        r.rig().rotation_disagreement_deg());
   }
   for (const pb::Candidate& c : r.candidates()) {
     std::printf("candidate  frame %llu%s%s (score %.3f, normalised %.3f)",
@@ -561,11 +788,22 @@ void AddStreamCommands(CLI::App& app, int* exit_code) {
       "1. Ctrl-C (SIGINT) or SIGTERM stops reading frames: the answers of those sent are taken, "
       "the stream is closed and the summary printed (how a camera stream ends).");
   stream->add_option("--map", stream_args->map, "Map name")->required();
+  CLI::Option* images =
+      stream->add_option("--images", stream_args->images,
+                         "Folder of frames, a list file, a video, or camera:N for the live camera "
+                         "/dev/videoN");
   stream
-      ->add_option("--images", stream_args->images,
-                   "Folder of frames, a list file, a video, or camera:N for the live camera "
-                   "/dev/videoN")
-      ->required();
+      ->add_option("--rig", stream_args->rig,
+                   "Instead of --images, a multi-camera rig sequence (a folder with rig.yaml and "
+                   "one folder per camera, a EuRoC folder of cam0, cam1, ... or a KITTI sequence "
+                   "folder) into a rig map: every frame carries one view per camera, and a "
+                   "camera's depth image when it has one")
+      ->excludes(images);
+  stream
+      ->add_option("--depth-scale", stream_args->depth_scale,
+                   "With --rig: units per metre of the cameras' 16-bit depth images")
+      ->capture_default_str()
+      ->needs("--rig");
   stream->add_option("--frames", stream_args->frames, "Stop after this many frames (0: all)")
       ->capture_default_str();
   stream
@@ -594,7 +832,7 @@ void AddStreamCommands(CLI::App& app, int* exit_code) {
                      "Every map of this group is searched too, as --search-maps");
   stream->add_option("--draw", stream_args->draw,
                      "Folder for a PNG per loop (loop_<frame>_<match>.png): both frames side by "
-                     "side with the inlier count");
+                     "side with their inlier correspondences (a rig loop: its first camera pair)");
   stream->add_flag("--timestamps", stream_args->timestamps,
                    "Stamp each frame with its time in the dataset (TUM, EuRoC, KITTI; 0.0 is a "
                    "time), or else this machine's clock when it is sent (the map's "
@@ -608,7 +846,12 @@ void AddStreamCommands(CLI::App& app, int* exit_code) {
   CLI::App* query = app.add_subcommand(
       "query", "Look one image up in a map of recogd (relocalisation, unless --add)");
   query->add_option("--map", query_args->map, "Map name")->required();
-  query->add_option("image", query_args->image, "Image file")->required();
+  query
+      ->add_option("images", query_args->images,
+                   "Image file; with --rig, one per camera in the rig file's order")
+      ->required();
+  query->add_option("--rig", query_args->rig,
+                    "Rig file (YAML) of the map's cameras: the images form one rig frame");
   query->add_flag("--add", query_args->add,
                   "Run the map's loop detector and keep the frame, as a streamed frame");
   query->add_option("--camera", query_args->camera,
