@@ -155,6 +155,7 @@ Status RecognitionServer::Open() {
     return Status::FailedPrecondition("cannot create the data directory '" + config.data_dir +
                                       "': " + error.message());
   }
+  state.metrics.WatchDisk(config.data_dir);
   // Checkpoints left by a server that died while streaming one (AdminService) are of no use.
   std::filesystem::remove_all(std::filesystem::path(config.data_dir) / "checkpoints", error);
   StoreRecovery& recovery = state.recovery;

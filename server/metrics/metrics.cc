@@ -1,5 +1,6 @@
 #include "server/metrics/metrics.h"
 
+#include <prometheus/collectable.h>
 #include <prometheus/counter.h>
 #include <prometheus/exposer.h>
 #include <prometheus/family.h>
@@ -9,6 +10,7 @@
 #include <prometheus/text_serializer.h>
 
 #include <exception>
+#include <filesystem>
 #include <utility>
 
 #include "recog_build_info.h"
@@ -45,7 +47,41 @@ prometheus::Family<T>& Register(prometheus::detail::Builder<T> builder, promethe
 
 }  // namespace
 
-ServerMetrics::ServerMetrics() : registry_(std::make_shared<prometheus::Registry>()) {
+class ServerMetrics::DiskSpace : public prometheus::Collectable {
+ public:
+  void Watch(const std::string& path) {
+    std::lock_guard lock(mutex_);
+    path_ = path;
+  }
+
+  std::vector<prometheus::MetricFamily> Collect() const override {
+    std::string path;
+    {
+      std::lock_guard lock(mutex_);
+      path = path_;
+    }
+    if (path.empty()) return {};
+    std::error_code error;
+    const std::filesystem::space_info space = std::filesystem::space(path, error);
+    if (error) return {};
+    const auto gauge = [](const char* name, const char* help, std::uintmax_t bytes) {
+      prometheus::MetricFamily family{name, help, prometheus::MetricType::Gauge, {}};
+      family.metric.emplace_back().gauge.value = static_cast<double>(bytes);
+      return family;
+    };
+    return {gauge("recog_store_disk_available_bytes",
+                  "Free bytes of the file system holding the data directory", space.available),
+            gauge("recog_store_disk_capacity_bytes",
+                  "Size of the file system holding the data directory", space.capacity)};
+  }
+
+ private:
+  mutable std::mutex mutex_;
+  std::string path_;
+};
+
+ServerMetrics::ServerMetrics()
+    : registry_(std::make_shared<prometheus::Registry>()), disk_(std::make_shared<DiskSpace>()) {
   prometheus::Registry& r = *registry_;
   rpc_duration_ = &Register(prometheus::BuildHistogram(), r, "recog_rpc_duration_seconds",
                             "Duration of finished RPCs by method and gRPC status code");
@@ -254,6 +290,8 @@ void ServerMetrics::StreamClosed(std::string_view rpc) {
   stream_active_->Add({{"rpc", std::string(rpc)}}).Decrement();
 }
 
+void ServerMetrics::WatchDisk(const std::string& path) { disk_->Watch(path); }
+
 Status ServerMetrics::StartHttp(const std::string& listen_address) {
   if (listen_address.empty()) {
     return Status::InvalidArgument("the metrics endpoint needs an address (host:port)");
@@ -265,6 +303,7 @@ Status ServerMetrics::StartHttp(const std::string& listen_address) {
   try {
     auto exposer = std::make_unique<prometheus::Exposer>(listen_address, /*num_threads=*/2);
     exposer->RegisterCollectable(registry_);
+    exposer->RegisterCollectable(disk_);
     exposer_ = std::move(exposer);
   } catch (const std::exception& e) {
     return Status::Unavailable("cannot serve metrics on '" + listen_address +
@@ -281,7 +320,9 @@ int ServerMetrics::HttpPort() const {
 }
 
 std::string ServerMetrics::Serialize() const {
-  return prometheus::TextSerializer().Serialize(registry_->Collect());
+  std::vector<prometheus::MetricFamily> families = registry_->Collect();
+  for (prometheus::MetricFamily& family : disk_->Collect()) families.push_back(std::move(family));
+  return prometheus::TextSerializer().Serialize(families);
 }
 
 }  // namespace recog::server

@@ -22,6 +22,9 @@
 //   recog_replica_changes_total                counter: model changes a replica copied
 //   recog_build_info{version, commit}          gauge, always 1: the build serving (the version
 //                                              and commit `recogd --version` prints)
+//   recog_store_disk_available_bytes           gauge: free bytes of the file system holding the
+//                                              data directory (WatchDisk), read at each scrape
+//   recog_store_disk_capacity_bytes            gauge: that file system's size
 // and, for the methods given to RegisterRpc, the standard gRPC server metrics of stock dashboards
 // (the names and labels of go-grpc-prometheus), labelled grpc_type ("unary", "client_stream",
 // "server_stream", "bidi_stream"), grpc_service ("recognition.v1.PlaceRecognition") and
@@ -51,6 +54,7 @@
 #include "core/common/status.h"
 
 namespace prometheus {
+class Collectable;
 class Counter;
 class Exposer;
 class Gauge;
@@ -116,6 +120,10 @@ class ServerMetrics {
   void SetReplicaSynced(bool synced);
   void AddReplicaChanges(uint64_t count = 1);
 
+  // The disk metrics report the file system that holds `path` (the data directory) from now on;
+  // until then, and while `path` cannot be read, they are absent.
+  void WatchDisk(const std::string& path);
+
   // A streaming call of `rpc` (e.g. "StreamFrames") opened or closed.
   void StreamOpened(std::string_view rpc);
   void StreamClosed(std::string_view rpc);
@@ -141,7 +149,10 @@ class ServerMetrics {
   template <typename V>
   using StringMap = std::unordered_map<std::string, V, StringHash, std::equal_to<>>;
 
+  class DiskSpace;  // the disk metrics, computed when collected
+
   std::shared_ptr<prometheus::Registry> registry_;
+  std::shared_ptr<DiskSpace> disk_;
   std::unique_ptr<prometheus::Exposer> exposer_;  // null until StartHttp succeeds
 
   prometheus::Family<prometheus::Histogram>* rpc_duration_;

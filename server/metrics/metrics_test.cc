@@ -7,6 +7,7 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <filesystem>
 #include <optional>
 #include <sstream>
 #include <string>
@@ -249,6 +250,26 @@ TEST(ServerMetricsTest, HttpEndpointServesTheMetricsOnAnEphemeralPort) {
 
   const Status again = metrics.StartHttp("127.0.0.1:0");
   EXPECT_EQ(again.code(), StatusCode::kFailedPrecondition);
+}
+
+TEST(ServerMetricsTest, TheDiskMetricsReportTheWatchedFileSystemAtEachScrape) {
+  ServerMetrics metrics;
+  ASSERT_TRUE(metrics.StartHttp("127.0.0.1:0").ok());
+  EXPECT_THAT(metrics.Serialize(), Not(HasSubstr("recog_store_disk")));  // nothing watched
+  const std::filesystem::path dir = std::filesystem::temp_directory_path();
+  metrics.WatchDisk(dir.string());
+  const std::filesystem::space_info space = std::filesystem::space(dir);
+  const std::string text = HttpGet(metrics.HttpPort(), "/metrics");
+  const std::optional<double> capacity = Sample(text, "recog_store_disk_capacity_bytes");
+  const std::optional<double> available = Sample(text, "recog_store_disk_available_bytes");
+  EXPECT_THAT(capacity, Optional(double(space.capacity)));
+  ASSERT_TRUE(available.has_value()) << text;
+  // Other processes write meanwhile: within 1 GiB of what this test read.
+  EXPECT_NEAR(*available, double(space.available), double(1 << 30));
+  EXPECT_LE(*available, *capacity);
+  EXPECT_THAT(metrics.Serialize(), HasSubstr("# TYPE recog_store_disk_available_bytes gauge"));
+  metrics.WatchDisk((dir / "no-such-directory-for-recog").string());
+  EXPECT_THAT(metrics.Serialize(), Not(HasSubstr("recog_store_disk")));  // unreadable: absent
 }
 
 TEST(ServerMetricsTest, ABusyPortIsUnavailableNotAnException) {
