@@ -13,8 +13,9 @@ packages=(
   python3-grpcio python3-protobuf python3-venv python3-setuptools python3-wheel
   python3-numpy python3-opencv python3-yaml
   nginx openssl
-  prometheus
+  prometheus gnuplot-nox
   clang-format
+  mkdocs mkdocs-material
 )
 
 missing=()

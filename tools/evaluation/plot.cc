@@ -1,11 +1,14 @@
 #include "tools/evaluation/plot.h"
 
+#include <sys/wait.h>
+#include <unistd.h>
+#include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
-
-#include <opencv2/imgcodecs.hpp>
-#include <opencv2/imgproc.hpp>
+#include <optional>
+#include <sstream>
 
 namespace recog::cli {
 namespace {
@@ -38,6 +41,116 @@ Status WritePlotCsv(const std::string& path, const PlotOptions& o,
   return Status::Ok();
 }
 
+// A gnuplot string literal: double-quoted, with its backslashes and quotes escaped.
+std::string GnuplotString(const std::string& text) {
+  std::string quoted = "\"";
+  for (char c : text) {
+    if (c == '"' || c == '\\') quoted += '\\';
+    quoted += (c == '\n' || c == '\r') ? ' ' : c;
+  }
+  return quoted + '"';
+}
+
+// "#rrggbb" of an OpenCV BGR colour.
+std::string HexColor(const cv::Scalar& bgr) {
+  char hex[8];
+  std::snprintf(hex, sizeof(hex), "#%02x%02x%02x", int(bgr[2]) & 255, int(bgr[1]) & 255,
+                int(bgr[0]) & 255);
+  return hex;
+}
+
+// The gnuplot commands that draw the plot into `path`: each series as lines and points from an
+// inline data block, its point labels thinned so that no two drawn labels of a series are closer
+// than about 30 pixels (they are the same data in the CSV).
+std::string GnuplotScript(const std::string& path, const PlotOptions& o,
+                          const std::vector<PlotSeries>& series) {
+  std::ostringstream gp;
+  gp.precision(10);
+  gp << "set terminal pngcairo size " << o.width << "," << o.height
+     << " font \"DejaVu Sans,10\" noenhanced\n"
+     << "set output " << GnuplotString(path) << "\n"
+     << "set title " << GnuplotString(o.title) << "\n"
+     << "set xlabel " << GnuplotString(o.x_label) << "\n"
+     << "set ylabel " << GnuplotString(o.y_label) << "\n"
+     << "set xrange [" << o.x_min << ":" << o.x_max << "]\n"
+     << "set yrange [" << o.y_min << ":" << o.y_max << "]\n"
+     << "set grid\nset key bottom right box opaque\n";
+  // Pixels per unit, approximately (the frame leaves ~120 x ~100 pixels for the axes' text).
+  const double x_scale = (o.width - 120) / (o.x_max - o.x_min);
+  const double y_scale = (o.height - 100) / (o.y_max - o.y_min);
+  std::vector<std::string> plots;
+  for (size_t k = 0; k < series.size(); ++k) {
+    const PlotSeries& s = series[k];
+    if (s.points.empty()) continue;
+    const std::string block = "$series" + std::to_string(k);
+    gp << block << " << EOD\n";
+    std::optional<cv::Point2d> last_label;
+    bool labelled = false;
+    for (size_t i = 0; i < s.points.size(); ++i) {
+      std::string label = i < s.point_labels.size() ? s.point_labels[i] : "";
+      const cv::Point2d& p = s.points[i];
+      if (!label.empty() && last_label.has_value() &&
+          std::hypot((p.x - last_label->x) * x_scale, (p.y - last_label->y) * y_scale) < 30.0) {
+        label.clear();
+      }
+      if (!label.empty()) {
+        last_label = p;
+        labelled = true;
+      }
+      gp << p.x << " " << p.y << " " << GnuplotString(label) << "\n";
+    }
+    gp << "EOD\n";
+    const std::string color = HexColor(s.color);
+    plots.push_back(block + " using 1:2 with linespoints lw 2 pt 7 ps 0.7 lc rgb \"" + color +
+                    "\" title " + GnuplotString(s.label));
+    if (labelled) {
+      plots.push_back(block +
+                      " using 1:2:3 with labels offset char 0.6,0.6 left font \",8\" tc rgb \"" +
+                      color + "\" notitle");
+    }
+  }
+  gp << "plot ";
+  if (plots.empty()) gp << "NaN notitle";  // axes only
+  for (size_t i = 0; i < plots.size(); ++i) gp << (i > 0 ? ", \\\n  " : "") << plots[i];
+  gp << "\nset output\n";
+  return gp.str();
+}
+
+// Runs gnuplot on `script`, which writes `path`. INTERNAL with gnuplot's own words when it fails
+// or is missing.
+Status RunGnuplot(const std::string& script, const std::string& path) {
+  char dir_template[] = "/tmp/recog-plot-XXXXXX";
+  const char* dir = ::mkdtemp(dir_template);
+  if (dir == nullptr) return Status::Internal("cannot make a temporary folder for gnuplot");
+  const std::filesystem::path script_path = std::filesystem::path(dir) / "plot.gp";
+  std::string output;
+  int code = -1;
+  {
+    std::ofstream out(script_path);
+    out << script;
+  }
+  // The folder's name is mkdtemp's (letters, digits, '/' and '-'): nothing for the shell to read.
+  if (FILE* pipe = ::popen(("gnuplot " + script_path.string() + " 2>&1").c_str(), "r")) {
+    char buffer[512];
+    while (std::fgets(buffer, sizeof(buffer), pipe) != nullptr) output += buffer;
+    const int status = ::pclose(pipe);
+    code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  }
+  std::error_code ignored;
+  std::filesystem::remove_all(dir, ignored);
+  if (code == 127) {
+    return Status::Internal("drawing plot '" + path +
+                            "' needs gnuplot (Debian: apt-get install gnuplot-nox); its numbers "
+                            "are in the CSV beside it");
+  }
+  if (code != 0 || !std::filesystem::exists(path)) {
+    while (!output.empty() && (output.back() == '\n' || output.back() == ' ')) output.pop_back();
+    return Status::Internal("cannot write plot '" + path +
+                            "': gnuplot: " + (output.empty() ? "failed" : output));
+  }
+  return Status::Ok();
+}
+
 }  // namespace
 
 std::string PlotCsvPath(const std::string& png_path) {
@@ -53,57 +166,8 @@ Status WritePlot(const std::string& path, const PlotOptions& o,
     return Status::InvalidArgument("plot '" + path +
                                    "': the image needs another extension than .csv");
   }
-  cv::Mat image(o.height, o.width, CV_8UC3, cv::Scalar(255, 255, 255));
-  const int left = 70, right = 20, top = 60, bottom = 60;
-  const int w = o.width - left - right, h = o.height - top - bottom;
-  const auto to_pixel = [&](cv::Point2d p) {
-    return cv::Point(left + int((p.x - o.x_min) / (o.x_max - o.x_min) * w),
-                     top + h - int((p.y - o.y_min) / (o.y_max - o.y_min) * h));
-  };
-  const cv::Scalar black(0, 0, 0), grey(220, 220, 220);
-  const int font = cv::FONT_HERSHEY_SIMPLEX;
-  for (int i = 0; i <= 10; ++i) {  // grid and ticks
-    const double fx = o.x_min + (o.x_max - o.x_min) * i / 10.0;
-    const double fy = o.y_min + (o.y_max - o.y_min) * i / 10.0;
-    const cv::Point px = to_pixel({fx, o.y_min}), py = to_pixel({o.x_min, fy});
-    cv::line(image, px, {px.x, top}, grey, 1);
-    cv::line(image, py, {left + w, py.y}, grey, 1);
-    char buf[32];
-    std::snprintf(buf, sizeof(buf), "%.2g", fx);
-    cv::putText(image, buf, {px.x - 12, top + h + 20}, font, 0.45, black, 1, cv::LINE_AA);
-    std::snprintf(buf, sizeof(buf), "%.2g", fy);
-    cv::putText(image, buf, {left - 45, py.y + 5}, font, 0.45, black, 1, cv::LINE_AA);
-  }
-  cv::rectangle(image, {left, top}, {left + w, top + h}, black, 1);
-  cv::putText(image, o.title, {left, 25}, font, 0.6, black, 1, cv::LINE_AA);
-  cv::putText(image, o.x_label, {left + w / 2 - 40, o.height - 15}, font, 0.55, black, 1,
-              cv::LINE_AA);
-  cv::putText(image, o.y_label, {5, top - 12}, font, 0.55, black, 1, cv::LINE_AA);
-
-  int legend_y = top + h - 20 * int(series.size());
-  for (const PlotSeries& s : series) {
-    for (size_t i = 0; i < s.points.size(); ++i) {
-      const cv::Point p = to_pixel(s.points[i]);
-      if (i > 0) cv::line(image, to_pixel(s.points[i - 1]), p, s.color, 2, cv::LINE_AA);
-      cv::circle(image, p, 4, s.color, cv::FILLED, cv::LINE_AA);
-      if (i < s.point_labels.size()) {
-        cv::putText(image, s.point_labels[i], p + cv::Point(6, -6), font, 0.35, s.color, 1,
-                    cv::LINE_AA);
-      }
-    }
-    if (!s.label.empty()) {
-      cv::line(image, {left + w - 180, legend_y}, {left + w - 150, legend_y}, s.color, 2);
-      cv::putText(image, s.label, {left + w - 145, legend_y + 5}, font, 0.45, black, 1,
-                  cv::LINE_AA);
-      legend_y += 20;
-    }
-  }
-  try {
-    if (!cv::imwrite(path, image)) return Status::Internal("cannot write plot '" + path + "'");
-  } catch (const cv::Exception& e) {
-    return Status::Internal("cannot write plot '" + path + "': " + e.what());
-  }
-  return o.write_csv ? WritePlotCsv(PlotCsvPath(path), o, series) : Status::Ok();
+  if (o.write_csv) RECOG_RETURN_IF_ERROR(WritePlotCsv(PlotCsvPath(path), o, series));
+  return RunGnuplot(GnuplotScript(path, o, series), path);
 }
 
 }  // namespace recog::cli

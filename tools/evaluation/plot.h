@@ -1,6 +1,7 @@
-// Line plots written as PNG images (OpenCV drawing, no plotting library): enough for the
-// precision-recall curves and latency plots the evaluation tools produce. Every plot's numbers
-// are written beside it as CSV (PlotCsvPath), for whoever would rather plot them their own way.
+// Line plots written as PNG images, drawn by gnuplot (Debian's gnuplot-nox, its pngcairo
+// terminal): the precision-recall curves, recall and error curves and latency plots the
+// evaluation tools produce. Every plot's numbers are written beside it as CSV (PlotCsvPath), for
+// whoever would rather plot them their own way.
 #pragma once
 
 #include <string>
@@ -31,10 +32,13 @@ struct PlotOptions {
 // The CSV beside the plot `png_path`: the same path with the extension .csv.
 std::string PlotCsvPath(const std::string& png_path);
 
-// Draws the series on axes with ticks and labels and writes `path` (PNG), and, with write_csv,
-// the plotted points to PlotCsvPath(path): a header "series,<x_label>,<y_label>,point_label",
-// then one row per point in drawing order. INVALID_ARGUMENT for an empty range or a path ending
-// in .csv, INTERNAL when a file cannot be written.
+// Writes, with write_csv, the plotted points to PlotCsvPath(path) (a header
+// "series,<x_label>,<y_label>,point_label", then one row per point in drawing order), then draws
+// the series (lines and points, a legend, a grid) with the title and axis labels and writes
+// `path` (PNG, width x height). Point labels of a series closer than ~30 pixels to the previous
+// drawn one are left out of the image (not the CSV) so that none overlap. INVALID_ARGUMENT for an
+// empty range or a path ending in .csv, INTERNAL when a file cannot be written or gnuplot fails
+// or is missing (the CSV is written first, either way).
 Status WritePlot(const std::string& path, const PlotOptions& options,
                  const std::vector<PlotSeries>& series);
 
