@@ -1,7 +1,7 @@
 // Object tracking speed (issue 16, "tracking across a stream"):
 //   BM_TrackVispCube  ObjectTracker::Track with default options, one thread, on the 218 frames of
 //                     objects/visp-cube in order (640x480, an 8.4 cm cube moved by hand), one frame
-//                     per iteration. The model is built as the README builds it: the CAD faces
+//                     per iteration. The model is built as docs/objects.md builds it: the CAD faces
 //                     (cube.cao), the frame-0 pose (cube.0.pos) and frame 0, with ViSP's
 //                     intrinsics (547, 547, 338, 234); it is the only object in the database.
 // Counters: tracking_ms_per_object, the headline, is the median over the frames that followed at

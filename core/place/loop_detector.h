@@ -192,16 +192,17 @@ struct LoopDetectorParams {
   // with no consistent queries behind it: its RANSAC needs at least this many inliers (and at
   // least epipolar.min_inliers). Default 16: robot B's frames looked up in robot A's map
   // (`recog eval place --split`) gave one false loop at 12 inliers in 763 on a seqgen tour and
-  // none from 16 on, where the corridor's weakest true one has 16 (README "Queries across maps").
+  // none from 16 on, where the corridor's weakest true one has 16 (docs/places.md, "Queries
+  // across maps").
   uint32_t relocalisation_min_inliers = 16;
 
   // The thesis's detector (Table 4.4): every loop needs k consistent queries
   // (strong_acceptance off).
   static LoopDetectorParams Thesis();
   // For keyframe streams (a SLAM's keyframes, metres apart; chosen on the corridor's every 2nd,
-  // 3rd and 4th frame and a seqgen tour of one frame per place, README "Keyframe streams"): the
-  // scores normalised by the best candidate, tau_c of 4 keyframes, and consecutive loops
-  // consistent only when their islands are at most 1 keyframe apart.
+  // 3rd and 4th frame and a seqgen tour of one frame per place, docs/places.md, "Keyframe
+  // streams"): the scores normalised by the best candidate, tau_c of 4 keyframes, and consecutive
+  // loops consistent only when their islands are at most 1 keyframe apart.
   static LoopDetectorParams Keyframes();
   Status Validate() const;
 };

@@ -8,10 +8,10 @@
 // by the best score over all the maps (PlaceMap::Recognise), so a map whose best candidate is
 // under alpha of the best map's is not verified (`bench_place` Relocalize_Group10x2600_vs_One26K
 // measures the cost against one map of all the frames). Measured on the corridor split
-// between two robots (`recog eval place --split 40`, README "Queries across maps"): each of
-// robot B's frames looked up alone in robot A's map finds 37 of the 44 revisits with no false
-// one, more than the single map's detector (36). The maps must share a vocabulary (all maps of a
-// MapRegistry do).
+// between two robots (`recog eval place --split 40`, docs/places.md, "Queries across maps"):
+// each of robot B's frames looked up alone in robot A's map finds 37 of the 44 revisits with no
+// false one, more than the single map's detector (36). The maps must share a vocabulary (all maps
+// of a MapRegistry do).
 //
 // Thread safety: as PlaceMap::Query, any number of searches may run at once and beside the maps'
 // own Add and Detect.

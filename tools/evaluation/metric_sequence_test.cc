@@ -1,8 +1,8 @@
 // Metric loops on synthetic RGB-D and stereo sequences with exactly known geometry (thesis
 // §3.3.3): three textured planes at 1.6, 2.6 (tilted 25°) and 4 m, a camera panning along x, then
 // coming back 0.25 m closer, 0.08 m lower and turned 3°. Every loop the detector finds on the way
-// back is checked against the true relative pose; the figures are printed (README, "Metric loops
-// from depth and stereo").
+// back is checked against the true relative pose; the figures are printed (docs/places.md,
+// "Metric loops from depth and stereo").
 #include "tools/evaluation/metric_sequence.h"
 
 #include <algorithm>

@@ -1,8 +1,8 @@
 // ObjectTracker on a real sequence: the visp-cube (218 frames of an 8.4 cm cube moved by hand),
-// with the model built as the README builds it (CAD faces, the frame-0 pose, frame 0). Tracking
-// must follow the cube with the poses full recognition gives, find it in frames where recognition
-// alone fails, and hand back to recognition when the cube disappears. Learning from the recording
-// (recording_learner.h) must then add views of the faces frame 0 does not show.
+// with the model built as docs/objects.md builds it (CAD faces, the frame-0 pose, frame 0).
+// Tracking must follow the cube with the poses full recognition gives, find it in frames where
+// recognition alone fails, and hand back to recognition when the cube disappears. Learning from the
+// recording (recording_learner.h) must then add views of the faces frame 0 does not show.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>

@@ -1,4 +1,4 @@
-// recog: command-line tool of the recognition service. See README.md, section "The recog tool".
+// recog: command-line tool of the recognition service. See docs/cli.md.
 //
 // Exit status: 0 on success (and for --help, --version), 1 when a subcommand fails (bad input
 // files, a failed call to recogd: one line "recog <cmd>: <reason>"), 2 when the command line is

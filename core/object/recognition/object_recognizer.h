@@ -1,7 +1,7 @@
 // ObjectRecognizer: finds known objects in an image and their 6-DoF pose (thesis Algorithm 4).
 //
 //  1. ORB features of the image over a scale pyramid, spread over the image by grid bucketing
-//     (DefaultQueryOrb: the defaults were chosen by measurement, see the README);
+//     (DefaultQueryOrb: the defaults were chosen by measurement, see docs/objects.md);
 //  2. regions of interest by two-stage clustering of the keypoints (roi_clustering.h), plus the
 //     whole image;
 //  3. per region: every feature's word and level-1 node are computed once per image, and the
@@ -66,9 +66,9 @@
 
 namespace recog {
 
-// The second pass (step 6 above). The defaults were measured on visp-cube and RoboEarth (README,
-// Evaluation): more crop features, crop levels, regions or candidates, or a wider margin, found
-// no more; enlarging to 480 or 240 px, or 2 crop levels, found fewer.
+// The second pass (step 6 above). The defaults were measured on visp-cube and RoboEarth
+// (docs/objects.md, "Evaluation"): more crop features, crop levels, regions or candidates, or a
+// wider margin, found no more; enlarging to 480 or 240 px, or 2 crop levels, found fewer.
 struct SecondPassOptions {
   bool enabled = true;
   size_t max_regions = 4;  // regions re-examined per image, most correspondences first
@@ -96,7 +96,7 @@ struct SecondPassOptions {
   }
 };
 
-// Step 7. Defaults measured on visp-rbt-cube (README, Evaluation).
+// Step 7. Defaults measured on visp-rbt-cube (docs/objects.md, "Evaluation").
 struct RefinementOptions {
   bool enabled = true;
   // Detections with at least this many inliers are kept as they are: their pose rests on enough
@@ -131,8 +131,8 @@ struct RecognitionOptions {
   // clutter (a fiducial board, a keyboard) takes every feature and a small, softly textured
   // object gets none (visp-rbt-cube's frame 0: 0 of 1000 features on the cube). A plain grid
   // starves an object that fills a view on a plain background instead (RoboEarth: 75.9 % against
-  // 88.9 %); the capped fill serves both. Measured (README, Evaluation) against no grid, a plain
-  // grid, caps of 2 and no cap, and 1000 and 1500 features.
+  // 88.9 %); the capped fill serves both. Measured (docs/objects.md, "Evaluation") against no grid,
+  // a plain grid, caps of 2 and no cap, and 1000 and 1500 features.
   static OrbOptions DefaultQueryOrb() {
     OrbOptions orb;
     orb.max_features = 1300;
