@@ -28,12 +28,7 @@ server=(--server "127.0.0.1:$port")
 "$recogd" --listen "127.0.0.1:$port" --metrics-listen "127.0.0.1:$metrics_port" \
   --data-dir "$tmp/data" --workers 2 >"$tmp/recogd.log" 2>&1 &
 server_pid=$!
-for _ in $(seq 100); do
-  "$recog" maps list "${server[@]}" >/dev/null 2>&1 && break
-  kill -0 "$server_pid" 2>/dev/null || break
-  sleep 0.1
-done
-expect_ok "recogd answers" "$recog" maps list "${server[@]}"
+wait_for_recogd "$server_pid" && pass || fail "recogd did not start: $(cat "$tmp/recogd.log")"
 expect_ok "stream the corridor frames" "$recog" stream --map corridor --create \
   --images "$project/tests/data/corridor" -q "${server[@]}"
 expect_error "a call that fails, for the error series" "NOT_FOUND" "$recog" query --map nowhere \
@@ -77,7 +72,7 @@ assert not missing, f"not exported by recogd: {missing}"
 assert len(used) >= 15, sorted(used)
 print(f"{len(used)} metric names, all exported: {sorted(used)}")
 PYTHON
-then pass; cat "$tmp/names.log"; else fail "the rules and the dashboard name only recogd's metrics: $(cat "$tmp/names.log")"; fi
+then pass; else fail "the rules and the dashboard name only recogd's metrics: $(cat "$tmp/names.log")"; fi
 
 if ! command -v promtool >/dev/null; then
   [ "$failures" -eq 0 ] || report_and_exit

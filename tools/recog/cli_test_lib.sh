@@ -65,3 +65,32 @@ report_and_exit() {
   [ "$failures" -eq 0 ]
   exit
 }
+
+# wait_for_recogd PID: waits up to 10 s for the recogd of process PID to answer
+# `recog maps list "${server[@]}"` (the test sets `recog` and `server`); 1 when it never does.
+wait_for_recogd() {
+  for _ in $(seq 100); do
+    "$recog" maps list "${server[@]}" >/dev/null 2>&1 && return 0
+    kill -0 "$1" 2>/dev/null || return 1
+    sleep 0.1
+  done
+  "$recog" maps list "${server[@]}" >/dev/null 2>&1
+}
+
+# photo_tiles SRC DST: every JPEG of SRC cut into 3x3 grey tiles DST/<name>_<0..8>.png, enough
+# photos for `recog seqgen rig` from the 4 bundled corridor frames.
+photo_tiles() {
+  mkdir -p "$2"
+  /usr/bin/python3 - "$1" "$2" <<'PYTHON'
+import glob, os, sys
+import cv2
+source, target = sys.argv[1], sys.argv[2]
+for path in sorted(glob.glob(os.path.join(source, "*.jpg"))):
+    photo = cv2.imread(path, cv2.IMREAD_GRAYSCALE)
+    h, w = photo.shape[0] // 3, photo.shape[1] // 3
+    name = os.path.splitext(os.path.basename(path))[0]
+    for q in range(9):
+        tile = photo[(q // 3) * h:(q // 3 + 1) * h, (q % 3) * w:(q % 3 + 1) * w]
+        cv2.imwrite(os.path.join(target, f"{name}_{q}.png"), tile)
+PYTHON
+}

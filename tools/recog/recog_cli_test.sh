@@ -92,15 +92,7 @@ expect_error "seqgen with an unknown format" "unknown image format" "$recog" seq
 [ ! -e "$tmp/seq3" ] && pass || fail "seqgen creates nothing on bad input"
 
 # seqgen rig: a front + rear rig out and back, 2 frames a leg, over 36 tiles of the photos.
-mkdir -p "$tmp/tiles"
-/usr/bin/python3 -c "
-import cv2, glob
-for path in sorted(glob.glob('$images/*.jpg')):
-    photo = cv2.imread(path, cv2.IMREAD_GRAYSCALE); h, w = photo.shape[0] // 3, photo.shape[1] // 3
-    for q in range(9):
-        name = path.split('/')[-1][:-4]
-        cv2.imwrite(f'$tmp/tiles/{name}_{q}.png', photo[(q // 3) * h:(q // 3 + 1) * h, (q % 3) * w:(q % 3 + 1) * w])
-"
+photo_tiles "$images" "$tmp/tiles"
 expect_ok "seqgen rig" "$recog" seqgen rig --images "$tmp/tiles" -o "$tmp/rig" --frames-per-leg 2 \
   --width 160 --height 120 --focal 80 --depth --json
 json_check "seqgen rig writes 4 rig frames, 2 of them revisits" \

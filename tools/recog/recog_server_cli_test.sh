@@ -35,12 +35,7 @@ server=(--server "127.0.0.1:$port")
 "$recogd" --listen "127.0.0.1:$port" --data-dir "$tmp/data" --metrics-listen "" --workers 2 \
   >"$tmp/recogd.log" 2>&1 &
 server_pid=$!
-for _ in $(seq 100); do
-  "$recog" maps list "${server[@]}" >/dev/null 2>&1 && break
-  kill -0 "$server_pid" 2>/dev/null || break
-  sleep 0.1
-done
-if ! "$recog" maps list "${server[@]}" >/dev/null 2>&1; then
+if ! wait_for_recogd "$server_pid"; then
   echo "FAIL: recogd did not start: $(cat "$tmp/recogd.log")"
   exit 1
 fi
@@ -178,15 +173,7 @@ expect_error "query of a missing image" "NOT_FOUND" "$recog" query --map corrido
 
 # A rig map: a front + rear rig driven out and back (seqgen rig over tiles of the corridor photos),
 # streamed with --rig; the way back's cameras find what the other camera saw on the way out.
-mkdir -p "$tmp/tiles"
-/usr/bin/python3 -c "
-import cv2, glob
-for path in sorted(glob.glob('$images/*.jpg')):
-    photo = cv2.imread(path, cv2.IMREAD_GRAYSCALE); h, w = photo.shape[0] // 3, photo.shape[1] // 3
-    for q in range(9):
-        name = path.split('/')[-1][:-4]
-        cv2.imwrite(f'$tmp/tiles/{name}_{q}.png', photo[(q // 3) * h:(q // 3 + 1) * h, (q % 3) * w:(q % 3 + 1) * w])
-"
+photo_tiles "$images" "$tmp/tiles"
 expect_ok "seqgen rig for the rig map" "$recog" seqgen rig --images "$tmp/tiles" -o "$tmp/rig" \
   --frames-per-leg 8 --width 320 --height 240 --focal 160 --depth -q
 expect_ok "stream --rig into a new rig map" "$recog" stream --map rig --create --preset keyframes \
