@@ -26,8 +26,10 @@
 // tour takes most of it). Run: build/bin/bench_place [--benchmark_filter=...]
 #include <benchmark/benchmark.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <filesystem>
 #include <iterator>
 #include <numeric>
@@ -410,9 +412,17 @@ void BM_Rig_2Cameras_26K(benchmark::State& state) {
   double extraction_ms = 0;
   const std::vector<FeatureSet> photos = PhotoFeatures(&extraction_ms);
   const cv::Matx33d K(400, 0, 319.5, 0, 400, 239.5, 0, 0, 1);
+  // Images of 640x480, or larger where a photo is (a rig frame's keypoints must be inside).
+  cv::Size size(640, 480);
+  for (const FeatureSet& photo : photos) {
+    for (const cv::KeyPoint& k : photo.keypoints) {
+      size.width = std::max(size.width, int(std::ceil(k.pt.x + 1.5f)));
+      size.height = std::max(size.height, int(std::ceil(k.pt.y + 1.5f)));
+    }
+  }
   const std::vector<RigCamera> rig = {
-      {"front", {640, 480}, K, {}, cv::Matx33d::eye(), {0, 0, 0.4}},
-      {"rear", {640, 480}, K, {}, cv::Matx33d(-1, 0, 0, 0, 1, 0, 0, 0, -1), {0, 0, -0.4}}};
+      {"front", size, K, {}, cv::Matx33d::eye(), {0, 0, 0.4}},
+      {"rear", size, K, {}, cv::Matx33d(-1, 0, 0, 0, 1, 0, 0, 0, -1), {0, 0, -0.4}}};
   auto vocabulary = std::make_shared<const Vocabulary>(LoadBundledPlaceVocabulary());
   std::mt19937_64 rng(13);
   std::map<std::string, std::vector<double>> times;
@@ -427,7 +437,10 @@ void BM_Rig_2Cameras_26K(benchmark::State& state) {
       out[f].cameras = {FeatureSubset(photos[(2 * f) % photos.size()], rng),
                         FeatureSubset(photos[(2 * f + 1) % photos.size()], rng)};
       out[f].timestamp = double(f);
-      if (!detector.Add(out[f]).ok()) std::exit(2);
+      if (auto added = detector.Add(out[f]); !added.ok()) {
+        std::fprintf(stderr, "bench_place: %s\n", added.status().ToString().c_str());
+        std::exit(2);
+      }
       if ((f + 1) % 1000 == 0) {
         std::fprintf(stderr, "bench_place: rig map %zu / %zu frames\n", f + 1, kRigFrames);
       }
@@ -438,7 +451,10 @@ void BM_Rig_2Cameras_26K(benchmark::State& state) {
       back.cameras = {Jittered(seen.cameras[1], 0.5, rng), Jittered(seen.cameras[0], 0.5, rng)};
       back.timestamp = double(kRigFrames + 60 + q);
       auto r = detector.Process(back);
-      if (!r.ok()) std::exit(2);
+      if (!r.ok()) {
+        std::fprintf(stderr, "bench_place: %s\n", r.status().ToString().c_str());
+        std::exit(2);
+      }
       const RigLoopTimings& t = r->timings;
       times["conversion"].push_back(t.conversion);
       times["query"].push_back(t.query);

@@ -347,10 +347,18 @@ int RunEvalRig(const EvalPlaceArgs& args, const PlaceEvaluationOptions& options,
     std::printf("detections %d (no ground truth)\n", e->detections);
   }
   if (poses) {
+    // A median over no loop is no figure: "none" then.
+    const auto median = [](double value, int count, const char* format) {
+      char text[32] = "none";
+      if (count > 0) std::snprintf(text, sizeof(text), format, value);
+      return std::string(text);
+    };
     std::printf(
-        "body pose of the correct loops: rotation error %.3f deg (median over %d posed), "
-        "translation error %.2f %% of the distance (median over %d metric)\n",
-        e->median_rotation_error_deg, e->posed_correct, e->median_translation_error_pct,
+        "body pose of the correct loops: rotation error %s (median over %d posed), "
+        "translation error %s of the distance (median over %d metric)\n",
+        median(e->median_rotation_error_deg, e->posed_correct, "%.3f deg").c_str(),
+        e->posed_correct,
+        median(e->median_translation_error_pct, e->metric_correct, "%.2f %%").c_str(),
         e->metric_correct);
   }
   std::printf("%-13s %8s %8s %8s  (ms per rig frame)\n", "stage", "mean", "median", "max");
