@@ -1057,6 +1057,55 @@ TEST_F(PlaceServiceTest, RgbdAndStereoFramesGiveMetricLoopsCloseToTheTruth) {
   ExpectMetricPose(response.result(), revisit, keyframes[response.result().match_frame_id()]);
 }
 
+// A rig map whose camera has a stereo partner: the views of its keyframes carry their right
+// images, and a revisit's plain view closes a metric loop whose body pose (the camera's: the rig's
+// one camera sits at the body's origin) is the truth.
+TEST_F(PlaceServiceTest, ARigViewWithItsStereoPartnerGivesAMetricBodyPose) {
+  const std::vector<cli::CameraPose> keyframes = {
+      {cli::Yaw(0), {-0.3, 0, 0}}, {cli::Yaw(0), {0, 0, 0}}, {cli::Yaw(0), {0.3, 0, 0}}};
+  const cli::CameraPose revisit{cli::Yaw(3), {0.05, 0.08, 0.25}};
+  pb::MapSettings settings;
+  *settings.add_rig() = client::MakeRigCamera("left", kSize, kK, {}, cv::Matx33d::eye(), {});
+  ASSERT_TRUE(CreateMap("stereo-rig", settings).ok());
+  const auto view = [](const cli::RenderedFrame& rendered) {
+    pb::Frame frame = CalibratedFrame(rendered);
+    frame.clear_intrinsics();  // the rig has them
+    return frame;
+  };
+  for (const cli::CameraPose& pose : keyframes) {
+    const cli::RenderedFrame rendered = Render(pose);
+    pb::Frame left = view(rendered);
+    ASSERT_TRUE(client::AttachStereoRight(rendered.right, kBaseline, &left).ok());
+    pb::Frame frame;
+    ASSERT_TRUE(client::AddRigView("left", left, &frame).ok());
+    pb::AddFrameResponse added;
+    ASSERT_TRUE(AddFrame("stereo-rig", frame, &added).ok());
+  }
+  pb::QueryPlaceRequest request;
+  request.set_map("stereo-rig");
+  ASSERT_TRUE(client::AddRigView("left", view(Render(revisit)), request.mutable_frame()).ok());
+  pb::QueryPlaceResponse response;
+  ASSERT_TRUE(places_->QueryPlace(Context().get(), request, &response).ok());
+  const pb::LoopResult& result = response.result();
+  ASSERT_EQ(result.status(), pb::LOOP_STATUS_LOOP_DETECTED);
+  ASSERT_LT(result.match_frame_id(), keyframes.size());  // one camera: one id a rig frame
+  ASSERT_EQ(result.rig().pairs_size(), 1);
+  EXPECT_TRUE(result.rig().pairs(0).metric());
+  ASSERT_TRUE(result.rig().metric());
+  ASSERT_EQ(result.rig().covariance_size(), 36);
+  cv::Matx33d R_true, R;
+  cv::Vec3d t_true, t;
+  const cli::CameraPose& match = keyframes[result.match_frame_id()];
+  cli::RelativePose(revisit, match, &R_true, &t_true);
+  for (int i = 0; i < 9; ++i) R.val[i] = result.rig().body_pose().rotation(i);
+  for (int i = 0; i < 3; ++i) t[i] = result.rig().body_pose().translation(i);
+  cv::Vec3d rotation_error;
+  cv::Rodrigues(cv::Mat(R * R_true.t()), rotation_error);
+  EXPECT_LT(cv::norm(rotation_error) * 180 / CV_PI, 0.3);
+  EXPECT_LT(cv::norm(t - t_true), 0.03 * cv::norm(revisit.center - match.center))
+      << "t " << t << " true " << t_true;
+}
+
 // The other side has the depth: robot A's map was built with intrinsics only (the server keeps
 // each frame's camera matrix), robot B relocalises in it with an RGB-D frame of its own camera
 // (other intrinsics). The metric pose is solved from B's points and A's pixels, in the same
