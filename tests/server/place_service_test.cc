@@ -1276,6 +1276,24 @@ TEST_F(PlaceServiceTest, ARigMapFindsWithItsRearCameraWhatItsFrontCameraSawAcros
   EXPECT_EQ(refused.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
   EXPECT_NE(refused.error_message().find("'rear'"), std::string::npos) << refused.error_message();
   EXPECT_EQ(GetMap("skewed").error_code(), grpc::StatusCode::NOT_FOUND);
+  pb::MapSettings short_pose = FrontRearRig();
+  short_pose.mutable_rig(0)->mutable_body_pose()->mutable_translation()->RemoveLast();
+  const grpc::Status pose_values = CreateMap("short-pose", short_pose);
+  EXPECT_EQ(pose_values.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_NE(pose_values.error_message().find("settings.rig[0] ('front').body_pose"),
+            std::string::npos)
+      << pose_values.error_message();
+  pb::MapSettings no_size = FrontRearRig();
+  no_size.mutable_rig(1)->set_width(0);
+  const grpc::Status size = CreateMap("no-size", no_size);
+  EXPECT_EQ(size.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_NE(size.error_message().find("settings.rig[1] ('rear')"), std::string::npos)
+      << size.error_message();
+  pb::MapSettings odd_distortion = FrontRearRig();
+  odd_distortion.mutable_rig(1)->mutable_intrinsics()->add_distortion(0.1);  // 1 value
+  EXPECT_EQ(CreateMap("odd-distortion", odd_distortion).error_code(),
+            grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(GetMap("short-pose").error_code(), grpc::StatusCode::NOT_FOUND);
 
   ASSERT_TRUE(CreateMap("rig", FrontRearRig()).ok());
   // The way out: the front camera sees the corridor, the rear one views nobody sees again.

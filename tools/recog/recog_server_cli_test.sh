@@ -195,6 +195,16 @@ expect_ok "query --rig" "$recog" query --map rig --rig "$tmp/rig/rig.yaml" \
 json_check "query --rig finds the rig frame and the body pose" \
   "assert d['status']=='loop_detected' and d['match']==22 and d['rig']['posed'] \
    and len(d['rig']['pairs'])==2, d"
+expect_error "stream --rig of a missing folder" "NOT_FOUND" "$recog" stream --map rig2 --create \
+  --rig "$tmp/no-rig" -q "${server[@]}"
+printf 'cameras:\n  - {name: front, width: 320}\n' >"$tmp/broken_rig.yaml"
+expect_error "query --rig with a malformed rig file" "INVALID_ARGUMENT.*broken_rig.yaml" "$recog" \
+  query --map rig --rig "$tmp/broken_rig.yaml" "$tmp/rig/front/rgb/000011.png" "${server[@]}"
+expect_usage_error "stream with both --images and --rig" "excludes" "$recog" stream --map rig \
+  --images "$images" --rig "$tmp/rig" "${server[@]}"
+expect_ok "maps list after the refused rig streams" "$recog" maps list --json "${server[@]}"
+json_check "no map was created by a refused rig stream" \
+  "assert 'rig2' not in [m['name'] for m in d] and 'rig' in [m['name'] for m in d], d"
 expect_error "query --rig with an image short" "one image per camera" "$recog" query --map rig \
   --rig "$tmp/rig/rig.yaml" "$tmp/rig/front/rgb/000011.png" "${server[@]}"
 expect_error "a single image into a rig map" "INVALID_ARGUMENT.*rig map" "$recog" query --map rig \
