@@ -58,6 +58,7 @@ class DiscardingStore : public IndexStore {
   Status Flush() override { return Status::Ok(); }
   Status Checkpoint(const std::string&) override { return Status::FailedPrecondition("none"); }
   StatusOr<VerifyReport> Verify(uint64_t) override { return VerifyReport{}; }
+  StatusOr<uint64_t> MapDiskBytes(MapId) override { return uint64_t{0}; }
 
  private:
   MapInfo info_;

@@ -228,6 +228,7 @@ class RocksDbIndexStore final : public IndexStore {
   Status Flush() override;
   Status Checkpoint(const std::string& dir) override;
   StatusOr<VerifyReport> Verify(uint64_t bytes_per_second) override;
+  StatusOr<uint64_t> MapDiskBytes(MapId map) override;
 
  private:
   struct MapState {
@@ -962,6 +963,24 @@ StatusOr<IndexStore::VerifyReport> VerifyTableFiles(
     }
   }
   return report;
+}
+
+StatusOr<uint64_t> RocksDbIndexStore::MapDiskBytes(MapId map) {
+  if (FindMap(map) == nullptr) return UnknownMap(map);
+  const std::string begin = MapEntriesBegin(map), end = MapEntriesEnd(map);
+  const rocksdb::Range range(begin, end);
+  rocksdb::SizeApproximationOptions options;
+  options.include_memtables = true;
+  options.include_files = true;
+  uint64_t total = 0;
+  for (ColumnFamily cf : kEntryColumnFamilies) {
+    uint64_t bytes = 0;
+    const rocksdb::Status status = db_->GetApproximateSizes(options, Cf(cf), &range, 1, &bytes);
+    if (!status.ok())
+      return Status::Internal("cannot size map " + std::to_string(map) + ": " + status.ToString());
+    total += bytes;
+  }
+  return total;
 }
 
 StatusOr<IndexStore::VerifyReport> RocksDbIndexStore::Verify(uint64_t bytes_per_second) {

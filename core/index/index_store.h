@@ -84,6 +84,10 @@ class IndexStore {
   // keeps serving. FAILED_PRECONDITION where the implementation has nothing on disk.
   virtual Status Checkpoint(const std::string& dir) = 0;
 
+  // Approximately how many bytes the entries of map `map` take on disk (the files, plus what is
+  // still in memory on its way there); 0 where nothing is on disk. NOT_FOUND for an unknown map.
+  virtual StatusOr<uint64_t> MapDiskBytes(MapId map) = 0;
+
   // What Verify read.
   struct VerifyReport {
     size_t files = 0;    // files checked

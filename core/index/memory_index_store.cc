@@ -72,6 +72,13 @@ Status MemoryIndexStore::CommitEntry(MapId map, const EntryRecord& entry) {
   return Status::Ok();
 }
 
+StatusOr<uint64_t> MemoryIndexStore::MapDiskBytes(MapId map) {
+  std::lock_guard lock(mutex_);
+  if (Find(map) == nullptr)
+    return Status::NotFound("map " + std::to_string(map) + " does not exist");
+  return uint64_t{0};  // nothing is on disk
+}
+
 Status MemoryIndexStore::RemoveEntry(MapId map, EntryId id) {
   std::lock_guard lock(mutex_);
   StoredMap* stored = Find(map);

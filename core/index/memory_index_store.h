@@ -29,6 +29,7 @@ class MemoryIndexStore : public IndexStore {
   Status Flush() override { return Status::Ok(); }
   Status Checkpoint(const std::string& dir) override;
   StatusOr<VerifyReport> Verify(uint64_t) override { return VerifyReport{}; }
+  StatusOr<uint64_t> MapDiskBytes(MapId map) override;
 
  private:
   struct StoredMap {
