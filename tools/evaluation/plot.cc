@@ -10,6 +10,8 @@
 #include <optional>
 #include <sstream>
 
+#include <nlohmann/json.hpp>
+
 namespace recog::cli {
 namespace {
 
@@ -57,6 +59,28 @@ std::string HexColor(const cv::Scalar& bgr) {
   std::snprintf(hex, sizeof(hex), "#%02x%02x%02x", int(bgr[2]) & 255, int(bgr[1]) & 255,
                 int(bgr[0]) & 255);
   return hex;
+}
+
+// The chart as JSON (the web console draws it: docs/console.md, "Charts").
+Status WritePlotJson(const std::string& path, const PlotOptions& o,
+                     const std::vector<PlotSeries>& series) {
+  nlohmann::json chart = {{"title", o.title},     {"x_label", o.x_label},
+                          {"y_label", o.y_label}, {"x_min", o.x_min},
+                          {"x_max", o.x_max},     {"y_min", o.y_min},
+                          {"y_max", o.y_max},     {"series", nlohmann::json::array()}};
+  for (const PlotSeries& s : series) {
+    nlohmann::json points = nlohmann::json::array();
+    for (const cv::Point2d& p : s.points) points.push_back({p.x, p.y});
+    chart["series"].push_back({{"label", s.label},
+                               {"color", HexColor(s.color)},
+                               {"points", points},
+                               {"point_labels", s.point_labels}});
+  }
+  std::ofstream out(path);
+  out << chart.dump() << '\n';
+  out.close();
+  if (!out) return Status::Internal("cannot write the plot's JSON '" + path + "'");
+  return Status::Ok();
 }
 
 // The gnuplot commands that draw the plot into `path`: each series as lines and points from an
@@ -157,17 +181,23 @@ std::string PlotCsvPath(const std::string& png_path) {
   return std::filesystem::path(png_path).replace_extension(".csv").string();
 }
 
+std::string PlotJsonPath(const std::string& png_path) {
+  return std::filesystem::path(png_path).replace_extension(".json").string();
+}
+
 Status WritePlot(const std::string& path, const PlotOptions& o,
                  const std::vector<PlotSeries>& series) {
   if (!(o.x_max > o.x_min) || !(o.y_max > o.y_min) || o.width < 200 || o.height < 150) {
     return Status::InvalidArgument("plot needs a non-empty range and at least 200x150 pixels");
   }
-  if (std::filesystem::path(path).extension() == ".csv") {
+  const std::string extension = std::filesystem::path(path).extension().string();
+  if (extension == ".csv" || extension == ".json") {
     return Status::InvalidArgument("plot '" + path +
-                                   "': the image needs another extension than .csv");
+                                   "': the image needs another extension than .csv or .json");
   }
   if (o.write_csv) RECOG_RETURN_IF_ERROR(WritePlotCsv(PlotCsvPath(path), o, series));
-  return RunGnuplot(GnuplotScript(path, o, series), path);
+  RECOG_RETURN_IF_ERROR(RunGnuplot(GnuplotScript(path, o, series), path));
+  return WritePlotJson(PlotJsonPath(path), o, series);
 }
 
 }  // namespace recog::cli

@@ -1,5 +1,5 @@
-// WritePlot: the CSV beside the image, the PNG gnuplot draws at the requested size, thinned point
-// labels, an empty plot, and the refusals.
+// WritePlot: the CSV and the JSON beside the image, the PNG gnuplot draws at the requested size,
+// thinned point labels, an empty plot, and the refusals.
 #include "tools/evaluation/plot.h"
 
 #include <filesystem>
@@ -7,6 +7,7 @@
 #include <sstream>
 
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -70,6 +71,19 @@ TEST_F(PlotTest, APrCurveIsDrawnAtItsSizeWithItsNumbersInTheCsvBeside) {
   int rows = 1;
   while (std::getline(lines, line)) ++rows;
   EXPECT_EQ(rows, 11);
+
+  // The chart for the web console: everything gnuplot drew, labels included.
+  const nlohmann::json chart = nlohmann::json::parse(Read(dir_ / "pr.json"));
+  EXPECT_EQ(chart["title"], options.title);
+  EXPECT_EQ(chart["x_label"], "recall");
+  EXPECT_EQ(chart["y_max"], 1.0);
+  ASSERT_EQ(chart["series"].size(), 1u);
+  const nlohmann::json& series = chart["series"][0];
+  EXPECT_EQ(series["label"], "corridor, k = 3");
+  EXPECT_EQ(series["color"], "#1450c8");
+  ASSERT_EQ(series["points"].size(), 11u);
+  EXPECT_DOUBLE_EQ(series["points"][10][0].get<double>(), 1.0);
+  EXPECT_EQ(series["point_labels"][0], "1.0");
 }
 
 TEST_F(PlotTest, APlotWithoutPointsHasItsAxesAndARichCsvOfTheCallerIsLeftAlone) {
@@ -88,10 +102,13 @@ TEST_F(PlotTest, BadRangesPathsAndFoldersAreRefused) {
   EXPECT_EQ(WritePlot((dir_ / "a.png").string(), options, {}).code(), StatusCode::kInvalidArgument);
   EXPECT_EQ(WritePlot((dir_ / "a.csv").string(), PlotOptions{}, {}).code(),
             StatusCode::kInvalidArgument);
+  EXPECT_EQ(WritePlot((dir_ / "a.json").string(), PlotOptions{}, {}).code(),
+            StatusCode::kInvalidArgument);
   const Status missing = WritePlot((dir_ / "no-such-folder" / "a.png").string(), PlotOptions{}, {});
   EXPECT_EQ(missing.code(), StatusCode::kInternal);
   EXPECT_NE(missing.message().find("no-such-folder"), std::string::npos) << missing.ToString();
   EXPECT_FALSE(fs::exists(dir_ / "a.png"));
+  EXPECT_FALSE(fs::exists(dir_ / "a.json"));
   PlotOptions no_csv;
   no_csv.write_csv = false;  // gnuplot itself cannot write the image there
   const Status refused = WritePlot((dir_ / "no-such-folder" / "b.png").string(), no_csv, {});
