@@ -1,11 +1,13 @@
 #!/usr/bin/env bash
 # Enforces the dependency rules of ARCHITECTURE: core/ never includes gRPC or RocksDB headers
 # (nor generated protobuf code), only storage/ includes RocksDB, and in server/ only the api/
-# converters and the services (the RPC handlers) see generated protobuf types; the server's
+# converters, the services (the RPC handlers) and the web console (an adapter of the same
+# services) see generated protobuf types; the server's
 # infrastructure (config, auth, metrics, runtime) does not; the client library (client/) sees the
 # generated API only, never core/, storage/ or server/ (its tests may, to start a server); core's
 # modules include only the layers below them (no cycles). The RPC handlers and converters stay
-# thin: they never reach into a place map's lock, deleted flag or loop detector (PlaceMap's
+# thin, and so does the console: they never reach into a place map's lock, deleted flag or loop
+# detector (PlaceMap's
 # Add/Detect/Query own that).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -79,7 +81,7 @@ if [ -n "$(git ls-files 'core/object/*.h' 'core/object/*.cc' | grep -v '^core/ob
   echo "check_boundaries: core/object/ keeps its files in its concern folders" >&2
   status=1
 fi
-if git grep -n -E '(\.|->)(mutex|deleted|detector)\b' -- 'server/services/' 'server/api/'; then
+if git grep -n -E '(\.|->)(mutex|deleted|detector)\b' -- 'server/services/' 'server/api/' 'server/console/'; then
   echo "check_boundaries: server/services and server/api must not take a map's lock, read its" \
     "deleted flag or drive its detector: call PlaceMap instead" >&2
   status=1

@@ -14,6 +14,7 @@ packages=(
   python3-numpy python3-opencv python3-yaml
   nginx openssl
   prometheus gnuplot-nox
+  libcpp-httplib-dev libjs-three libjs-chart.js chromium chromium-driver python3-selenium
   clang-format
   mkdocs mkdocs-material
 )

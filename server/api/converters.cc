@@ -406,6 +406,10 @@ void ToProto(const LoopDetectorParams& params, pb::MapSettings* out) {
 }
 
 StatusOr<std::vector<RigCamera>> RigFromProto(const pb::MapSettings& settings) {
+  if (settings.rig_size() > 0 && settings.keep_thumbnails()) {
+    return Status::InvalidArgument(
+        "settings.keep_thumbnails is for single-camera maps, not for a rig map");
+  }
   std::vector<RigCamera> rig;
   for (int i = 0; i < settings.rig_size(); ++i) {
     const pb::RigCameraSettings& in = settings.rig(i);

@@ -10,6 +10,7 @@
 #include "core/vocabulary/vocabulary_io.h"
 #include "server/app/grpc_metrics.h"
 #include "server/app/server_tls.h"
+#include "server/console/web_console.h"
 #include "server/replication/repository_follower.h"
 #include "server/services/admin_service.h"
 #include "server/services/object_service.h"
@@ -72,6 +73,8 @@ RecognitionServer::RecognitionServer() = default;
 RecognitionServer::~RecognitionServer() { Shutdown(std::chrono::milliseconds(0)); }
 
 int RecognitionServer::metrics_port() const { return state_->metrics.HttpPort(); }
+
+int RecognitionServer::console_port() const { return console_ == nullptr ? 0 : console_->port(); }
 
 StatusOr<std::unique_ptr<RecognitionServer>> RecognitionServer::Start(const ServerConfig& config) {
   RECOG_RETURN_IF_ERROR(config.Validate());
@@ -138,6 +141,13 @@ StatusOr<std::unique_ptr<RecognitionServer>> RecognitionServer::Start(const Serv
                config.tls.cert.empty() ? "plaintext" : "TLS", config.data_dir);
   RECOG_RETURN_IF_ERROR(server->Open());
   RECOG_RETURN_IF_ERROR(server->StartFollowing());
+  if (!config.console.listen.empty()) {
+    grpc::ChannelArguments arguments;
+    arguments.SetMaxReceiveMessageSize(int(config.max_message_bytes));
+    arguments.SetMaxSendMessageSize(int(config.max_message_bytes));
+    RECOG_ASSIGN_OR_RETURN(server->console_,
+                           WebConsole::Start(&state, server->server_->InProcessChannel(arguments)));
+  }
   server->server_->GetHealthCheckService()->SetServingStatus(true);
   server->server_->GetHealthCheckService()->SetServingStatus(kStoreHealthService, true);
   spdlog::info("recogd ready: {} place maps, {} objects, {} workers, metrics on {}",
@@ -178,6 +188,7 @@ Status RecognitionServer::Open() {
   state.objects = std::move(objects);
   RECOG_ASSIGN_OR_RETURN(state.repository,
                          ModelRepository::Open(state.store.get(), state.objects, Sha256Hex));
+  RECOG_ASSIGN_OR_RETURN(state.thumbnails, FrameThumbnails::Open(state.store.get()));
   if (const std::shared_ptr<const PlacementTable> placement = state.placement()) {
     RECOG_RETURN_IF_ERROR(CheckGroupPlacement(*placement, state));
   }
@@ -237,6 +248,7 @@ Status RecognitionServer::StartFollowing() {
 void RecognitionServer::Shutdown(std::chrono::milliseconds grace) {
   std::call_once(shutdown_once_, [&] {
     if (state_ == nullptr) return;
+    console_.reset();   // its requests call the services and read the state
     follower_.reset();  // it writes into the repository
     ServerState& state = *state_;
     state.draining = true;
@@ -248,6 +260,7 @@ void RecognitionServer::Shutdown(std::chrono::milliseconds grace) {
     }
     state.verifier.reset();  // waits for a check in progress
     if (state.pool != nullptr) state.pool->Stop();
+    state.thumbnails.reset();  // writes the queued ones before the store is flushed
     if (state.store != nullptr) {
       const Status flushed = state.store->Flush();
       if (!flushed.ok()) spdlog::error("flushing the store failed: {}", flushed.ToString());

@@ -51,6 +51,7 @@ class RepositoryService;
 class AdminService;
 class RepositoryFollower;
 class ServerTls;
+class WebConsole;
 
 class RecognitionServer {
  public:
@@ -70,6 +71,8 @@ class RecognitionServer {
   int port() const { return port_; }
   // The metrics port, 0 when metrics are off.
   int metrics_port() const;
+  // The port of the web console (console.listen), 0 without one.
+  int console_port() const;
 
   // Re-reads the placement table (ServerConfig::shard) and serves by it from the next call; OK
   // and nothing done without a shard configuration. On error the table in use is kept; a table
@@ -99,6 +102,7 @@ class RecognitionServer {
   std::unique_ptr<AdminService> admin_service_;
   std::unique_ptr<grpc::Server> server_;
   std::unique_ptr<RepositoryFollower> follower_;  // on a replica, once ready
+  std::unique_ptr<WebConsole> console_;           // with console.listen, once ready
   int port_ = 0;
   std::once_flag shutdown_once_;
 };

@@ -163,6 +163,13 @@ Status ReadConfig(const YAML::Node& root, ServerConfig* config) {
   RECOG_RETURN_IF_ERROR(repository.Read("token_file", &config->repository.token_file));
   RECOG_RETURN_IF_ERROR(repository.Read("tls_ca", &config->repository.tls_ca));
   RECOG_RETURN_IF_ERROR(repository.RejectUnknownKeys());
+  RECOG_ASSIGN_OR_RETURN(YamlSection console, top.Section("console"));
+  RECOG_RETURN_IF_ERROR(console.Read("listen", &config->console.listen));
+  RECOG_RETURN_IF_ERROR(console.Read("web_root", &config->console.web_root));
+  RECOG_RETURN_IF_ERROR(console.Read("vendor_dir", &config->console.vendor_dir));
+  RECOG_RETURN_IF_ERROR(console.Read("loops_per_map", &config->console.loops_per_map));
+  RECOG_RETURN_IF_ERROR(console.Read("charts_dir", &config->console.charts_dir));
+  RECOG_RETURN_IF_ERROR(console.RejectUnknownKeys());
 
   RECOG_ASSIGN_OR_RETURN(YamlSection store, top.Section("store"));
   RECOG_RETURN_IF_ERROR(store.ReadParsed("sync", &config->store.sync, ParseStoreSync));
@@ -321,6 +328,15 @@ Status ServerConfig::Validate() const {
   const bool picks_free_port = listen.ends_with(":0");
   if (!metrics_listen.empty() && metrics_listen == listen && !picks_free_port) {
     return Status::InvalidArgument("metrics_listen must differ from listen ('" + listen + "')");
+  }
+  if (!console.listen.empty() && !console.listen.ends_with(":0") &&
+      (console.listen == listen || console.listen == metrics_listen)) {
+    return Status::InvalidArgument("console.listen ('" + console.listen +
+                                   "') must differ from listen and metrics_listen");
+  }
+  if (console.loops_per_map < 1 || console.loops_per_map > 1000) {
+    return Status::InvalidArgument("console.loops_per_map must be 1 to 1000, not " +
+                                   std::to_string(console.loops_per_map));
   }
   if (store.group_sync_interval_ms < 1 || store.group_sync_interval_ms > kMaxGroupSyncIntervalMs) {
     return Status::InvalidArgument("store.group_sync_interval_ms must be between 1 and " +
@@ -508,6 +524,12 @@ void AddFlags(CLI::App& app, ServerConfig* config) {
                  "File of the bearer token sent to the repository primary");
   app.add_option("--repository-tls-ca", config->repository.tls_ca,
                  "PEM CA of the repository primary's certificate (default: plaintext)");
+  app.add_option("--console-listen", config->console.listen,
+                 "Serve the web console on this address (host:port; default: no console)");
+  app.add_option("--console-web-root", config->console.web_root,
+                 "The console's pages (default: the bundled ones)");
+  app.add_option("--console-charts-dir", config->console.charts_dir,
+                 "Folder of the charts (.json beside `recog eval --plot` PNGs) the console shows");
 }
 
 StatusOr<CommandLine> ParseCommandLine(int argc, const char* const* argv) {

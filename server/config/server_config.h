@@ -108,6 +108,25 @@ struct RepositoryConfig {
   std::string tls_ca;      // default "": PEM CA of the primary's certificate; "" = plaintext
 };
 
+// The web console (server/console/): pages and an HTTP/JSON API over the same services, on its
+// own address. `listen` empty (the default): no console, and the gRPC path does nothing for it.
+// It uses the server's TLS files (tls.cert/key; with tls.client_ca, browsers must present a
+// client certificate too) and its tokens: a read token may look, a write token may change.
+struct ConsoleConfig {
+  std::string listen;  // default "": host:port of the console ("127.0.0.1:8080"); "" = off
+  // Default "": the console's pages; empty means the bundled ones (server/console/web, or the
+  // installed copy).
+  std::string web_root;
+  // Default "/usr/share/javascript": where Debian's libjs-three and libjs-chart.js are (served
+  // under /vendor/).
+  std::string vendor_dir = "/usr/share/javascript";
+  // Default 50: the last loops each map answered, kept in memory for the console (1..1000).
+  uint32_t loops_per_map = 50;
+  // Default "": a folder of charts (the .json that `recog eval ... --plot` writes beside each
+  // PNG) shown on the console's Charts page; empty means none.
+  std::string charts_dir;
+};
+
 struct ServerConfig {
   // Default "127.0.0.1:50051": the gRPC address (host:port, [v6]:port or unix:path).
   std::string listen = "127.0.0.1:50051";
@@ -144,6 +163,7 @@ struct ServerConfig {
   StoreConfig store;            // YAML section "store"
   ShardConfig shard;            // YAML section "shard"
   RepositoryConfig repository;  // YAML section "repository"
+  ConsoleConfig console;        // YAML section "console"
   // Default 10000: on SIGTERM/SIGINT, calls in flight get this long to finish before they are
   // cancelled.
   uint32_t shutdown_grace_ms = 10000;

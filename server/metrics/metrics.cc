@@ -9,6 +9,7 @@
 #include <prometheus/registry.h>
 #include <prometheus/text_serializer.h>
 
+#include <algorithm>
 #include <exception>
 #include <filesystem>
 #include <utility>
@@ -323,6 +324,35 @@ std::string ServerMetrics::Serialize() const {
   std::vector<prometheus::MetricFamily> families = registry_->Collect();
   for (prometheus::MetricFamily& family : disk_->Collect()) families.push_back(std::move(family));
   return prometheus::TextSerializer().Serialize(families);
+}
+
+ServerMetrics::Totals ServerMetrics::ReadTotals() const {
+  Totals totals;
+  totals.bucket_bounds = RpcBuckets();
+  totals.bucket_counts.assign(totals.bucket_bounds.size(), 0);
+  for (const prometheus::MetricFamily& family : registry_->Collect()) {
+    if (family.name == "recog_rpc_duration_seconds") {
+      for (const prometheus::ClientMetric& metric : family.metric) {
+        const uint64_t count = metric.histogram.sample_count;
+        totals.calls += count;
+        const bool ok = std::any_of(metric.label.begin(), metric.label.end(), [](const auto& l) {
+          return l.name == "code" && l.value == "OK";
+        });
+        if (!ok) totals.errors += count;
+        const auto& buckets = metric.histogram.bucket;
+        for (size_t b = 0; b < buckets.size() && b < totals.bucket_counts.size(); ++b) {
+          totals.bucket_counts[b] += buckets[b].cumulative_count;
+        }
+      }
+    } else if (family.name == "recog_frames_total") {
+      for (const prometheus::ClientMetric& metric : family.metric) {
+        totals.frames += uint64_t(metric.counter.value);
+      }
+    } else if (family.name == "recog_worker_queue_depth" && !family.metric.empty()) {
+      totals.queue_depth = family.metric.front().gauge.value;
+    }
+  }
+  return totals;
 }
 
 }  // namespace recog::server

@@ -50,6 +50,7 @@
 #include <string>
 #include <string_view>
 #include <unordered_map>
+#include <vector>
 
 #include "core/common/status.h"
 
@@ -139,6 +140,19 @@ class ServerMetrics {
 
   // Every metric in Prometheus' text exposition format, as /metrics serves it.
   std::string Serialize() const;
+
+  // Totals since start, read from the metrics above (for the console's live charts: RPCs of every
+  // method, those whose code was not OK, frames of both kinds, the queue depth now, and the RPC
+  // duration histogram summed over methods and codes).
+  struct Totals {
+    uint64_t calls = 0;
+    uint64_t errors = 0;
+    uint64_t frames = 0;
+    double queue_depth = 0;
+    std::vector<double> bucket_bounds;    // seconds: the histogram's upper bounds (no +Inf)
+    std::vector<uint64_t> bucket_counts;  // calls at or below each bound (cumulative)
+  };
+  Totals ReadTotals() const;
 
  private:
   // Heterogeneous lookup by string_view, so that looking up a seen label value does not allocate.

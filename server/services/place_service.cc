@@ -4,6 +4,8 @@
 #include <chrono>
 #include <optional>
 
+#include <spdlog/spdlog.h>
+
 #include "core/place/map_search.h"
 #include "server/api/converters.h"
 #include "server/api/status_mapping.h"
@@ -34,13 +36,14 @@ enum class FrameMode {
   kQuery,   // PlaceMap::Query (QueryPlace, query-only streams)
 };
 
-void FillMapInfo(const PlaceMap& map, pb::MapInfo* out) {
+void FillMapInfo(const ServerState& state, const PlaceMap& map, pb::MapInfo* out) {
   const MapInfo& info = map.info();
   out->set_name(map.name());
   out->set_id(info.id);
   ToProto(map.params(), out->mutable_settings());
   if (!map.group().empty()) out->mutable_settings()->set_group(map.group());
   ToProto(map.rig(), out->mutable_settings());
+  out->mutable_settings()->set_keep_thumbnails(state.thumbnails->Enabled(info.id));
   out->set_frames(map.frames());
   out->set_next_frame_id(map.next_frame_id());
   out->set_created_unix_ms(info.created_unix_ms);
@@ -61,6 +64,16 @@ Status Owned(const grpc::Status& owned) {
 Status ScopeCall(const ServerState& state, CallInfo& call, const std::string& name) {
   call.map = name;
   return Owned(CheckMapOwner(state, name));
+}
+
+// A new map's keep_thumbnails setting (a failure to store it is logged: the map is created, and
+// its MapInfo says that it keeps none).
+void ApplyThumbnailSetting(ServerState& state, const PlaceMap& map,
+                           const pb::MapSettings& settings) {
+  if (!settings.keep_thumbnails()) return;
+  const Status enabled = state.thumbnails->Enable(map.info().id);
+  if (!enabled.ok())
+    spdlog::warn("map '{}' keeps no thumbnails: {}", map.name(), enabled.ToString());
 }
 
 // What creating map `name` in `group` ("" for none) needs: ScopeCall, the group placed on this
@@ -343,6 +356,49 @@ Status RunRigFrame(ServerState& state, WorkerContext& worker, PlaceMap& map, Fra
   return Status::Ok();
 }
 
+// What the web console keeps of a frame its map stored (Add or Detect): the frame's thumbnail when
+// the map keeps them (written in the background), and the loop it closed, with its inliers, when
+// the console is on. A failure here does not fail the frame, which the map holds already: it is
+// logged.
+void KeepForConsole(ServerState& state, const PlaceMap& map, const PreparedFrame& prepared,
+                    const PlaceFrameResult& result) {
+  const uint32_t map_id = map.info().id;
+  const LoopResult& loop = result.loop;
+  const Status queued = state.thumbnails->Keep(map_id, loop.entry, prepared.frame().image);
+  if (!queued.ok()) spdlog::warn("map '{}': {}", map.name(), queued.ToString());
+  if (state.recent_loops == nullptr || loop.status != LoopStatus::kLoopDetected) return;
+  RecordedLoop recorded;
+  recorded.frame_id = loop.entry;
+  recorded.match_frame_id = loop.match;
+  recorded.unix_ms = std::chrono::duration_cast<std::chrono::milliseconds>(
+                         std::chrono::system_clock::now().time_since_epoch())
+                         .count();
+  recorded.score = loop.score;
+  recorded.normalized_score = loop.normalized_score;
+  recorded.inliers = uint32_t(loop.inliers.size());
+  recorded.frame_size = prepared.frame().image.size();
+  recorded.pairs.reserve(result.correspondences.size());
+  for (const PlaceCorrespondence& c : result.correspondences) {
+    recorded.pairs.emplace_back(c.query_pixel.x, c.query_pixel.y, c.match_pixel.x, c.match_pixel.y);
+  }
+  state.recent_loops->Record(map.name(), std::move(recorded));
+}
+
+// A removed frame's thumbnail (a failure is logged: the frame is gone already).
+void ForgetThumbnail(ServerState& state, const PlaceMap& map, uint64_t frame_id) {
+  const Status removed = state.thumbnails->RemoveFrame(map.info().id, frame_id);
+  if (!removed.ok())
+    spdlog::warn("map '{}': thumbnail of frame {} not removed: {}", map.name(), frame_id,
+                 removed.ToString());
+}
+
+// A deleted map's thumbnails and recent loops (a failure is logged: the map is gone already).
+void ForgetConsoleRecords(ServerState& state, const std::string& map, uint32_t map_id) {
+  const Status removed = state.thumbnails->RemoveMap(map_id);
+  if (!removed.ok()) spdlog::warn("map '{}': thumbnails not removed: {}", map, removed.ToString());
+  if (state.recent_loops != nullptr) state.recent_loops->Forget(map);
+}
+
 // Decodes one frame, runs it against the map, looks it up in the `search` maps, and encodes what
 // it did (`inter_map` may be null when `search` is empty). `num_features` reports an added
 // frame's features.
@@ -361,10 +417,15 @@ Status RunPlaceFrame(ServerState& state, WorkerContext& worker, PlaceMap& map, F
   const FeatureSet& features = prepared.features();
   if (num_features != nullptr) *num_features = uint32_t(features.size());
   const auto start = Clock::now();
-  const PlaceResultOptions extras = prepared.Extras(options);
+  PlaceResultOptions extras = prepared.Extras(options);
+  // The console shows a detected loop's inliers: asked for whenever it records loops.
+  const bool recording = state.recent_loops != nullptr && mode == FrameMode::kDetect;
+  extras.include_correspondences = extras.include_correspondences || recording;
   StatusOr<PlaceFrameResult> result =
       RunMode(map, mode, features, prepared.frame(), extras, prepared.geometry());
   if (!result.ok()) return result.status();
+  if (mode != FrameMode::kQuery) KeepForConsole(state, map, prepared, result.value());
+  if (!options.include_correspondences()) result->correspondences.clear();
   state.metrics.AddFrames(FrameKind::kPlace);
   if (mode != FrameMode::kAdd && result->loop.status == LoopStatus::kLoopDetected) {
     state.metrics.AddLoopDetections();
@@ -422,6 +483,7 @@ class PlaceFrameStream final
       StatusOr<std::vector<RigCamera>> rig = RigFromProto(config.settings());
       if (!rig.ok()) return ToGrpcStatus(rig.status(), call_.request_id);
       map = state_.maps->Create(config.map(), params, GroupOf(config.settings()), rig.value());
+      if (map.ok()) ApplyThumbnailSetting(state_, *map.value(), config.settings());
       if (map.status().code() == StatusCode::kAlreadyExists) {
         map = CallMap(state_, call_, config.map(), right);  // created by another stream meanwhile
       }
@@ -507,7 +569,8 @@ grpc::ServerUnaryReactor* PlaceService::CreateMap(grpc::CallbackServerContext* c
                     StatusOr<std::shared_ptr<PlaceMap>> map = state_.maps->Create(
                         request->name(), params, GroupOf(request->settings()), rig.value());
                     if (!map.ok()) return ToGrpcStatus(map.status(), call.request_id);
-                    FillMapInfo(*map.value(), response->mutable_map());
+                    ApplyThumbnailSetting(state_, *map.value(), request->settings());
+                    FillMapInfo(state_, *map.value(), response->mutable_map());
                     state_.metrics.SetMapEntries(request->name(), 0);
                     return grpc::Status::OK;
                   });
@@ -521,7 +584,7 @@ grpc::ServerUnaryReactor* PlaceService::GetMap(grpc::CallbackServerContext* cont
                     StatusOr<std::shared_ptr<PlaceMap>> map =
                         CallMap(state_, call, request->name(), Right::kRead);
                     if (!map.ok()) return ToGrpcStatus(map.status(), call.request_id);
-                    FillMapInfo(*map.value(), response->mutable_map());
+                    FillMapInfo(state_, *map.value(), response->mutable_map());
                     return grpc::Status::OK;
                   });
 }
@@ -542,7 +605,7 @@ grpc::ServerUnaryReactor* PlaceService::ListMaps(grpc::CallbackServerContext* co
             response->set_next_page_token(response->maps(int(added) - 1).name());
             break;
           }
-          FillMapInfo(*map, response->add_maps());
+          FillMapInfo(state_, *map, response->add_maps());
           ++added;
         }
         return grpc::Status::OK;
@@ -554,11 +617,13 @@ grpc::ServerUnaryReactor* PlaceService::DeleteMap(grpc::CallbackServerContext* c
                                                   pb::DeleteMapResponse* response) {
   return RunUnary(state_, context, Method("DeleteMap"), Right::kWrite, request->request_id(),
                   response, [=, this](CallInfo& call, WorkerContext&) {
-                    RECOG_RETURN_IF_ERROR_AS_GRPC(
-                        CallMap(state_, call, request->name(), Right::kWrite).status(),
-                        call.request_id);
+                    StatusOr<std::shared_ptr<PlaceMap>> map =
+                        CallMap(state_, call, request->name(), Right::kWrite);
+                    if (!map.ok()) return ToGrpcStatus(map.status(), call.request_id);
+                    const uint32_t map_id = map.value()->info().id;
                     StatusOr<size_t> frames = state_.maps->Delete(request->name());
                     if (!frames.ok()) return ToGrpcStatus(frames.status(), call.request_id);
+                    ForgetConsoleRecords(state_, request->name(), map_id);
                     response->set_frames_deleted(frames.value());
                     state_.metrics.RemoveMap(request->name());
                     return grpc::Status::OK;
@@ -634,13 +699,17 @@ grpc::ServerUnaryReactor* PlaceService::RemoveFrame(grpc::CallbackServerContext*
             RECOG_RETURN_IF_ERROR_AS_GRPC(place_map.RemoveFrame(EntryId(request->frame_id())),
                                           call.request_id);
             response->add_removed_frame_ids(request->frame_id());
+            ForgetThumbnail(state_, place_map, request->frame_id());
             break;
           }
           case pb::RemoveFrameRequest::kClientFrameId: {
             StatusOr<std::vector<EntryId>> removed =
                 place_map.RemoveFramesByClientId(request->client_frame_id());
             if (!removed.ok()) return ToGrpcStatus(removed.status(), call.request_id);
-            for (EntryId id : removed.value()) response->add_removed_frame_ids(id);
+            for (EntryId id : removed.value()) {
+              response->add_removed_frame_ids(id);
+              ForgetThumbnail(state_, place_map, id);
+            }
             break;
           }
           case pb::RemoveFrameRequest::FRAME_NOT_SET:

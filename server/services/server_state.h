@@ -23,6 +23,8 @@
 #include "server/config/placement_table.h"
 #include "server/config/server_config.h"
 #include "server/metrics/metrics.h"
+#include "server/runtime/frame_thumbnails.h"
+#include "server/runtime/recent_loops.h"
 #include "server/runtime/request_log.h"
 #include "server/runtime/store_verifier.h"
 #include "server/runtime/worker_pool.h"
@@ -35,12 +37,17 @@ struct ServerState {
   ServerState(ServerConfig config, TokenAuthenticator authenticator)
       : config(std::move(config)),
         auth(std::move(authenticator)),
-        requests(this->config.request_log_entries) {}
+        requests(this->config.request_log_entries),
+        recent_loops(this->config.console.listen.empty()
+                         ? nullptr
+                         : std::make_unique<RecentLoops>(this->config.console.loops_per_map)) {}
 
   const ServerConfig config;
   const TokenAuthenticator auth;
   // The answers of recent mutating calls by request_id (RunOnce in call.h).
   RequestLog requests;
+  // The last loops of each map, for the web console; null (nothing recorded) without a console.
+  const std::unique_ptr<RecentLoops> recent_loops;
   ServerMetrics metrics;
   std::unique_ptr<WorkerPool<WorkerContext>> pool;  // its contexts read this state
   std::atomic<bool> ready{false};
@@ -51,7 +58,8 @@ struct ServerState {
   std::unique_ptr<MapRegistry> maps;
   std::shared_ptr<ObjectDatabase> objects;
   std::unique_ptr<ModelRepository> repository;
-  std::unique_ptr<StoreVerifier> verifier;  // checks the store's files (store_verifier.h)
+  std::unique_ptr<FrameThumbnails> thumbnails;  // of the maps that keep them (keep_thumbnails)
+  std::unique_ptr<StoreVerifier> verifier;      // checks the store's files (store_verifier.h)
   StoreRecovery recovery;  // what opening the store recovered (empty when it opened whole)
   // How frames sent as images are described for place maps.
   FeatureOptions place_features = PlaceFeatureOptions();

@@ -50,7 +50,8 @@ json MapJson(const pb::MapInfo& map) {
             {"geometry", EnumLabel(pb::GeometryCheck_Name(s.geometry()), "GEOMETRY_CHECK_")},
             {"recent_seconds", s.recent_seconds()},
             {"recent_frames", s.recent_frames()},
-            {"group", s.group()}}}};
+            {"group", s.group()},
+            {"keep_thumbnails", s.keep_thumbnails()}}}};
 }
 
 int RunMapsList(const ServerFlags& flags, RecognitionClient& client) {
@@ -132,6 +133,9 @@ void AddMapsCommands(CLI::App& app, int* exit_code) {
       "--group", [settings](const std::string& v) { settings->set_group(v); },
       "Map group (a fleet's maps, a robot's sessions) that queries search together "
       "(recog stream --search-group)");
+  create->add_flag_callback(
+      "--keep-thumbnails", [settings] { settings->set_keep_thumbnails(true); },
+      "Keep a small JPEG of each frame for the web console (about 15 KB a frame)");
   create->add_option_function<double>(
       "--recent-seconds", [settings](const double& v) { settings->set_recent_seconds(v); },
       "Recent frames left out of queries, in seconds, for timestamped frames (20)");

@@ -172,6 +172,7 @@ struct StreamArgs {
   double rate = 0;
   uint64_t frames = 0;  // 0: every frame of the sequence
   bool features_on_client = false, create = false, timestamps = false, quiet = false;
+  bool keep_thumbnails = false;  // with create: the new map keeps a thumbnail of each frame
 };
 
 // Set by SIGINT/SIGTERM while `recog stream` runs: stop reading frames, take the answers of those
@@ -377,6 +378,7 @@ int RunStream(const StreamArgs& args, RecognitionClient& client) {
   config.set_create_if_missing(args.create);
   if (!args.preset.empty()) config.mutable_settings()->set_preset(args.preset);
   if (!args.group.empty()) config.mutable_settings()->set_group(args.group);
+  if (args.keep_thumbnails) config.mutable_settings()->set_keep_thumbnails(true);
   for (const std::string& name : args.search_maps) config.add_search_maps(name);
   config.set_search_group(args.search_group);
   if (args.create) source->AddRig(config.mutable_settings());
@@ -824,6 +826,11 @@ void AddStreamCommands(CLI::App& app, int* exit_code) {
   stream
       ->add_option("--group", stream_args->group,
                    "With --create: the new map's group (searched together by --search-group)")
+      ->needs("--create");
+  stream
+      ->add_flag("--keep-thumbnails", stream_args->keep_thumbnails,
+                 "With --create: the new map keeps a small JPEG of each frame, which the web "
+                 "console shows beside its loops")
       ->needs("--create");
   stream->add_option("--search-maps", stream_args->search_maps,
                      "Other maps every frame is also looked up in (relocalisation; their matches "

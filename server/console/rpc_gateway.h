@@ -1,0 +1,62 @@
+// RpcGateway: the console's HTTP/JSON face of recogd's unary RPCs.
+//
+// POST /api/rpc/<package.Service>/<Method> carries the request message as JSON (protobuf's JSON
+// mapping; field names as in the .proto files); the gateway parses it into the method's request
+// type, calls the method on the server's own services through an in-process gRPC channel (so
+// authentication, readiness, the worker pool, metrics and the log line are exactly those of a
+// gRPC client's call: there is no second implementation), and prints the response as JSON with
+// the proto field names and every field. The caller's `Authorization` header goes with the call
+// as its metadata. Streaming methods are not served (NOT_FOUND). Thread-safe.
+#pragma once
+
+#include <chrono>
+#include <memory>
+#include <string>
+#include <string_view>
+#include <utility>
+#include <vector>
+
+#include <google/protobuf/message.h>
+#include <grpcpp/grpcpp.h>
+
+namespace recog::server {
+
+// What an HTTP handler answers.
+struct HttpReply {
+  int status = 200;
+  std::string content_type = "application/json";
+  std::string body;
+  std::vector<std::pair<std::string, std::string>> headers = {};  // beside Content-Type
+};
+
+// {"code": "NOT_FOUND", "message": "..."} with the HTTP status of the gRPC code (HttpStatusOf).
+HttpReply ErrorReply(const grpc::Status& status);
+// 400 for INVALID_ARGUMENT and OUT_OF_RANGE, 401, 403, 404, 409 for ALREADY_EXISTS and ABORTED,
+// 412 FAILED_PRECONDITION, 429 RESOURCE_EXHAUSTED, 499 CANCELLED, 503 UNAVAILABLE, 504
+// DEADLINE_EXCEEDED, 501 UNIMPLEMENTED, 500 otherwise.
+int HttpStatusOf(grpc::StatusCode code);
+
+// A message as the console's JSON (proto field names, default values printed).
+std::string ToJson(const google::protobuf::Message& message);
+
+class RpcGateway {
+ public:
+  static constexpr std::chrono::seconds kDeadline{60};
+
+  explicit RpcGateway(std::shared_ptr<grpc::Channel> channel);
+
+  // Calls `method` ("recognition.v1.PlaceRecognition/ListMaps") with the JSON `body`, as the
+  // caller of `authorization` (the HTTP header's value, "" for none).
+  HttpReply Call(std::string_view method, std::string_view body,
+                 const std::string& authorization) const;
+
+  // The same with a request message already built; `response` must be of the method's response
+  // type. For the console's own views, which start from an RPC's answer.
+  grpc::Status Call(std::string_view method, const google::protobuf::Message& request,
+                    google::protobuf::Message* response, const std::string& authorization) const;
+
+ private:
+  std::shared_ptr<grpc::Channel> channel_;
+};
+
+}  // namespace recog::server

@@ -1,0 +1,64 @@
+// WebConsole: recogd's web console (ConsoleConfig, `console.listen`) — pages to browse the place
+// maps and the model repository, try recognition on an image, and watch the server live.
+//
+// It serves, on its own HTTP (or, with the server's tls.cert, HTTPS) address:
+//   /                      the pages (server/console/web: plain ES modules, no build step)
+//   /vendor/three/...      Debian's libjs-three, /vendor/chart.js/... Debian's libjs-chart.js
+//   /api/rpc/<Service>/<Method>   every unary RPC as JSON (RpcGateway: the same services)
+//   /api/maps, /api/maps/<name>/loops, /api/maps/<name>/frames/<id>/thumbnail,
+//   /api/models/<name>, /api/models/<name>/points, /api/models/<name>/views/<i>/image,
+//   /api/live, /api/whoami   the views the gRPC API has no call for (docs/server.md, "Console")
+// Every /api/ request is authenticated with the server's tokens (`Authorization: Bearer ...`) and
+// needs the read right (and the map's, for a map's views); the gateway's calls check their own
+// right as any gRPC call does, so a read-only token cannot change anything. Answers that fail are
+// {"code", "message"} with the HTTP status of the gRPC code. Requests larger than the server's
+// max_message_bytes (plus base64's third) are refused with 413.
+#pragma once
+
+#include <memory>
+#include <thread>
+
+#include <grpcpp/grpcpp.h>
+
+#include "core/common/status.h"
+#include "server/console/live_sampler.h"
+#include "server/console/rpc_gateway.h"
+#include "server/services/server_state.h"
+
+namespace httplib {
+class Server;
+}
+
+namespace recog::server {
+
+class WebConsole {
+ public:
+  // Listens on state->config.console.listen and serves from a background thread until destroyed.
+  // `channel` is an in-process channel to the server's services. UNAVAILABLE when the address
+  // cannot be bound, NOT_FOUND when the pages are missing, INVALID_ARGUMENT for a malformed
+  // address, FAILED_PRECONDITION when the TLS files cannot be used.
+  static StatusOr<std::unique_ptr<WebConsole>> Start(ServerState* state,
+                                                     std::shared_ptr<grpc::Channel> channel);
+  ~WebConsole();  // stops serving: requests in flight finish first
+  WebConsole(const WebConsole&) = delete;
+  WebConsole& operator=(const WebConsole&) = delete;
+
+  int port() const { return port_; }
+
+ private:
+  WebConsole(ServerState* state, std::shared_ptr<grpc::Channel> channel);
+  void AddRoutes();
+
+  ServerState* state_;
+  RpcGateway gateway_;
+  LiveSampler live_;
+  std::unique_ptr<httplib::Server> http_;
+  std::thread thread_;
+  size_t http_payload_limit_ = 0;  // bytes of a request's body
+  int port_ = 0;
+};
+
+// Where the bundled pages are: the source tree's server/console/web, else the installed copy.
+std::string DefaultConsoleWebRoot();
+
+}  // namespace recog::server
