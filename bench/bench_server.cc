@@ -79,6 +79,8 @@ struct Options {
   uint32_t workers = 0;
   std::string json_file;
   std::string log_level = "warn";
+  bool console = false;          // the servers run the web console (console.listen)
+  bool keep_thumbnails = false;  // the scenarios' maps keep a thumbnail of each frame
 };
 
 double MsBetween(Clock::time_point from, Clock::time_point to) {
@@ -190,12 +192,14 @@ struct FloodResult {
 // A RecognitionServer on 127.0.0.1 with a fresh data_dir, removed again with the server.
 class ScopedServer {
  public:
-  static StatusOr<std::unique_ptr<ScopedServer>> Start(const std::string& name, uint32_t workers) {
+  static StatusOr<std::unique_ptr<ScopedServer>> Start(const std::string& name,
+                                                       const Options& options) {
     server::ServerConfig config;
     config.listen = "127.0.0.1:0";
     config.data_dir = TempPath("server_" + name);
     config.metrics_listen = "";
-    config.workers = workers;
+    config.workers = options.workers;
+    if (options.console) config.console.listen = "127.0.0.1:0";
     std::filesystem::remove_all(config.data_dir);
     std::unique_ptr<ScopedServer> scoped(new ScopedServer(config.data_dir));
     RECOG_ASSIGN_OR_RETURN(scoped->server_, server::RecognitionServer::Start(config));
@@ -293,22 +297,25 @@ StatusOr<Frames> PrepareFrames(const std::string& dir) {
 
 StatusOr<
     std::unique_ptr<grpc::ClientReaderWriter<pb::StreamFramesRequest, pb::StreamFramesResponse>>>
-OpenStream(pb::PlaceRecognition::Stub& stub, grpc::ClientContext* context, const std::string& map) {
+OpenStream(pb::PlaceRecognition::Stub& stub, grpc::ClientContext* context, const std::string& map,
+           const Options& options) {
   auto stream = stub.StreamFrames(context);
   pb::StreamFramesRequest config;
   config.mutable_config()->set_map(map);
   config.mutable_config()->set_create_if_missing(true);
+  if (options.keep_thumbnails)
+    config.mutable_config()->mutable_settings()->set_keep_thumbnails(true);
   if (!stream->Write(config)) return FromGrpc(stream->Finish(), "StreamFrames config of " + map);
   return stream;
 }
 
 // One robot: `count` frames (cycling through `frames`) into `map`, one in flight at a time.
 StatusOr<StreamStats> RunRobot(const std::shared_ptr<grpc::Channel>& channel,
-                               const std::string& map,
+                               const std::string& map, const Options& options,
                                const std::vector<pb::StreamFramesRequest>& frames, int count) {
   auto stub = pb::PlaceRecognition::NewStub(channel);
   grpc::ClientContext context;
-  RECOG_ASSIGN_OR_RETURN(auto stream, OpenStream(*stub, &context, map));
+  RECOG_ASSIGN_OR_RETURN(auto stream, OpenStream(*stub, &context, map, options));
   StreamStats stats;
   pb::StreamFramesResponse response;
   for (int i = 0; i < count; ++i) {
@@ -329,7 +336,7 @@ StatusOr<StreamStats> RunRobot(const std::shared_ptr<grpc::Channel>& channel,
 StatusOr<LoadResult> RunRobots(const std::string& name, const Options& options, int streams,
                                int frames_each,
                                const std::vector<pb::StreamFramesRequest>& frames) {
-  RECOG_ASSIGN_OR_RETURN(auto server, ScopedServer::Start(name, options.workers));
+  RECOG_ASSIGN_OR_RETURN(auto server, ScopedServer::Start(name, options));
   std::vector<std::shared_ptr<grpc::Channel>> channels;
   for (int s = 0; s < streams; ++s) {
     RECOG_ASSIGN_OR_RETURN(auto channel, server->Connect());
@@ -341,8 +348,8 @@ StatusOr<LoadResult> RunRobots(const std::string& name, const Options& options, 
   for (int s = 0; s < streams; ++s) {
     robots.emplace_back([&, s] {
       go.arrive_and_wait();
-      results[size_t(s)] =
-          RunRobot(channels[size_t(s)], name + "-" + std::to_string(s), frames, frames_each);
+      results[size_t(s)] = RunRobot(channels[size_t(s)], name + "-" + std::to_string(s), options,
+                                    frames, frames_each);
     });
   }
   go.arrive_and_wait();
@@ -361,11 +368,11 @@ StatusOr<LoadResult> RunRobots(const std::string& name, const Options& options, 
 
 StatusOr<FloodResult> RunFlood(const Options& options,
                                const std::vector<pb::StreamFramesRequest>& frames) {
-  RECOG_ASSIGN_OR_RETURN(auto server, ScopedServer::Start("flood", options.workers));
+  RECOG_ASSIGN_OR_RETURN(auto server, ScopedServer::Start("flood", options));
   RECOG_ASSIGN_OR_RETURN(auto channel, server->Connect());
   auto stub = pb::PlaceRecognition::NewStub(channel);
   grpc::ClientContext context;
-  RECOG_ASSIGN_OR_RETURN(auto stream, OpenStream(*stub, &context, "flood"));
+  RECOG_ASSIGN_OR_RETURN(auto stream, OpenStream(*stub, &context, "flood", options));
 
   FloodResult result;
   result.rss_start_mib = CurrentRssMiB();
@@ -455,6 +462,8 @@ int Run(const Options& options) {
       "threads shared by the server and the client threads, so client work competes with the "
       "server for CPU\n",
       defaults.WorkerCount(), hardware_threads);
+  std::printf("web console %s, maps %s thumbnails\n", options.console ? "on" : "off",
+              options.keep_thumbnails ? "keep" : "keep no");
 
   std::printf("preparing frames from %s ...\n", options.images.c_str());
   StatusOr<Frames> frames = PrepareFrames(options.images);
@@ -543,6 +552,10 @@ int main(int argc, char** argv) {
   app.add_option("--json", options.json_file, "Also write the JSON report to this file");
   app.add_option("--log-level", options.log_level, "Server log level (spdlog)")
       ->capture_default_str();
+  app.add_flag("--console", options.console,
+               "Run the servers with the web console on (loops recorded for it, live samples)");
+  app.add_flag("--keep-thumbnails", options.keep_thumbnails,
+               "The scenarios' maps keep a thumbnail of each frame (MapSettings.keep_thumbnails)");
   CLI11_PARSE(app, argc, argv);
   spdlog::set_level(spdlog::level::from_str(options.log_level));
   return recog::bench::Run(options);
