@@ -150,9 +150,10 @@ StatusOr<std::unique_ptr<RecognitionServer>> RecognitionServer::Start(const Serv
   }
   server->server_->GetHealthCheckService()->SetServingStatus(true);
   server->server_->GetHealthCheckService()->SetServingStatus(kStoreHealthService, true);
-  spdlog::info("recogd ready: {} place maps, {} objects, {} workers, metrics on {}",
+  spdlog::info("recogd ready: {} place maps, {} objects, {} workers, metrics on {}, console on {}",
                state.maps->List().size(), state.objects->size(), state.pool->threads(),
-               config.metrics_listen.empty() ? "(off)" : config.metrics_listen);
+               config.metrics_listen.empty() ? "(off)" : config.metrics_listen,
+               config.console.listen.empty() ? "(off)" : config.console.listen);
   return server;
 }
 

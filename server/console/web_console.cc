@@ -55,8 +55,13 @@ WebConsole::WebConsole(ServerState* state, std::shared_ptr<grpc::Channel> channe
       live_([state] { return state->metrics.ReadTotals(); }, kLiveInterval, kLiveSamples) {}
 
 WebConsole::~WebConsole() {
-  if (http_ != nullptr) http_->stop();
-  if (thread_.joinable()) thread_.join();
+  if (!thread_.joinable()) return;
+  // stop() reaches the listening thread only once it listens: until it has stopped, ask again.
+  while (!stopped_) {
+    http_->stop();
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  thread_.join();
 }
 
 StatusOr<std::unique_ptr<WebConsole>> WebConsole::Start(ServerState* state,
@@ -101,7 +106,10 @@ StatusOr<std::unique_ptr<WebConsole>> WebConsole::Start(ServerState* state,
     return Status::Unavailable("the console cannot listen on " + config.console.listen +
                                " (address in use, or not an address of this machine)");
   }
-  console->thread_ = std::thread([&http] { http.listen_after_bind(); });
+  console->thread_ = std::thread([&http, console = console.get()] {
+    http.listen_after_bind();
+    console->stopped_ = true;
+  });
   spdlog::info("console on {}://{}:{}/", config.tls.cert.empty() ? "http" : "https", host,
                console->port_);
   return console;
@@ -116,8 +124,18 @@ void WebConsole::AddRoutes() {
   http.Get("/api/whoami", [&state](const httplib::Request& request, httplib::Response& response) {
     Send(WhoAmIView(state, Authorization(request)), &response);
   });
+  // Only JSON bodies: another site's page can send a form or text/plain to this address without
+  // asking, but not application/json (the browser asks first, and the console does not answer
+  // CORS), so a console without tokens cannot be driven by a page the operator happens to open.
   http.Post(R"(/api/rpc/([A-Za-z0-9_.]+/[A-Za-z0-9_]+))", [this](const httplib::Request& request,
                                                                  httplib::Response& response) {
+    if (!request.get_header_value("Content-Type").starts_with("application/json")) {
+      Send(ErrorReply({grpc::StatusCode::INVALID_ARGUMENT,
+                       "the body must be JSON sent as Content-Type: application/json"}),
+           &response);
+      response.status = 415;
+      return;
+    }
     Send(gateway_.Call(request.matches[1].str(), request.body, Authorization(request)), &response);
   });
   http.Get("/api/maps",

@@ -15,6 +15,7 @@
 // max_message_bytes (plus base64's third) are refused with 413.
 #pragma once
 
+#include <atomic>
 #include <memory>
 #include <thread>
 
@@ -54,7 +55,8 @@ class WebConsole {
   LiveSampler live_;
   std::unique_ptr<httplib::Server> http_;
   std::thread thread_;
-  size_t http_payload_limit_ = 0;  // bytes of a request's body
+  std::atomic<bool> stopped_{false};  // the thread has left listen_after_bind
+  size_t http_payload_limit_ = 0;     // bytes of a request's body
   int port_ = 0;
 };
 

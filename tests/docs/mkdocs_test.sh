@@ -5,7 +5,7 @@
 # "## The two commands". Usage: mkdocs_test.sh PROJECT_DIR. Exit 77 (skipped) without mkdocs.
 set -u
 
-project_dir=${1:?usage: mkdocs_test.sh PROJECT_DIR}
+project_dir=$(cd "${1:?usage: mkdocs_test.sh PROJECT_DIR}" && pwd) || exit 1
 max_readme_lines=250
 
 if ! command -v mkdocs >/dev/null 2>&1; then

@@ -228,6 +228,12 @@ TEST_F(ConsoleTest, TheGatewayCallsTheServicesAndRefusesWhatIsNotARequest) {
   auto [unknown, body] = Get("/api/nothing");
   EXPECT_EQ(unknown, 404);
   EXPECT_EQ(json::parse(body)["code"], "NOT_FOUND");
+  // Only JSON: a page of another site cannot send it without the browser asking first.
+  httplib::Result text = http_->Post("/api/rpc/recognition.v1.PlaceRecognition/CreateMap",
+                                     R"({"name": "forged"})", "text/plain");
+  ASSERT_TRUE(text);
+  EXPECT_EQ(text->status, 415);
+  EXPECT_EQ(GetMap("forged").error_code(), grpc::StatusCode::NOT_FOUND);
   httplib::Result form = http_->Post("/api/rpc/recognition.v1.PlaceRecognition/GetMap",
                                      std::string(20000, 'a'), "application/x-www-form-urlencoded");
   ASSERT_TRUE(form);
@@ -350,6 +356,20 @@ TEST(ConsoleOffTest, WithoutAnAddressThereIsNoConsole) {
   auto server = RecognitionServer::Start(config);
   ASSERT_TRUE(server.ok()) << server.status().ToString();
   EXPECT_EQ((*server)->console_port(), 0);
+}
+
+// The console's thread may not listen yet when the server stops: stopping must still end it (a
+// stop that came too early used to leave it in accept() and the shutdown waiting forever).
+TEST(ConsoleStartTest, AServerStoppedAsSoonAsItStartedStops) {
+  recog::testing::TempDir dir("console-quick");
+  ServerConfig config = LoopbackConfig(dir);
+  config.console.listen = "127.0.0.1:0";
+  for (int i = 0; i < 10; ++i) {
+    auto server = RecognitionServer::Start(config);
+    ASSERT_TRUE(server.ok()) << server.status().ToString();
+    EXPECT_GT((*server)->console_port(), 0);
+    (*server)->Shutdown(std::chrono::milliseconds(0));
+  }
 }
 
 TEST(ConsoleStartTest, AMissingPageFolderOrABadAddressStopsTheStart) {
