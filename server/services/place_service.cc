@@ -364,6 +364,7 @@ void KeepForConsole(ServerState& state, const PlaceMap& map, const PreparedFrame
                     const PlaceFrameResult& result) {
   const uint32_t map_id = map.info().id;
   const LoopResult& loop = result.loop;
+  if (loop.entry == kInvalidEntryId) return;  // the map did not keep the frame
   const Status queued = state.thumbnails->Keep(map_id, loop.entry, prepared.frame().image);
   if (!queued.ok()) spdlog::warn("map '{}': {}", map.name(), queued.ToString());
   if (state.recent_loops == nullptr || loop.status != LoopStatus::kLoopDetected) return;
