@@ -135,7 +135,7 @@ void AddMapsCommands(CLI::App& app, int* exit_code) {
       "(recog stream --search-group)");
   create->add_flag_callback(
       "--keep-thumbnails", [settings] { settings->set_keep_thumbnails(true); },
-      "Keep a small JPEG of each frame for the web console (about 15 KB a frame)");
+      "Keep a small JPEG of each frame for the web console (6-11 KB a frame)");
   create->add_option_function<double>(
       "--recent-seconds", [settings](const double& v) { settings->set_recent_seconds(v); },
       "Recent frames left out of queries, in seconds, for timestamped frames (20)");
