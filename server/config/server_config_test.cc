@@ -301,6 +301,22 @@ TEST_F(ServerConfigTest, UnknownKeysAreRejectedByName) {
   EXPECT_THAT(place.status().message(), HasSubstr("unknown key 'place.min_features'"));
 }
 
+TEST_F(ServerConfigTest, TheConsoleSectionIsReadAndItsUnknownKeysRejected) {
+  StatusOr<ServerConfig> console =
+      Load("console:\n  listen: \"127.0.0.1:8080\"\n  loops_per_map: 7\n  charts_dir: /tmp/c\n");
+  ASSERT_TRUE(console.ok()) << console.status().ToString();
+  EXPECT_EQ(console->console.listen, "127.0.0.1:8080");
+  EXPECT_EQ(console->console.loops_per_map, 7u);
+  EXPECT_EQ(console->console.charts_dir, "/tmp/c");
+  EXPECT_EQ(console->console.vendor_dir, "/usr/share/javascript");  // the default
+  StatusOr<ServerConfig> typo = Load("console:\n  listn: \"127.0.0.1:8080\"\n");
+  ASSERT_FALSE(typo.ok());
+  EXPECT_THAT(typo.status().message(), HasSubstr("unknown key 'console.listn'"));
+  StatusOr<ServerConfig> wrong_type = Load("console:\n  loops_per_map: many\n");
+  ASSERT_FALSE(wrong_type.ok());
+  EXPECT_THAT(wrong_type.status().message(), HasSubstr("console.loops_per_map"));
+}
+
 TEST_F(ServerConfigTest, ValuesOfTheWrongTypeAreRejectedByName) {
   const std::vector<std::pair<std::string, std::string>> cases = {
       {"workers: many\n", "key 'workers' must be a non-negative integer, got 'many'"},
@@ -373,6 +389,10 @@ TEST_F(ServerConfigTest, ValidateNamesTheBadField) {
       {[](ServerConfig& c) { c.repository.primary = c.listen; }, "repository.primary is this"},
       {[](ServerConfig& c) { c.place.alpha = -1; }, "place: alpha"},
       {[](ServerConfig& c) { c.place.epipolar.min_inliers = 3; }, "place: RANSAC"},
+      {[](ServerConfig& c) { c.console.listen = c.listen; }, "console.listen"},
+      {[](ServerConfig& c) { c.console.listen = c.metrics_listen; }, "console.listen"},
+      {[](ServerConfig& c) { c.console.loops_per_map = 0; }, "console.loops_per_map"},
+      {[](ServerConfig& c) { c.console.loops_per_map = 1001; }, "console.loops_per_map"},
   };
   for (const auto& [mutate, expected] : cases) {
     ServerConfig config;

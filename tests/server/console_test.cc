@@ -4,6 +4,8 @@
 #include <httplib.h>
 #include <nlohmann/json.hpp>
 
+#include <filesystem>
+#include <fstream>
 #include <opencv2/imgcodecs.hpp>
 #include <thread>
 
@@ -323,6 +325,40 @@ TEST_F(ConsoleTest, TokensRuleTheConsoleAsTheyRuleTheApi) {
   EXPECT_EQ(Rpc("recognition.v1.PlaceRecognition/CreateMap", R"({"name": "mine"})", kWriter).first,
             200);
   EXPECT_EQ(Get("/api/maps/mine/loops", kReader).first, 200);
+}
+
+TEST_F(ConsoleTest, TheChartsOfItsFolderAreListedAndWhatIsNotAChartSaysSo) {
+  auto [none_status, none] = GetJson("/api/charts");
+  ASSERT_EQ(none_status, 200);
+  EXPECT_EQ(none["configured"], false);
+  EXPECT_TRUE(none["charts"].empty());
+
+  const std::string charts = data_dir_.Sub("charts");
+  std::filesystem::create_directories(charts);
+  const auto write = [&](const std::string& name, const std::string& text) {
+    std::ofstream(charts + "/" + name) << text;
+  };
+  write("pr.json", R"({"title": "PR", "x_min": 0, "x_max": 1, "y_min": 0, "y_max": 1,
+                      "series": [{"label": "a", "points": [[0.5, 1.0]]}]})");
+  write("pr.png", "png");
+  write("broken.json", "{not json");
+  write("broken.png", "png");
+  write("report.json", R"({"frames": 84})");  // no PNG beside it: a report, not a chart
+  StopServer();
+  config().console.charts_dir = charts;
+  StartServer();
+  http_ = std::make_unique<httplib::Client>("127.0.0.1", server_->console_port());
+
+  auto [status, listed] = GetJson("/api/charts");
+  ASSERT_EQ(status, 200) << listed;
+  EXPECT_EQ(listed["configured"], true);
+  ASSERT_EQ(listed["charts"].size(), 1u) << listed;
+  EXPECT_EQ(listed["charts"][0]["name"], "pr");
+  EXPECT_EQ(listed["charts"][0]["chart"]["series"][0]["label"], "a");
+  ASSERT_EQ(listed["errors"].size(), 1u) << listed;
+  EXPECT_EQ(listed["errors"][0]["file"], "broken.json");
+  EXPECT_NE(listed["errors"][0]["message"].get<std::string>().find("not a chart"),
+            std::string::npos);
 }
 
 TEST_F(ConsoleTest, ThePagesAndDebiansLibrariesAreServed) {

@@ -202,6 +202,10 @@ expect_error "query --rig with a malformed rig file" "INVALID_ARGUMENT.*broken_r
   query --map rig --rig "$tmp/broken_rig.yaml" "$tmp/rig/front/rgb/000011.png" "${server[@]}"
 expect_usage_error "stream with both --images and --rig" "excludes" "$recog" stream --map rig \
   --images "$images" --rig "$tmp/rig" "${server[@]}"
+expect_usage_error "stream --keep-thumbnails without --create" "--create" "$recog" stream --map corridor \
+  --keep-thumbnails --images "$images" "${server[@]}"
+expect_ok "maps create --keep-thumbnails" "$recog" maps create thumbs --keep-thumbnails --json "${server[@]}"
+json_check "maps create --keep-thumbnails shows the setting" "assert d['settings']['keep_thumbnails'] is True, d"
 expect_ok "maps list after the refused rig streams" "$recog" maps list --json "${server[@]}"
 json_check "no map was created by a refused rig stream" \
   "assert 'rig2' not in [m['name'] for m in d] and 'rig' in [m['name'] for m in d], d"
