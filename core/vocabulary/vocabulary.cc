@@ -356,57 +356,107 @@ WordId Vocabulary::Descend(const Distance& distance, const uint8_t* descriptor, 
   return best_word;
 }
 
-template <class Distance>
+template <class Distance, class Emit>
 void Vocabulary::DescendBinaryBatch(const Distance& distance, const uint8_t* rows, size_t count,
-                                    int di_depth, BowEntry* entries,
-                                    std::pair<NodeId, uint32_t>* node_of_feature) const {
+                                    int di_depth, Emit&& emit) const {
   // With 8 rows in flight, the cache misses of one row's next level are hidden behind the
   // distance computations of the 7 others (8, 16 and 32 measured: 8 is fastest here).
   constexpr size_t kBatch = 8;
   constexpr size_t kCacheLine = 64;
-  const NodeId root = roots_[0];
+  constexpr uint32_t kFar = UINT32_MAX;
   for (size_t base = 0; base < count; base += kBatch) {
     const size_t n = std::min(kBatch, count - base);
-    NodeId node[kBatch];
+    // Over all trees so far: the nearest leaf's word, and the nearest node at the direct-index
+    // depth (depth 0: the first root, which every row shares).
+    WordId word[kBatch];
+    uint32_t word_distance[kBatch];
     NodeId di_node[kBatch];
-    for (size_t j = 0; j < n; ++j) node[j] = di_node[j] = root;
-    bool descending = true;
-    for (int depth = 1; descending; ++depth) {
-      descending = false;
+    uint32_t di_distance[kBatch];
+    for (size_t j = 0; j < n; ++j) {
+      word[j] = kInvalidWordId;
+      word_distance[j] = kFar;
+      di_node[j] = roots_[0];
+      di_distance[j] = di_depth == 0 ? 0 : kFar;
+    }
+    for (uint32_t tree = 0; tree < info_.num_trees; ++tree) {
+      // In this tree: the current node, its distance, and the deepest node up to the
+      // direct-index depth with its distance (a leaf above that depth stands for itself).
+      NodeId node[kBatch];
+      uint32_t node_distance[kBatch];
+      NodeId tree_di[kBatch];
+      uint32_t tree_di_distance[kBatch];
       for (size_t j = 0; j < n; ++j) {
-        const uint32_t children = child_count_[node[j]];
-        if (children == 0) continue;  // reached its leaf earlier
-        const uint32_t first = child_begin_or_word_[node[j]];
-        const uint8_t* block = descriptors_ + size_t(first) * stride_;
-        const uint8_t* row = rows + (base + j) * stride_;
-        // Branch-free arg-min: distance in the high bits, child index in the low 8 bits, so the
-        // smallest key is the nearest child and, on a tie, the first one.
-        uint32_t best = UINT32_MAX;
-        for (uint32_t c = 0; c < children; ++c) {
-          best = std::min(best, (uint32_t(distance(row, block + size_t(c) * stride_)) << 8) | c);
-        }
-        const NodeId next = first + (best & 0xffu);
-        node[j] = next;
-        if (depth <= di_depth) di_node[j] = next;  // deepest node up to the direct-index depth
-        if (child_count_[next] != 0) {
-          const uint32_t next_first = child_begin_or_word_[next];
-          const uint8_t* next_block = descriptors_ + size_t(next_first) * stride_;
-          const size_t bytes = size_t(child_count_[next]) * stride_;
-          for (size_t offset = 0; offset < bytes; offset += kCacheLine) {
-            __builtin_prefetch(next_block + offset);
+        node[j] = tree_di[j] = roots_[tree];
+        node_distance[j] = tree_di_distance[j] = kFar;
+      }
+      bool descending = true;
+      for (int depth = 1; descending; ++depth) {
+        descending = false;
+        for (size_t j = 0; j < n; ++j) {
+          const uint32_t children = child_count_[node[j]];
+          if (children == 0) continue;  // reached its leaf earlier
+          const uint32_t first = child_begin_or_word_[node[j]];
+          const uint8_t* block = descriptors_ + size_t(first) * stride_;
+          const uint8_t* row = rows + (base + j) * stride_;
+          // Branch-free arg-min: distance in the high bits, child index in the low 8 bits, so
+          // the smallest key is the nearest child and, on a tie, the first one.
+          uint32_t best = UINT32_MAX;
+          for (uint32_t c = 0; c < children; ++c) {
+            best = std::min(best, (uint32_t(distance(row, block + size_t(c) * stride_)) << 8) | c);
           }
-          __builtin_prefetch(child_begin_or_word_ + next_first);
-          __builtin_prefetch(child_count_ + next_first);
-          descending = true;
+          const NodeId next = first + (best & 0xffu);
+          node[j] = next;
+          node_distance[j] = best >> 8;
+          if (depth <= di_depth) {
+            tree_di[j] = next;
+            tree_di_distance[j] = best >> 8;
+          }
+          if (child_count_[next] != 0) {
+            const uint32_t next_first = child_begin_or_word_[next];
+            const uint8_t* next_block = descriptors_ + size_t(next_first) * stride_;
+            const size_t bytes = size_t(child_count_[next]) * stride_;
+            for (size_t offset = 0; offset < bytes; offset += kCacheLine) {
+              __builtin_prefetch(next_block + offset);
+            }
+            __builtin_prefetch(child_begin_or_word_ + next_first);
+            __builtin_prefetch(child_count_ + next_first);
+            descending = true;
+          }
+        }
+      }
+      for (size_t j = 0; j < n; ++j) {
+        if (node_distance[j] < word_distance[j]) {
+          word_distance[j] = node_distance[j];
+          word[j] = child_begin_or_word_[node[j]];
+        }
+        if (tree_di_distance[j] < di_distance[j]) {
+          di_distance[j] = tree_di_distance[j];
+          di_node[j] = tree_di[j];
         }
       }
     }
-    for (size_t j = 0; j < n; ++j) {
-      const WordId word = child_begin_or_word_[node[j]];
-      entries[base + j] = {word, word_weight_[word]};
-      if (node_of_feature != nullptr) node_of_feature[base + j] = {di_node[j], uint32_t(base + j)};
-    }
+    for (size_t j = 0; j < n; ++j) emit(base + j, word[j], di_node[j]);
   }
+}
+
+template <class Emit>
+void Vocabulary::DescendRows(const uint8_t* rows, size_t count, int di_depth, Emit&& emit) const {
+  if (info_.descriptor.type == DescriptorType::kBinary) {
+    if (stride_ == 32) {
+      DescendBinaryBatch(Hamming256Distance{}, rows, count, di_depth, emit);
+    } else {
+      DescendBinaryBatch(HammingAnyDistance{stride_}, rows, count, di_depth, emit);
+    }
+    return;
+  }
+  WithDistance(info_.descriptor, [&](const auto& distance) {
+    for (size_t i = 0; i < count; ++i) {
+      NodeId node = 0;
+      const WordId word = Descend(distance, rows + i * stride_, di_depth, &node);
+      emit(i, word, node);
+    }
+    return 0;
+  });
 }
 
 WordId Vocabulary::TransformOne(const uint8_t* descriptor, NodeId* node, int levels_up) const {
@@ -415,6 +465,24 @@ WordId Vocabulary::TransformOne(const uint8_t* descriptor, NodeId* node, int lev
   return WithDistance(info_.descriptor, [&](const auto& distance) {
     return Descend(distance, descriptor, di_depth, node);
   });
+}
+
+Status Vocabulary::TransformEach(const cv::Mat& descriptors, std::vector<WordId>* words,
+                                 std::vector<NodeId>* nodes, int levels_up) const {
+  if (empty()) return Status::FailedPrecondition("the vocabulary is empty");
+  RECOG_RETURN_IF_ERROR(CheckDescriptorMatrix(descriptors, info_.descriptor));
+  const size_t n = descriptors.empty() ? 0 : size_t(descriptors.rows);
+  words->resize(n);
+  if (nodes != nullptr) nodes->resize(n);
+  if (n == 0) return Status::Ok();
+  WordId* word_out = words->data();
+  NodeId* node_out = nodes != nullptr ? nodes->data() : nullptr;
+  DescendRows(descriptors.ptr<uint8_t>(0), n, DirectIndexDepth(levels_up),
+              [&](size_t i, WordId word, NodeId node) {
+                word_out[i] = word;
+                if (node_out != nullptr) node_out[i] = node;
+              });
+  return Status::Ok();
 }
 
 Status Vocabulary::Transform(const cv::Mat& descriptors, BowVector* bow, FeatureVector* features,
@@ -434,25 +502,12 @@ Status Vocabulary::Transform(const cv::Mat& descriptors, BowVector* bow, Feature
   if (features != nullptr) node_of_feature.resize(n);
 
   const int di_depth = DirectIndexDepth(levels_up);
-  const uint8_t* rows = descriptors.ptr<uint8_t>(0);
+  BowEntry* entry = entries.data();
   auto* pairs = features != nullptr ? node_of_feature.data() : nullptr;
-  if (info_.num_trees == 1 && info_.descriptor.type == DescriptorType::kBinary) {
-    if (stride_ == 32) {
-      DescendBinaryBatch(Hamming256Distance{}, rows, n, di_depth, entries.data(), pairs);
-    } else {
-      DescendBinaryBatch(HammingAnyDistance{stride_}, rows, n, di_depth, entries.data(), pairs);
-    }
-  } else {
-    WithDistance(info_.descriptor, [&](const auto& distance) {
-      for (size_t i = 0; i < n; ++i) {
-        NodeId node = 0;
-        const WordId word = Descend(distance, rows + i * stride_, di_depth, &node);
-        entries[i] = {word, word_weight_[word]};
-        if (pairs != nullptr) pairs[i] = {node, uint32_t(i)};
-      }
-      return 0;
-    });
-  }
+  DescendRows(descriptors.ptr<uint8_t>(0), n, di_depth, [&](size_t i, WordId word, NodeId node) {
+    entry[i] = {word, word_weight_[word]};
+    if (pairs != nullptr) pairs[i] = {node, uint32_t(i)};
+  });
 
   // Group by word. tf weightings add up the occurrences, idf/binary count a word once; words of
   // weight 0 are left out (they carry no information, and DBoW2 leaves them out too).

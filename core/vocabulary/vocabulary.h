@@ -113,6 +113,12 @@ class Vocabulary {
   // The word of one descriptor (`descriptor` points at size_bytes bytes); when `node` is not null
   // it receives the direct-index node at `levels_up` levels above the words.
   WordId TransformOne(const uint8_t* descriptor, NodeId* node = nullptr, int levels_up = 0) const;
+  // TransformOne for every row of `descriptors`, in one batch (much faster than a loop over
+  // TransformOne: the rows descend together, their cache misses overlapped). (*words)[i] and,
+  // when `nodes` is not null, (*nodes)[i] are row i's; both are resized, their memory reused.
+  // Fails as Transform does.
+  Status TransformEach(const cv::Mat& descriptors, std::vector<WordId>* words,
+                       std::vector<NodeId>* nodes = nullptr, int levels_up = 0) const;
 
   // Depth below the root of the direct-index node for `levels_up`: max(0, depth - levels_up).
   // For several trees, the node at that depth nearest to the descriptor over all trees is used
@@ -151,12 +157,15 @@ class Vocabulary {
   template <class Distance>
   WordId Descend(const Distance& distance, const uint8_t* descriptor, int di_depth,
                  NodeId* di_node) const;
-  // Transform's fast path for one tree of binary descriptors: the same descent as Descend for
-  // `count` rows, run level by level over batches of rows with the next level prefetched.
-  // Writes entries[i] = {word, word weight} and, when not null, node_of_feature[i] = {node, i}.
-  template <class Distance>
+  // The descent of Descend for `count` binary rows, run level by level over batches of rows
+  // with the next level prefetched; calls emit(i, word, direct-index node) for every row i.
+  template <class Distance, class Emit>
   void DescendBinaryBatch(const Distance& distance, const uint8_t* rows, size_t count, int di_depth,
-                          BowEntry* entries, std::pair<NodeId, uint32_t>* node_of_feature) const;
+                          Emit&& emit) const;
+  // emit(i, word, direct-index node) for each of `count` rows: DescendBinaryBatch for binary
+  // descriptors, Descend row by row otherwise.
+  template <class Emit>
+  void DescendRows(const uint8_t* rows, size_t count, int di_depth, Emit&& emit) const;
 
   VocabularyInfo info_;
   uint32_t num_nodes_ = 0;

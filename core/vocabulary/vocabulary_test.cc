@@ -83,6 +83,55 @@ TEST(VocabularyTest, SeveralTreesPickTheNearestLeafOverAllTrees) {
   EXPECT_EQ(*words.rbegin(), voc.num_words() - 1);
 }
 
+// TransformEach and Transform descend rows in batches of 8; TransformOne one row at a time. They
+// must agree on every row's word and direct-index node, for one tree and for several (the node
+// nearest over all trees), at every level and for a row count that is not a multiple of 8.
+TEST(VocabularyTest, BatchedTransformsAgreeWithTransformOneRowByRow) {
+  const cv::Mat queries = ClusteredBinaryDescriptors(203, 40, 0.1, 17);
+  for (uint32_t trees : {1u, 4u}) {
+    const Vocabulary voc = TrainSmall(5, 3, trees);
+    std::set<NodeId> nodes_seen;
+    for (int levels_up : {0, 1, 2, 3, 9}) {
+      std::vector<WordId> words;
+      std::vector<NodeId> nodes;
+      ASSERT_TRUE(voc.TransformEach(queries, &words, &nodes, levels_up).ok());
+      ASSERT_EQ(words.size(), size_t(queries.rows));
+      ASSERT_EQ(nodes.size(), size_t(queries.rows));
+      BowVector bow;
+      FeatureVector fv;
+      ASSERT_TRUE(voc.Transform(queries, &bow, &fv, levels_up).ok());
+      std::vector<NodeId> node_in_fv(size_t(queries.rows), std::numeric_limits<NodeId>::max());
+      for (size_t i = 0; i < fv.size(); ++i) {
+        for (uint32_t f : fv.features(i)) node_in_fv[f] = fv.node(i);
+      }
+      for (int r = 0; r < queries.rows; ++r) {
+        NodeId node = 0;
+        const WordId word = voc.TransformOne(queries.ptr<uint8_t>(r), &node, levels_up);
+        EXPECT_EQ(words[size_t(r)], word) << trees << " trees, row " << r;
+        EXPECT_EQ(nodes[size_t(r)], node) << trees << " trees, levels_up " << levels_up;
+        EXPECT_EQ(node_in_fv[size_t(r)], node) << trees << " trees, levels_up " << levels_up;
+        nodes_seen.insert(node);
+      }
+    }
+    if (trees > 1) {
+      // The nodes come from more than the first tree.
+      EXPECT_TRUE(std::any_of(nodes_seen.begin(), nodes_seen.end(),
+                              [&](NodeId n) { return n >= voc.Root(1); }));
+    }
+  }
+}
+
+TEST(VocabularyTest, TransformEachRejectsWhatTransformRejects) {
+  const Vocabulary voc = TrainSmall(6, 2, 2);
+  std::vector<WordId> words = {1, 2};
+  EXPECT_EQ(voc.TransformEach(cv::Mat(10, 64, CV_8U, cv::Scalar(0)), &words).code(),
+            StatusCode::kInvalidArgument);
+  ASSERT_TRUE(voc.TransformEach(cv::Mat(0, 32, CV_8U), &words).ok());
+  EXPECT_TRUE(words.empty());
+  EXPECT_EQ(Vocabulary().TransformEach(RandomDescriptors(3, 1), &words).code(),
+            StatusCode::kFailedPrecondition);
+}
+
 TEST(VocabularyTest, TfIdfBowIsTheL1NormalisedSumOfWordWeights) {
   const Vocabulary voc = TrainSmall(8, 3, 1);
   const cv::Mat d = ClusteredBinaryDescriptors(200, 40, 0.08, 21);

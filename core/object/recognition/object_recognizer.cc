@@ -212,7 +212,7 @@ Status ObjectRecognizer::RecognizeFeatures(const FeatureSet& features,
   return Status::Ok();
 }
 
-void ObjectRecognizer::Prepare(const CameraIntrinsics& camera, QueryFeatures* query) const {
+Status ObjectRecognizer::Prepare(const CameraIntrinsics& camera, QueryFeatures* query) const {
   const FeatureSet& features = *query->features;
   query->positions.resize(features.size());
   for (size_t i = 0; i < features.size(); ++i) query->positions[i] = features.keypoints[i].pt;
@@ -221,14 +221,8 @@ void ObjectRecognizer::Prepare(const CameraIntrinsics& camera, QueryFeatures* qu
     cv::undistortPoints(query->positions, query->pinhole, camera.K(), camera.distortion,
                         cv::noArray(), camera.K());
   }
-  const Vocabulary& vocabulary = database_->vocabulary();
-  const int levels_up = database_->direct_levels_up();
-  query->words.resize(features.size());
-  query->nodes.resize(features.size());
-  for (size_t i = 0; i < features.size(); ++i) {
-    query->words[i] =
-        vocabulary.TransformOne(features.descriptors.ptr(int(i)), &query->nodes[i], levels_up);
-  }
+  return database_->vocabulary().TransformEach(features.descriptors, &query->words, &query->nodes,
+                                               database_->direct_levels_up());
 }
 
 Status ObjectRecognizer::QueryRegion(const QueryFeatures& query,
@@ -307,7 +301,7 @@ Status ObjectRecognizer::Run(const FeatureSet& features, const CameraIntrinsics&
   revisits->clear();
   auto phase = Clock::now();
   query_.features = &features;
-  Prepare(camera, &query_);
+  RECOG_RETURN_IF_ERROR(Prepare(camera, &query_));
   // Prepare computed the words too; they count as conversion.
   const double prepared = MillisecondsSince(phase);
   phase = Clock::now();
@@ -378,7 +372,7 @@ Status ObjectRecognizer::SecondPass(const cv::Mat& image, const CameraIntrinsics
       keypoint.size = float(keypoint.size / scale);
     }
     crop_query_.features = &crop_features_;
-    Prepare(camera, &crop_query_);
+    RECOG_RETURN_IF_ERROR(Prepare(camera, &crop_query_));
     all.resize(crop_features_.size());
     std::iota(all.begin(), all.end(), 0u);
     RECOG_RETURN_IF_ERROR(QueryRegion(crop_query_, all, pass.candidates, &candidates, &stages));

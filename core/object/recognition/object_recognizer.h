@@ -239,7 +239,7 @@ class ObjectRecognizer {
                     const std::vector<Revisit>& revisits, std::vector<Detection>* detections,
                     RecognitionTiming* timing);
   // Positions, pinhole pixels, words and nodes of query->features.
-  void Prepare(const CameraIntrinsics& camera, QueryFeatures* query) const;
+  Status Prepare(const CameraIntrinsics& camera, QueryFeatures* query) const;
   // BC matching of the bag of words of `region` (indices into query.features).
   Status QueryRegion(const QueryFeatures& query, const std::vector<uint32_t>& region,
                      size_t candidates, std::vector<BcMatch>* matches, RecognitionTiming* timing);
