@@ -1,12 +1,14 @@
 #include "core/object/recognition/object_pose.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <random>
 
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "core/geometry/p3p.h"
 #include "core/geometry/pose_covariance.h"
 
 namespace recog {
@@ -72,9 +74,8 @@ bool RansacPnp(const cv::Matx33d& K, const std::vector<cv::Point3f>& object,
   const size_t n = object.size();
   if (n < kMinInliers) return false;
   std::mt19937_64 rng(seed);
-  std::vector<cv::Point3f> sample_object(kSample);
-  std::vector<cv::Point2f> sample_image(kSample);
-  std::vector<cv::Mat> rvecs, tvecs;
+  std::array<cv::Vec3d, kSample> sample_object, sample_rays;
+  std::array<P3PSolution, 4> solutions;
   std::vector<uint32_t> candidate;
   inliers->clear();
   // Adaptive stop: enough iterations to draw, with 99 % confidence, one all-inlier sample at the
@@ -88,22 +89,16 @@ bool RansacPnp(const cv::Matx33d& K, const std::vector<cv::Point3f>& object,
         picked[k] = uint32_t(rng() % n);
         fresh = std::find(picked, picked + k, picked[k]) == picked + k;
       }
-      sample_object[k] = object[picked[k]];
-      sample_image[k] = image[picked[k]];
+      const cv::Point3f& x = object[picked[k]];
+      const cv::Point2f& pixel = image[picked[k]];
+      sample_object[size_t(k)] = cv::Vec3d(x.x, x.y, x.z);
+      sample_rays[size_t(k)] =
+          cv::Vec3d((pixel.x - K(0, 2)) / K(0, 0), (pixel.y - K(1, 2)) / K(1, 1), 1.0);
     }
-    try {
-      if (cv::solveP3P(sample_object, sample_image, K, cv::noArray(), rvecs, tvecs,
-                       cv::SOLVEPNP_P3P) == 0) {
-        continue;
-      }
-    } catch (const cv::Exception&) {
-      continue;  // a degenerate sample
-    }
+    const size_t solved = SolveP3P(sample_object, sample_rays, &solutions);
     bool improved = false;
-    for (size_t s = 0; s < rvecs.size(); ++s) {
-      const cv::Vec3d rvec(rvecs[s]), tvec(tvecs[s]);
-      if (!std::isfinite(rvec[0] + rvec[1] + rvec[2] + tvec[0] + tvec[1] + tvec[2])) continue;
-      const RigidTransform hypothesis = PoseFromRodrigues(rvec, tvec);
+    for (size_t s = 0; s < solved; ++s) {
+      const RigidTransform hypothesis{solutions[s].R, solutions[s].t};
       ReprojectionInliers(K, hypothesis, object, image, threshold_px, &candidate);
       if (candidate.size() > inliers->size()) {
         inliers->swap(candidate);
