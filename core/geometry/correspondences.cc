@@ -71,26 +71,50 @@ Status MatchByDirectIndex(const FeatureVector& a_direct, const cv::Mat& a_descri
   matches->clear();
   RECOG_RETURN_IF_ERROR(CheckBinary(a_descriptors, b_descriptors));
   const uint32_t a_rows = uint32_t(a_descriptors.rows), b_rows = uint32_t(b_descriptors.rows);
-  size_t i = 0, j = 0;
-  while (i < a_direct.size() && j < b_direct.size()) {
-    if (a_direct.node(i) < b_direct.node(j)) {
-      ++i;
-    } else if (a_direct.node(i) > b_direct.node(j)) {
-      ++j;
-    } else {
-      for (uint32_t fa : a_direct.features(i)) {
-        if (fa >= a_rows) return Status::InvalidArgument("direct index of A exceeds its features");
-        Nearest nearest;
-        for (uint32_t fb : b_direct.features(j)) {
-          if (fb >= b_rows)
-            return Status::InvalidArgument("direct index of B exceeds its features");
-          nearest.Offer(Distance(a_descriptors, fa, b_descriptors, fb), fb);
+  const size_t stride = size_t(a_descriptors.cols);
+  const uint8_t* a_base = a_descriptors.data;  // null when empty: no index passes the checks
+  const uint8_t* b_base = b_descriptors.data;
+  // Every pair of features under a node both direct indices share; the distance is the innermost
+  // loop, so it is chosen once, outside it.
+  auto match_shared_nodes = [&](const auto& distance) -> Status {
+    size_t i = 0, j = 0;
+    while (i < a_direct.size() && j < b_direct.size()) {
+      if (a_direct.node(i) < b_direct.node(j)) {
+        ++i;
+      } else if (a_direct.node(i) > b_direct.node(j)) {
+        ++j;
+      } else {
+        const std::span<const uint32_t> a_features = a_direct.features(i);
+        const std::span<const uint32_t> b_features = b_direct.features(j);
+        // Checked here, not trusted: a direct index may come from a decoded record.
+        if (!a_features.empty() &&
+            *std::max_element(a_features.begin(), a_features.end()) >= a_rows) {
+          return Status::InvalidArgument("direct index of A exceeds its features");
         }
-        if (nearest.Accept(options)) matches->push_back({fa, nearest.index, nearest.best});
+        if (!b_features.empty() &&
+            *std::max_element(b_features.begin(), b_features.end()) >= b_rows) {
+          return Status::InvalidArgument("direct index of B exceeds its features");
+        }
+        for (uint32_t fa : a_features) {
+          const uint8_t* a_row = a_base + size_t(fa) * stride;
+          Nearest nearest;
+          for (uint32_t fb : b_features) {
+            nearest.Offer(distance(a_row, b_base + size_t(fb) * stride), fb);
+          }
+          if (nearest.Accept(options)) matches->push_back({fa, nearest.index, nearest.best});
+        }
+        ++i;
+        ++j;
       }
-      ++i;
-      ++j;
     }
+    return Status::Ok();
+  };
+  if (stride == 32) {
+    RECOG_RETURN_IF_ERROR(
+        match_shared_nodes([](const uint8_t* a, const uint8_t* b) { return Hamming256(a, b); }));
+  } else {
+    RECOG_RETURN_IF_ERROR(match_shared_nodes(
+        [stride](const uint8_t* a, const uint8_t* b) { return HammingDistance(a, b, stride); }));
   }
   MakeOneToOne(matches);
   return Status::Ok();
