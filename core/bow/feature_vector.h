@@ -33,6 +33,8 @@ class FeatureVector {
     return {features_.data() + offsets_[i], features_.data() + offsets_[i + 1]};
   }
   std::span<const NodeId> nodes() const { return nodes_; }
+  // Position of node(i)'s first feature in the list of every node's features, node by node.
+  size_t first_position(size_t i) const { return offsets_[i]; }
 
   void Clear();
   // Rebuilds the vector from (node, feature) pairs sorted by node then feature.

@@ -63,20 +63,18 @@ void MakeOneToOne(std::vector<Match>* matches) {
             [](const Match& x, const Match& y) { return x.a < y.a; });
 }
 
-}  // namespace
-
-Status MatchByDirectIndex(const FeatureVector& a_direct, const cv::Mat& a_descriptors,
-                          const FeatureVector& b_direct, const cv::Mat& b_descriptors,
-                          const MatchOptions& options, std::vector<Match>* matches) {
+// Every pair of features under a node both direct indices share; row_of_b(j, k) is the
+// descriptor of the k-th feature of b_direct's node j. The distance is the innermost loop, so it
+// is chosen once, outside it.
+template <class RowOfB>
+Status MatchSharedNodes(const FeatureVector& a_direct, const cv::Mat& a_descriptors,
+                        const FeatureVector& b_direct, uint32_t b_rows, size_t stride,
+                        const RowOfB& row_of_b, const MatchOptions& options,
+                        std::vector<Match>* matches) {
   matches->clear();
-  RECOG_RETURN_IF_ERROR(CheckBinary(a_descriptors, b_descriptors));
-  const uint32_t a_rows = uint32_t(a_descriptors.rows), b_rows = uint32_t(b_descriptors.rows);
-  const size_t stride = size_t(a_descriptors.cols);
+  const uint32_t a_rows = uint32_t(a_descriptors.rows);
   const uint8_t* a_base = a_descriptors.data;  // null when empty: no index passes the checks
-  const uint8_t* b_base = b_descriptors.data;
-  // Every pair of features under a node both direct indices share; the distance is the innermost
-  // loop, so it is chosen once, outside it.
-  auto match_shared_nodes = [&](const auto& distance) -> Status {
+  auto match = [&](const auto& distance) -> Status {
     size_t i = 0, j = 0;
     while (i < a_direct.size() && j < b_direct.size()) {
       if (a_direct.node(i) < b_direct.node(j)) {
@@ -98,8 +96,8 @@ Status MatchByDirectIndex(const FeatureVector& a_direct, const cv::Mat& a_descri
         for (uint32_t fa : a_features) {
           const uint8_t* a_row = a_base + size_t(fa) * stride;
           Nearest nearest;
-          for (uint32_t fb : b_features) {
-            nearest.Offer(distance(a_row, b_base + size_t(fb) * stride), fb);
+          for (size_t k = 0; k < b_features.size(); ++k) {
+            nearest.Offer(distance(a_row, row_of_b(j, k)), b_features[k]);
           }
           if (nearest.Accept(options)) matches->push_back({fa, nearest.index, nearest.best});
         }
@@ -111,13 +109,62 @@ Status MatchByDirectIndex(const FeatureVector& a_direct, const cv::Mat& a_descri
   };
   if (stride == 32) {
     RECOG_RETURN_IF_ERROR(
-        match_shared_nodes([](const uint8_t* a, const uint8_t* b) { return Hamming256(a, b); }));
+        match([](const uint8_t* a, const uint8_t* b) { return Hamming256(a, b); }));
   } else {
-    RECOG_RETURN_IF_ERROR(match_shared_nodes(
+    RECOG_RETURN_IF_ERROR(match(
         [stride](const uint8_t* a, const uint8_t* b) { return HammingDistance(a, b, stride); }));
   }
   MakeOneToOne(matches);
   return Status::Ok();
+}
+
+}  // namespace
+
+Status MatchByDirectIndex(const FeatureVector& a_direct, const cv::Mat& a_descriptors,
+                          const FeatureVector& b_direct, const cv::Mat& b_descriptors,
+                          const MatchOptions& options, std::vector<Match>* matches) {
+  matches->clear();
+  RECOG_RETURN_IF_ERROR(CheckBinary(a_descriptors, b_descriptors));
+  const size_t stride = size_t(a_descriptors.cols);
+  const uint8_t* b_base = b_descriptors.data;
+  return MatchSharedNodes(
+      a_direct, a_descriptors, b_direct, uint32_t(b_descriptors.rows), stride,
+      [&](size_t j, size_t k) { return b_base + size_t(b_direct.features(j)[k]) * stride; },
+      options, matches);
+}
+
+StatusOr<cv::Mat> DescriptorsInDirectOrder(const FeatureVector& b_direct,
+                                           const cv::Mat& descriptors) {
+  RECOG_RETURN_IF_ERROR(CheckBinary(descriptors, descriptors));
+  cv::Mat ordered(int(b_direct.num_features()), descriptors.cols, CV_8U);
+  int row = 0;
+  for (size_t j = 0; j < b_direct.size(); ++j) {
+    for (uint32_t f : b_direct.features(j)) {
+      if (f >= uint32_t(descriptors.rows)) {
+        return Status::InvalidArgument("direct index exceeds its features");
+      }
+      descriptors.row(int(f)).copyTo(ordered.row(row++));
+    }
+  }
+  return ordered;
+}
+
+Status MatchByDirectIndexInOrder(const FeatureVector& a_direct, const cv::Mat& a_descriptors,
+                                 const FeatureVector& b_direct, const cv::Mat& b_in_direct_order,
+                                 const MatchOptions& options, std::vector<Match>* matches) {
+  matches->clear();
+  RECOG_RETURN_IF_ERROR(CheckBinary(a_descriptors, b_in_direct_order));
+  if (size_t(b_in_direct_order.rows) != b_direct.num_features()) {
+    return Status::InvalidArgument("B's descriptors in direct order have " +
+                                   std::to_string(b_in_direct_order.rows) + " rows for " +
+                                   std::to_string(b_direct.num_features()) + " features");
+  }
+  const size_t stride = size_t(a_descriptors.cols);
+  const uint8_t* b_base = b_in_direct_order.data;
+  return MatchSharedNodes(
+      a_direct, a_descriptors, b_direct, uint32_t(b_in_direct_order.rows), stride,
+      [&](size_t j, size_t k) { return b_base + (b_direct.first_position(j) + k) * stride; },
+      options, matches);
 }
 
 Status MatchExhaustive(const cv::Mat& a_descriptors, const cv::Mat& b_descriptors,

@@ -42,6 +42,20 @@ Status MatchByDirectIndex(const FeatureVector& a_direct, const cv::Mat& a_descri
                           const FeatureVector& b_direct, const cv::Mat& b_descriptors,
                           const MatchOptions& options, std::vector<Match>* matches);
 
+// B's descriptors rearranged node by node in the order of `b_direct`: row p is the descriptor of
+// the p-th feature b_direct lists (every node's features in turn). INVALID_ARGUMENT when b_direct
+// names a row `descriptors` does not have.
+StatusOr<cv::Mat> DescriptorsInDirectOrder(const FeatureVector& b_direct,
+                                           const cv::Mat& descriptors);
+
+// MatchByDirectIndex with B's descriptors given node by node (DescriptorsInDirectOrder): the
+// same matches, but each node's candidates are read from contiguous memory. For a large B read
+// once per query (an object model out of the cache) the matching takes about half the time.
+// INVALID_ARGUMENT when `b_in_direct_order` does not have one row per feature of b_direct.
+Status MatchByDirectIndexInOrder(const FeatureVector& a_direct, const cv::Mat& a_descriptors,
+                                 const FeatureVector& b_direct, const cv::Mat& b_in_direct_order,
+                                 const MatchOptions& options, std::vector<Match>* matches);
+
 // Putative matches by comparing every pair of features.
 Status MatchExhaustive(const cv::Mat& a_descriptors, const cv::Mat& b_descriptors,
                        const MatchOptions& options, std::vector<Match>* matches);

@@ -1,5 +1,6 @@
 #include "core/geometry/correspondences.h"
 
+#include <algorithm>
 #include <random>
 
 #include <gtest/gtest.h>
@@ -84,6 +85,45 @@ TEST(CorrespondencesTest, NonBinaryOrMismatchedDescriptorsAreRefused) {
       MatchByDirectIndex(AllUnderOneNode(9), cv::Mat(3, 32, CV_8U, cv::Scalar(0)),
                          AllUnderOneNode(3), cv::Mat(3, 32, CV_8U, cv::Scalar(0)), {}, &matches)
           .code(),
+      StatusCode::kInvalidArgument);
+}
+
+// B holds a noisy copy of each of A's descriptors among random ones, its nodes listing their
+// features out of order of the rows: the in-order variant must give exactly MatchByDirectIndex's
+// matches.
+TEST(CorrespondencesTest, MatchingAgainstDescriptorsInDirectOrderGivesTheSameMatches) {
+  const cv::Mat a = testing::RandomDescriptors(300, 8);
+  cv::Mat b;
+  cv::vconcat(a, testing::RandomDescriptors(600, 9), b);
+  for (int r = 0; r < 300; r += 2) b.at<uint8_t>(r, r % 32) ^= 0x5;  // 2 bits off
+  auto by_node = [](uint32_t rows, uint32_t nodes) {
+    std::vector<std::pair<NodeId, uint32_t>> pairs;
+    for (uint32_t f = 0; f < rows; ++f) pairs.push_back({(f * 7919u) % nodes, f});
+    std::sort(pairs.begin(), pairs.end());
+    FeatureVector fv;
+    fv.AssignSorted(pairs);
+    return fv;
+  };
+  const FeatureVector a_direct = by_node(300, 5), b_direct = by_node(900, 5);
+  auto ordered = DescriptorsInDirectOrder(b_direct, b);
+  ASSERT_TRUE(ordered.ok()) << ordered.status().ToString();
+  ASSERT_EQ(ordered->rows, b.rows);
+  EXPECT_EQ(cv::countNonZero(ordered->row(0) != b.row(int(b_direct.features(0)[0]))), 0);
+  const MatchOptions options{.ratio = 0.8, .max_distance = 64};
+  std::vector<Match> plain, in_order;
+  ASSERT_TRUE(MatchByDirectIndex(a_direct, a, b_direct, b, options, &plain).ok());
+  ASSERT_TRUE(MatchByDirectIndexInOrder(a_direct, a, b_direct, *ordered, options, &in_order).ok());
+  EXPECT_EQ(plain.size(), 300u);  // every copy, under the node of its original
+  EXPECT_EQ(in_order, plain);
+}
+
+TEST(CorrespondencesTest, DescriptorsInDirectOrderMustMatchTheirDirectIndex) {
+  const cv::Mat d = testing::RandomDescriptors(3, 2);
+  EXPECT_EQ(DescriptorsInDirectOrder(AllUnderOneNode(9), d).status().code(),
+            StatusCode::kInvalidArgument);
+  std::vector<Match> matches;
+  EXPECT_EQ(
+      MatchByDirectIndexInOrder(AllUnderOneNode(3), d, AllUnderOneNode(4), d, {}, &matches).code(),
       StatusCode::kInvalidArgument);
 }
 

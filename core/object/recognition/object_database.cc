@@ -3,6 +3,7 @@
 #include <cmath>
 #include <numeric>
 
+#include "core/geometry/correspondences.h"
 #include "core/object/formats/model_file.h"
 
 namespace recog {
@@ -76,6 +77,12 @@ StatusOr<std::shared_ptr<const IndexedObject>> ObjectDatabase::Load(EntryRecord&
   object->descriptors = std::move(record.descriptors);
   object->points = std::move(record.points);
   object->direct = std::move(record.direct);
+  if (object->direct.num_features() != size_t(object->descriptors.rows)) {
+    return Status::DataLoss(where + "'s direct index does not hold every descriptor once");
+  }
+  auto ordered = DescriptorsInDirectOrder(object->direct, object->descriptors);
+  if (!ordered.ok()) return Status::DataLoss(where + ": " + ordered.status().message());
+  object->direct_descriptors = std::move(ordered).value();
   if (object->metadata.type == ObjectType::kPlanar) {
     object->face_of_feature.reserve(object->points.size());
     for (const cv::Point3f& p : object->points) {

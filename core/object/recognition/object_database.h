@@ -10,7 +10,8 @@
 // (memory or RocksDB) survives a restart: Open() reloads every object.
 //
 // Recognition needs the descriptors, points and direct index of the best candidate at once, so
-// every object is also kept decoded in memory (about 48 bytes a descriptor) and handed out as an
+// every object is also kept decoded in memory (about 80 bytes a descriptor: its descriptor twice,
+// once in the model's order and once node by node for the direct index) and handed out as an
 // immutable shared snapshot: replacing or removing a model never disturbs a recognition that is
 // using the old one.
 //
@@ -42,6 +43,7 @@ struct IndexedObject {
   std::vector<cv::Point3f> points;          // 3D point of each feature (object frame)
   std::vector<uint32_t> face_of_feature;    // planar objects: the face of each feature
   FeatureVector direct;                     // level-1 node -> features
+  cv::Mat direct_descriptors;               // the descriptors node by node, in direct's order
   std::vector<cv::Point3f> outline_points;  // a few hundred model points for the outline
 };
 

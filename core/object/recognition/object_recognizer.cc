@@ -427,8 +427,9 @@ ObjectRecognizer::Verification ObjectRecognizer::Verify(
   FeatureVector region_direct;
   region_direct.AssignSorted(pairs);
   std::vector<Match> matches;
-  const Status matched = MatchByDirectIndex(region_direct, region_descriptors, object.direct,
-                                            object.descriptors, options_.match, &matches);
+  const Status matched =
+      MatchByDirectIndexInOrder(region_direct, region_descriptors, object.direct,
+                                object.direct_descriptors, options_.match, &matches);
   timing->correspondences += MillisecondsSince(phase);
   verification.correspondences = matched.ok() ? matches.size() : 0;
   if (verification.correspondences < options_.min_inliers) return verification;
