@@ -648,15 +648,15 @@ const RigidTransform kSmallPosterPose = PoseAt(10, 0, {-0.4, -0.2, 2.6});
 
 // A sparse first pass (1000 features ranked over the whole frame, no grid, no refinement): the
 // small poster's region is proposed but cannot be verified; the second pass, on the enlarged
-// crop, can, when it looks at regions whatever their correspondences (min_correspondences 0: the
-// poster's region has fewer than 4). With the defaults this clutter defeats both passes: its drawn
-// shapes and letters are what a small object loses its features to.
+// crop, can, when it looks at every region whose candidate failed (min_partial_inliers 0: the
+// poster's region has fewer than 4 correspondences, no pose). With the defaults this clutter
+// defeats both passes: its drawn shapes and letters are what a small object loses its features to.
 RecognitionOptions SparseFirstPass() {
   RecognitionOptions options;
   options.orb.max_features = 1000;
   options.orb.grid_rows = options.orb.grid_cols = 0;
   options.refinement.enabled = false;
-  options.second_pass.min_correspondences = 0;
+  options.second_pass.min_partial_inliers = 0;
   return options;
 }
 
@@ -699,6 +699,19 @@ TEST_F(ObjectRecognitionTest, TheSecondPassFindsASmallObjectInClutter) {
   for (const cv::Point2f& p : found[0].inlier_pixels) {
     EXPECT_TRUE((poster_box + cv::Size2d(8, 8) - cv::Point2d(4, 4)).contains(p)) << p;
   }
+
+  // With the default rule only regions where RANSAC came close to a pose are searched again; the
+  // poster's (fewer than 4 correspondences) is not, nor are most of the others.
+  RecognitionOptions near_misses_only = SparseFirstPass();
+  near_misses_only.second_pass.min_partial_inliers = SecondPassOptions().min_partial_inliers;
+  ASSERT_GE(near_misses_only.second_pass.min_partial_inliers, 5u);
+  const size_t every_failed_region = timing.second_pass_regions;
+  std::vector<Detection> near_miss_detections;
+  ASSERT_TRUE(ObjectRecognizer(database_, near_misses_only)
+                  .Recognize(frame, camera_, &near_miss_detections, &timing)
+                  .ok());
+  EXPECT_TRUE(near_miss_detections.empty());
+  EXPECT_LT(timing.second_pass_regions, every_failed_region);
 
   // Deterministic: a second run, and a second recogniser, give the same detection.
   ObjectRecognizer fresh(database_, SparseFirstPass());

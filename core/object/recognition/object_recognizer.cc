@@ -285,8 +285,8 @@ void ObjectRecognizer::VerifyCandidates(const std::vector<BcMatch>& candidates,
       }
       detections->push_back(std::move(detection));
     } else {
-      // Failed: worth a closer look only when the object had some correspondences in the region.
-      if (verification.correspondences >= options_.second_pass.min_correspondences) {
+      // Failed: worth a closer look only when RANSAC came close to a pose of the object there.
+      if (verification.inliers >= options_.second_pass.min_partial_inliers) {
         *weak = true;
         *evidence = std::max(*evidence, verification.correspondences);
       }

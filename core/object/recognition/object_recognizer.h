@@ -15,12 +15,12 @@
 //     (IPPE on the inliers). A detection needs at least `min_inliers` inliers (3D objects) or
 //     `min_planar_inliers` (planar ones).
 //  6. second pass (Recognize only, SecondPassOptions): a small object in a cluttered frame gets
-//     few of the image's features, so its region proposes it but its verification fails (with at
-//     least second_pass.min_correspondences correspondences: a region with fewer holds nothing of
-//     the object to look closer at) or is weak. Such regions (clusters, not the whole image) are
-//     cropped from the image with a margin, enlarged when small, and searched again with their own,
-//     denser ORB features (mapped back to image pixels): bag of words, BC matching, correspondences
-//     and verification as above. RecognizeFeatures has no image, so it runs steps 2-5 only.
+//     few of the image's features, so its region proposes it but its verification fails (with a
+//     pose of at least second_pass.min_partial_inliers inliers, short of a detection) or is weak.
+//     Such regions (clusters, not the whole image) are cropped from the image with a margin,
+//     enlarged when small, and searched again with their own, denser ORB features (mapped back to
+//     image pixels): bag of words, BC matching, correspondences and verification as above.
+//     RecognizeFeatures has no image, so it runs steps 2-5 only.
 //  7. refinement (RefinementOptions): each detection is looked for again near its pose by guided
 //     matching (guided_matcher.h: ORB in the box of the projected model, every projected model
 //     feature matched to the keypoints around it, RANSAC PnP + LM); the refined pose replaces the
@@ -74,13 +74,15 @@ struct SecondPassOptions {
   size_t max_regions = 4;  // regions re-examined per image, most correspondences first
   // A first-pass detection with fewer inliers than this is weak: its region is searched again.
   size_t weak_inliers = 20;
-  // A region whose candidate was not detected is searched again when the direct index found it at
-  // least this many correspondences. Measured (bench_objects, one run each): on the real
-  // cluttered frames the second pass costs a median 3.9 ms a frame with 8 and 14.3 ms with 4
-  // (RoboEarth views: 13.8 ms in all against 19.5); RoboEarth leave-one-view-out finds 47 of 54
-  // views with 8, 48 with 4 or 0. 0 is what a small object that got almost none of the first
-  // pass's features needs.
-  size_t min_correspondences = 8;
+  // A region whose candidate was not detected is searched again when RANSAC came close there: a
+  // pose with at least this many inliers, fewer than a detection needs (RANSAC PnP reports none
+  // below 5). 0 searches every region whose candidate failed, whatever it had. Measured
+  // (bench_objects and recog eval objects, one run each; docs/objects.md): the rule before, every
+  // region with 8 correspondences, took the real cluttered frames without an object to a median
+  // 8.9 ms against 7.4 ms with this one; RoboEarth leave-one-view-out finds the same 47 of 54
+  // views as taken, but 46 rather than 48 rotated by 90 degrees and 47 rather than 48 by 180
+  // (views the second pass found in regions where the first had 8-9 correspondences and no pose).
+  size_t min_partial_inliers = 5;
   double margin = 0.25;      // added to each side of the region's box, as a fraction of its size
   int min_margin_px = 16;    // and at least this many pixels
   int enlarge_to_px = 320;   // crops whose longer side is shorter are enlarged towards this...
@@ -245,9 +247,9 @@ class ObjectRecognizer {
                      size_t candidates, std::vector<BcMatch>* matches, RecognitionTiming* timing);
   // Verifies the candidates against a region: passing detections are appended, with `region` as
   // their region. *weak is set when a candidate was detected with fewer than
-  // second_pass.weak_inliers inliers, or not detected although it had
-  // second_pass.min_correspondences correspondences; *evidence is then the most correspondences
-  // of those candidates.
+  // second_pass.weak_inliers inliers, or not detected although RANSAC found a pose of
+  // second_pass.min_partial_inliers inliers; *evidence is then the most correspondences of those
+  // candidates.
   void VerifyCandidates(const std::vector<BcMatch>& candidates, const QueryFeatures& query,
                         const std::vector<uint32_t>& region, int region_index,
                         const CameraIntrinsics& camera, const ObjectFilter& filter,
