@@ -771,9 +771,10 @@ TEST_F(ObjectRecognitionTest, ADetectionInsideAStrongerOneOfAnotherObjectIsDropp
   ASSERT_TRUE(half.ok()) << half.status().ToString();
   ASSERT_TRUE(database_->Put(*half).ok());
   RecognitionOptions options;
-  options.report_duplicates = true;  // every region's detection, before the suppression
-  options.candidates_per_roi = 2;    // both models verified in every region
-  options.beta = 0;                  // whatever their BC scores
+  options.report_duplicates = true;   // every region's detection, before the suppression
+  options.candidates_per_roi = 2;     // both models verified in every region
+  options.runner_up_score_ratio = 0;  // however far the runner-up's score is below the best's
+  options.beta = 0;                   // whatever their BC scores
   ObjectRecognizer recognizer(database_, options);
   const cv::Mat view = RenderPoster(poster, poster_, camera_, PoseAt(10, 0, {0, 0, 1.0}));
   std::vector<Detection> detections;
@@ -781,6 +782,38 @@ TEST_F(ObjectRecognitionTest, ADetectionInsideAStrongerOneOfAnotherObjectIsDropp
   ASSERT_FALSE(detections.empty());
   EXPECT_EQ(detections[0].name, "poster");
   for (const Detection& d : detections) EXPECT_EQ(d.name, "poster");
+}
+
+// The runner-up of a region is verified only when its chi-square score is close enough to the
+// best's: with a ratio of 1 only the best (no two models tie here), with 0 both models.
+TEST_F(ObjectRecognitionTest, ARunnerUpIsVerifiedOnlyWhenItsScoreIsCloseToTheBest) {
+  ASSERT_TRUE(database_->Put(poster_).ok());
+  const cv::Mat poster = Poster();
+  ModelBuilder builder(ObjectVocabulary());
+  auto half = builder.FromFaceImages(
+      "half", {{BoxSide::kFront, poster.colRange(0, poster.cols / 2).clone()}}, kPosterWidth / 2,
+      kPosterHeight);
+  ASSERT_TRUE(half.ok()) << half.status().ToString();
+  ASSERT_TRUE(database_->Put(*half).ok());
+  const cv::Mat view = RenderPoster(poster, poster_, camera_, PoseAt(10, 0, {0, 0, 1.0}));
+  auto verified_with_ratio = [&](double ratio, RecognitionTiming* timing) {
+    RecognitionOptions options;
+    options.candidates_per_roi = 2;
+    options.runner_up_score_ratio = ratio;
+    options.report_duplicates = true;  // a model found in one region is verified in the others
+    options.second_pass.enabled = false;
+    options.beta = 0;  // both models are candidates of every region sharing words with them
+    ObjectRecognizer recognizer(database_, options);
+    std::vector<Detection> detections;
+    ASSERT_TRUE(recognizer.Recognize(view, camera_, &detections, timing).ok());
+  };
+  RecognitionTiming only_best, both;
+  verified_with_ratio(1.0, &only_best);
+  verified_with_ratio(0.0, &both);
+  ASSERT_GT(only_best.regions, 0u);
+  EXPECT_EQ(only_best.verified, only_best.regions);
+  EXPECT_EQ(both.regions, only_best.regions);
+  EXPECT_EQ(both.verified, 2 * both.regions);
 }
 
 }  // namespace

@@ -255,7 +255,12 @@ void ObjectRecognizer::VerifyCandidates(const std::vector<BcMatch>& candidates,
                                         bool* weak, size_t* evidence) {
   *weak = false;
   *evidence = 0;
+  bool gathered = false;
   for (const BcMatch& candidate : candidates) {
+    // Ranked best first: the runners-up that follow score lower still.
+    if (candidate.chi_square < options_.runner_up_score_ratio * candidates.front().chi_square) {
+      break;
+    }
     // Found already with enough inliers: a duplicate (skipped unless asked for). A weak earlier
     // detection does not stop a better one.
     const bool found_already =
@@ -267,8 +272,15 @@ void ObjectRecognizer::VerifyCandidates(const std::vector<BcMatch>& candidates,
     if (!object) continue;  // removed meanwhile
     if (!filter.Passes(object->metadata)) continue;
     ++t->verified;
+    if (!gathered) {
+      const auto phase = Clock::now();
+      GatherRegion(query, region, &region_features_);
+      t->correspondences += MillisecondsSince(phase);
+      gathered = true;
+    }
     Detection detection;
-    const Verification verification = Verify(*object, query, region, camera, extras, t, &detection);
+    const Verification verification =
+        Verify(*object, query, region_features_, camera, extras, t, &detection);
     if (explaining_) {
       ObjectExplanation& explained = explained_[object->metadata.name];
       ++explained.regions;
@@ -408,27 +420,32 @@ void ObjectRecognizer::Refine(const cv::Mat& image, const FeatureSet* features,
                    [](const Detection& a, const Detection& b) { return a.inliers > b.inliers; });
 }
 
+void ObjectRecognizer::GatherRegion(const QueryFeatures& query, const std::vector<uint32_t>& region,
+                                    RegionFeatures* out) {
+  const FeatureSet& features = *query.features;
+  const int row_bytes = features.descriptors.cols;
+  out->indices = &region;
+  out->descriptors.create(int(region.size()), row_bytes, CV_8U);
+  out->by_node.resize(region.size());
+  for (size_t i = 0; i < region.size(); ++i) {
+    std::memcpy(out->descriptors.ptr(int(i)), features.descriptors.ptr(int(region[i])),
+                size_t(row_bytes));
+    out->by_node[i] = {query.nodes[region[i]], uint32_t(i)};
+  }
+  std::sort(out->by_node.begin(), out->by_node.end());
+  out->direct.AssignSorted(out->by_node);
+}
+
 ObjectRecognizer::Verification ObjectRecognizer::Verify(
-    const IndexedObject& object, const QueryFeatures& query, const std::vector<uint32_t>& region,
+    const IndexedObject& object, const QueryFeatures& query, const RegionFeatures& region_features,
     const CameraIntrinsics& camera, const DetectionOptions& extras, RecognitionTiming* timing,
     Detection* detection) {
   Verification verification;
   auto phase = Clock::now();
-  const FeatureSet& features = *query.features;
-  const int row_bytes = features.descriptors.cols;
-  cv::Mat region_descriptors(int(region.size()), row_bytes, CV_8U);
-  std::vector<std::pair<NodeId, uint32_t>> pairs(region.size());
-  for (size_t i = 0; i < region.size(); ++i) {
-    std::memcpy(region_descriptors.ptr(int(i)), features.descriptors.ptr(int(region[i])),
-                size_t(row_bytes));
-    pairs[i] = {query.nodes[region[i]], uint32_t(i)};
-  }
-  std::sort(pairs.begin(), pairs.end());
-  FeatureVector region_direct;
-  region_direct.AssignSorted(pairs);
+  const std::vector<uint32_t>& region = *region_features.indices;
   std::vector<Match> matches;
   const Status matched =
-      MatchByDirectIndexInOrder(region_direct, region_descriptors, object.direct,
+      MatchByDirectIndexInOrder(region_features.direct, region_features.descriptors, object.direct,
                                 object.direct_descriptors, options_.match, &matches);
   timing->correspondences += MillisecondsSince(phase);
   verification.correspondences = matched.ok() ? matches.size() : 0;
