@@ -138,6 +138,20 @@ void PrintLearnedViews(const LearnedModel& learned, size_t frames) {
               learned.views.front().name.c_str());
 }
 
+// Warns of every RGB-D view whose features with a depth mostly fall outside the object's box: its
+// pose (or the depth's registration) is probably off, and its points are misplaced in the model.
+void WarnOfMisposedViews(const std::vector<RgbdViewReport>& reports) {
+  for (const RgbdViewReport& view : reports) {
+    if (!view.LooksMisposed()) continue;
+    std::fprintf(stderr,
+                 "warning: view %s: %zu of its %zu features with a depth are in the box (%.0f %%, "
+                 "fewer than %.0f %%): is its pose right?\n",
+                 view.name.c_str(), view.in_box, view.with_depth,
+                 100.0 * double(view.in_box) / double(view.with_depth),
+                 100.0 * RgbdViewReport::kMinInBoxShare);
+  }
+}
+
 // A model from a CAD file of planar faces and one registered image (--cad --pose --image
 // --camera), e.g. the visp-cube; with --recording, the frames of the recording that follow the
 // image are followed and more views learned from them (recording_learner.h).
@@ -214,7 +228,10 @@ StatusOr<ObjectModel> BuildFromRgbdRecording(const ModelBuildArgs& args, ModelBu
     RECOG_ASSIGN_OR_RETURN(std::vector<RgbdView> views,
                            PosedRgbdViews(frames, poses, options.camera, args.depth_scale, chosen));
     RECOG_ASSIGN_OR_RETURN(const ObjectBox box, ParseBox(args.box));
-    return builder->FromRgbd(options.name, views, box);
+    std::vector<RgbdViewReport> reports;
+    StatusOr<ObjectModel> model = builder->FromRgbd(options.name, views, box, &reports);
+    WarnOfMisposedViews(reports);
+    return model;
   }
   RECOG_ASSIGN_OR_RETURN(options.first_pose, ReadPoseOfFrame(args.pose, frames.front().image));
   RECOG_ASSIGN_OR_RETURN(options.box, ParseBox(args.box));
@@ -250,9 +267,12 @@ StatusOr<ObjectModel> BuildFromRgbd(const ModelBuildArgs& args, ModelBuilder* bu
   if (!args.box.empty()) {
     RECOG_ASSIGN_OR_RETURN(box, ParseBox(args.box));
   }
-  return builder->FromRgbd(
+  std::vector<RgbdViewReport> reports;
+  StatusOr<ObjectModel> model = builder->FromRgbd(
       args.name.empty() ? fs::path(args.rgbd).parent_path().filename().string() : args.name, views,
-      box);
+      box, &reports);
+  WarnOfMisposedViews(reports);
+  return model;
 }
 
 int RunModelBuild(const ModelBuildArgs& args) {

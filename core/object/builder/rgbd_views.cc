@@ -103,7 +103,9 @@ std::vector<size_t> RobustInliers(const std::vector<cv::Point3f>& points, double
 
 StatusOr<ObjectModel> ModelBuilder::FromRgbd(const std::string& name,
                                              const std::vector<RgbdView>& views,
-                                             const std::optional<ObjectBox>& box) {
+                                             const std::optional<ObjectBox>& box,
+                                             std::vector<RgbdViewReport>* report) {
+  if (report) report->clear();
   RECOG_RETURN_IF_ERROR(ValidateName("object", name));
   if (views.empty()) return Status::InvalidArgument("an RGB-D model needs views");
   if (box && !(box->size[0] > 0 && box->size[1] > 0 && box->size[2] > 0 &&
@@ -156,6 +158,7 @@ StatusOr<ObjectModel> ModelBuilder::FromRgbd(const std::string& name,
     }
     RECOG_RETURN_IF_ERROR(ExtractInRegion(posed.image, region, &features));
     descriptor_bytes = features.descriptors.cols;
+    RgbdViewReport view_report{posed.name, features.size()};
     const RigidTransform object_from_camera = posed.camera_from_object.Inverse();
     const size_t points_before = points.size();
     for (size_t i = 0; i < features.size(); ++i) {
@@ -168,6 +171,7 @@ StatusOr<ObjectModel> ModelBuilder::FromRgbd(const std::string& name,
                                options_.discontinuity_ratio, z)) {
         continue;
       }
+      ++view_report.with_depth;
       const cv::Vec3d c = z * PixelRay(posed.camera, p);
       const cv::Point3d x = object_from_camera.Apply({c[0], c[1], c[2]});
       if (box) {
@@ -178,11 +182,13 @@ StatusOr<ObjectModel> ModelBuilder::FromRgbd(const std::string& name,
         }
         if (!inside) continue;
       }
+      ++view_report.in_box;
       points.emplace_back(x);
       view_of_point.push_back(uint32_t(view_index));
       const uint8_t* d = features.descriptors.ptr(int(i));
       descriptors.insert(descriptors.end(), d, d + descriptor_bytes);
     }
+    if (report) report->push_back(view_report);
     if (points.size() == points_before) {
       return Status::InvalidArgument(
           where +

@@ -409,6 +409,50 @@ TEST(ModelBuilderTest, RgbdViewsBackProjectFeaturesWithDepth) {
   EXPECT_EQ(builder.FromRgbd("wall", {view}).status().code(), StatusCode::kInvalidArgument);
 }
 
+// A view whose pose is off puts its depth outside the box: the report says so, view by view,
+// and the build goes on with the views that agree.
+TEST(ModelBuilderTest, TheRgbdReportFlagsAViewWhoseDepthMissesTheBox) {
+  // A wall 1.5 m in front of the camera, the object a 2 cm thick slab of it (camera frame =
+  // object frame for the well-posed view).
+  RgbdView posed;
+  posed.view.name = "posed";
+  posed.view.image = Poster();
+  const cv::Size size = posed.view.image.size();
+  posed.view.camera = {500, 500, size.width / 2.0, size.height / 2.0, {}};
+  posed.depth = cv::Mat(size, CV_16U, cv::Scalar(1500));
+  // Its depth puts the right half of the image 10 cm behind the slab, as a pose off by a few
+  // centimetres puts part of a small object's outline on the background.
+  RgbdView misposed = posed;
+  misposed.view.name = "misposed";
+  misposed.depth = posed.depth.clone();
+  misposed.depth.colRange(size.width / 2, size.width).setTo(1600);
+  const ObjectBox slab{{2.0, 2.0, 0.02}, {0, 0, 1.5}};
+  ModelBuilder builder(ObjectVocabulary());
+  std::vector<RgbdViewReport> report;
+  auto model = builder.FromRgbd("wall", {posed, misposed}, slab, &report);
+  ASSERT_TRUE(model.ok()) << model.status().ToString();
+  ASSERT_EQ(report.size(), 2u);
+  EXPECT_EQ(report[0].name, "posed");
+  EXPECT_GT(report[0].with_depth, RgbdViewReport::kMinWithDepth);
+  EXPECT_LE(report[0].with_depth, report[0].features);
+  EXPECT_EQ(report[0].in_box, report[0].with_depth);
+  EXPECT_FALSE(report[0].LooksMisposed());
+  EXPECT_EQ(report[1].name, "misposed");
+  EXPECT_GT(report[1].with_depth, RgbdViewReport::kMinWithDepth);
+  EXPECT_GT(report[1].in_box, 0u);
+  EXPECT_TRUE(report[1].LooksMisposed());
+  for (const cv::Point3f& p : model->points) EXPECT_NEAR(p.z, 1.5, 1e-6);  // none from behind
+
+  // A view all of whose depth misses the box gives no point: an error, and the report up to it.
+  misposed.depth.setTo(1600);
+  EXPECT_EQ(builder.FromRgbd("wall", {posed, misposed}, slab, &report).status().code(),
+            StatusCode::kInvalidArgument);
+  ASSERT_EQ(report.size(), 2u);
+  EXPECT_FALSE(report[0].LooksMisposed());
+  EXPECT_EQ(report[1].in_box, 0u);
+  EXPECT_TRUE(report[1].LooksMisposed());
+}
+
 TEST(ModelBuilderTest, PosedPolygonsIntersectKeypointsWithTheVisibleFace) {
   // One 1 x 0.75 m face at z = 2 m in front of the camera; keypoints outside it are dropped.
   PosedImage view{"frame", Poster(), {500, 500, 320, 240, {}}, {}};
