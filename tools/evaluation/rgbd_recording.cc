@@ -68,7 +68,8 @@ StatusOr<std::vector<RgbdRecordingFrame>> ListRgbdRecording(const std::string& d
 StatusOr<LearnedModel> LearnFromRgbdRecording(ModelBuilder* builder,
                                               const std::vector<RgbdRecordingFrame>& frames,
                                               const RgbdRecordingOptions& options,
-                                              const LearningProgress& progress) {
+                                              const LearningProgress& progress,
+                                              std::vector<RgbdViewReport>* view_report) {
   if (frames.empty()) return Status::InvalidArgument("an RGB-D recording needs frames");
   if (!(options.depth_scale > 0)) return Status::InvalidArgument("depth scale must be positive");
   std::map<std::string, std::string> depth_of;  // frame name -> its depth image
@@ -98,7 +99,8 @@ StatusOr<LearnedModel> LearnFromRgbdRecording(ModelBuilder* builder,
       }
       rgbd.push_back(known->second);
     }
-    return builder->FromRgbd(options.name, rgbd, options.box);
+    // The learner's last build is the learned model's: its report is the one left.
+    return builder->FromRgbd(options.name, rgbd, options.box, view_report);
   };
   return LearnFromRecording(build, builder->vocabulary(), first, later, options.learning, progress);
 }

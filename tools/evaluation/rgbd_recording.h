@@ -49,11 +49,13 @@ struct RgbdRecordingOptions {
 // is the stem of the view's colour image. INVALID_ARGUMENT without frames, for a depth image
 // that cannot be read or is not 16-bit of its colour image's size (naming it), or a depth scale
 // that is not positive; the errors of reading the colour images, of LearnFromRecording and of
-// FromRgbd as they are.
+// FromRgbd as they are. With `view_report`, also FromRgbd's report on the learned model's views
+// (a first pose that is off shows there).
 StatusOr<LearnedModel> LearnFromRgbdRecording(ModelBuilder* builder,
                                               const std::vector<RgbdRecordingFrame>& frames,
                                               const RgbdRecordingOptions& options,
-                                              const LearningProgress& progress = {});
+                                              const LearningProgress& progress = {},
+                                              std::vector<RgbdViewReport>* view_report = nullptr);
 
 // The frames numbered `numbers` as RGB-D views (grey image, depth, `camera`, the frame's pose of
 // `poses`), in that order, for ModelBuilder::FromRgbd: a model from chosen frames of a recording

@@ -158,13 +158,22 @@ TEST_F(RgbdRecordingTest, LearnsViewsOfASyntheticWalkWithPosesCloseToTheTruth) {
   options.first_pose = truth[0];
   options.box.size = {o.width, o.height, o.depth};
   size_t reports = 0;
-  auto learned = LearnFromRgbdRecording(&builder_, *frames, options,
-                                        [&](size_t done, size_t total, size_t /*views*/) {
-                                          EXPECT_EQ(done, ++reports);
-                                          EXPECT_EQ(total, size_t(kFrames - 1));
-                                        });
+  std::vector<RgbdViewReport> view_report;
+  auto learned = LearnFromRgbdRecording(
+      &builder_, *frames, options,
+      [&](size_t done, size_t total, size_t /*views*/) {
+        EXPECT_EQ(done, ++reports);
+        EXPECT_EQ(total, size_t(kFrames - 1));
+      },
+      &view_report);
   ASSERT_TRUE(learned.ok()) << learned.status().ToString();
   EXPECT_EQ(reports, size_t(kFrames - 1));
+  // The builder's report is on the learned views, none of which is off its depth.
+  ASSERT_EQ(view_report.size(), learned->views.size());
+  for (size_t i = 0; i < view_report.size(); ++i) {
+    EXPECT_EQ(view_report[i].name, learned->views[i].name);
+    EXPECT_FALSE(view_report[i].LooksMisposed()) << view_report[i].name;
+  }
   std::printf("synthetic walk of %d frames: %zu views, found in %zu frames, %zu points\n", kFrames,
               learned->views.size(), learned->frames_found, learned->model.points.size());
   ASSERT_GE(learned->views.size(), 2u);
@@ -205,8 +214,11 @@ TEST_F(RgbdRecordingTest, VispRbtCubeLearnedFromFrameZerosPose) {
   ASSERT_TRUE(first.ok()) << first.status().ToString();
   options.first_pose = *first;
   options.box.size = {0.085, 0.085, 0.085};
-  auto learned = LearnFromRgbdRecording(&builder_, *frames, options);
+  std::vector<RgbdViewReport> view_report;
+  auto learned = LearnFromRgbdRecording(&builder_, *frames, options, {}, &view_report);
   ASSERT_TRUE(learned.ok()) << learned.status().ToString();
+  ASSERT_EQ(view_report.size(), learned->views.size());
+  for (const RgbdViewReport& view : view_report) EXPECT_FALSE(view.LooksMisposed()) << view.name;
   std::printf("visp-rbt-cube: %zu views, found in %zu of %zu frames, %zu points\n",
               learned->views.size(), learned->frames_found, frames->size() - 1,
               learned->model.points.size());

@@ -238,13 +238,17 @@ StatusOr<ObjectModel> BuildFromRgbdRecording(const ModelBuildArgs& args, ModelBu
   options.depth_scale = args.depth_scale;
   options.learning.min_view_angle_deg = args.view_angle;
   ProgressBar progress(!args.quiet);
+  std::vector<RgbdViewReport> reports;
   RECOG_ASSIGN_OR_RETURN(LearnedModel learned,
-                         LearnFromRgbdRecording(builder, frames, options,
-                                                [&](size_t done, size_t total, size_t /*views*/) {
-                                                  progress.Update("frames", done, total);
-                                                }));
+                         LearnFromRgbdRecording(
+                             builder, frames, options,
+                             [&](size_t done, size_t total, size_t /*views*/) {
+                               progress.Update("frames", done, total);
+                             },
+                             &reports));
   progress.Finish();
   PrintLearnedViews(learned, frames.size() - 1);
+  WarnOfMisposedViews(reports);
   return std::move(learned.model);
 }
 
