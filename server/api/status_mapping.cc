@@ -2,6 +2,8 @@
 
 #include <spdlog/spdlog.h>
 
+#include "core/common/text.h"
+
 namespace recog::server {
 
 grpc::StatusCode ToGrpcCode(StatusCode code) {
@@ -38,7 +40,8 @@ grpc::Status ToGrpcStatus(const Status& status, std::string_view request_id) {
   if (code == grpc::StatusCode::INTERNAL || code == grpc::StatusCode::DATA_LOSS) {
     const char* what =
         code == grpc::StatusCode::DATA_LOSS ? "corrupt stored data" : "internal error";
-    spdlog::error("request={} {}: {}", request_id, what, status.ToString());
+    spdlog::error("request={} {}: {}", EscapeForLog(request_id), what,
+                  EscapeForLog(status.ToString(), 1024));
     return {code, std::string(what) + " (request " + std::string(request_id) +
                       "; the server log has the details)"};
   }

@@ -7,6 +7,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include "core/common/text.h"
 #include "server/api/status_mapping.h"
 
 namespace recog::server {
@@ -72,9 +73,11 @@ void EndCall(ServerState& state, const CallInfo& call, const grpc::Status& statu
   const auto level = status.ok()    ? spdlog::level::debug
                      : server_fault ? spdlog::level::err
                                     : spdlog::level::info;
-  spdlog::log(level, "request={} method={} caller={} map={} code={} ms={:.2f}{}{}", call.request_id,
-              call.method, call.caller.name, call.map, code, seconds * 1e3,
-              status.ok() ? "" : " error=", status.error_message());
+  // The map and the message may hold what a client sent (a name refused for its newline).
+  spdlog::log(level, "request={} method={} caller={} map={} code={} ms={:.2f}{}{}",
+              EscapeForLog(call.request_id), call.method, EscapeForLog(call.caller.name),
+              EscapeForLog(call.map), code, seconds * 1e3,
+              status.ok() ? "" : " error=", EscapeForLog(status.error_message(), 1024));
 }
 
 void SampleWorkerGauges(ServerState& state) {
@@ -118,8 +121,9 @@ grpc::Status RunOnce(ServerState& state, grpc::CallbackServerContext* context, c
                      const std::function<grpc::Status()>& work) {
   if (grpc::Status checked = CheckRequestId(request_id); !checked.ok()) return checked;
   if (request_id.empty()) return work();
-  // The caller is part of the key: one client cannot read another's answers by guessing ids.
-  const std::string key = call.method + '\n' + call.caller.name + '\n' + request_id;
+  // The caller's token is part of the key: one client cannot read another's answers by guessing
+  // ids, nor can another token of the same rights or name.
+  const std::string key = call.method + '\n' + call.caller.identity + '\n' + request_id;
   const auto now = RequestLog::Clock::now();
   // Wait for a running duplicate at most until this call's deadline (and the log's window).
   const auto left = std::min<std::chrono::system_clock::duration>(
@@ -128,7 +132,7 @@ grpc::Status RunOnce(ServerState& state, grpc::CallbackServerContext* context, c
   switch (claim.kind) {
     case RequestLog::Claim::Kind::kRepeat:
       spdlog::info("request={} method={} request_id={}: a repeat, answered from the request log",
-                   call.request_id, call.method, request_id);
+                   EscapeForLog(call.request_id), call.method, EscapeForLog(request_id));
       if (!response->ParseFromString(claim.answer)) {
         return {grpc::StatusCode::INTERNAL, "the stored answer does not parse"};
       }
