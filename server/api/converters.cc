@@ -7,45 +7,42 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "core/common/text.h"
+#include "server/api/image_header.h"
+
 namespace recog::server {
 namespace {
 
 bool Finite(double v) { return std::isfinite(v); }
 
-Status CheckImageSize(uint64_t width, uint64_t height, const char* field) {
-  if (width == 0 || height == 0) {
-    return Status::InvalidArgument(std::string(field) + " has zero size (" + std::to_string(width) +
-                                   "x" + std::to_string(height) + ")");
-  }
-  if (width > kMaxImageSide || height > kMaxImageSide || width * height > kMaxImagePixels) {
-    return Status::InvalidArgument(std::string(field) + " is too large (" + std::to_string(width) +
-                                   "x" + std::to_string(height) + "; at most " +
-                                   std::to_string(kMaxImageSide) + " pixels a side and 64 Mpixel)");
-  }
-  return Status::Ok();
-}
-
-StatusOr<cv::Mat> DecodeEncodedImage(const std::string& bytes,
+// An encoded JPEG or PNG as 8-bit grey; its declared size is charged to `budget` before it is
+// decoded.
+StatusOr<cv::Mat> DecodeEncodedImage(const std::string& bytes, PixelBudget& budget,
                                      const std::string& field = "frame.encoded_image") {
   if (bytes.empty()) return Status::InvalidArgument(field + " is empty");
+  RECOG_ASSIGN_OR_RETURN(const ImageHeader header, ReadImageHeader(bytes, field));
+  RECOG_RETURN_IF_ERROR(budget.Take(header.width, header.height, field));
   const cv::Mat buffer(1, int(bytes.size()), CV_8UC1, const_cast<char*>(bytes.data()));
   cv::Mat image;
   try {
     image = cv::imdecode(buffer, cv::IMREAD_GRAYSCALE);
   } catch (const cv::Exception&) {
-    image.release();  // OpenCV refused it (e.g. declared dimensions over its limits)
+    image.release();  // OpenCV refused it
   }
   if (image.empty()) {
     return Status::InvalidArgument(field + " is not a decodable JPEG or PNG image (" +
                                    std::to_string(bytes.size()) + " bytes)");
   }
-  RECOG_RETURN_IF_ERROR(CheckImageSize(uint64_t(image.cols), uint64_t(image.rows), field.c_str()));
+  if (uint32_t(image.cols) != header.width || uint32_t(image.rows) != header.height) {
+    return Status::InvalidArgument(field + " decodes to another size than its header declares");
+  }
   if (image.depth() != CV_8U) image.convertTo(image, CV_8U, 1.0 / 256.0);  // 16-bit PNG
   return image;
 }
 
-StatusOr<cv::Mat> DecodeRawImage(const pb::RawImage& raw, const char* field = "frame.raw_image") {
-  RECOG_RETURN_IF_ERROR(CheckImageSize(raw.width(), raw.height(), field));
+StatusOr<cv::Mat> DecodeRawImage(const pb::RawImage& raw, PixelBudget& budget,
+                                 const std::string& field = "frame.raw_image") {
+  RECOG_RETURN_IF_ERROR(budget.Take(raw.width(), raw.height(), field));
   int channels = 0;
   switch (raw.format()) {
     case pb::PIXEL_FORMAT_GRAY8:
@@ -55,14 +52,14 @@ StatusOr<cv::Mat> DecodeRawImage(const pb::RawImage& raw, const char* field = "f
       channels = 3;
       break;
     default:
-      return Status::InvalidArgument(std::string(field) + ".format must be GRAY8 or BGR8");
+      return Status::InvalidArgument(field + ".format must be GRAY8 or BGR8");
   }
   const uint64_t expected = uint64_t(raw.width()) * raw.height() * uint64_t(channels);
   if (raw.pixels().size() != expected) {
-    return Status::InvalidArgument(
-        std::string(field) + ".pixels has " + std::to_string(raw.pixels().size()) + " bytes; " +
-        std::to_string(raw.width()) + "x" + std::to_string(raw.height()) + "x" +
-        std::to_string(channels) + " needs " + std::to_string(expected));
+    return Status::InvalidArgument(field + ".pixels has " + std::to_string(raw.pixels().size()) +
+                                   " bytes; " + std::to_string(raw.width()) + "x" +
+                                   std::to_string(raw.height()) + "x" + std::to_string(channels) +
+                                   " needs " + std::to_string(expected));
   }
   const cv::Mat view(int(raw.height()), int(raw.width()), CV_8UC(channels),
                      const_cast<char*>(raw.pixels().data()));
@@ -140,11 +137,17 @@ Status DecodeIntrinsics(const pb::CameraIntrinsics& in, CameraIntrinsics* out) {
 }
 
 // A depth image: a 16-bit single-channel PNG, or raw 16-bit or float values.
-Status DecodeDepth(const pb::DepthImage& in, DecodedFrame* out) {
+Status DecodeDepth(const pb::DepthImage& in, PixelBudget& budget, DecodedFrame* out) {
   switch (in.content_case()) {
     case pb::DepthImage::kEncoded: {
       const std::string& bytes = in.encoded();
       if (bytes.empty()) return Status::InvalidArgument("frame.depth.encoded is empty");
+      RECOG_ASSIGN_OR_RETURN(const ImageHeader header,
+                             ReadImageHeader(bytes, "frame.depth.encoded"));
+      if (header.format != ImageHeader::Format::kPng) {
+        return Status::InvalidArgument("frame.depth.encoded must be a 16-bit PNG, not a JPEG");
+      }
+      RECOG_RETURN_IF_ERROR(budget.Take(header.width, header.height, "frame.depth.encoded"));
       const cv::Mat buffer(1, int(bytes.size()), CV_8UC1, const_cast<char*>(bytes.data()));
       try {
         out->depth = cv::imdecode(buffer, cv::IMREAD_UNCHANGED);
@@ -161,13 +164,15 @@ Status DecodeDepth(const pb::DepthImage& in, DecodedFrame* out) {
             std::to_string(out->depth.elemSize1() * 8) + "-bit, " +
             std::to_string(out->depth.channels()) + " channel(s)); 8-bit depth is refused");
       }
-      RECOG_RETURN_IF_ERROR(CheckImageSize(uint64_t(out->depth.cols), uint64_t(out->depth.rows),
-                                           "frame.depth.encoded"));
+      if (uint32_t(out->depth.cols) != header.width || uint32_t(out->depth.rows) != header.height) {
+        return Status::InvalidArgument(
+            "frame.depth.encoded decodes to another size than its header declares");
+      }
       break;
     }
     case pb::DepthImage::kRaw: {
       const pb::RawDepth& raw = in.raw();
-      RECOG_RETURN_IF_ERROR(CheckImageSize(raw.width(), raw.height(), "frame.depth.raw"));
+      RECOG_RETURN_IF_ERROR(budget.Take(raw.width(), raw.height(), "frame.depth.raw"));
       int type = 0;
       switch (raw.format()) {
         case pb::DEPTH_FORMAT_U16:
@@ -202,7 +207,7 @@ Status DecodeDepth(const pb::DepthImage& in, DecodedFrame* out) {
   return Status::Ok();
 }
 
-Status DecodeRight(const pb::StereoRight& in, DecodedFrame* out) {
+Status DecodeRight(const pb::StereoRight& in, PixelBudget& budget, DecodedFrame* out) {
   if (!Finite(in.baseline_m()) || in.baseline_m() <= 0) {
     return Status::InvalidArgument("frame.right.baseline_m must be set, in metres, > 0 (got " +
                                    std::to_string(in.baseline_m()) + ")");
@@ -210,12 +215,13 @@ Status DecodeRight(const pb::StereoRight& in, DecodedFrame* out) {
   out->baseline_m = in.baseline_m();
   switch (in.content_case()) {
     case pb::StereoRight::kEncodedImage: {
-      RECOG_ASSIGN_OR_RETURN(out->right,
-                             DecodeEncodedImage(in.encoded_image(), "frame.right.encoded_image"));
+      RECOG_ASSIGN_OR_RETURN(
+          out->right, DecodeEncodedImage(in.encoded_image(), budget, "frame.right.encoded_image"));
       return Status::Ok();
     }
     case pb::StereoRight::kRawImage: {
-      RECOG_ASSIGN_OR_RETURN(out->right, DecodeRawImage(in.raw_image(), "frame.right.raw_image"));
+      RECOG_ASSIGN_OR_RETURN(out->right,
+                             DecodeRawImage(in.raw_image(), budget, "frame.right.raw_image"));
       return Status::Ok();
     }
     case pb::StereoRight::CONTENT_NOT_SET:
@@ -229,7 +235,7 @@ std::string SizeText(cv::Size size) {
 }
 
 // Decodes the frame's depth or right image and checks that it goes with the frame.
-Status DecodeStructure(const pb::Frame& frame, DecodedFrame* out) {
+Status DecodeStructure(const pb::Frame& frame, PixelBudget& budget, DecodedFrame* out) {
   if (frame.has_depth() && frame.has_right()) {
     return Status::InvalidArgument("a frame carries depth or a right image, not both");
   }
@@ -247,7 +253,7 @@ Status DecodeStructure(const pb::Frame& frame, DecodedFrame* out) {
   }
   cv::Size size = out->image.size();
   if (frame.has_depth()) {
-    RECOG_RETURN_IF_ERROR(DecodeDepth(frame.depth(), out));
+    RECOG_RETURN_IF_ERROR(DecodeDepth(frame.depth(), budget, out));
     if (!out->has_image()) {  // client features: their image size, when given
       const pb::Features& features = frame.features();
       size = features.image_width() == 0 && features.image_height() == 0
@@ -264,7 +270,7 @@ Status DecodeStructure(const pb::Frame& frame, DecodedFrame* out) {
     return Status::InvalidArgument(
         "frame.right needs the left image (encoded_image or raw_image), not features");
   }
-  RECOG_RETURN_IF_ERROR(DecodeRight(frame.right(), out));
+  RECOG_RETURN_IF_ERROR(DecodeRight(frame.right(), budget, out));
   if (out->right.size() != size) {
     return Status::InvalidArgument("frame.right is " + SizeText(out->right.size()) +
                                    "; it must be the size of the " + SizeText(size) +
@@ -288,11 +294,35 @@ void AddCorrespondences(const std::vector<PlaceCorrespondence>& in,
 
 }  // namespace
 
+Status PixelBudget::Take(uint64_t width, uint64_t height, const std::string& field) {
+  if (width == 0 || height == 0) {
+    return Status::InvalidArgument(field + " has zero size (" + std::to_string(width) + "x" +
+                                   std::to_string(height) + ")");
+  }
+  if (width > kMaxImageSide || height > kMaxImageSide || width * height > kMaxImagePixels) {
+    return Status::InvalidArgument(field + " is too large (" + std::to_string(width) + "x" +
+                                   std::to_string(height) + "; at most " +
+                                   std::to_string(kMaxImageSide) + " pixels a side and " +
+                                   std::to_string(kMaxImagePixels >> 20) + " Mpixel)");
+  }
+  if (width * height > left_) {
+    return Status::InvalidArgument(field + " (" + std::to_string(width) + "x" +
+                                   std::to_string(height) + ") takes the call's images beyond " +
+                                   std::to_string(kMaxCallPixels >> 20) +
+                                   " Mpixel together; send fewer or smaller images per call");
+  }
+  left_ -= width * height;
+  return Status::Ok();
+}
+
 Status DecodeFrameHeader(const pb::Frame& frame, DecodedFrame* out) {
   if (frame.camera_id().size() > kMaxFrameIdBytes ||
       frame.client_frame_id().size() > kMaxFrameIdBytes) {
     return Status::InvalidArgument(
         "frame.camera_id and frame.client_frame_id are at most 128 bytes");
+  }
+  if (!IsValidUtf8(frame.camera_id()) || !IsValidUtf8(frame.client_frame_id())) {
+    return Status::InvalidArgument("frame.camera_id and frame.client_frame_id must be UTF-8");
   }
   if (frame.has_timestamp() && (!Finite(frame.timestamp()) || frame.timestamp() < 0)) {
     return Status::InvalidArgument("frame.timestamp must be finite and >= 0");
@@ -312,7 +342,8 @@ Status DecodeFrameHeader(const pb::Frame& frame, DecodedFrame* out) {
   return Status::Ok();
 }
 
-StatusOr<DecodedFrame> DecodeFrame(const pb::Frame& frame, const DescriptorFormat& format) {
+StatusOr<DecodedFrame> DecodeFrame(const pb::Frame& frame, const DescriptorFormat& format,
+                                   PixelBudget& budget) {
   DecodedFrame out;
   RECOG_RETURN_IF_ERROR(DecodeFrameHeader(frame, &out));
   if (frame.views_size() > 0) {
@@ -327,11 +358,11 @@ StatusOr<DecodedFrame> DecodeFrame(const pb::Frame& frame, const DescriptorForma
   const auto start = std::chrono::steady_clock::now();
   switch (frame.content_case()) {
     case pb::Frame::kEncodedImage: {
-      RECOG_ASSIGN_OR_RETURN(out.image, DecodeEncodedImage(frame.encoded_image()));
+      RECOG_ASSIGN_OR_RETURN(out.image, DecodeEncodedImage(frame.encoded_image(), budget));
       break;
     }
     case pb::Frame::kRawImage: {
-      RECOG_ASSIGN_OR_RETURN(out.image, DecodeRawImage(frame.raw_image()));
+      RECOG_ASSIGN_OR_RETURN(out.image, DecodeRawImage(frame.raw_image(), budget));
       break;
     }
     case pb::Frame::kFeatures: {
@@ -342,7 +373,9 @@ StatusOr<DecodedFrame> DecodeFrame(const pb::Frame& frame, const DescriptorForma
       return Status::InvalidArgument(
           "the frame has no content: set encoded_image, raw_image or features");
   }
-  if (frame.has_depth() || frame.has_right()) RECOG_RETURN_IF_ERROR(DecodeStructure(frame, &out));
+  if (frame.has_depth() || frame.has_right()) {
+    RECOG_RETURN_IF_ERROR(DecodeStructure(frame, budget, &out));
+  }
   out.decode_ms =
       std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
   return out;
@@ -418,8 +451,8 @@ StatusOr<std::vector<RigCamera>> RigFromProto(const pb::MapSettings& settings) {
     camera.name = in.name();
     camera.size = cv::Size(int(std::min<uint32_t>(in.width(), kMaxImageSide + 1)),
                            int(std::min<uint32_t>(in.height(), kMaxImageSide + 1)));
-    RECOG_RETURN_IF_ERROR(
-        CheckImageSize(in.width(), in.height(), (field + " width x height").c_str()));
+    // A camera's size is checked as one image would be.
+    RECOG_RETURN_IF_ERROR(PixelBudget().Take(in.width(), in.height(), field + " width x height"));
     const pb::CameraIntrinsics& k = in.intrinsics();
     camera.K = cv::Matx33d(k.fx(), 0, k.cx(), 0, k.fy(), k.cy(), 0, 0, 1);
     camera.distortion.assign(k.distortion().begin(), k.distortion().end());
@@ -606,7 +639,7 @@ pb::ObjectType ToProto(ObjectType type) {
 void ToProto(const Detection& detection, pb::DetectedObject* out) {
   out->set_name(detection.name);
   out->set_version(detection.version);
-  out->set_object_class(detection.object_class);
+  out->set_object_class(ToValidUtf8(detection.object_class));
   out->set_type(ToProto(detection.type));
   ToProto(detection.camera_from_object.R, detection.camera_from_object.t, out->mutable_pose());
   out->set_units(detection.units);
@@ -669,14 +702,16 @@ DetectionOptions FromProto(const pb::DetectionOptions& options) {
 
 void ToProto(const ModelVersionInfo& info, pb::ModelInfo* out) {
   const ObjectMetadata& m = info.metadata;
+  // Free text is checked at upload; a store written before that may hold other bytes, which
+  // would make the whole answer unreadable to clients: they are replaced.
   out->set_name(m.name);
   out->set_version(m.version);
-  out->set_object_class(m.object_class);
+  out->set_object_class(ToValidUtf8(m.object_class));
   out->set_type(ToProto(m.type));
   for (int i = 0; i < 3; ++i) out->add_dimensions(m.dimensions[i]);
-  out->set_units(m.units);
-  out->set_source(m.source);
-  for (const std::string& tag : info.tags) out->add_tags(tag);
+  out->set_units(ToValidUtf8(m.units));
+  out->set_source(ToValidUtf8(m.source));
+  for (const std::string& tag : info.tags) out->add_tags(ToValidUtf8(tag));
   out->set_sha256(info.sha256);
   out->set_size_bytes(info.size_bytes);
   out->set_created_unix_ms(info.created_unix_ms);

@@ -28,6 +28,7 @@ namespace pb = ::recognition::v1;
 // Limits on what a frame may hold (beyond gRPC's message size).
 inline constexpr uint32_t kMaxImageSide = 16384;          // pixels, width or height
 inline constexpr uint64_t kMaxImagePixels = 64ull << 20;  // 64 Mpixel
+inline constexpr uint64_t kMaxCallPixels = 64ull << 20;   // all the images of one call together
 inline constexpr uint32_t kMaxClientFeatures = 100000;
 inline constexpr size_t kMaxFrameIdBytes = 128;  // camera_id and client_frame_id
 
@@ -50,14 +51,29 @@ struct DecodedFrame {
   bool has_image() const { return !image.empty(); }
 };
 
-// Decodes and validates a frame. Client features must have `format`'s descriptor length.
-// INVALID_ARGUMENT (naming the field) for anything unusable, including a frame without content,
-// and for depth or a right image that cannot go with the frame: another size than the image, 8-bit
-// depth, a missing or non-positive baseline, no intrinsics (or intrinsics with distortion), both
-// depth and a right image, a right image with client features, more than kMaxExcludedFrames
-// exclude_frame_ids.
+// The pixels one call may decode: each image at most kMaxImageSide a side and kMaxImagePixels,
+// and all the images of the call (its frames, their views, depth and right images) together at
+// most kMaxCallPixels. An encoded image is charged with the size its header declares, before it
+// is decoded, so that a small file declaring a huge image costs nothing. One per call.
+class PixelBudget {
+ public:
+  // Charges a width x height image of `field`. INVALID_ARGUMENT naming it for a zero size or a
+  // size beyond a limit (then nothing is charged).
+  Status Take(uint64_t width, uint64_t height, const std::string& field);
+
+ private:
+  uint64_t left_ = kMaxCallPixels;
+};
+
+// Decodes and validates a frame, its images charged to `budget`. Client features must have
+// `format`'s descriptor length. INVALID_ARGUMENT (naming the field) for anything unusable,
+// including a frame without content, and for depth or a right image that cannot go with the frame:
+// another size than the image, 8-bit depth, a missing or non-positive baseline, no intrinsics (or
+// intrinsics with distortion), both depth and a right image, a right image with client features,
+// more than kMaxExcludedFrames exclude_frame_ids.
 inline constexpr int kMaxExcludedFrames = 1000;
-StatusOr<DecodedFrame> DecodeFrame(const pb::Frame& frame, const DescriptorFormat& format);
+StatusOr<DecodedFrame> DecodeFrame(const pb::Frame& frame, const DescriptorFormat& format,
+                                   PixelBudget& budget);
 // The part of DecodeFrame that does not look at the content: the timestamp, the ids and
 // exclude_frame_ids (a rig frame's, whose content is in its views).
 Status DecodeFrameHeader(const pb::Frame& frame, DecodedFrame* out);

@@ -25,8 +25,10 @@ Status RunRecognition(ServerState& state, WorkerContext& worker, const pb::Frame
                       google::protobuf::RepeatedPtrField<pb::DetectedObject>* out,
                       pb::Timing* timing,
                       google::protobuf::RepeatedPtrField<pb::ObjectExplanation>* explanations) {
-  RECOG_ASSIGN_OR_RETURN(DecodedFrame frame,
-                         DecodeFrame(request, state.objects->vocabulary().info().descriptor));
+  PixelBudget budget;
+  RECOG_ASSIGN_OR_RETURN(
+      DecodedFrame frame,
+      DecodeFrame(request, state.objects->vocabulary().info().descriptor, budget));
   if (!frame.intrinsics.has_value()) {
     return Status::InvalidArgument(
         "frame.intrinsics is required for object recognition (the pose is solved with them)");

@@ -163,10 +163,12 @@ class PreparedFrame {
  public:
   // Decodes `request` for maps of `descriptor`, extracts its features and its 3D points, adding
   // the time each step took to `timing` (decode_ms, features_ms, recognition_ms for the points).
+  // Its images are charged to `budget`, the call's.
   static StatusOr<PreparedFrame> Prepare(WorkerContext& worker, const pb::Frame& request,
-                                         const DescriptorFormat& descriptor, pb::Timing* timing) {
+                                         const DescriptorFormat& descriptor, PixelBudget& budget,
+                                         pb::Timing* timing) {
     PreparedFrame prepared;
-    RECOG_ASSIGN_OR_RETURN(prepared.frame_, DecodeFrame(request, descriptor));
+    RECOG_ASSIGN_OR_RETURN(prepared.frame_, DecodeFrame(request, descriptor, budget));
     const DecodedFrame& frame = prepared.frame_;
     timing->set_decode_ms(timing->decode_ms() + frame.decode_ms);
     if (frame.has_image()) {
@@ -257,9 +259,10 @@ class PreparedRigFrame {
     }
     prepared.frame_.timestamp = prepared.header_.timestamp;
     prepared.frame_.client_id = prepared.header_.client_frame_id;
+    PixelBudget budget;  // every camera's images together
     for (size_t c = 0; c < rig.size(); ++c) {
       const Status status = prepared.AddCamera(worker, request.views(view_of[c]), rig[c],
-                                               map.vocabulary().info().descriptor, timing);
+                                               map.vocabulary().info().descriptor, budget, timing);
       if (!status.ok()) return status.WithContext("rig camera '" + rig[c].name + "'");
     }
     return prepared;
@@ -281,7 +284,7 @@ class PreparedRigFrame {
 
   // Prepares `view` as a frame of `camera` and appends it to the rig frame.
   Status AddCamera(WorkerContext& worker, const pb::Frame& view, const RigCamera& camera,
-                   const DescriptorFormat& descriptor, pb::Timing* timing) {
+                   const DescriptorFormat& descriptor, PixelBudget& budget, pb::Timing* timing) {
     pb::Frame with_intrinsics = view;
     pb::CameraIntrinsics* k = with_intrinsics.mutable_intrinsics();
     k->set_fx(camera.K(0, 0));
@@ -289,8 +292,9 @@ class PreparedRigFrame {
     k->set_cx(camera.K(0, 2));
     k->set_cy(camera.K(1, 2));
     k->mutable_distortion()->Assign(camera.distortion.begin(), camera.distortion.end());
-    RECOG_ASSIGN_OR_RETURN(PreparedFrame prepared,
-                           PreparedFrame::Prepare(worker, with_intrinsics, descriptor, timing));
+    RECOG_ASSIGN_OR_RETURN(
+        PreparedFrame prepared,
+        PreparedFrame::Prepare(worker, with_intrinsics, descriptor, budget, timing));
     const DecodedFrame& decoded = prepared.frame();
     cv::Size size = decoded.image.size();
     if (!decoded.has_image() && view.features().image_width() != 0) {
@@ -412,9 +416,10 @@ Status RunPlaceFrame(ServerState& state, WorkerContext& worker, PlaceMap& map, F
     RECOG_RETURN_IF_ERROR(CheckRigRequest(map, options, search));
     return RunRigFrame(state, worker, map, mode, request, options, out, timing, num_features);
   }
+  PixelBudget budget;
   RECOG_ASSIGN_OR_RETURN(
       PreparedFrame prepared,
-      PreparedFrame::Prepare(worker, request, map.vocabulary().info().descriptor, timing));
+      PreparedFrame::Prepare(worker, request, map.vocabulary().info().descriptor, budget, timing));
   const FeatureSet& features = prepared.features();
   if (num_features != nullptr) *num_features = uint32_t(features.size());
   const auto start = Clock::now();
@@ -523,9 +528,10 @@ Status RunRelocalize(ServerState& state, WorkerContext& worker, const Caller& ca
   pb::Timing* timing = response->mutable_timing();
   std::vector<PreparedFrame> prepared;
   prepared.reserve(size_t(request.frames_size()));
+  PixelBudget budget;  // every frame's images together
   for (int i = 0; i < request.frames_size(); ++i) {
     StatusOr<PreparedFrame> frame = PreparedFrame::Prepare(
-        worker, request.frames(i), maps.front()->vocabulary().info().descriptor, timing);
+        worker, request.frames(i), maps.front()->vocabulary().info().descriptor, budget, timing);
     if (!frame.ok()) return frame.status().WithContext("frames[" + std::to_string(i) + "]");
     prepared.push_back(std::move(frame).value());
   }
