@@ -7,12 +7,14 @@
 #include <utility>
 
 #include "core/common/file_io.h"
+#include "core/common/text.h"
 #include "wire/sha256.h"
 
 namespace recog::server {
 namespace {
 
 constexpr std::string_view kAnonymous = "anonymous";
+constexpr size_t kMaxNameBytes = 64;
 
 bool IsVisibleAscii(std::string_view text) {
   return std::all_of(text.begin(), text.end(), [](char c) { return c > ' ' && c < 0x7f; });
@@ -93,6 +95,11 @@ Status ReadEntry(const YAML::Node& entry, const std::string& where, Caller* call
     return Status::InvalidArgument(where + " needs a non-empty name");
   }
   caller->name = name.Scalar();
+  if (caller->name.size() > kMaxNameBytes || !IsPrintableAscii(caller->name)) {
+    return Status::InvalidArgument(where + ": the name must be 1 to " +
+                                   std::to_string(kMaxNameBytes) +
+                                   " printable ASCII characters (it is written in the logs)");
+  }
   const std::string named = where + " ('" + caller->name + "')";
 
   const YAML::Node secret = entry["token"];
@@ -202,7 +209,8 @@ StatusOr<std::shared_ptr<const TokenAuthenticator::Callers>> TokenAuthenticator:
   const std::string what = "token file '" + path + "'";
   RECOG_ASSIGN_OR_RETURN(const std::string text, ReadWholeFile(path, what));
   auto callers = std::make_shared<Callers>();
-  std::unordered_map<std::string, std::string> entry_of_digest;  // for duplicate errors
+  // For the errors of duplicates: the entry of each token (by digest) and of each name.
+  std::unordered_map<std::string, std::string> entry_of_digest, entry_of_name;
   try {
     const YAML::Node root = YAML::Load(text);
     if (!root.IsMap()) {
@@ -234,6 +242,12 @@ StatusOr<std::shared_ptr<const TokenAuthenticator::Callers>> TokenAuthenticator:
         return Status::InvalidArgument(what + ": " + named + " has the same token as " +
                                        it->second);
       }
+      auto [same_name, name_inserted] = entry_of_name.emplace(caller.name, named);
+      if (!name_inserted) {
+        return Status::InvalidArgument(what + ": " + named + " has the same name as " +
+                                       same_name->second + " (names tell tokens apart in logs)");
+      }
+      caller.identity = digest;
       callers->emplace(std::move(digest), std::move(caller));
     }
   } catch (const YAML::Exception& e) {
@@ -246,7 +260,10 @@ TokenAuthenticator TokenAuthenticator::AllowAll() { return TokenAuthenticator();
 
 StatusOr<Caller> TokenAuthenticator::Authenticate(std::string_view authorization_header) const {
   if (shared_ == nullptr)
-    return Caller{.name = std::string(kAnonymous), .can_read = true, .can_write = true};
+    return Caller{.name = std::string(kAnonymous),
+                  .identity = std::string(kAnonymous),
+                  .can_read = true,
+                  .can_write = true};
   const std::string_view header = TrimSpaces(authorization_header);
   if (header.empty()) {
     return Status::Unauthenticated("missing authorization header (expected 'Bearer <token>')");
@@ -284,6 +301,16 @@ Status TokenAuthenticator::CheckMap(const Caller& caller, Right right, std::stri
   if (scope.Covers(map, group)) return Status::Ok();
   return Status::PermissionDenied("'" + caller.name + "' may not " + std::string(RightName(right)) +
                                   " map '" + std::string(map) + "'");
+}
+
+Status TokenAuthenticator::CheckEveryMap(const Caller& caller, Right right, std::string_view what) {
+  RECOG_RETURN_IF_ERROR(Check(caller, right));
+  const bool everywhere = caller.readable_maps.covers_every_map() &&
+                          (right == Right::kRead || caller.writable_maps.covers_every_map());
+  if (everywhere) return Status::Ok();
+  return Status::PermissionDenied("'" + caller.name +
+                                  "' reaches only some maps: " + std::string(what) +
+                                  " reads every map of the server and needs a token without maps");
 }
 
 }  // namespace recog::server

@@ -10,8 +10,8 @@
 //
 // `read` allows queries, recognition, listing and downloading; `write` allows all of that and
 // also creating and deleting maps, adding and streaming frames, uploading and deleting models
-// (write implies read). Two entries may share a name (e.g. a robot's old and new token while it
-// is rotated), never a token.
+// (write implies read). Names are unique in the file (they are what the logs show: rotate a
+// robot's token as `robot-7` and `robot-7-next`), and so are tokens.
 //
 // An entry may scope its rights on place maps (a fleet: each robot writes its own maps and reads
 // its group's; an operator's entry has no `maps` and reaches every map):
@@ -25,8 +25,9 @@
 //
 // With `maps`, the token reaches only the maps its patterns cover (MapScope); the server checks
 // every map a call names, the maps a query searches included (CheckMap: PERMISSION_DENIED naming
-// the map), and ListMaps lists only the readable ones. Its rights on the object repository and
-// the admin calls are its `rights`, unscoped.
+// the map), and ListMaps lists only the readable ones. Its rights on the object repository are its
+// `rights`, unscoped. The admin calls (Checkpoint, Verify, StoreStatus) read or copy every map at
+// once, so they need a token without `maps` besides the right (CheckEveryMap).
 //
 // Only the SHA-256 digests of the tokens are kept, and a presented token is found by looking up
 // its digest, so the time Authenticate takes says nothing useful about the secrets. Error
@@ -69,6 +70,8 @@ class MapScope {
   static StatusOr<MapScope> Of(const std::vector<std::string>& patterns);
 
   bool Covers(std::string_view map, std::string_view group) const;
+  // True for the default scope (every map, present and future).
+  bool covers_every_map() const { return every_map_; }
   // Also covers what `other` covers.
   void Include(const MapScope& other);
 
@@ -79,7 +82,10 @@ class MapScope {
 
 // An authenticated caller.
 struct Caller {
-  std::string name;             // the token's name from the file, or "anonymous" with AllowAll
+  std::string name;  // the token's name from the file, or "anonymous" with AllowAll
+  // Who the caller is for what must not be shared between tokens (the request log's answers):
+  // the SHA-256 digest of its token, or "anonymous" with AllowAll.
+  std::string identity = {};
   bool can_read = false;        // holds Right::kRead
   bool can_write = false;       // holds Right::kWrite
   MapScope readable_maps = {};  // where can_read holds for place maps (every map by default)
@@ -89,7 +95,8 @@ struct Caller {
 class TokenAuthenticator {
  public:
   // Reads the token file at `path`. NOT_FOUND when it is missing; INVALID_ARGUMENT naming the
-  // entry (its number and line) for a missing or empty name, a token shorter than
+  // entry (its number and line) for a missing or empty name, a name used twice or holding other
+  // than printable ASCII, a token shorter than
   // kMinTokenLength or with characters other than visible ASCII, a token used twice, an unknown
   // or missing right, an unknown key, a bad `maps` (not read/write lists of valid patterns, or
   // write patterns without the write right), a file without tokens, or malformed YAML.
@@ -114,6 +121,10 @@ class TokenAuthenticator {
   // else PERMISSION_DENIED naming the caller, the right and the map.
   static Status CheckMap(const Caller& caller, Right right, std::string_view map,
                          std::string_view group);
+  // Check, then that the caller reads (and, for kWrite, writes) every map, as a token without
+  // `maps` does: what the admin calls need. Else PERMISSION_DENIED naming the caller and `what`
+  // ("Checkpoint").
+  static Status CheckEveryMap(const Caller& caller, Right right, std::string_view what);
 
   // True for AllowAll().
   bool allows_all() const { return shared_ == nullptr; }

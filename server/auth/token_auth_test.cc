@@ -10,6 +10,8 @@
 #include <utility>
 #include <vector>
 
+#include "wire/sha256.h"
+
 namespace recog::server {
 namespace {
 
@@ -262,18 +264,82 @@ TEST_F(TokenAuthTest, FilesWithoutATokenListAreRejected) {
   }
 }
 
-TEST_F(TokenAuthTest, TwoEntriesMayShareANameDuringTokenRotation) {
-  StatusOr<TokenAuthenticator> auth = LoadText(R"(tokens:
+// Names tell tokens apart in the logs, and a second token of the same name used to replay the
+// first's answers from the request log: a rotated token takes a name of its own.
+TEST_F(TokenAuthTest, TwoEntriesOfOneNameAreRefusedAndEachTokenHasItsOwnIdentity) {
+  StatusOr<TokenAuthenticator> same = LoadText(R"(tokens:
   - name: robot-7
     token: old-token-0123456789
     rights: [write]
   - name: robot-7
     token: new-token-0123456789
+    rights: [read]
+)");
+  ASSERT_FALSE(same.ok());
+  EXPECT_EQ(same.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_THAT(same.status().message(), HasSubstr("('robot-7') has the same name as entry 1"));
+  EXPECT_THAT(same.status().message(), Not(HasSubstr("0123456789")));
+
+  StatusOr<TokenAuthenticator> rotated = LoadText(R"(tokens:
+  - name: robot-7
+    token: old-token-0123456789
+    rights: [write]
+  - name: robot-7-next
+    token: new-token-0123456789
     rights: [write]
 )");
+  ASSERT_TRUE(rotated.ok()) << rotated.status().ToString();
+  const Caller old_token = rotated->Authenticate("Bearer old-token-0123456789").value();
+  const Caller new_token = rotated->Authenticate("Bearer new-token-0123456789").value();
+  EXPECT_EQ(old_token.identity, Sha256Hex("old-token-0123456789"));
+  EXPECT_EQ(new_token.identity, Sha256Hex("new-token-0123456789"));
+  EXPECT_EQ(TokenAuthenticator::AllowAll().Authenticate("")->identity, "anonymous");
+}
+
+TEST_F(TokenAuthTest, ANameMustBePrintableAsciiForTheLogs) {
+  for (const std::string& name : {std::string("\"robot\\n7\""), std::string("\"robot\\t7\""),
+                                  std::string("\"caf\\xE9\""), std::string(65, 'a')}) {
+    StatusOr<TokenAuthenticator> auth = LoadText(
+        "tokens:\n  - name: " + name + "\n    token: some-token-0123456789\n    rights: [read]\n");
+    ASSERT_FALSE(auth.ok()) << name;
+    EXPECT_THAT(auth.status().message(), HasSubstr("printable ASCII")) << name;
+  }
+}
+
+TEST_F(TokenAuthTest, AdminCallsNeedATokenThatReachesEveryMap) {
+  StatusOr<TokenAuthenticator> auth = LoadText(R"(tokens:
+  - name: operator
+    token: operator-token-0123456789
+    rights: [write]
+  - name: robot-a
+    token: robot-a-token-0123456789
+    rights: [write]
+    maps:
+      write: ["robot-a*"]
+  - name: viewer
+    token: viewer-token-0123456789
+    rights: [read]
+    maps:
+      read: ["group:fleet"]
+  - name: reader
+    token: reader-token-0123456789
+    rights: [read]
+)");
   ASSERT_TRUE(auth.ok()) << auth.status().ToString();
-  EXPECT_EQ(auth->Authenticate("Bearer old-token-0123456789")->name, "robot-7");
-  EXPECT_EQ(auth->Authenticate("Bearer new-token-0123456789")->name, "robot-7");
+  const auto caller = [&](const std::string& token) {
+    return auth->Authenticate("Bearer " + token + "-token-0123456789").value();
+  };
+  EXPECT_TRUE(TokenAuthenticator::CheckEveryMap(caller("operator"), Right::kWrite, "Verify").ok());
+  EXPECT_TRUE(TokenAuthenticator::CheckEveryMap(caller("reader"), Right::kRead, "Status").ok());
+  const Status scoped =
+      TokenAuthenticator::CheckEveryMap(caller("robot-a"), Right::kWrite, "Checkpoint");
+  EXPECT_EQ(scoped.code(), StatusCode::kPermissionDenied);
+  EXPECT_THAT(scoped.message(), HasSubstr("'robot-a'"));
+  EXPECT_THAT(scoped.message(), HasSubstr("Checkpoint"));
+  EXPECT_EQ(TokenAuthenticator::CheckEveryMap(caller("viewer"), Right::kRead, "Status").code(),
+            StatusCode::kPermissionDenied);
+  EXPECT_EQ(TokenAuthenticator::CheckEveryMap(caller("reader"), Right::kWrite, "Verify").code(),
+            StatusCode::kPermissionDenied);
 }
 
 TEST_F(TokenAuthTest, ReloadSwapsTheTokensForEveryCopyAndKeepsThemWhenTheFileIsBad) {

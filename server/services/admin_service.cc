@@ -31,6 +31,11 @@ class CheckpointDownload final : public grpc::ServerWriteReactor<pb::CheckpointR
                        : std::min<size_t>(request.chunk_bytes(), kMaxChunkBytes);
     grpc::Status status = BeginCall(state_, context_, kMethod, Right::kWrite, &call_);
     if (status.ok()) {
+      status =
+          ToGrpcStatus(TokenAuthenticator::CheckEveryMap(call_.caller, Right::kWrite, "Checkpoint"),
+                       call_.request_id);
+    }
+    if (status.ok()) {
       if (state_.pool->TrySubmit([this](WorkerContext&) { Prepare(); })) return;
       status = Busy(state_, context_);
     }
@@ -182,6 +187,9 @@ grpc::ServerUnaryReactor* AdminService::Verify(grpc::CallbackServerContext* cont
   return RunUnary(
       state_, context, "/recognition.v1.Admin/Verify", Right::kWrite,
       [=, this](CallInfo& call, WorkerContext&) {
+        RECOG_RETURN_IF_ERROR_AS_GRPC(
+            TokenAuthenticator::CheckEveryMap(call.caller, Right::kWrite, "Verify"),
+            call.request_id);
         const uint64_t mib = request->mib_per_second() != 0 ? request->mib_per_second()
                                                             : state_.config.store.verify_mb_per_s;
         const auto start = std::chrono::steady_clock::now();
@@ -199,7 +207,10 @@ grpc::ServerUnaryReactor* AdminService::StoreStatus(grpc::CallbackServerContext*
                                                     const pb::StoreStatusRequest*,
                                                     pb::StoreStatusResponse* response) {
   return RunUnary(state_, context, "/recognition.v1.Admin/StoreStatus", Right::kRead,
-                  [=, this](CallInfo&, WorkerContext&) {
+                  [=, this](CallInfo& call, WorkerContext&) {
+                    RECOG_RETURN_IF_ERROR_AS_GRPC(
+                        TokenAuthenticator::CheckEveryMap(call.caller, Right::kRead, "StoreStatus"),
+                        call.request_id);
                     if (state_.recovery.recovered()) {
                       FillRecoveryReport(state_.recovery, response->mutable_recovery());
                     }

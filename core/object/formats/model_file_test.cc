@@ -228,6 +228,33 @@ TEST(ModelFileTest, RoundTripsA3DModel) {
   EXPECT_EQ(Encode(*decoded), bytes);
 }
 
+// Its text goes back out in protobuf strings and JSON, which must be UTF-8: bytes FF FE in a
+// RoboEarth meta.xml name once made a class that broke every client's model listing.
+TEST(ModelFileTest, TextThatIsNotUtf8IsRefused) {
+  ObjectModel model = PlanarModel(60, 16);
+  model.metadata.object_class = "caf\xC3\xA9";  // UTF-8 is fine
+  ASSERT_TRUE(model.Validate().ok());
+  const auto refused = [](const ObjectModel& bad, const std::string& field) {
+    const Status status = bad.Validate();
+    EXPECT_EQ(status.code(), StatusCode::kInvalidArgument) << field;
+    EXPECT_NE(status.message().find(field + " is not UTF-8"), std::string::npos)
+        << status.message();
+    EXPECT_FALSE(EncodeObjectModel(bad).ok());
+  };
+  ObjectModel bad = model;
+  bad.metadata.object_class = "\xFF\xFE";
+  refused(bad, "the class");
+  bad = model;
+  bad.metadata.source = "roboearth:/\xC3";
+  refused(bad, "the source");
+  bad = model;
+  bad.metadata.units = "\xB5m";
+  refused(bad, "the units");
+  bad = model;
+  bad.views[0].name = "face_\xFF";
+  refused(bad, "a view's name");
+}
+
 TEST(ModelFileTest, RoundTripsAPlanarModelWithViews) {
   const ObjectModel model = PlanarModel(60, 16);
   ASSERT_TRUE(model.Validate().ok());

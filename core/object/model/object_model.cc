@@ -1,6 +1,7 @@
 #include "core/object/model/object_model.h"
 
 #include "core/common/names.h"
+#include "core/common/text.h"
 
 #include <cmath>
 
@@ -83,6 +84,17 @@ bool ProjectPoint(const CameraIntrinsics& camera, const RigidTransform& camera_f
 Status ObjectModel::Validate() const {
   RECOG_RETURN_IF_ERROR(ValidateName("object", metadata.name));
   const std::string where = "object model '" + metadata.name + "': ";
+  // Its text goes into API answers and JSON, which must be UTF-8.
+  const auto text = [&](const std::string& value, const std::string& field) {
+    return IsValidUtf8(value) ? Status::Ok()
+                              : Status::InvalidArgument(where + field + " is not UTF-8 text");
+  };
+  RECOG_RETURN_IF_ERROR(text(metadata.object_class, "the class"));
+  RECOG_RETURN_IF_ERROR(text(metadata.units, "the units"));
+  RECOG_RETURN_IF_ERROR(text(metadata.source, "the source"));
+  for (const TrainingView& view : views) {
+    RECOG_RETURN_IF_ERROR(text(view.name, "a view's name"));
+  }
   if (descriptor.type != DescriptorType::kBinary) {
     return Status::InvalidArgument(where + "only binary descriptors are supported");
   }

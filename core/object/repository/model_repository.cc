@@ -22,6 +22,7 @@
 
 #include "core/common/byte_codec.h"
 #include "core/common/names.h"
+#include "core/common/text.h"
 #include "core/object/formats/model_file.h"
 
 namespace recog {
@@ -77,8 +78,11 @@ Status NormaliseTags(std::vector<std::string>* tags) {
     }
     for (char c : tag) {
       if (static_cast<unsigned char>(c) < 0x20 || c == 0x7f) {
-        return Status::InvalidArgument("tag '" + tag + "' has a control character");
+        return Status::InvalidArgument("tag '" + EscapeForLog(tag) + "' has a control character");
       }
+    }
+    if (!IsValidUtf8(tag)) {
+      return Status::InvalidArgument("tag '" + EscapeForLog(tag) + "' is not UTF-8 text");
     }
   }
   std::sort(tags->begin(), tags->end());

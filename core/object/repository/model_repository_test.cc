@@ -187,8 +187,11 @@ TEST_F(ModelRepositoryTest, TagsAreKeptSortedWithoutDuplicatesAndBadOnesAreRefus
   EXPECT_EQ(info.tags, (std::vector<std::string>{"kitchen", "shelf"}));
   EXPECT_EQ(repository_->Get("mug", 1)->first.tags, info.tags);
 
-  const std::vector<std::vector<std::string>> bad = {
-      {""}, {std::string(65, 't')}, {"line\nbreak"}, std::vector<std::string>(33, "many")};
+  const std::vector<std::vector<std::string>> bad = {{""},
+                                                     {std::string(65, 't')},
+                                                     {"line\nbreak"},
+                                                     std::vector<std::string>(33, "many"),
+                                                     {"not \xFF\xFE utf-8"}};
   for (const std::vector<std::string>& tags : bad) {
     EXPECT_EQ(repository_->Put(File(TestModel("other", 2)), "", tags).status().code(),
               StatusCode::kInvalidArgument);
