@@ -3,6 +3,7 @@
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>
+#include <cctype>
 #include <charconv>
 #include <climits>
 #include <filesystem>
@@ -57,6 +58,24 @@ class YamlSection {
     if (!child.IsScalar() || !YAML::convert<T>::decode(child, *value)) {
       return Status::InvalidArgument("key '" + Name(key) + "' must be " +
                                      std::string(Describe<T>()) + ", got " + Quote(child));
+    }
+    return Status::Ok();
+  }
+
+  // Reads a list of strings `key` into *values when present.
+  Status ReadList(const std::string& key, std::vector<std::string>* values) {
+    known_.push_back(key);
+    const YAML::Node child = Child(key);
+    if (!child.IsDefined()) return Status::Ok();
+    const auto wrong = [&] {
+      return Status::InvalidArgument("key '" + Name(key) + "' must be a list of strings, got " +
+                                     Quote(child));
+    };
+    if (!child.IsSequence()) return wrong();
+    values->clear();
+    for (const YAML::Node& item : child) {
+      if (!item.IsScalar()) return wrong();
+      values->push_back(item.Scalar());
     }
     return Status::Ok();
   }
@@ -169,6 +188,11 @@ Status ReadConfig(const YAML::Node& root, ServerConfig* config) {
   RECOG_RETURN_IF_ERROR(console.Read("vendor_dir", &config->console.vendor_dir));
   RECOG_RETURN_IF_ERROR(console.Read("loops_per_map", &config->console.loops_per_map));
   RECOG_RETURN_IF_ERROR(console.Read("charts_dir", &config->console.charts_dir));
+  RECOG_RETURN_IF_ERROR(console.ReadList("hosts", &config->console.hosts));
+  RECOG_RETURN_IF_ERROR(console.Read("max_connections", &config->console.max_connections));
+  RECOG_RETURN_IF_ERROR(
+      console.Read("max_connections_per_client", &config->console.max_connections_per_client));
+  RECOG_RETURN_IF_ERROR(console.Read("request_timeout_ms", &config->console.request_timeout_ms));
   RECOG_RETURN_IF_ERROR(console.RejectUnknownKeys());
 
   RECOG_ASSIGN_OR_RETURN(YamlSection store, top.Section("store"));
@@ -337,6 +361,31 @@ Status ServerConfig::Validate() const {
   if (console.loops_per_map < 1 || console.loops_per_map > 1000) {
     return Status::InvalidArgument("console.loops_per_map must be 1 to 1000, not " +
                                    std::to_string(console.loops_per_map));
+  }
+  if (console.max_connections < 1 || console.max_connections > 1024) {
+    return Status::InvalidArgument("console.max_connections must be 1 to 1024, not " +
+                                   std::to_string(console.max_connections));
+  }
+  if (console.max_connections_per_client < 1 ||
+      console.max_connections_per_client > console.max_connections) {
+    return Status::InvalidArgument(
+        "console.max_connections_per_client must be 1 to console.max_connections (" +
+        std::to_string(console.max_connections) + "), not " +
+        std::to_string(console.max_connections_per_client));
+  }
+  if (console.request_timeout_ms < 1000 || console.request_timeout_ms > 600000) {
+    return Status::InvalidArgument("console.request_timeout_ms must be 1000 to 600000, not " +
+                                   std::to_string(console.request_timeout_ms));
+  }
+  for (const std::string& host : console.hosts) {
+    const bool name =
+        !host.empty() && host.size() <= 253 && std::all_of(host.begin(), host.end(), [](char c) {
+          return std::isalnum(static_cast<unsigned char>(c)) || c == '-' || c == '.';
+        });
+    if (!name) {
+      return Status::InvalidArgument("console.hosts: '" + host +
+                                     "' is not a host name (letters, digits, '-' and '.')");
+    }
   }
   if (store.group_sync_interval_ms < 1 || store.group_sync_interval_ms > kMaxGroupSyncIntervalMs) {
     return Status::InvalidArgument("store.group_sync_interval_ms must be between 1 and " +

@@ -21,6 +21,7 @@
 #include <cstdint>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include <CLI/CLI.hpp>
 
@@ -125,6 +126,18 @@ struct ConsoleConfig {
   // Default "": a folder of charts (the .json that `recog eval ... --plot` writes beside each
   // PNG) shown on the console's Charts page; empty means none.
   std::string charts_dir;
+  // Default []: host names the console answers to besides IP addresses and "localhost" (the
+  // names of its URL, e.g. behind a proxy: ["recog.example.com"]). A request whose Host or Origin
+  // names another host is refused, so that a web page cannot reach the console through a name it
+  // rebinds to this machine's address (DNS rebinding).
+  std::vector<std::string> hosts;
+  // Default 32: connections served at once, a thread each; more are refused with 503 (1..1024).
+  uint32_t max_connections = 32;
+  // Default 8: connections one client address may hold at once (1..max_connections).
+  uint32_t max_connections_per_client = 8;
+  // Default 30000: milliseconds a client has to send a whole request, and again to take its
+  // answer, however slowly it sends (1000..600000).
+  uint32_t request_timeout_ms = 30000;
 };
 
 struct ServerConfig {

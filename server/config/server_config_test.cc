@@ -309,6 +309,17 @@ TEST_F(ServerConfigTest, TheConsoleSectionIsReadAndItsUnknownKeysRejected) {
   EXPECT_EQ(console->console.loops_per_map, 7u);
   EXPECT_EQ(console->console.charts_dir, "/tmp/c");
   EXPECT_EQ(console->console.vendor_dir, "/usr/share/javascript");  // the default
+  StatusOr<ServerConfig> guarded = Load(
+      "console:\n  hosts: [recog.example.com, console.lan]\n  max_connections: 64\n"
+      "  max_connections_per_client: 4\n  request_timeout_ms: 5000\n");
+  ASSERT_TRUE(guarded.ok()) << guarded.status().ToString();
+  EXPECT_EQ(guarded->console.hosts, (std::vector<std::string>{"recog.example.com", "console.lan"}));
+  EXPECT_EQ(guarded->console.max_connections, 64u);
+  EXPECT_EQ(guarded->console.max_connections_per_client, 4u);
+  EXPECT_EQ(guarded->console.request_timeout_ms, 5000u);
+  StatusOr<ServerConfig> not_a_list = Load("console:\n  hosts: recog.example.com\n");
+  ASSERT_FALSE(not_a_list.ok());
+  EXPECT_THAT(not_a_list.status().message(), HasSubstr("console.hosts' must be a list"));
   StatusOr<ServerConfig> typo = Load("console:\n  listn: \"127.0.0.1:8080\"\n");
   ASSERT_FALSE(typo.ok());
   EXPECT_THAT(typo.status().message(), HasSubstr("unknown key 'console.listn'"));
@@ -393,6 +404,15 @@ TEST_F(ServerConfigTest, ValidateNamesTheBadField) {
       {[](ServerConfig& c) { c.console.listen = c.metrics_listen; }, "console.listen"},
       {[](ServerConfig& c) { c.console.loops_per_map = 0; }, "console.loops_per_map"},
       {[](ServerConfig& c) { c.console.loops_per_map = 1001; }, "console.loops_per_map"},
+      {[](ServerConfig& c) { c.console.max_connections = 0; }, "console.max_connections"},
+      {[](ServerConfig& c) { c.console.max_connections = 1025; }, "console.max_connections"},
+      {[](ServerConfig& c) { c.console.max_connections_per_client = 33; },
+       "console.max_connections_per_client"},
+      {[](ServerConfig& c) { c.console.max_connections_per_client = 0; },
+       "console.max_connections_per_client"},
+      {[](ServerConfig& c) { c.console.request_timeout_ms = 999; }, "console.request_timeout_ms"},
+      {[](ServerConfig& c) { c.console.hosts = {"a b"}; }, "console.hosts: 'a b'"},
+      {[](ServerConfig& c) { c.console.hosts = {""}; }, "console.hosts"},
   };
   for (const auto& [mutate, expected] : cases) {
     ServerConfig config;

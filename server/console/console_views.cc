@@ -23,7 +23,7 @@ constexpr size_t kDefaultMaxPoints = 20000, kMaxMaxPoints = 1000000;
 
 HttpReply Error(const Status& status) { return ErrorReply(ToGrpcStatus(status)); }
 
-HttpReply Json(const json& body) { return {200, "application/json", body.dump()}; }
+HttpReply Json(const json& body) { return {200, "application/json", JsonText(body)}; }
 
 // The caller of `authorization` when it holds the read right and the server is ready.
 StatusOr<Caller> Reader(const ServerState& state, const std::string& authorization) {

@@ -7,6 +7,7 @@
 #include <grpcpp/generic/generic_stub.h>
 #include <nlohmann/json.hpp>
 
+#include "core/common/text.h"
 #include "wire/grpc_code_names.h"
 
 namespace recog::server {
@@ -82,10 +83,14 @@ int HttpStatusOf(grpc::StatusCode code) {
   }
 }
 
+std::string JsonText(const nlohmann::json& json) {
+  return json.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
+}
+
 HttpReply ErrorReply(const grpc::Status& status) {
   const nlohmann::json body = {{"code", std::string(GrpcCodeName(status.error_code()))},
                                {"message", status.error_message()}};
-  return {HttpStatusOf(status.error_code()), "application/json", body.dump()};
+  return {HttpStatusOf(status.error_code()), "application/json", JsonText(body)};
 }
 
 std::string ToJson(const protobuf::Message& message) {
@@ -102,6 +107,11 @@ RpcGateway::RpcGateway(std::shared_ptr<grpc::Channel> channel) : channel_(std::m
 
 grpc::Status RpcGateway::Call(std::string_view method, const protobuf::Message& request,
                               protobuf::Message* response, const std::string& authorization) const {
+  // gRPC aborts the process on metadata it cannot send (a tab, a byte beyond ASCII).
+  if (!IsPrintableAscii(authorization)) {
+    return {grpc::StatusCode::UNAUTHENTICATED,
+            "the Authorization header must be printable ASCII ('Bearer <token>')"};
+  }
   grpc::ClientContext context;
   context.set_deadline(std::chrono::system_clock::now() + kDeadline);
   if (!authorization.empty()) context.AddMetadata("authorization", authorization);

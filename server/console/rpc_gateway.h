@@ -18,6 +18,7 @@
 
 #include <google/protobuf/message.h>
 #include <grpcpp/grpcpp.h>
+#include <nlohmann/json_fwd.hpp>
 
 namespace recog::server {
 
@@ -28,6 +29,10 @@ struct HttpReply {
   std::string body;
   std::vector<std::pair<std::string, std::string>> headers = {};  // beside Content-Type
 };
+
+// `json` as text. Strings that are not UTF-8 (a path or a name a client sent) have their bad bytes
+// replaced by U+FFFD instead of making the dump throw.
+std::string JsonText(const nlohmann::json& json);
 
 // {"code": "NOT_FOUND", "message": "..."} with the HTTP status of the gRPC code (HttpStatusOf).
 HttpReply ErrorReply(const grpc::Status& status);

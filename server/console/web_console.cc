@@ -3,14 +3,18 @@
 #include <filesystem>
 
 #include <httplib.h>
+#include <openssl/evp.h>
+#include <openssl/sha.h>
 #include <spdlog/spdlog.h>
 
+#include "core/common/file_io.h"
+#include "core/common/text.h"
 #include "server/console/console_views.h"
+#include "server/console/guarded_http_server.h"
 
 namespace recog::server {
 namespace {
 
-constexpr int kHttpThreads = 4;
 constexpr std::chrono::milliseconds kLiveInterval{1000};
 constexpr size_t kLiveSamples = 300;  // five minutes
 
@@ -38,6 +42,51 @@ bool SplitAddress(const std::string& address, std::string* host, int* port) {
   } catch (const std::exception&) {
     return false;
   }
+}
+
+// The content of the page's inline import map, which the policy must allow by its hash.
+std::string InlineImportMap(const std::string& index_html) {
+  constexpr std::string_view kOpen = "<script type=\"importmap\">", kClose = "</script>";
+  const size_t open = index_html.find(kOpen);
+  if (open == std::string::npos) return {};
+  const size_t begin = open + kOpen.size();
+  const size_t end = index_html.find(kClose, begin);
+  return end == std::string::npos ? std::string() : index_html.substr(begin, end - begin);
+}
+
+// 'sha256-<base64>' of `text`, as Content-Security-Policy names an inline script.
+std::string ScriptHash(const std::string& text) {
+  unsigned char digest[SHA256_DIGEST_LENGTH];
+  SHA256(reinterpret_cast<const unsigned char*>(text.data()), text.size(), digest);
+  unsigned char base64[4 * ((SHA256_DIGEST_LENGTH + 2) / 3) + 1];
+  EVP_EncodeBlock(base64, digest, SHA256_DIGEST_LENGTH);
+  return "'sha256-" + std::string(reinterpret_cast<const char*>(base64)) + "'";
+}
+
+// Sent with every answer: scripts, styles and everything else from the console itself (the page's
+// import map by its hash), never framed, types never sniffed, no referrer.
+httplib::Headers SecurityHeaders(const std::string& index_html) {
+  std::string scripts = "'self'";
+  if (const std::string map = InlineImportMap(index_html); !map.empty()) {
+    scripts += " " + ScriptHash(map);
+  }
+  return {{"Content-Security-Policy",
+           "default-src 'self'; script-src " + scripts +
+               "; img-src 'self' data: blob:; object-src 'none'; base-uri 'none'; "
+               "form-action 'self'; frame-ancestors 'none'"},
+          {"X-Content-Type-Options", "nosniff"},
+          {"X-Frame-Options", "DENY"},
+          {"Referrer-Policy", "no-referrer"}};
+}
+
+// A file of `files` (GET /static/..., /vendor/...), or 404.
+HttpReply StaticFileReply(const StaticFiles& files, const std::string& path) {
+  const StaticFiles::File* file = files.Find(path);
+  if (file != nullptr) {
+    StatusOr<std::string> content = ReadWholeFile(file->path, "console file");
+    if (content.ok()) return {200, file->content_type, std::move(content).value()};
+  }
+  return {404, "text/plain; charset=utf-8", "no such file"};
 }
 
 }  // namespace
@@ -69,8 +118,10 @@ StatusOr<std::unique_ptr<WebConsole>> WebConsole::Start(ServerState* state,
   const ServerConfig& config = state->config;
   const std::string web_root =
       config.console.web_root.empty() ? DefaultConsoleWebRoot() : config.console.web_root;
-  if (!std::filesystem::exists(std::filesystem::path(web_root) / "index.html")) {
-    return Status::NotFound("console.web_root '" + web_root + "' has no index.html");
+  const std::string index = web_root + "/index.html";
+  StatusOr<std::string> index_html = ReadWholeFile(index, "the console's index.html");
+  if (!index_html.ok()) {
+    return Status::NotFound("console.web_root '" + web_root + "' has no readable index.html");
   }
   std::string host;
   int port = 0;
@@ -79,27 +130,24 @@ StatusOr<std::unique_ptr<WebConsole>> WebConsole::Start(ServerState* state,
                                    "' is not host:port");
   }
   std::unique_ptr<WebConsole> console(new WebConsole(state, std::move(channel)));
-  if (config.tls.cert.empty()) {
-    console->http_ = std::make_unique<httplib::Server>();
-  } else {
-    console->http_ = std::make_unique<httplib::SSLServer>(
-        config.tls.cert.c_str(), config.tls.key.c_str(),
-        config.tls.client_ca.empty() ? nullptr : config.tls.client_ca.c_str());
-  }
+  const ConnectionLimits limits{
+      .max_connections = config.console.max_connections,
+      .max_connections_per_client = config.console.max_connections_per_client,
+      .request_timeout = std::chrono::milliseconds(config.console.request_timeout_ms)};
+  const HttpsFiles https{config.tls.cert, config.tls.key, config.tls.client_ca};
+  console->http_ = MakeGuardedHttpServer(limits, config.tls.cert.empty() ? nullptr : &https);
   httplib::Server& http = *console->http_;
   if (!http.is_valid()) {
     return Status::FailedPrecondition("the console cannot use the TLS files " + config.tls.cert +
                                       " and " + config.tls.key);
   }
-  http.new_task_queue = [] { return new httplib::ThreadPool(kHttpThreads); };
   // A frame as JSON: its bytes in base64 (4/3) and the rest of the request.
-  console->http_payload_limit_ = size_t(config.max_message_bytes) / 3 * 4 + (64 << 10);
-  http.set_payload_max_length(console->http_payload_limit_);
-  http.set_file_extension_and_mimetype_mapping("js", "text/javascript");
-  http.set_file_extension_and_mimetype_mapping("mjs", "text/javascript");
-  http.set_mount_point("/static", web_root);
-  http.set_mount_point("/vendor/three", config.console.vendor_dir + "/three");
-  http.set_mount_point("/vendor/chart.js", config.console.vendor_dir + "/chart.js");
+  console->gate_.emplace(config.console.hosts, !config.tls.cert.empty(),
+                         size_t(config.max_message_bytes) / 3 * 4 + (64 << 10), &state->auth);
+  console->files_.AddFolder("/static", web_root);
+  console->files_.AddFolder("/vendor/three", config.console.vendor_dir + "/three");
+  console->files_.AddFolder("/vendor/chart.js", config.console.vendor_dir + "/chart.js");
+  http.set_default_headers(SecurityHeaders(*index_html));
   console->AddRoutes();
   console->port_ = port == 0 ? http.bind_to_any_port(host) : port;
   if (console->port_ <= 0 || (port != 0 && !http.bind_to_port(host, port))) {
@@ -110,32 +158,36 @@ StatusOr<std::unique_ptr<WebConsole>> WebConsole::Start(ServerState* state,
     http.listen_after_bind();
     console->stopped_ = true;
   });
-  spdlog::info("console on {}://{}:{}/", config.tls.cert.empty() ? "http" : "https", host,
-               console->port_);
+  spdlog::info("console on {}://{}:{}/ ({} files)", config.tls.cert.empty() ? "http" : "https",
+               host, console->port_, console->files_.size());
   return console;
 }
 
 void WebConsole::AddRoutes() {
   httplib::Server& http = *http_;
   ServerState& state = *state_;
+  // Before routing, before any body is read: the gate's refusals close the connection.
+  http.set_pre_routing_handler(
+      [this](const httplib::Request& request, httplib::Response& response) {
+        std::optional<HttpReply> refusal = gate_->Check(request);
+        if (!refusal.has_value()) return httplib::Server::HandlerResponse::Unhandled;
+        refusal->headers.emplace_back("Connection", "close");
+        Send(*refusal, &response);
+        CloseConnectionAfterResponse();
+        return httplib::Server::HandlerResponse::Handled;
+      });
   http.Get("/", [](const httplib::Request&, httplib::Response& response) {
     response.set_redirect("/static/index.html");
   });
+  http.Get(R"(/(static|vendor)/.+)",
+           [this](const httplib::Request& request, httplib::Response& response) {
+             Send(StaticFileReply(files_, request.path), &response);
+           });
   http.Get("/api/whoami", [&state](const httplib::Request& request, httplib::Response& response) {
     Send(WhoAmIView(state, Authorization(request)), &response);
   });
-  // Only JSON bodies: another site's page can send a form or text/plain to this address without
-  // asking, but not application/json (the browser asks first, and the console does not answer
-  // CORS), so a console without tokens cannot be driven by a page the operator happens to open.
   http.Post(R"(/api/rpc/([A-Za-z0-9_.]+/[A-Za-z0-9_]+))", [this](const httplib::Request& request,
                                                                  httplib::Response& response) {
-    if (!request.get_header_value("Content-Type").starts_with("application/json")) {
-      Send(ErrorReply({grpc::StatusCode::INVALID_ARGUMENT,
-                       "the body must be JSON sent as Content-Type: application/json"}),
-           &response);
-      response.status = 415;
-      return;
-    }
     Send(gateway_.Call(request.matches[1].str(), request.body, Authorization(request)), &response);
   });
   http.Get("/api/maps",
@@ -175,25 +227,36 @@ void WebConsole::AddRoutes() {
            [this, &state](const httplib::Request& request, httplib::Response& response) {
              Send(LiveView(state, live_, Authorization(request)), &response);
            });
-  // Refusals of the HTTP layer (no such route, a body too large) under /api/ are JSON too.
-  http.set_error_handler([max = http_payload_limit_](const httplib::Request& request,
-                                                     httplib::Response& response) {
-    if (!request.path.starts_with("/api/") || !response.body.empty()) return;
+  // A handler that throws answers 500; the exception is logged, never sent.
+  http.set_exception_handler(
+      [](const httplib::Request& request, httplib::Response& response, std::exception_ptr error) {
+        std::string what = "unknown exception";
+        try {
+          std::rethrow_exception(error);
+        } catch (const std::exception& e) {
+          what = e.what();
+        } catch (...) {
+        }
+        spdlog::error("console: {} {}: {}", request.method, EscapeForLog(request.path),
+                      EscapeForLog(what));
+        Send(ErrorReply({grpc::StatusCode::INTERNAL, "internal error (the server log has it)"}),
+             &response);
+      });
+  // Refusals of the HTTP layer (no such route, a malformed request) are JSON under /api/, and
+  // plain text elsewhere; they never echo the request.
+  http.set_error_handler([](const httplib::Request& request, httplib::Response& response) {
+    if (!response.body.empty()) return;
     const int status = response.status;
-    // cpp-httplib takes at most 8 KiB of a form: JSON must say that it is JSON.
-    const bool form =
-        request.get_header_value("Content-Type").starts_with("application/x-www-form-urlencoded");
     const grpc::Status refusal =
-        status == 413
-            ? grpc::Status(grpc::StatusCode::RESOURCE_EXHAUSTED,
-                           form ? std::string("a form body takes at most 8 KiB: send "
-                                              "the JSON as Content-Type: "
-                                              "application/json")
-                                : "the request is larger than the console takes (" +
-                                      std::to_string(max) + " bytes)")
-            : grpc::Status(grpc::StatusCode::NOT_FOUND, request.method + " " + request.path +
-                                                            " is not part of the console's API");
-    Send(ErrorReply(refusal), &response);
+        status == 404
+            ? grpc::Status(grpc::StatusCode::NOT_FOUND, "no such page or call of the console's API")
+            : grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
+                           "the request is malformed (HTTP " + std::to_string(status) + ")");
+    if (request.path.starts_with("/api/")) {
+      Send(ErrorReply(refusal), &response);
+    } else {
+      response.set_content(refusal.error_message(), "text/plain; charset=utf-8");
+    }
     response.status = status;
   });
 }

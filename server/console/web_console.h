@@ -2,28 +2,35 @@
 // maps and the model repository, try recognition on an image, and watch the server live.
 //
 // It serves, on its own HTTP (or, with the server's tls.cert, HTTPS) address:
-//   /                      the pages (server/console/web: plain ES modules, no build step)
+//   /static/...            the pages (server/console/web: plain ES modules, no build step)
 //   /vendor/three/...      Debian's libjs-three, /vendor/chart.js/... Debian's libjs-chart.js
 //   /api/rpc/<Service>/<Method>   every unary RPC as JSON (RpcGateway: the same services)
 //   /api/maps, /api/maps/<name>/loops, /api/maps/<name>/frames/<id>/thumbnail,
 //   /api/models/<name>, /api/models/<name>/points, /api/models/<name>/views/<i>/image,
 //   /api/live, /api/whoami   the views the gRPC API has no call for (docs/server.md, "Console")
-// Every /api/ request is authenticated with the server's tokens (`Authorization: Bearer ...`) and
-// needs the read right (and the map's, for a map's views); the gateway's calls check their own
-// right as any gRPC call does, so a read-only token cannot change anything. Answers that fail are
-// {"code", "message"} with the HTTP status of the gRPC code. Requests larger than the server's
-// max_message_bytes (plus base64's third) are refused with 413.
+// Every request passes the RequestGate first (its Host and Origin, its body's size and framing,
+// the Authorization header, and for the gateway's calls the token, all before a body is read);
+// files are served by exact name (StaticFiles); connections have deadlines and a cap
+// (MakeGuardedHttpServer). Every /api/ view authenticates with the server's tokens and needs the
+// read right (and the map's, for a map's views); the gateway's calls check their own right as any
+// gRPC call does, so a read-only token cannot change anything. Answers that fail are
+// {"code", "message"} with the HTTP status of the gRPC code; a handler that throws answers 500.
+// Every answer carries a Content-Security-Policy (no framing, scripts of the console only),
+// X-Content-Type-Options: nosniff and X-Frame-Options: DENY.
 #pragma once
 
 #include <atomic>
 #include <memory>
+#include <optional>
 #include <thread>
 
 #include <grpcpp/grpcpp.h>
 
 #include "core/common/status.h"
 #include "server/console/live_sampler.h"
+#include "server/console/request_gate.h"
 #include "server/console/rpc_gateway.h"
+#include "server/console/static_files.h"
 #include "server/services/server_state.h"
 
 namespace httplib {
@@ -53,10 +60,11 @@ class WebConsole {
   ServerState* state_;
   RpcGateway gateway_;
   LiveSampler live_;
+  std::optional<RequestGate> gate_;  // set by Start
+  StaticFiles files_;
   std::unique_ptr<httplib::Server> http_;
   std::thread thread_;
   std::atomic<bool> stopped_{false};  // the thread has left listen_after_bind
-  size_t http_payload_limit_ = 0;     // bytes of a request's body
   int port_ = 0;
 };
 

@@ -13,7 +13,6 @@
 #include "server/console/rpc_gateway.h"
 #include "tests/server/server_fixture.h"
 #include "tests/testing/model_files.h"
-#include "wire/sha256.h"
 
 namespace recog::server::testing {
 namespace {
@@ -83,21 +82,6 @@ class ConsoleTest : public ServerFixture {
       // The console records the inliers; the client, which did not ask, does not get them.
       EXPECT_EQ(response.result().inlier_correspondences_size(), 0);
     }
-  }
-
-  grpc::Status PutModel(const std::string& bytes, const std::string& name) {
-    auto context = Context();
-    pb::PutModelResponse response;
-    auto writer = models_->PutModel(context.get(), &response);
-    pb::PutModelRequest request;
-    request.mutable_header()->set_name(name);
-    request.mutable_header()->set_sha256(Sha256Hex(bytes));
-    request.mutable_header()->set_size_bytes(bytes.size());
-    writer->Write(request);
-    request.set_chunk(bytes);
-    writer->Write(request);
-    writer->WritesDone();
-    return writer->Finish();
   }
 
   std::unique_ptr<httplib::Client> http_;
@@ -239,7 +223,7 @@ TEST_F(ConsoleTest, TheGatewayCallsTheServicesAndRefusesWhatIsNotARequest) {
   httplib::Result form = http_->Post("/api/rpc/recognition.v1.PlaceRecognition/GetMap",
                                      std::string(20000, 'a'), "application/x-www-form-urlencoded");
   ASSERT_TRUE(form);
-  EXPECT_EQ(form->status, 413);
+  EXPECT_EQ(form->status, 415);
   EXPECT_NE(form->body.find("application/json"), std::string::npos) << form->body;
 }
 
@@ -373,7 +357,7 @@ TEST_F(ConsoleTest, ThePagesAndDebiansLibrariesAreServed) {
     httplib::Result three = http_->Get("/vendor/three/build/three.module.js");
     ASSERT_TRUE(three);
     EXPECT_EQ(three->status, 200);
-    EXPECT_EQ(three->get_header_value("Content-Type"), "text/javascript");
+    EXPECT_EQ(three->get_header_value("Content-Type"), "text/javascript; charset=utf-8");
   }
 }
 

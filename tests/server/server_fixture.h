@@ -19,6 +19,7 @@
 #include "server/app/recognition_server.h"
 #include "storage/store_test_util.h"
 #include "tests/testing/data_paths.h"
+#include "wire/sha256.h"
 
 namespace recog::server::testing {
 
@@ -119,6 +120,23 @@ class ServerFixture : public ::testing::Test {
     request.set_map(map);
     *request.mutable_frame() = frame;
     return places_->AddFrame(Context().get(), request, response);
+  }
+
+  // Uploads the model file `bytes` as `name` in one chunk (with `token` when given).
+  grpc::Status PutModel(const std::string& bytes, const std::string& name,
+                        const std::string& token = {}) {
+    auto context = Context(token);
+    pb::PutModelResponse response;
+    auto writer = models_->PutModel(context.get(), &response);
+    pb::PutModelRequest request;
+    request.mutable_header()->set_name(name);
+    request.mutable_header()->set_sha256(Sha256Hex(bytes));
+    request.mutable_header()->set_size_bytes(bytes.size());
+    writer->Write(request);
+    request.set_chunk(bytes);
+    writer->Write(request);
+    writer->WritesDone();
+    return writer->Finish();
   }
 
   grpc::Status GetMap(const std::string& name, pb::MapInfo* info = nullptr) {

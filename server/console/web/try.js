@@ -162,8 +162,10 @@ async function tryObjects(output, photo, K, signal) {
     const colour = `hsl(${(i * 67 + 200) % 360}, 90%, 50%)`;
     drawDetection(ctx, o, K, lengths.get(o.name), colour, scale);
     const t = ((o.pose && o.pose.translation) || []).map((v) => num(v).toFixed(3));
+    const swatch = el('span', { class: 'swatch' });
+    swatch.style.background = colour;  // through the CSSOM: the console's policy forbids style attributes
     list.append(el('li', { class: 'detected-object', 'data-name': o.name },
-      el('span', { class: 'swatch', style: `background:${colour}` }),
+      swatch,
       el('strong', {}, o.name), ` · ${num(o.inliers)} inliers · translation (${t.join(', ')}) ${o.units || ''}`));
   });
   if (!objects.length) list.append(el('li', { class: 'none muted' }, 'No object recognised in this photo.'));
