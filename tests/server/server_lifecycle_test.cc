@@ -12,6 +12,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cstdlib>
 #include <fstream>
 #include <future>
 #include <thread>
@@ -240,8 +241,10 @@ TEST_F(ServerLifecycleTest, ACallWhoseDeadlinePassesInTheQueueDoesNotRun) {
   std::vector<uchar> big;
   ASSERT_TRUE(cv::imencode(".jpg", cv::repeat(small, 12, 12), big));  // 6144x4608
   const pb::Frame large = JpegFrame(std::string(big.begin(), big.end()));
-  // Six of them: at least a second of work on one worker (decoding a 28-megapixel JPEG alone takes
-  // over 100 ms), far beyond the 100 ms deadline of the call queued 100 ms after them.
+  // Six of them: seconds of work on one worker (decoding a 28-megapixel JPEG alone takes over
+  // 100 ms). The queued call is sent once the first has ended with at least two still waiting (the
+  // queue-depth gauge is sampled as each call ends), so it waits far beyond its 300 ms deadline
+  // however loaded the machine is.
   std::vector<std::future<grpc::Status>> busy;
   for (int i = 0; i < 6; ++i) {
     busy.push_back(std::async(std::launch::async, [&] {
@@ -249,13 +252,23 @@ TEST_F(ServerLifecycleTest, ACallWhoseDeadlinePassesInTheQueueDoesNotRun) {
       return AddFrame("queued", large, &added);
     }));
   }
-  std::this_thread::sleep_for(std::chrono::milliseconds(100));  // the large frames are queued
+  const auto waiting = [&] {
+    const std::string metrics = FetchMetrics(server_->metrics_port());
+    const size_t at = metrics.find("\nrecog_worker_queue_depth ");
+    return at == std::string::npos ? 0.0 : std::atof(metrics.c_str() + at + 26);
+  };
+  const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  double queued = 0;
+  while ((queued = waiting()) < 2 && std::chrono::steady_clock::now() < give_up) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  ASSERT_GE(queued, 2) << "the large frames never queued";
   pb::AddFrameRequest request;
   request.set_map("queued");
   *request.mutable_frame() = JpegFrame(CorridorJpeg(20));
   pb::AddFrameResponse added;
   grpc::ClientContext context;
-  context.set_deadline(std::chrono::system_clock::now() + std::chrono::milliseconds(100));
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::milliseconds(300));
   EXPECT_EQ(places_->AddFrame(&context, request, &added).error_code(),
             grpc::StatusCode::DEADLINE_EXCEEDED);
   for (auto& call : busy) EXPECT_TRUE(call.get().ok());
