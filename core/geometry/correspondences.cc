@@ -378,28 +378,125 @@ bool RelativePoseFromFundamental(const cv::Matx33d& fundamental, const cv::Matx3
   return PoseFromEssential(cv::Mat(essential), pa, pb, cv::noArray(), R, t);
 }
 
+namespace {
+
+// How the inliers (normalised pixels pa, pb; `inlier` marks them) triangulate with the pose
+// X_b = R X_a + t: the ones in front of both cameras (rays meeting in front, or parallel within
+// kParallelDeg and pointing the same way: a point at infinity, as all are under a pure
+// rotation), the ones the rotation alone explains, and each one's ray angle.
+struct Triangulation {
+  uint32_t in_front = 0, rotation_only = 0;
+  std::vector<double> parallax_deg;
+};
+
+constexpr double kParallelDeg = 0.1;
+
+Triangulation Triangulate(const cv::Matx33d& R, const cv::Vec3d& t,
+                          const std::vector<cv::Point2d>& pa, const std::vector<cv::Point2d>& pb,
+                          const std::vector<bool>& inlier, double threshold) {
+  Triangulation result;
+  const cv::Vec3d centre_b = -(R.t() * t);  // camera b in a's frame
+  for (size_t i = 0; i < pa.size(); ++i) {
+    if (!inlier[i]) continue;
+    const cv::Vec3d ray_a(pa[i].x, pa[i].y, 1.0);
+    const cv::Vec3d ray_b = R.t() * cv::Vec3d(pb[i].x, pb[i].y, 1.0);
+    const double cosine = ray_a.dot(ray_b) / (cv::norm(ray_a) * cv::norm(ray_b));
+    const double angle = std::acos(std::clamp(cosine, -1.0, 1.0)) * 180.0 / CV_PI;
+    result.parallax_deg.push_back(angle);
+    bool front = cosine > 0.0;
+    if (angle >= kParallelDeg) {
+      // The depths along both rays where they pass closest:
+      // lambda_a ray_a ~ centre_b + lambda_b ray_b.
+      const double aa = ray_a.dot(ray_a), ab = ray_a.dot(ray_b), bb = ray_b.dot(ray_b);
+      const double ac = ray_a.dot(centre_b), bc = ray_b.dot(centre_b);
+      const double det = ab * ab - aa * bb;
+      const double lambda_a = (ab * bc - bb * ac) / det;
+      const double lambda_b = (aa * bc - ab * ac) / det;
+      front = lambda_a > 0.0 && lambda_b > 0.0;
+    }
+    result.in_front += front;
+    // The rotation alone: b's ray turned into a's frame lands on a's pixel.
+    const cv::Point2d rotated(ray_b[0] / ray_b[2], ray_b[1] / ray_b[2]);
+    result.rotation_only += ray_b[2] > 0.0 && cv::norm(rotated - pa[i]) < threshold;
+  }
+  return result;
+}
+
+}  // namespace
+
+EssentialResult VerifyEssential(const cv::Matx33d& K_a, const cv::Matx33d& K_b,
+                                const std::vector<cv::KeyPoint>& a_keypoints,
+                                const std::vector<cv::KeyPoint>& b_keypoints,
+                                const std::vector<Match>& matches,
+                                const EssentialOptions& options) {
+  EssentialResult result;
+  if (matches.size() < 5) return result;
+  std::vector<cv::Point2d> pa, pb;
+  if (!NormalisedPairs(K_a, K_b, a_keypoints, b_keypoints, matches, &pa, &pb)) return result;
+  // The pixel threshold in normalised units, by the mean focal length of the two cameras.
+  const double focal = (K_a(0, 0) + K_a(1, 1) + K_b(0, 0) + K_b(1, 1)) / 4.0;
+  const double threshold = options.threshold_px / focal;
+  cv::Mat mask;
+  cv::Mat essential;
+  try {
+    essential = cv::findEssentialMat(pa, pb, cv::Mat::eye(3, 3, CV_64F), cv::RANSAC,
+                                     options.confidence, threshold, options.max_iterations, mask);
+  } catch (const cv::Exception&) {
+    return result;
+  }
+  // Several solutions come stacked (3 x 3 each) when the 5-point problem is ambiguous on the
+  // best sample: the first is RANSAC's.
+  if (essential.rows < 3 || essential.cols != 3 || mask.empty()) return result;
+  std::vector<bool> inlier(matches.size());
+  for (size_t i = 0; i < matches.size(); ++i) {
+    inlier[i] = mask.at<uchar>(int(i)) != 0;
+    if (inlier[i]) result.inliers.push_back(matches[i]);
+  }
+  if (result.inliers.size() < 5) return result;
+  result.essential = cv::Matx33d(cv::Mat(essential.rowRange(0, 3)));
+  // Of the four decompositions, the one that puts the most inliers in front of both cameras;
+  // on a tie (a pure rotation puts every point at infinity for the right R), the one whose
+  // rotation alone explains the most.
+  cv::Mat R1, R2, t;
+  cv::decomposeEssentialMat(essential.rowRange(0, 3), R1, R2, t);
+  Triangulation best;
+  bool chosen = false;
+  for (const cv::Mat& R : {R1, R2}) {
+    for (const double sign : {1.0, -1.0}) {
+      const cv::Matx33d rotation(R);
+      const cv::Vec3d translation = cv::Vec3d(t) * sign;
+      Triangulation candidate = Triangulate(rotation, translation, pa, pb, inlier, threshold);
+      const bool better =
+          !chosen || candidate.in_front > best.in_front ||
+          (candidate.in_front == best.in_front && candidate.rotation_only > best.rotation_only);
+      if (!better) continue;
+      best = std::move(candidate);
+      result.R = rotation;
+      result.t = translation;
+      chosen = true;
+    }
+  }
+  result.found = true;
+  result.in_front = best.in_front;
+  result.rotation_only = best.rotation_only;
+  std::nth_element(best.parallax_deg.begin(),
+                   best.parallax_deg.begin() + long(best.parallax_deg.size() / 2),
+                   best.parallax_deg.end());
+  result.parallax_deg = best.parallax_deg[best.parallax_deg.size() / 2];
+  return result;
+}
+
 bool RelativePoseFromMatches(const cv::Matx33d& K_a, const cv::Matx33d& K_b,
                              const std::vector<cv::KeyPoint>& a_keypoints,
                              const std::vector<cv::KeyPoint>& b_keypoints,
                              const std::vector<Match>& matches, double threshold_px, cv::Matx33d* R,
                              cv::Vec3d* t) {
-  if (matches.size() < 5) return false;
-  std::vector<cv::Point2d> pa, pb;
-  if (!NormalisedPairs(K_a, K_b, a_keypoints, b_keypoints, matches, &pa, &pb)) return false;
-  // The pixel threshold in normalised units, by the mean focal length of the two cameras.
-  const double focal = (K_a(0, 0) + K_a(1, 1) + K_b(0, 0) + K_b(1, 1)) / 4.0;
-  cv::Mat mask;
-  cv::Mat essential;
-  try {
-    essential = cv::findEssentialMat(pa, pb, cv::Mat::eye(3, 3, CV_64F), cv::RANSAC, 0.999,
-                                     threshold_px / focal, mask);
-  } catch (const cv::Exception&) {
-    return false;
-  }
-  // Several solutions come stacked (3 x 3 each) when the 5-point problem is ambiguous on the
-  // best sample: the first is RANSAC's.
-  if (essential.rows < 3 || essential.cols != 3) return false;
-  return PoseFromEssential(essential.rowRange(0, 3), pa, pb, mask, R, t);
+  const EssentialResult essential =
+      VerifyEssential(K_a, K_b, a_keypoints, b_keypoints, matches, {.threshold_px = threshold_px});
+  if (!essential.found || essential.in_front < 5) return false;
+  *R = essential.R;
+  *t = essential.t;
+  return true;
 }
 
 }  // namespace recog

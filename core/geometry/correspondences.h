@@ -130,13 +130,46 @@ bool RelativePoseFromFundamental(const cv::Matx33d& fundamental, const cv::Matx3
                                  const std::vector<cv::KeyPoint>& b_keypoints,
                                  const std::vector<Match>& inliers, cv::Matx33d* R, cv::Vec3d* t);
 
+struct EssentialOptions {
+  double threshold_px = 1.0;  // distance to the epipolar line, pixels at the cameras' mean focal
+  double confidence = 0.999;
+  int max_iterations = 1000;
+};
+
+// What the matches of two calibrated views say through their essential matrix: its RANSAC
+// inliers, the relative pose X_b = R * X_a + t (|t| = 1) of the decomposition that puts the most
+// inliers in front of both cameras, and how the inliers triangulate with it.
+struct EssentialResult {
+  bool found = false;          // an essential matrix with at least 5 inliers
+  std::vector<Match> inliers;  // consistent with E (in front or not)
+  cv::Matx33d essential = cv::Matx33d::zeros();
+  cv::Matx33d R = cv::Matx33d::eye();
+  cv::Vec3d t = cv::Vec3d(0, 0, 0);
+  // Inliers whose two rays meet in front of both cameras, or are parallel and point the same way
+  // (a point at infinity, as every point of a pure rotation is).
+  uint32_t in_front = 0;
+  // The median angle between an inlier's two rays (degrees): 0 for a pure rotation, larger the
+  // more the baseline shows. It is what makes the depths, and F itself, well defined.
+  double parallax_deg = 0;
+  // Inliers the rotation alone explains: within threshold_px once x_b is mapped by K_b R K_a^-1.
+  uint32_t rotation_only = 0;
+};
+
+// Fits an essential matrix with RANSAC (OpenCV's five-point solver, deterministic) to the matches,
+// their pixels normalised by each camera, and measures the result (see EssentialResult). Fewer
+// than 5 matches, or an out-of-range match: not found.
+EssentialResult VerifyEssential(const cv::Matx33d& K_a, const cv::Matx33d& K_b,
+                                const std::vector<cv::KeyPoint>& a_keypoints,
+                                const std::vector<cv::KeyPoint>& b_keypoints,
+                                const std::vector<Match>& matches, const EssentialOptions& options);
+
 // The relative pose of two calibrated views (X_b = R * X_a + t, |t| = 1) from their matches,
-// by the five-point algorithm: an essential matrix fitted with RANSAC (OpenCV's, deterministic)
-// to the pixels normalised by each camera, `threshold_px` from its epipolar lines, then the one
-// of its four decompositions with the most RANSAC inliers in front of both cameras. Unlike
-// RelativePoseFromFundamental, which decomposes K_bᵀ F K_a, the fit itself knows the cameras:
-// on the rig drives of tools/evaluation/rig_place_test.cc this cuts the rotation error several
-// times. False with fewer than 5 matches, or fewer than 5 points in front.
+// by the five-point algorithm (VerifyEssential): an essential matrix fitted with RANSAC (OpenCV's,
+// deterministic) to the pixels normalised by each camera, `threshold_px` from its epipolar lines,
+// then the one of its four decompositions with the most RANSAC inliers in front of both cameras.
+// Unlike RelativePoseFromFundamental, which decomposes K_bᵀ F K_a, the fit itself knows the
+// cameras: on the rig drives of tools/evaluation/rig_place_test.cc this cuts the rotation error
+// several times. False with fewer than 5 matches, or fewer than 5 points in front.
 bool RelativePoseFromMatches(const cv::Matx33d& K_a, const cv::Matx33d& K_b,
                              const std::vector<cv::KeyPoint>& a_keypoints,
                              const std::vector<cv::KeyPoint>& b_keypoints,

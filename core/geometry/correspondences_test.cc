@@ -313,3 +313,68 @@ TEST(InlierSpreadTest, MatchesBunchedInACornerCoverLessThanSpreadOnes) {
 
 }  // namespace
 }  // namespace recog
+
+namespace recog {
+namespace {
+
+const cv::Matx33d kCamera(500, 0, 320, 0, 500, 240, 0, 0, 1);
+
+// Views of random points 4-8 m ahead from camera A and from camera B = (R, t) (X_b = R X_a + t).
+void PosedViews(const cv::Matx33d& R, const cv::Vec3d& t, int n, uint64_t seed,
+                std::vector<cv::KeyPoint>* ka, std::vector<cv::KeyPoint>* kb) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> xy(-2, 2), z(4, 8);
+  for (int i = 0; i < n; ++i) {
+    const cv::Vec3d p(xy(rng), xy(rng), z(rng));
+    const cv::Vec3d q = R * p + t;
+    ka->emplace_back(float(500 * p[0] / p[2] + 320), float(500 * p[1] / p[2] + 240), 31.f);
+    kb->emplace_back(float(500 * q[0] / q[2] + 320), float(500 * q[1] / q[2] + 240), 31.f);
+  }
+}
+
+cv::Matx33d Yaw(double radians) {
+  return {std::cos(radians),  0, std::sin(radians), 0, 1, 0,
+          -std::sin(radians), 0, std::cos(radians)};
+}
+
+TEST(EssentialTest, ARigidSceneTriangulatesInFrontWithParallaxAndItsMotion) {
+  std::vector<cv::KeyPoint> ka, kb;
+  PosedViews(Yaw(0.3), {0.8, 0.0, 0.1}, 80, 5, &ka, &kb);
+  const EssentialResult r = VerifyEssential(kCamera, kCamera, ka, kb, Identity(80), {});
+  ASSERT_TRUE(r.found);
+  EXPECT_EQ(r.inliers.size(), 80u);
+  EXPECT_EQ(r.in_front, 80u);
+  EXPECT_GT(r.parallax_deg, 3.0);
+  EXPECT_LT(cv::norm(r.R - Yaw(0.3)), 0.01);
+  EXPECT_GT(r.t.dot(cv::normalize(cv::Vec3d(0.8, 0.0, 0.1))), 0.999);
+  EXPECT_LT(r.rotation_only, 10u);  // the baseline shows: the rotation alone explains little
+}
+
+TEST(EssentialTest, APureRotationHasNoParallaxAndTheRotationExplainsIt) {
+  std::vector<cv::KeyPoint> ka, kb;
+  PosedViews(Yaw(0.2), {0, 0, 0}, 80, 6, &ka, &kb);
+  const EssentialResult r = VerifyEssential(kCamera, kCamera, ka, kb, Identity(80), {});
+  ASSERT_TRUE(r.found);
+  EXPECT_LT(r.parallax_deg, 0.1);
+  EXPECT_GE(r.rotation_only, 76u);
+  EXPECT_LT(cv::norm(r.R - Yaw(0.2)), 0.01);
+}
+
+// Pairs of unrelated points fit no essential matrix with many inliers; fewer than 5 matches or a
+// match out of range give none at all.
+TEST(EssentialTest, RandomPairsFewMatchesOrBadIndicesGiveNoEssentialMatrix) {
+  std::vector<cv::KeyPoint> ka, kb;
+  PosedViews(Yaw(0.3), {0.8, 0.0, 0.1}, 80, 7, &ka, &kb);
+  std::vector<cv::KeyPoint> shuffled = kb;
+  std::mt19937_64 rng(8);
+  std::shuffle(shuffled.begin(), shuffled.end(), rng);
+  const EssentialResult r = VerifyEssential(kCamera, kCamera, ka, shuffled, Identity(80), {});
+  EXPECT_LT(r.inliers.size(), 40u);  // random pairs: most are not inliers
+  EXPECT_FALSE(VerifyEssential(kCamera, kCamera, ka, kb, Identity(4), {}).found);
+  std::vector<Match> out_of_range = Identity(10);
+  out_of_range[3].b = 500;
+  EXPECT_FALSE(VerifyEssential(kCamera, kCamera, ka, kb, out_of_range, {}).found);
+}
+
+}  // namespace
+}  // namespace recog
