@@ -19,6 +19,9 @@ namespace recog {
 struct FeatureSet {
   std::vector<cv::KeyPoint> keypoints;
   cv::Mat descriptors;  // one row per keypoint, in the extractor's DescriptorFormat
+  // The size of the image the features come from (the extractors set it; 0 x 0 when unknown,
+  // e.g. features from elsewhere that did not say).
+  cv::Size image_size = cv::Size(0, 0);
 
   size_t size() const { return keypoints.size(); }
 };

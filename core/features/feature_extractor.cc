@@ -181,6 +181,7 @@ class OrbExtractor final : public FeatureExtractor {
 
   Status Extract(const cv::Mat& image, FeatureSet* out) override {
     out->keypoints.clear();
+    out->image_size = image.size();
     out->descriptors = EmptyDescriptors(format());
     cv::Mat gray;
     RECOG_RETURN_IF_ERROR(ToGray(image, &gray_buffer_, &gray));
@@ -339,6 +340,7 @@ class BriefExtractor final : public FeatureExtractor {
 
   Status Extract(const cv::Mat& image, FeatureSet* out) override {
     out->keypoints.clear();
+    out->image_size = image.size();
     out->descriptors = EmptyDescriptors(format());
     cv::Mat gray;
     RECOG_RETURN_IF_ERROR(ToGray(image, &gray_buffer_, &gray));
@@ -455,6 +457,7 @@ class SiftExtractor final : public FeatureExtractor {
 
   Status Extract(const cv::Mat& image, FeatureSet* out) override {
     out->keypoints.clear();
+    out->image_size = image.size();
     out->descriptors = EmptyDescriptors(format());
     cv::Mat gray;
     RECOG_RETURN_IF_ERROR(ToGray(image, &gray_buffer_, &gray));

@@ -62,12 +62,63 @@ Status CheckGeometry(const FeatureSet& features, const FrameGeometry* geometry) 
   return Status::Ok();
 }
 
+// The query's camera matrix for the calibrated check, when it has one.
+const cv::Matx33d* CameraOf(const FrameGeometry* geometry) {
+  return geometry != nullptr ? &geometry->K : nullptr;
+}
+
 bool IsUsablePoint(const cv::Point3f& p) {
   return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z) && p.z > 0.0f;
 }
 
 // The grid of InlierSpread for strong evidence: 4 x 4 cells over each image.
 constexpr int kSpreadGrid = 4;
+
+// The angle of a rotation matrix, degrees.
+double RotationAngleDeg(const cv::Matx33d& R) {
+  return std::acos(std::clamp((cv::trace(R) - 1.0) / 2.0, -1.0, 1.0)) * 180.0 / CV_PI;
+}
+
+// Whether the inliers of `essential` make a physical two-view geometry (CalibratedCheckOptions):
+// in front of both cameras, or a pure rotation the rotation alone explains; `pure_rotation`, when
+// not null, says which.
+bool PhysicallyPlausible(const EssentialResult& essential, const CalibratedCheckOptions& options,
+                         bool* pure_rotation = nullptr) {
+  const double inliers = double(essential.inliers.size());
+  const bool rotation = essential.parallax_deg < options.min_parallax_deg &&
+                        essential.rotation_only >= options.min_rotation_only * inliers;
+  if (pure_rotation != nullptr) *pure_rotation = rotation;
+  return inliers > 0 && (essential.in_front >= options.min_in_front * inliers || rotation);
+}
+
+// The calibrated check (CalibratedCheckOptions) of the query (a: camera K_query) against a
+// candidate (b: K_match): fills the result's inliers, fundamental matrix and evidence, and says
+// whether the loop holds with at least `min_inliers` inliers.
+bool CheckCalibrated(const cv::Matx33d& K_query, const cv::Matx33d& K_match,
+                     const std::vector<cv::KeyPoint>& query_keypoints,
+                     const std::vector<cv::KeyPoint>& match_keypoints,
+                     const std::vector<Match>& matches, size_t min_inliers,
+                     const CalibratedCheckOptions& options, LoopResult* result) {
+  EssentialResult essential = VerifyEssential(K_query, K_match, query_keypoints, match_keypoints,
+                                              matches, options.essential);
+  LoopEvidence& evidence = result->evidence;
+  evidence.calibrated = true;
+  if (!essential.found) return false;
+  const bool geometry = PhysicallyPlausible(essential, options, &evidence.pure_rotation);
+  result->inliers = std::move(essential.inliers);
+  // x_match^T F x_query = 0, as VerifyEpipolar's.
+  result->fundamental = K_match.inv().t() * essential.essential * K_query.inv();
+  const double inliers = double(result->inliers.size());
+  evidence.inliers = uint32_t(result->inliers.size());
+  evidence.spread = InlierSpread(query_keypoints, match_keypoints, result->inliers, kSpreadGrid);
+  evidence.in_front = inliers > 0 ? essential.in_front / inliers : 0.0;
+  evidence.parallax_deg = essential.parallax_deg;
+  evidence.rotation_deg = RotationAngleDeg(essential.R);
+  evidence.rotation = essential.R;
+  evidence.translation = essential.t;
+  return result->inliers.size() >= min_inliers && geometry &&
+         evidence.rotation_deg <= options.max_rotation_deg && evidence.spread >= options.min_spread;
+}
 
 }  // namespace
 
@@ -89,6 +140,8 @@ std::string_view LoopStatusName(LoopStatus status) {
       return "failed_temporal_consistency";
     case LoopStatus::kFailedGeometry:
       return "failed_geometry";
+    case LoopStatus::kCandidate:
+      return "candidate";
   }
   return "unknown";
 }
@@ -172,6 +225,7 @@ LoopDetectorParams LoopDetectorParams::Keyframes() {
   params.normalisation = ScoreNormalisation::kBestCandidate;
   params.recent_frames = 4;
   params.consistency_max_island_gap = 1;
+  params.min_spread = 0.25;
   return params;
 }
 
@@ -208,11 +262,30 @@ Status LoopDetectorParams::Validate() const {
         "the metric check needs a threshold > 0, a confidence in (0, 1), iterations >= 1, at "
         "least 6 inliers, an inlier ratio in [0, 1] and a sigma floor >= 0");
   }
+  const CalibratedCheckOptions& c = calibrated;
+  if (!(c.essential.threshold_px > 0.0) ||
+      !(c.essential.confidence > 0.0 && c.essential.confidence < 1.0) ||
+      c.essential.max_iterations < 1 || !(c.min_in_front >= 0.0 && c.min_in_front <= 1.0) ||
+      !(c.max_rotation_deg >= 0.0 && c.max_rotation_deg <= 180.0) || !(c.min_parallax_deg >= 0.0) ||
+      !(c.min_rotation_only >= 0.0 && c.min_rotation_only <= 1.0) ||
+      !(c.min_spread >= 0.0 && c.min_spread <= 1.0)) {
+    return Status::InvalidArgument(
+        "the calibrated check needs a threshold > 0, a confidence in (0, 1), iterations >= 1, "
+        "shares in [0, 1], a rotation in [0, 180] and a parallax >= 0");
+  }
+  if (!(max_motion_disagreement_deg >= 0.0 && max_motion_disagreement_deg <= 180.0)) {
+    return Status::InvalidArgument("max_motion_disagreement_deg must be in [0, 180], not " +
+                                   std::to_string(max_motion_disagreement_deg));
+  }
   if (strong_temporal_matches > temporal_matches) {
     return Status::InvalidArgument("strong_temporal_matches must be <= temporal_matches");
   }
   if (strong_min_inliers < epipolar.min_inliers) {
     return Status::InvalidArgument("strong_min_inliers must be >= min_inliers");
+  }
+  if (!(min_spread >= 0.0 && min_spread <= 1.0)) {
+    return Status::InvalidArgument("min_spread must be in [0, 1], not " +
+                                   std::to_string(min_spread));
   }
   if (!(strong_min_spread >= 0.0 && strong_min_spread <= 1.0)) {
     return Status::InvalidArgument("strong_min_spread must be in [0, 1]");
@@ -392,7 +465,8 @@ StatusOr<LoopResult> LoopDetector::Process(const FeatureSet& features,
     result.timings.islands = MsSince(start);
 
     if (result.status == LoopStatus::kLoopDetected) {
-      RECOG_RETURN_IF_ERROR(Verify(features, direct, params_.epipolar, &result));
+      RECOG_RETURN_IF_ERROR(
+          Verify(features, direct, CameraOf(geometry), params_.epipolar, &result));
       if (result.status == LoopStatus::kLoopDetected) {
         result.acceptance = LoopAcceptance::kTemporalConsistency;
       }
@@ -405,7 +479,8 @@ StatusOr<LoopResult> LoopDetector::Process(const FeatureSet& features,
       EpipolarOptions epipolar = params_.epipolar;
       epipolar.min_inliers = params_.strong_min_inliers;
       bool strong = false;
-      RECOG_RETURN_IF_ERROR(Verify(features, direct, epipolar, &trial, &strong));
+      RECOG_RETURN_IF_ERROR(
+          Verify(features, direct, CameraOf(geometry), epipolar, &trial, &strong));
       if (strong) {
         result = std::move(trial);
         result.status = LoopStatus::kLoopDetected;
@@ -417,12 +492,21 @@ StatusOr<LoopResult> LoopDetector::Process(const FeatureSet& features,
     if (result.status == LoopStatus::kLoopDetected && geometry != nullptr) {
       RECOG_RETURN_IF_ERROR(VerifyMetric(features, *geometry, &result));
     }
+    if (result.status == LoopStatus::kLoopDetected && params_.keyframe_confirmations > 0) {
+      RECOG_RETURN_IF_ERROR(Confirm(features, direct, CameraOf(geometry), frame, &result));
+    }
   }
 
   start = Clock::now();
   RECOG_ASSIGN_OR_RETURN(result.entry,
                          Insert(features, bow, direct, timestamp, client_id, geometry));
   result.timings.insertion = MsSince(start);
+  if (result.status == LoopStatus::kLoopDetected || result.status == LoopStatus::kCandidate) {
+    const LoopEvidence& evidence = result.evidence;
+    last_loop_ = LastLoop{frame, result.entry, result.match,
+                          evidence.calibrated ? std::optional(evidence.rotation) : std::nullopt,
+                          evidence.confirmations};
+  }
   return result;
 }
 
@@ -512,7 +596,7 @@ Status LoopDetector::VerifyAlone(const FeatureSet& features, const ConvertedFram
   // One frame's evidence, with no consistent queries behind it: a higher floor of inliers.
   EpipolarOptions epipolar = params_.epipolar;
   epipolar.min_inliers = std::max<size_t>(epipolar.min_inliers, params_.relocalisation_min_inliers);
-  RECOG_RETURN_IF_ERROR(Verify(features, frame.direct, epipolar, result));
+  RECOG_RETURN_IF_ERROR(Verify(features, frame.direct, CameraOf(geometry), epipolar, result));
   if (result->status != LoopStatus::kLoopDetected) return Status::Ok();
   result->acceptance = LoopAcceptance::kRelocalisation;
   if (geometry != nullptr) RECOG_RETURN_IF_ERROR(VerifyMetric(features, *geometry, result));
@@ -544,36 +628,109 @@ StatusOr<EntryId> LoopDetector::Insert(const FeatureSet& features, const BowVect
 }
 
 Status LoopDetector::Verify(const FeatureSet& features, const FeatureVector& direct,
-                            const EpipolarOptions& epipolar_options, LoopResult* result,
-                            bool* strong) const {
+                            const cv::Matx33d* camera, const EpipolarOptions& epipolar_options,
+                            LoopResult* result, bool* strong) const {
+  // epipolar_options with the floor of small frames (below).
   if (params_.geometry == GeometryCheck::kNone) return Status::Ok();
   const auto start = Clock::now();
   RECOG_ASSIGN_OR_RETURN(EntryRecord candidate,
                          database_->Get(result->match, kEntryDirect | kEntryFeatures));
   std::vector<Match> matches;
-  if (params_.geometry == GeometryCheck::kDirectIndex) {
-    RECOG_RETURN_IF_ERROR(MatchByDirectIndex(direct, features.descriptors, candidate.direct,
-                                             candidate.descriptors, params_.matching, &matches));
-  } else {
-    RECOG_RETURN_IF_ERROR(
-        MatchExhaustive(features.descriptors, candidate.descriptors, params_.matching, &matches));
-  }
+  RECOG_RETURN_IF_ERROR(Correspondences(features.descriptors, direct, candidate, &matches));
   result->correspondences = uint32_t(matches.size());
-  EpipolarResult epipolar =
-      VerifyEpipolar(features.keypoints, candidate.keypoints, matches, epipolar_options);
-  result->fundamental = epipolar.fundamental;
-  result->inliers = std::move(epipolar.inliers);
-  if (!epipolar.verified) result->status = LoopStatus::kFailedGeometry;
+  EpipolarOptions epipolar = epipolar_options;
+  const int64_t pixels = int64_t(features.image_size.area());
+  if (pixels > 0 && pixels <= int64_t(params_.small_frame_pixels)) {
+    epipolar.min_inliers = std::max<size_t>(epipolar.min_inliers, params_.small_frame_min_inliers);
+  }
+  LoopEvidence& evidence = result->evidence;
+  const bool calibrated = params_.calibrated.enabled && camera != nullptr && candidate.has_camera();
+  bool verified = false;
+  if (calibrated) {
+    verified = CheckCalibrated(*camera, candidate.camera, features.keypoints, candidate.keypoints,
+                               matches, epipolar.min_inliers, params_.calibrated, result);
+  } else {
+    EpipolarResult fitted =
+        VerifyEpipolar(features.keypoints, candidate.keypoints, matches, epipolar);
+    result->fundamental = fitted.fundamental;
+    result->inliers = std::move(fitted.inliers);
+    evidence.inliers = uint32_t(result->inliers.size());
+    evidence.spread =
+        InlierSpread(features.keypoints, candidate.keypoints, result->inliers, kSpreadGrid);
+    verified = fitted.verified && evidence.spread >= params_.min_spread;
+  }
+  if (!verified) result->status = LoopStatus::kFailedGeometry;
   if (strong != nullptr) {
-    // Cheapest first: the spread, then the homography's RANSAC only when still needed.
-    *strong = epipolar.verified &&
-              InlierSpread(features.keypoints, candidate.keypoints, result->inliers, kSpreadGrid) >=
-                  params_.strong_min_spread &&
-              SelectTwoViewModel(features.keypoints, candidate.keypoints, result->inliers,
-                                 result->fundamental, params_.model_selection)
-                      .homography_ratio <= params_.strong_max_homography_ratio;
+    // Calibrated, the check itself has ruled out what R_H guards against (no parallax, points
+    // behind a camera); otherwise the homography's RANSAC runs only when still needed.
+    *strong =
+        verified && evidence.spread >= params_.strong_min_spread &&
+        (calibrated ? !evidence.pure_rotation
+                    : SelectTwoViewModel(features.keypoints, candidate.keypoints, result->inliers,
+                                         result->fundamental, params_.model_selection)
+                              .homography_ratio <= params_.strong_max_homography_ratio);
   }
   result->timings.verification = MsSince(start);
+  return Status::Ok();
+}
+
+Status LoopDetector::Correspondences(const cv::Mat& a_descriptors, const FeatureVector& a_direct,
+                                     const EntryRecord& b, std::vector<Match>* matches) const {
+  if (params_.geometry == GeometryCheck::kDirectIndex) {
+    return MatchByDirectIndex(a_direct, a_descriptors, b.direct, b.descriptors, params_.matching,
+                              matches);
+  }
+  return MatchExhaustive(a_descriptors, b.descriptors, params_.matching, matches);
+}
+
+StatusOr<std::optional<cv::Matx33d>> LoopDetector::RotationBetween(
+    const std::vector<cv::KeyPoint>& a_keypoints, const cv::Mat& a_descriptors,
+    const FeatureVector& a_direct, const cv::Matx33d& a_camera, EntryId b) const {
+  RECOG_ASSIGN_OR_RETURN(EntryRecord entry, database_->Get(b, kEntryDirect | kEntryFeatures));
+  if (!entry.has_camera()) return std::optional<cv::Matx33d>();
+  std::vector<Match> matches;
+  RECOG_RETURN_IF_ERROR(Correspondences(a_descriptors, a_direct, entry, &matches));
+  const EssentialResult essential = VerifyEssential(
+      a_camera, entry.camera, a_keypoints, entry.keypoints, matches, params_.calibrated.essential);
+  const bool held = essential.found && essential.inliers.size() >= params_.epipolar.min_inliers &&
+                    PhysicallyPlausible(essential, params_.calibrated);
+  return held ? std::optional(essential.R) : std::nullopt;
+}
+
+Status LoopDetector::Confirm(const FeatureSet& features, const FeatureVector& direct,
+                             const cv::Matx33d* camera, uint64_t frame, LoopResult* result) const {
+  uint32_t confirmations = 0;
+  const auto distance = [](EntryId x, EntryId y) { return x > y ? x - y : y - x; };
+  if (last_loop_.has_value() && frame - last_loop_->frame <= params_.consistency_max_query_gap &&
+      distance(result->match, last_loop_->match) <= params_.island_max_gap) {
+    bool agrees = true;
+    if (result->evidence.calibrated && last_loop_->rotation.has_value() && camera != nullptr) {
+      // X_match = R X_query for both loops; the two query frames and the two matches by their own
+      // matches: predicted R_now = R_matches * R_before * R_queries.
+      RECOG_ASSIGN_OR_RETURN(const std::optional<cv::Matx33d> queries,
+                             RotationBetween(features.keypoints, features.descriptors, direct,
+                                             *camera, last_loop_->query));
+      std::optional<cv::Matx33d> matches = cv::Matx33d::eye();
+      if (result->match != last_loop_->match) {
+        RECOG_ASSIGN_OR_RETURN(EntryRecord before,
+                               database_->Get(last_loop_->match, kEntryDirect | kEntryFeatures));
+        RECOG_ASSIGN_OR_RETURN(matches,
+                               RotationBetween(before.keypoints, before.descriptors, before.direct,
+                                               before.camera, result->match));
+      }
+      // Frames too alike (or too far apart) to fix a rotation between them leave the motion
+      // unchecked: the neighbourhood alone confirms then.
+      agrees = !queries.has_value() || !matches.has_value() ||
+               RotationAngleDeg(result->evidence.rotation *
+                                (*matches * *last_loop_->rotation * *queries).t()) <=
+                   params_.max_motion_disagreement_deg;
+    }
+    if (agrees) confirmations = last_loop_->confirmations + 1;
+  }
+  result->evidence.confirmations = confirmations;
+  if (confirmations < params_.keyframe_confirmations) {
+    result->status = LoopStatus::kCandidate;
+  }
   return Status::Ok();
 }
 

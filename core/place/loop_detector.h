@@ -87,6 +87,9 @@ enum class LoopStatus {
   kNoConsistentIsland,         // the candidates formed no island of the minimum size
   kFailedTemporalConsistency,  // the best island is not consistent with the previous queries
   kFailedGeometry,             // too few correspondences or RANSAC inliers (2D, or 3D: metric)
+  // Verified, but waiting for the next keyframe(s) to confirm it (keyframe_confirmations): the
+  // answer carries the match and its evidence; a client must not act on it yet.
+  kCandidate,
 };
 std::string_view LoopStatusName(LoopStatus status);  // "loop_detected", "too_few_features", ...
 
@@ -111,6 +114,34 @@ struct MetricCheckOptions {
   uint32_t min_inliers = 12;      // PnP inliers a metric loop needs
   double min_inlier_ratio = 0.7;  // PnP inliers / 2D-3D correspondences
   double min_sigma_px = 0.5;      // floor of the residual sigma of the covariance (pixels)
+};
+
+// The calibrated check of a loop (Verify, when the query and the candidate both have a camera
+// matrix: a keyframe client that sends its intrinsics, `recog eval place --camera`). Twelve
+// inliers of a fundamental matrix is what a repeated façade seen from elsewhere can give; the
+// essential matrix (5 degrees of freedom, fitted by the five-point algorithm, so that few
+// correspondences suffice) must also make physical sense:
+//  - its inliers triangulate in front of both cameras (min_in_front; a point whose two rays are
+//    parallel counts when they point the same way): matches between look-alike structures fit
+//    some geometry, often one that puts points behind a camera; or else, without parallax (the
+//    inliers' median ray angle under min_parallax_deg), the rotation alone explains them
+//    (min_rotation_only of them): a camera that turned on the spot, where depth and F are
+//    undefined;
+//  - the cameras look at most max_rotation_deg apart: two views of one place share their field
+//    of view;
+//  - the inliers cover min_spread of both images (InlierSpread, 4 x 4 cells): not one row of
+//    windows.
+// Defaults chosen on the Strecha keyframe walks of shared/data (docs/places.md, "Keyframe
+// streams"): over all their pairs with 12 or more inliers, ORB pairs of different places put
+// fewer than 20 % of their inliers on the true geometry, same-place pairs mostly over 30 %.
+struct CalibratedCheckOptions {
+  bool enabled = true;  // false: the fundamental matrix, as without camera matrices
+  EssentialOptions essential;
+  double min_in_front = 0.9;
+  double max_rotation_deg = 90.0;
+  double min_parallax_deg = 1.0;
+  double min_rotation_only = 0.8;
+  double min_spread = 0.125;
 };
 
 // What a frame knows of its 3D structure. `K`: the pinhole camera matrix of its keypoints (lens
@@ -165,9 +196,10 @@ struct LoopDetectorParams {
   uint32_t consistency_max_island_gap = 3;  // ids between consecutive queries' islands
   uint32_t consistency_max_query_gap = 2;   // queries further apart restart the count
   GeometryCheck geometry = GeometryCheck::kDirectIndex;
-  MatchOptions matching;      // ratio 0.6 (§4.4.6), max Hamming distance 50
-  EpipolarOptions epipolar;   // 2 px, 12 inliers (Table 4.4)
-  MetricCheckOptions metric;  // the 3D check, for frames with a FrameGeometry
+  MatchOptions matching;              // ratio 0.6 (§4.4.6), max Hamming distance 50
+  EpipolarOptions epipolar;           // 2 px, 12 inliers (Table 4.4)
+  MetricCheckOptions metric;          // the 3D check, for frames with a FrameGeometry
+  CalibratedCheckOptions calibrated;  // step 6 when both frames have a camera matrix
 
   // Acceptance on strong evidence (step 6; not in the thesis): a candidate consistent with fewer
   // than temporal_matches previous queries, but at least strong_temporal_matches, is verified and
@@ -183,6 +215,11 @@ struct LoopDetectorParams {
   // Default 0.25: the inliers occupy at least 4 of the 4 x 4 cells over each image's keypoints,
   // in both images (InlierSpread): a match of one small textured patch is not a place.
   double strong_min_spread = 0.25;
+  // The spread every verified loop needs without camera matrices (the calibrated check has its
+  // own, CalibratedCheckOptions::min_spread). Default 0 (video: consecutive queries back a loop);
+  // the keyframes preset 0.25: on the Strecha courtyard the look-alike façades' loops kept their
+  // inliers on 2 or 3 of the 16 cells, one row of windows.
+  double min_spread = 0.0;
   // Default 0.45: above this R_H, a homography explains the correspondences about as well as F
   // (0.5 = equally well), so F's inliers prove no 3D structure (two photos of one screen pass F
   // with 30 inliers). ORB-SLAM's initialisation switches to H at 0.40-0.45.
@@ -195,6 +232,27 @@ struct LoopDetectorParams {
   // none from 16 on, where the corridor's weakest true one has 16 (docs/places.md, "Queries
   // across maps").
   uint32_t relocalisation_min_inliers = 16;
+  // Small frames (a 160x120 or 128x96 robot camera, often a fisheye one): their few features
+  // give few inliers, true loops as false ones, and the false loops seen on such a camera had 12
+  // to 18. A frame of at most small_frame_pixels (FeatureSet::image_size; unknown: not small)
+  // needs small_frame_min_inliers inliers in every verification. Defaults 320 x 240 and 20: on
+  // the shared corridor downscaled to 160x120 and 128x96 its true loops mostly have 20 to 78
+  // (docs/places.md, "Small frames").
+  uint32_t small_frame_pixels = 320 * 240;
+  uint32_t small_frame_min_inliers = 20;
+  // Keyframe confirmations (beyond the thesis; ORB-SLAM asks as much of its keyframes): with
+  // N > 0, a verified loop is first a candidate (kCandidate), and it is accepted when each of the
+  // next N queried frames also closes a verified loop next to it: a match at most island_max_gap
+  // ids from the previous loop's, at most consistency_max_query_gap frames later, and, when both
+  // loops were checked calibrated, a relative motion that agrees with the previous loop's (the
+  // rotation the two loops imply between the two query frames within
+  // max_motion_disagreement_deg of the one their own matches give, when their matches and the
+  // two match frames' fix one: frames too alike or too far apart leave it unchecked). Once
+  // confirmed, the loops
+  // that go on next to it are accepted at once. Latency: the first loop of a revisit is answered
+  // N frames late (as a candidate before). Default 0: accepted at once.
+  uint32_t keyframe_confirmations = 0;
+  double max_motion_disagreement_deg = 15.0;
 
   // The thesis's detector (Table 4.4): every loop needs k consistent queries
   // (strong_acceptance off).
@@ -210,6 +268,25 @@ struct LoopDetectorParams {
 // The preset named `mode`: "default" (LoopDetectorParams{}), "thesis" (Thesis()) or "keyframes"
 // (Keyframes()).
 StatusOr<LoopDetectorParams> ParseLoopDetectorMode(std::string_view mode);
+
+// The figures behind a verified loop, so that a client can gate on its own thresholds (step 6).
+struct LoopEvidence {
+  uint32_t inliers = 0;  // of the two-view model: E when calibrated, else F
+  double spread = 0;     // InlierSpread over 4 x 4 cells: the smaller share of the two images
+  // Both frames had a camera matrix and the essential matrix was checked; the fields below are
+  // set only then.
+  bool calibrated = false;
+  double in_front = 0;         // share of the inliers in front of both cameras
+  double parallax_deg = 0;     // median angle between an inlier's two rays
+  double rotation_deg = 0;     // angle of the relative rotation
+  bool pure_rotation = false;  // no parallax, and the rotation alone explains the inliers
+  // The relative pose of the essential matrix: X_match = rotation * X_query + translation, the
+  // translation of unit length (two views fix it up to scale).
+  cv::Matx33d rotation = cv::Matx33d::eye();
+  cv::Vec3d translation = cv::Vec3d(0, 0, 0);
+  // Keyframes after the first candidate that confirmed the loop (keyframe_confirmations).
+  uint32_t confirmations = 0;
+};
 
 struct LoopTimings {  // milliseconds spent in each stage for one frame
   double conversion = 0, query = 0, islands = 0, insertion = 0, verification = 0;
@@ -260,7 +337,8 @@ struct LoopResult {
   // What the database query returned (at most max_query_results entries, best score first, equal
   // scores by increasing id), before alpha and the islands; empty when the frame was not queried.
   std::vector<LoopCandidate> candidates;
-  MetricLoop metric;  // the 3D check, for frames with a FrameGeometry
+  MetricLoop metric;      // the 3D check, for frames with a FrameGeometry
+  LoopEvidence evidence;  // of the verification (inliers set whenever step 6 ran)
   LoopTimings timings;
 };
 
@@ -357,6 +435,14 @@ class LoopDetector {
     EntryId first = 0, last = 0;
     uint32_t consistent = 0;
   };
+  // The last verified loop (keyframe confirmations).
+  struct LastLoop {
+    uint64_t frame = 0;               // index of its query frame in the sequence
+    EntryId query = kInvalidEntryId;  // the entry its query frame became
+    EntryId match = kInvalidEntryId;
+    std::optional<cv::Matx33d> rotation;  // X_match = R X_query, when checked calibrated
+    uint32_t confirmations = 0;
+  };
 
   LoopDetector(Database* database, const LoopDetectorParams& params)
       : database_(database), params_(params) {}
@@ -386,9 +472,27 @@ class LoopDetector {
   // Step 6: verifies `result->match` with the geometry check of the parameters (nothing for
   // kNone) and `epipolar`, filling correspondences, inliers, fundamental matrix and verification
   // time; the status becomes kFailedGeometry when the check fails. With `strong`, also sets
-  // *strong to whether a verified match is strong evidence (inliers, spread, R_H).
-  Status Verify(const FeatureSet& features, const FeatureVector& direct,
+  // *strong to whether a verified match is strong evidence (inliers, spread, R_H). With a
+  // `camera` for the query (may be null) and a candidate stored with one, the calibrated check.
+  Status Verify(const FeatureSet& features, const FeatureVector& direct, const cv::Matx33d* camera,
                 const EpipolarOptions& epipolar, LoopResult* result, bool* strong = nullptr) const;
+  // Keyframe confirmations for a verified loop of frame `frame` (status kLoopDetected): counts the
+  // loops before it that confirm it into result->evidence.confirmations and makes it a
+  // kCandidate while they are fewer than keyframe_confirmations.
+  Status Confirm(const FeatureSet& features, const FeatureVector& direct, const cv::Matx33d* camera,
+                 uint64_t frame, LoopResult* result) const;
+  // The rotation X_b = R X_a between two frames from their own matches (the calibrated check's
+  // essential matrix; nullopt when they do not hold one with epipolar.min_inliers inliers): `a` is
+  // the frame being processed or an entry, `b` an entry of the map.
+  StatusOr<std::optional<cv::Matx33d>> RotationBetween(const std::vector<cv::KeyPoint>& a_keypoints,
+                                                       const cv::Mat& a_descriptors,
+                                                       const FeatureVector& a_direct,
+                                                       const cv::Matx33d& a_camera,
+                                                       EntryId b) const;
+  // The putative matches of step 6 (the geometry check's matcher) between features a and an
+  // entry's.
+  Status Correspondences(const cv::Mat& a_descriptors, const FeatureVector& a_direct,
+                         const EntryRecord& b, std::vector<Match>* matches) const;
   // The start of a one-frame result (Recognise, VerifyEntry): its conversion time; false, with
   // kTooFewFeatures, when the frame has too few features to be looked up.
   bool StartAlone(const FeatureSet& features, const ConvertedFrame& frame,
@@ -408,6 +512,7 @@ class LoopDetector {
   uint64_t frames_seen_ = 0;
   std::optional<BowVector> previous_bow_;  // of the last frame with enough features
   std::optional<PreviousMatch> previous_match_;
+  std::optional<LastLoop> last_loop_;
   // The timestamps of the timestamped entries this detector added (never decreasing), and their
   // ids, in id order.
   std::vector<double> entry_timestamps_;

@@ -70,6 +70,28 @@ class LoopDetectorTest : public ::testing::Test {
     EXPECT_EQ(a.fundamental, b.fundamental) << where;
   }
 
+  // Run with every frame calibrated (camera matrix `K`, no 3D points), from `features`.
+  std::vector<LoopResult> RunCalibrated(const std::vector<FeatureSet>& features,
+                                        const LoopDetectorParams& params, Database* db) {
+    auto detector = LoopDetector::Create(db, params);
+    EXPECT_TRUE(detector.ok()) << detector.status().ToString();
+    FrameGeometry geometry;
+    geometry.K = cv::Matx33d(300, 0, 128, 0, 300, 192, 0, 0, 1);
+    std::vector<LoopResult> results;
+    for (const FeatureSet& f : features) {
+      auto r = detector->Process(f, std::nullopt, {}, &geometry);
+      EXPECT_TRUE(r.ok()) << r.status().ToString();
+      results.push_back(std::move(r).value());
+    }
+    return results;
+  }
+
+  std::unique_ptr<Database> NewDatabase(const std::string& name) {
+    auto db = Database::Create(&store_, name, *vocabulary_);
+    EXPECT_TRUE(db.ok());
+    return std::move(db).value();
+  }
+
   static std::shared_ptr<const Vocabulary>* vocabulary_;
   MemoryIndexStore store_;
   std::unique_ptr<Database> db_;
@@ -764,6 +786,96 @@ TEST_F(LoopDetectorTest, BadFrameGeometryAndMetricParametersAreInvalidArgument) 
   EXPECT_EQ(detector->Query(features, 0.0, &no_camera).status().code(),
             StatusCode::kInvalidArgument);
   EXPECT_EQ(db_->size(), 0u) << "a refused frame is not added";
+}
+
+// Frames with a camera matrix are verified with the essential matrix, and their loops carry its
+// figures: on the tour's revisits (the same views shifted a few pixels: no parallax to speak of,
+// every point in front or at infinity).
+TEST_F(LoopDetectorTest, CalibratedLoopsAreCheckedWithTheEssentialMatrixAndCarryItsEvidence) {
+  const std::vector<FeatureSet> tour = Extract(TourWithRevisits());
+  const std::vector<LoopResult> results = RunCalibrated(tour, params_, NewDatabase("cal").get());
+  int loops = 0;
+  for (const LoopResult& r : results) {
+    if (r.status != LoopStatus::kLoopDetected) continue;
+    ++loops;
+    EXPECT_TRUE(r.evidence.calibrated);
+    EXPECT_EQ(r.evidence.inliers, r.inliers.size());
+    EXPECT_TRUE(r.evidence.in_front >= 0.9 || r.evidence.pure_rotation) << r.evidence.in_front;
+    EXPECT_LT(r.evidence.rotation_deg, 5.0);
+    EXPECT_GT(r.evidence.spread, 0.125);
+    EXPECT_EQ(r.evidence.confirmations, 0u);
+  }
+  EXPECT_GE(loops, 4);
+  // Without camera matrices the same loops are checked with F: not calibrated, spread set.
+  for (const LoopResult& r : Run(TourWithRevisits(), params_, NewDatabase("plain").get())) {
+    if (r.status != LoopStatus::kLoopDetected) continue;
+    EXPECT_FALSE(r.evidence.calibrated);
+    EXPECT_EQ(r.evidence.inliers, r.inliers.size());
+    EXPECT_GT(r.evidence.spread, 0.0);
+  }
+  // A rotation bound no loop can meet: every candidate fails the check.
+  LoopDetectorParams strict = params_;
+  strict.calibrated.max_rotation_deg = 0.0;
+  for (const LoopResult& r : RunCalibrated(tour, strict, NewDatabase("strict").get())) {
+    EXPECT_NE(r.status, LoopStatus::kLoopDetected);
+  }
+}
+
+// With keyframe confirmations, a revisit's first verified loop is a candidate and the next
+// frame's loop next to it is accepted, with its confirmation counted; without, both at once.
+TEST_F(LoopDetectorTest, AKeyframeConfirmationTurnsTheFirstLoopIntoACandidate) {
+  const std::vector<FeatureSet> tour = Extract(TourWithRevisits());
+  const std::vector<LoopResult> at_once = RunCalibrated(tour, params_, NewDatabase("a").get());
+  LoopDetectorParams confirmed = params_;
+  confirmed.keyframe_confirmations = 1;
+  const std::vector<LoopResult> later = RunCalibrated(tour, confirmed, NewDatabase("b").get());
+  ASSERT_EQ(at_once.size(), later.size());
+  size_t first = at_once.size();
+  for (size_t i = 0; i < at_once.size(); ++i) {
+    if (at_once[i].status == LoopStatus::kLoopDetected) {
+      first = i;
+      break;
+    }
+  }
+  ASSERT_LT(first + 1, at_once.size());
+  ASSERT_EQ(at_once[first + 1].status, LoopStatus::kLoopDetected);
+  EXPECT_EQ(later[first].status, LoopStatus::kCandidate);
+  EXPECT_EQ(later[first].match, at_once[first].match);  // the candidate says what it is
+  EXPECT_EQ(later[first].evidence.confirmations, 0u);
+  EXPECT_EQ(later[first + 1].status, LoopStatus::kLoopDetected);
+  EXPECT_EQ(later[first + 1].evidence.confirmations, 1u);
+  EXPECT_EQ(LoopStatusName(LoopStatus::kCandidate), "candidate");
+  // With no gap allowed, only a loop to the very frame the previous one matched confirms it.
+  confirmed.island_max_gap = 0;
+  const std::vector<LoopResult> strict = RunCalibrated(tour, confirmed, NewDatabase("c").get());
+  for (size_t i = 1; i < strict.size(); ++i) {
+    if (strict[i].status != LoopStatus::kLoopDetected) continue;
+    EXPECT_EQ(strict[i].match, strict[i - 1].match) << i;
+    EXPECT_GE(strict[i].evidence.confirmations, 1u) << i;
+  }
+  confirmed.max_motion_disagreement_deg = 181.0;
+  EXPECT_EQ(confirmed.Validate().code(), StatusCode::kInvalidArgument);
+}
+
+// A small frame needs small_frame_min_inliers in every verification; a frame of unknown size
+// or a large one does not.
+TEST_F(LoopDetectorTest, SmallFramesNeedTheirOwnFloorOfInliers) {
+  std::vector<FeatureSet> tour = Extract(TourWithRevisits());
+  LoopDetectorParams params = params_;
+  params.small_frame_min_inliers = 100000;  // more than any loop here has
+  const auto loops = [&](const std::string& db_name) {
+    int n = 0;
+    for (const LoopResult& r : RunCalibrated(tour, params, NewDatabase(db_name).get())) {
+      n += r.status == LoopStatus::kLoopDetected;
+    }
+    return n;
+  };
+  EXPECT_EQ(tour[0].image_size, cv::Size(256, 384));  // the extractor says where they came from
+  EXPECT_GE(loops("large"), 4);                       // 98,304 pixels: not small
+  for (FeatureSet& f : tour) f.image_size = cv::Size(160, 120);
+  EXPECT_EQ(loops("small"), 0);
+  for (FeatureSet& f : tour) f.image_size = cv::Size(0, 0);
+  EXPECT_GE(loops("unknown"), 4);
 }
 
 }  // namespace

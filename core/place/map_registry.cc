@@ -66,6 +66,10 @@ std::string EncodePlaceSettings(const LoopDetectorParams& p, const std::string& 
                 p.epipolar.min_inliers, p.recent_seconds, p.recent_frames,
                 std::string(GeometryCheckName(p.geometry)).c_str());
   std::string text = buffer;
+  // Written only when set, so that settings read by an older build stay byte-identical.
+  if (p.keyframe_confirmations > 0) {
+    text += "keyframe_confirmations " + std::to_string(p.keyframe_confirmations) + "\n";
+  }
   if (!group.empty()) text += "group " + group + "\n";
   for (const RigCamera& camera : rig) text += EncodeRigCamera(camera);
   return text;
@@ -120,6 +124,8 @@ StatusOr<LoopDetectorParams> DecodePlaceSettings(std::string_view text, std::str
       p.recent_seconds = number;
     } else if (key == "recent_frames") {
       p.recent_frames = uint32_t(number);
+    } else if (key == "keyframe_confirmations") {
+      p.keyframe_confirmations = uint32_t(number);
     }  // unknown keys: written by a newer minor version, ignored
   }
   if (!versioned) return Status::DataLoss("place settings without a version line");

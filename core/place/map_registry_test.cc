@@ -133,6 +133,12 @@ TEST(MapRegistryTest, SettingsRoundTripThroughTheirText) {
   EXPECT_EQ(group, "") << "no group line: no group";
   ASSERT_TRUE(DecodePlaceSettings(EncodePlaceSettings(p, "fleet-7"), &group).ok());
   EXPECT_EQ(group, "fleet-7");
+  // Keyframe confirmations are kept when set, and absent (as older settings have it) when not.
+  EXPECT_EQ(EncodePlaceSettings(p).find("keyframe_confirmations"), std::string::npos);
+  p.keyframe_confirmations = 2;
+  decoded = DecodePlaceSettings(EncodePlaceSettings(p));
+  ASSERT_TRUE(decoded.ok());
+  EXPECT_EQ(decoded->keyframe_confirmations, 2u);
 }
 
 TEST(MapRegistryTest, ARigRoundTripsThroughTheSettingsTextExactly) {
