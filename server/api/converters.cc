@@ -104,6 +104,8 @@ StatusOr<FeatureSet> DecodeFeatures(const pb::Features& features, const Descript
                                    std::to_string(n * format.size_bytes));
   }
   FeatureSet out;
+  out.image_size = cv::Size(int(std::min<uint32_t>(features.image_width(), kMaxImageSide)),
+                            int(std::min<uint32_t>(features.image_height(), kMaxImageSide)));
   out.keypoints.reserve(n);
   for (size_t i = 0; i < n; ++i) {
     const int j = int(i);
@@ -392,6 +394,9 @@ Status ApplyMapSettings(const pb::MapSettings& settings, LoopDetectorParams* par
   if (settings.has_min_inliers()) params->epipolar.min_inliers = settings.min_inliers();
   if (settings.has_recent_seconds()) params->recent_seconds = settings.recent_seconds();
   if (settings.has_recent_frames()) params->recent_frames = settings.recent_frames();
+  if (settings.has_keyframe_confirmations()) {
+    params->keyframe_confirmations = settings.keyframe_confirmations();
+  }
   if (settings.has_geometry()) {
     switch (settings.geometry()) {
       case pb::GEOMETRY_CHECK_UNSPECIFIED:
@@ -425,6 +430,7 @@ void ToProto(const LoopDetectorParams& params, pb::MapSettings* out) {
   out->set_min_inliers(uint32_t(params.epipolar.min_inliers));
   out->set_recent_seconds(params.recent_seconds);
   out->set_recent_frames(params.recent_frames);
+  out->set_keyframe_confirmations(params.keyframe_confirmations);
   switch (params.geometry) {
     case GeometryCheck::kDirectIndex:
       out->set_geometry(pb::GEOMETRY_CHECK_DIRECT_INDEX);
@@ -563,6 +569,8 @@ pb::LoopStatus ToProto(LoopStatus status) {
       return pb::LOOP_STATUS_FAILED_TEMPORAL_CONSISTENCY;
     case LoopStatus::kFailedGeometry:
       return pb::LOOP_STATUS_FAILED_GEOMETRY;
+    case LoopStatus::kCandidate:
+      return pb::LOOP_STATUS_CANDIDATE;
   }
   return pb::LOOP_STATUS_UNSPECIFIED;
 }
@@ -610,6 +618,18 @@ void ToProto(const PlaceFrameResult& frame, pb::LoopResult* out) {
   }
   out->set_match_client_frame_id(frame.match_client_id);
   if (result.metric.checked) ToProto(result.metric, out->mutable_metric());
+  if (result.correspondences > 0 || !result.inliers.empty()) {
+    const LoopEvidence& v = result.evidence;
+    pb::LoopEvidence* evidence = out->mutable_evidence();
+    evidence->set_inliers(v.inliers);
+    evidence->set_spread(v.spread);
+    evidence->set_calibrated(v.calibrated);
+    evidence->set_in_front(v.in_front);
+    evidence->set_parallax_deg(v.parallax_deg);
+    evidence->set_rotation_deg(v.rotation_deg);
+    evidence->set_pure_rotation(v.pure_rotation);
+    evidence->set_confirmations(v.confirmations);
+  }
   for (const PlaceCandidate& c : frame.candidates) {
     pb::Candidate* candidate = out->add_candidates();
     candidate->set_frame_id(c.frame);

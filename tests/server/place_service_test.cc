@@ -335,6 +335,47 @@ TEST_F(PlaceServiceTest, MapsAndTheirSettingsSurviveARestart) {
   EXPECT_EQ(added.frame_id(), 3u);
 }
 
+// A stream of frames with intrinsics into a map that wants one keyframe to confirm a loop: the
+// revisit's first loop is a candidate with its evidence (checked with the essential matrix), the
+// next one is accepted with its confirmation; the setting is kept across a restart.
+TEST_F(PlaceServiceTest, AConfirmedLoopComesAfterItsCandidateAndCarriesItsEvidence) {
+  pb::StreamConfig config;
+  config.set_map("confirmed");
+  config.set_create_if_missing(true);
+  config.mutable_settings()->set_temporal_matches(0);
+  config.mutable_settings()->set_recent_frames(1);
+  config.mutable_settings()->set_keyframe_confirmations(1);
+  std::vector<pb::Frame> frames;
+  for (int n : {1, 20, 1, 1}) {
+    pb::Frame frame = JpegFrame(CorridorJpeg(n));
+    pb::CameraIntrinsics* k = frame.mutable_intrinsics();
+    k->set_fx(400);
+    k->set_fy(400);
+    k->set_cx(256);
+    k->set_cy(192);
+    frames.push_back(frame);
+  }
+  grpc::Status status;
+  const auto answers = Stream(*places_, config, frames, &status);
+  ASSERT_TRUE(status.ok()) << status.error_message();
+  ASSERT_EQ(answers.size(), 4u);
+  const pb::LoopResult& candidate = answers[2].result();
+  EXPECT_EQ(candidate.status(), pb::LOOP_STATUS_CANDIDATE);
+  EXPECT_EQ(candidate.match_frame_id(), 0u);
+  EXPECT_TRUE(candidate.evidence().calibrated());
+  EXPECT_EQ(candidate.evidence().inliers(), candidate.inliers());
+  EXPECT_EQ(candidate.evidence().confirmations(), 0u);
+  const pb::LoopResult& loop = answers[3].result();
+  EXPECT_EQ(loop.status(), pb::LOOP_STATUS_LOOP_DETECTED);
+  EXPECT_EQ(loop.evidence().confirmations(), 1u);
+  EXPECT_GT(loop.evidence().spread(), 0.0);
+  EXPECT_GE(loop.evidence().in_front(), 0.9);
+  RestartServer();
+  pb::MapInfo info;
+  ASSERT_TRUE(GetMap("confirmed", &info).ok());
+  EXPECT_EQ(info.settings().keyframe_confirmations(), 1u);
+}
+
 TEST_F(PlaceServiceTest, AKeyframeMapKeepsItsPresetAcrossARestartAndAnUnknownPresetIsRefused) {
   pb::MapSettings settings;
   settings.set_preset("keyframes");

@@ -51,7 +51,8 @@ json MapJson(const pb::MapInfo& map) {
             {"recent_seconds", s.recent_seconds()},
             {"recent_frames", s.recent_frames()},
             {"group", s.group()},
-            {"keep_thumbnails", s.keep_thumbnails()}}}};
+            {"keep_thumbnails", s.keep_thumbnails()},
+            {"keyframe_confirmations", s.keyframe_confirmations()}}}};
 }
 
 int RunMapsList(const ServerFlags& flags, RecognitionClient& client) {
@@ -142,6 +143,11 @@ void AddMapsCommands(CLI::App& app, int* exit_code) {
   create->add_option_function<uint32_t>(
       "--recent-frames", [settings](const uint32_t& v) { settings->set_recent_frames(v); },
       "Recent frames left out of queries, for frames without timestamps (20)");
+  create->add_option_function<uint32_t>(
+      "--keyframe-confirmations",
+      [settings](const uint32_t& v) { settings->set_keyframe_confirmations(v); },
+      "Keyframes that must confirm a verified loop before it is accepted; until then it is "
+      "answered as a candidate (0: at once)");
   ConnectCommand(create, &create_args->server, exit_code, [create_args](RecognitionClient& client) {
     auto map = client.CreateMap(create_args->name, create_args->settings);
     if (!map.ok()) return Fail("maps create", map.status());

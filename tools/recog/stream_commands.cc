@@ -73,6 +73,17 @@ json LoopJson(const pb::LoopResult& r) {
   }
   out["correspondences"] = r.correspondences();
   out["inliers"] = r.inliers();
+  if (r.has_evidence()) {
+    const pb::LoopEvidence& e = r.evidence();
+    out["evidence"] = {{"inliers", e.inliers()},
+                       {"spread", e.spread()},
+                       {"calibrated", e.calibrated()},
+                       {"in_front", e.in_front()},
+                       {"parallax_deg", e.parallax_deg()},
+                       {"rotation_deg", e.rotation_deg()},
+                       {"pure_rotation", e.pure_rotation()},
+                       {"confirmations", e.confirmations()}};
+  }
   if (r.has_frame_id()) out["frame"] = r.frame_id();
   if (r.has_match_frame_id()) {
     out["match"] = r.match_frame_id();

@@ -58,9 +58,17 @@ def main() -> int:
                           f"{response.error.message}", file=sys.stderr)
                 elif response.result.status == place_pb2.LOOP_STATUS_LOOP_DETECTED:
                     result = response.result
+                    evidence = result.evidence
                     loops += 1
                     print(f"frame {result.frame_id} closes a loop with frame "
-                          f"{result.match_frame_id} (inliers {result.inliers})", flush=True)
+                          f"{result.match_frame_id} (inliers {result.inliers}, spread "
+                          f"{evidence.spread:.2f}, confirmations {evidence.confirmations})",
+                          flush=True)
+                elif response.result.status == place_pb2.LOOP_STATUS_CANDIDATE:
+                    # A loop awaiting the next keyframes' confirmation: shown, not acted on.
+                    result = response.result
+                    print(f"frame {result.frame_id}: candidate loop with frame "
+                          f"{result.match_frame_id}, awaiting confirmation", flush=True)
         except RecogError as error:
             print(f"stream_folder: {error}", file=sys.stderr)
             return 1
