@@ -168,6 +168,31 @@ bool GroundTruth::Matches(int query, int other) const {
   return std::binary_search(m.begin(), m.end(), other);
 }
 
+bool GroundTruth::IsAmbiguous(int query, int other) const {
+  return ambiguous.count({std::max(query, other), std::min(query, other)}) > 0;
+}
+
+Status ReadAmbiguousPairs(const std::string& path, GroundTruth* truth) {
+  std::ifstream in(path);
+  if (!in) return Status::NotFound("ambiguous pairs '" + path + "' not found");
+  std::string line;
+  for (int number = 1; std::getline(in, line); ++number) {
+    const size_t hash = line.find('#');
+    if (hash != std::string::npos) line.resize(hash);
+    int i = 0, j = 0;
+    char rest = 0;
+    if (line.find_first_not_of(" \t\r") == std::string::npos) continue;  // blank or comment
+    const int read = std::sscanf(line.c_str(), "%d %d %c", &i, &j, &rest);
+    if (read != 2 || i < 1 || j < 1 || i > truth->frames || j > truth->frames || i == j) {
+      return Status::DataLoss("ambiguous pairs '" + path + "' line " + std::to_string(number) +
+                              ": expected two different frame numbers from 1 to " +
+                              std::to_string(truth->frames));
+    }
+    truth->ambiguous.insert({std::max(i, j) - 1, std::min(i, j) - 1});
+  }
+  return Status::Ok();
+}
+
 int GroundTruth::QueriesWithMatches() const {
   return int(std::count_if(matches.begin(), matches.end(),
                            [](const std::vector<int>& m) { return !m.empty(); }));

@@ -27,7 +27,9 @@
 // semantics above: they are counted in `ignored_entries` and otherwise dropped.
 #pragma once
 
+#include <set>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "core/common/status.h"
@@ -38,11 +40,16 @@ struct GroundTruth {
   int frames = 0;
   // matches[i]: 0-based frames j < i that frame i matches, increasing. Size `frames`.
   std::vector<std::vector<int>> matches;
+  // Pairs (i, j), 0-based, i > j, that are neither the same place nor different places (a loop
+  // between them is left out of precision); empty unless ReadAmbiguousPairs filled it.
+  std::set<std::pair<int, int>> ambiguous;
   // Dense files only: 1s on or above the diagonal, which were ignored.
   long long ignored_entries = 0;
 
   // True when frame `query` matches frame `other` (0-based); false for out-of-range frames.
   bool Matches(int query, int other) const;
+  // True when the pair (either order) is listed as ambiguous.
+  bool IsAmbiguous(int query, int other) const;
   // Number of frames with at least one match.
   int QueriesWithMatches() const;
   // Total number of (query, match) pairs.
@@ -54,6 +61,11 @@ struct GroundTruth {
 // Reads either format. NOT_FOUND for a missing file; DATA_LOSS (with the line number) for a
 // malformed one.
 StatusOr<GroundTruth> ReadGroundTruth(const std::string& path);
+
+// Reads a list of ambiguous pairs into truth->ambiguous: '#' starts a comment, blank lines are
+// skipped, every other line is "i j", two different 1-based frame numbers of the sequence.
+// NOT_FOUND for a missing file; DATA_LOSS naming the line for anything else.
+Status ReadAmbiguousPairs(const std::string& path, GroundTruth* truth);
 
 // Write the dense / sparse format. INVALID_ARGUMENT when `truth` does not validate, INTERNAL when
 // the file cannot be written.

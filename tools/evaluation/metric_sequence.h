@@ -19,6 +19,7 @@
 #include <opencv2/core.hpp>
 
 #include "core/common/status.h"
+#include "tools/evaluation/camera_trajectory.h"
 
 namespace recog::cli {
 
@@ -27,11 +28,6 @@ struct TexturedPlane {
   cv::Vec3d center;
   cv::Vec3d axis_x, axis_y;      // unit vectors of the world along the photo's columns and rows
   double width = 1, height = 1;  // metres the photo spans
-};
-
-struct CameraPose {
-  cv::Matx33d world_from_camera = cv::Matx33d::eye();
-  cv::Vec3d center = cv::Vec3d(0, 0, 0);
 };
 
 struct RenderedFrame {

@@ -269,8 +269,10 @@ void AddTimings(const LoopTimings& t, double features_ms, const double* points_m
 }
 
 // Counts frame `query`'s result in `eval`: its status, and its match (frame `match` of the
-// sequence, when it has one) scored against the ground truth.
+// sequence, when it has one) scored against the ground truth and, with a trajectory, against the
+// true geometry of its inliers.
 void CountResult(const LoopResult& r, int query, int match, const GroundTruth& truth,
+                 const SequenceFeatures& sequence, const CameraTrajectory* trajectory,
                  PlaceEvaluation* eval) {
   ++eval->statuses[std::string(LoopStatusName(r.status))];
   if (r.match == kInvalidEntryId) return;
@@ -279,20 +281,33 @@ void CountResult(const LoopResult& r, int query, int match, const GroundTruth& t
   loop.match = match;
   loop.status = r.status;
   loop.correct = truth.Matches(query, match);
+  loop.ambiguous = truth.IsAmbiguous(query, match);
+  if (trajectory != nullptr && !r.inliers.empty()) {
+    loop.geometry = ScoreLoopGeometry(
+        trajectory->poses[size_t(query)], trajectory->poses[size_t(match)], trajectory->K,
+        sequence.features[size_t(query)], sequence.features[size_t(match)], r.inliers);
+    loop.correct = loop.correct && loop.geometry->agrees;
+  }
   loop.normalized_score = r.normalized_score;
   loop.acceptance = r.acceptance;
   loop.inliers = uint32_t(r.inliers.size());
   loop.metric = r.metric;
+  loop.evidence = r.evidence;
   if (r.status == LoopStatus::kLoopDetected) {
     ++eval->detections;
-    eval->correct += loop.correct;
+    if (loop.ambiguous) {
+      ++eval->ambiguous;
+    } else {
+      eval->correct += loop.correct;
+    }
   }
   eval->loops.push_back(loop);
 }
 
 void Finish(const std::map<std::string, std::vector<double>>& times, PlaceEvaluation* eval) {
   for (const auto& [stage, values] : times) eval->timing_ms[stage] = StatsOf(values);
-  eval->precision = eval->detections > 0 ? double(eval->correct) / eval->detections : 1.0;
+  const int judged = eval->detections - eval->ambiguous;
+  eval->precision = judged > 0 ? double(eval->correct) / judged : 1.0;
   eval->recall = eval->query_frames_with_truth > 0
                      ? double(eval->correct) / eval->query_frames_with_truth
                      : 0.0;
@@ -316,8 +331,14 @@ const double* PointsMsOf(const SequenceFeatures& sequence, size_t i) {
 StatusOr<PlaceEvaluation> EvaluatePlace(const SequenceFeatures& sequence, const GroundTruth& truth,
                                         std::shared_ptr<const Vocabulary> vocabulary,
                                         const PlaceEvaluationOptions& options,
-                                        std::vector<LoopResult>* results) {
+                                        std::vector<LoopResult>* results,
+                                        const CameraTrajectory* trajectory) {
   RECOG_RETURN_IF_ERROR(CheckTruthCoversSequence(truth, sequence));
+  if (trajectory != nullptr && trajectory->poses.size() != sequence.features.size()) {
+    return Status::InvalidArgument("the poses cover " + std::to_string(trajectory->poses.size()) +
+                                   " frames but the sequence has " +
+                                   std::to_string(sequence.features.size()));
+  }
   RECOG_ASSIGN_OR_RETURN(std::vector<LoopResult> detected,
                          DetectLoops(sequence, std::move(vocabulary), options));
 
@@ -328,7 +349,7 @@ StatusOr<PlaceEvaluation> EvaluatePlace(const SequenceFeatures& sequence, const 
   for (int i = 0; i < eval.frames; ++i) {
     const LoopResult& r = detected[size_t(i)];
     AddTimings(r.timings, sequence.feature_ms[size_t(i)], PointsMsOf(sequence, size_t(i)), &times);
-    CountResult(r, i, int(r.match), truth, &eval);
+    CountResult(r, i, int(r.match), truth, sequence, trajectory, &eval);
   }
   Finish(times, &eval);
   if (results != nullptr) *results = std::move(detected);
@@ -392,12 +413,12 @@ StatusOr<AcrossMapsEvaluation> EvaluateAcrossMaps(const SequenceFeatures& sequen
         LoopResult own,
         map_b.Process(sequence.features[f], TimestampOf(sequence, f), {}, GeometryOf(sequence, f)));
     AddTimings(own.timings, sequence.feature_ms[f], PointsMsOf(sequence, f), &own_times);
-    CountResult(own, i, split + int(own.match), truth, &eval.own_map);
+    CountResult(own, i, split + int(own.match), truth, sequence, nullptr, &eval.own_map);
     RECOG_ASSIGN_OR_RETURN(
         LoopResult across,
         map_a.Query(sequence.features[f], TimestampOf(sequence, f), GeometryOf(sequence, f)));
     AddTimings(across.timings, 0.0, nullptr, &inter_times);
-    CountResult(across, i, int(across.match), truth, &eval.inter_map);
+    CountResult(across, i, int(across.match), truth, sequence, nullptr, &eval.inter_map);
   }
   Finish(inter_times, &eval.inter_map);
   Finish(own_times, &eval.own_map);

@@ -14,6 +14,7 @@
 #include "core/features/feature_extractor.h"
 #include "core/geometry/frame_points.h"
 #include "core/place/loop_detector.h"
+#include "tools/evaluation/camera_trajectory.h"
 #include "tools/evaluation/dataset_layouts.h"
 #include "tools/evaluation/ground_truth.h"
 
@@ -99,11 +100,16 @@ struct DetectedLoop {
   int query = 0;  // 0-based frame index
   int match = 0;  // 0-based frame index of the matched frame
   LoopStatus status = LoopStatus::kLoopDetected;
-  bool correct = false;  // the ground truth marks the pair
+  // The ground truth marks the pair and, with a trajectory, the loop's inliers agree with the true
+  // geometry (`geometry->agrees`).
+  bool correct = false;
+  bool ambiguous = false;  // the pair is listed as ambiguous: left out of precision
   double normalized_score = 0;
   uint32_t inliers = 0;
   LoopAcceptance acceptance = LoopAcceptance::kNone;  // how the detector accepted it
   MetricLoop metric;                                  // the 3D check, for frames with 3D points
+  LoopEvidence evidence;                              // the detector's own figures
+  std::optional<LoopGeometryTruth> geometry;          // with a trajectory: what the poses say
 };
 
 struct PlaceEvaluation {
@@ -111,7 +117,8 @@ struct PlaceEvaluation {
   int query_frames_with_truth = 0;
   int detections = 0;
   int correct = 0;
-  double precision = 1.0;  // 1 when there is no detection
+  int ambiguous = 0;       // detections of ambiguous pairs (in `detections`, not in precision)
+  double precision = 1.0;  // correct / (detections - ambiguous); 1 when that is 0
   double recall = 0.0;
   std::map<std::string, StageStats> timing_ms;  // features, conversion, query, islands, ...
   std::map<std::string, int> statuses;          // frames per LoopStatus name
@@ -131,11 +138,14 @@ StatusOr<std::vector<LoopResult>> DetectLoops(const SequenceFeatures& sequence,
                                               const PlaceEvaluationOptions& options);
 
 // DetectLoops, scored against the ground truth. `results`, when not null, receives every frame's
-// LoopResult.
+// LoopResult. With `trajectory` (one pose per frame), each loop is also scored by its inliers
+// (ScoreLoopGeometry): one whose inliers do not agree with the true geometry is false whatever
+// the ground truth says. INVALID_ARGUMENT when the trajectory has another number of frames.
 StatusOr<PlaceEvaluation> EvaluatePlace(const SequenceFeatures& sequence, const GroundTruth& truth,
                                         std::shared_ptr<const Vocabulary> vocabulary,
                                         const PlaceEvaluationOptions& options,
-                                        std::vector<LoopResult>* results = nullptr);
+                                        std::vector<LoopResult>* results = nullptr,
+                                        const CameraTrajectory* trajectory = nullptr);
 
 // Two robots sharing a sequence's places (a fleet's maps, or one robot's two sessions): frames
 // [0, split) are robot A's map (added, no query); frames [split, n) stream into robot B's own

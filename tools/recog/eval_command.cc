@@ -31,7 +31,12 @@ struct EvalPlaceArgs {
   std::string images, ground_truth, vocabulary, params_file, draw_dir, sweep;
   std::string mode = "default";
   std::string layout = "auto";
-  std::string camera;  // fx,fy,cx,cy: 3D points from the dataset's depth or right images
+  // fx,fy,cx,cy: the frames' camera matrix (the calibrated check of loops), and 3D points from
+  // the dataset's depth or right images
+  std::string camera;
+  std::string poses;  // with --camera: every frame's pose (CameraTrajectory), loops judged by it
+  std::string ambiguous;                                            // pairs left out of precision
+  std::string trajectory_plot = "recog_eval_place_trajectory.png";  // with --poses
   double depth_scale = 0, baseline = 0;
   std::string plot = "recog_eval_place_pr.png";
   int features = 1000;
@@ -49,6 +54,14 @@ struct EvalPlaceArgs {
 int Fail(const Status& s) {
   std::fprintf(stderr, "recog eval place: %s\n", s.ToString().c_str());
   return 1;
+}
+
+// The name of a sequence for a title: its folder, or the folder above an "images" folder.
+std::string SequenceTitle(const std::string& images) {
+  fs::path shown = fs::path(images).lexically_normal();
+  if (shown.filename().empty()) shown = shown.parent_path();      // a trailing slash
+  if (shown.filename() == "images") shown = shown.parent_path();  // name the data set
+  return shown.filename().string();
 }
 
 // Reads detector parameters from a YAML file; unknown keys are an error (typos must not pass
@@ -114,6 +127,20 @@ Status ReadParams(const std::string& path, PlaceEvaluationOptions* options, int*
         p.strong_min_spread = v.as<double>();
       else if (key == "strong_max_homography_ratio")
         p.strong_max_homography_ratio = v.as<double>();
+      else if (key == "min_spread")
+        p.min_spread = v.as<double>();
+      else if (key == "keyframe_confirmations")
+        p.keyframe_confirmations = v.as<uint32_t>();
+      else if (key == "max_motion_disagreement_deg")
+        p.max_motion_disagreement_deg = v.as<double>();
+      else if (key == "calibrated_check")
+        p.calibrated.enabled = v.as<bool>();
+      else if (key == "calibrated_min_in_front")
+        p.calibrated.min_in_front = v.as<double>();
+      else if (key == "calibrated_max_rotation_deg")
+        p.calibrated.max_rotation_deg = v.as<double>();
+      else if (key == "calibrated_min_spread")
+        p.calibrated.min_spread = v.as<double>();
       else if (key == "direct_index_levels_up")
         options->direct_index_levels_up = v.as<uint32_t>();
       else if (key == "features")
@@ -150,6 +177,24 @@ nlohmann::json ToJson(const PlaceEvaluation& e, const SequenceFeatures& seq) {
                            {"correct", l.correct},
                            {"normalized_score", l.normalized_score},
                            {"inliers", l.inliers}};
+    if (l.status == LoopStatus::kLoopDetected || l.inliers > 0) {
+      const LoopEvidence& v = l.evidence;
+      loop["evidence"] = {{"inliers", v.inliers},
+                          {"spread", v.spread},
+                          {"calibrated", v.calibrated},
+                          {"in_front", v.in_front},
+                          {"parallax_deg", v.parallax_deg},
+                          {"rotation_deg", v.rotation_deg},
+                          {"pure_rotation", v.pure_rotation},
+                          {"confirmations", v.confirmations}};
+    }
+    if (l.ambiguous) loop["ambiguous"] = true;
+    if (l.geometry.has_value()) {
+      loop["true_geometry"] = {{"distance_m", l.geometry->distance_m},
+                               {"angle_deg", l.geometry->angle_deg},
+                               {"agreeing_inliers", l.geometry->agreeing},
+                               {"agrees", l.geometry->agrees}};
+    }
     if (l.metric.checked) {
       // X_query = R X_match + t, metres.
       loop["metric"] = {{"verified", l.metric.verified},
@@ -161,15 +206,11 @@ nlohmann::json ToJson(const PlaceEvaluation& e, const SequenceFeatures& seq) {
     }
     loops.push_back(std::move(loop));
   }
-  return {{"frames", e.frames},
-          {"query_frames_with_truth", e.query_frames_with_truth},
-          {"detections", e.detections},
-          {"correct", e.correct},
-          {"precision", e.precision},
-          {"recall", e.recall},
-          {"statuses", e.statuses},
-          {"timing_ms", timing},
-          {"loops", loops}};
+  return {{"frames", e.frames},         {"query_frames_with_truth", e.query_frames_with_truth},
+          {"detections", e.detections}, {"correct", e.correct},
+          {"ambiguous", e.ambiguous},   {"precision", e.precision},
+          {"recall", e.recall},         {"statuses", e.statuses},
+          {"timing_ms", timing},        {"loops", loops}};
 }
 
 // Side-by-side images of each detection with its inlier correspondences.
@@ -434,6 +475,17 @@ int RunEvalPlace(const EvalPlaceArgs& args) {
     truth = ReadGroundTruth(args.ground_truth);
     if (!truth.ok()) return Fail(truth.status());
   }
+  if (!args.ambiguous.empty()) {
+    if (!has_truth) return Fail(Status::InvalidArgument("--ambiguous needs --ground-truth"));
+    if (Status s = ReadAmbiguousPairs(args.ambiguous, &*truth); !s.ok()) return Fail(s);
+  }
+  std::optional<CameraTrajectory> trajectory;
+  if (!args.poses.empty()) {
+    if (args.camera.empty()) return Fail(Status::InvalidArgument("--poses needs --camera"));
+    auto poses = ReadCameraPoses(args.poses);
+    if (!poses.ok()) return Fail(poses.status());
+    trajectory = CameraTrajectory{std::move(poses).value(), ParseCamera(args.camera)->K()};
+  }
   std::optional<SequenceGeometryOptions> geometry;
   if (!args.camera.empty()) {
     auto camera = ParseCamera(args.camera);
@@ -492,7 +544,8 @@ int RunEvalPlace(const EvalPlaceArgs& args) {
   }
 
   std::vector<LoopResult> results;
-  auto evaluation = EvaluatePlace(*sequence, *truth, shared, options, &results);
+  auto evaluation = EvaluatePlace(*sequence, *truth, shared, options, &results,
+                                  trajectory ? &*trajectory : nullptr);
   if (!evaluation.ok()) return Fail(evaluation.status());
   nlohmann::json out = ToJson(*evaluation, *sequence);
   out["parameters"] = std::move(parameters);
@@ -535,10 +588,7 @@ int RunEvalPlace(const EvalPlaceArgs& args) {
     }
     out["sweep"] = sweep;
     PlotOptions plot;
-    fs::path shown = fs::path(args.images).lexically_normal();
-    if (shown.filename().empty()) shown = shown.parent_path();      // a trailing slash
-    if (shown.filename() == "images") shown = shown.parent_path();  // name the data set
-    plot.title = "Loop detection on " + shown.filename().string() +
+    plot.title = "Loop detection on " + SequenceTitle(args.images) +
                  ": precision vs recall, alpha from 0 to 1";
     plot.x_label = "recall";
     plot.y_label = "precision";
@@ -548,6 +598,25 @@ int RunEvalPlace(const EvalPlaceArgs& args) {
   if (!args.draw_dir.empty()) {
     if (Status s = DrawDetections(args.draw_dir, *sequence, results); !s.ok()) return Fail(s);
   }
+  if (trajectory.has_value()) {
+    std::vector<DrawnLoop> drawn;
+    for (const DetectedLoop& l : evaluation->loops) {
+      if (l.status != LoopStatus::kLoopDetected) continue;
+      drawn.push_back({l.query, l.match,
+                       l.ambiguous ? DrawnLoop::Verdict::kAmbiguous
+                       : l.correct ? DrawnLoop::Verdict::kCorrect
+                                   : DrawnLoop::Verdict::kFalse});
+    }
+    char title[160];
+    std::snprintf(title, sizeof(title), "%s, --mode %s: %d loops, %d correct, %d ambiguous",
+                  SequenceTitle(args.images).c_str(), args.mode.c_str(), evaluation->detections,
+                  evaluation->correct, evaluation->ambiguous);
+    if (Status s = WriteTrajectoryPlot(trajectory->poses, drawn, title, args.trajectory_plot);
+        !s.ok()) {
+      return Fail(s);
+    }
+    out["trajectory_plot"] = args.trajectory_plot;
+  }
 
   if (args.json) {
     std::printf("%s\n", out.dump(2).c_str());
@@ -556,8 +625,10 @@ int RunEvalPlace(const EvalPlaceArgs& args) {
     if (has_truth) {
       std::printf("frames %d, query frames with a true match %d\n", e.frames,
                   e.query_frames_with_truth);
-      std::printf("detections %d, correct %d: precision %.1f %%, recall %.1f %%\n", e.detections,
-                  e.correct, 100 * e.precision, 100 * e.recall);
+      std::printf("detections %d, correct %d%s: precision %.1f %%, recall %.1f %%\n", e.detections,
+                  e.correct,
+                  e.ambiguous > 0 ? (", ambiguous " + std::to_string(e.ambiguous)).c_str() : "",
+                  100 * e.precision, 100 * e.recall);
     } else {
       std::printf("frames %d (layout %s), detections %d (no ground truth)\n", e.frames,
                   std::string(DatasetLayoutName(source->layout())).c_str(), e.detections);
@@ -578,10 +649,21 @@ int RunEvalPlace(const EvalPlaceArgs& args) {
                       l.metric.inliers.size(), cv::norm(l.metric.t));
         metric = text;
       }
-      std::printf("loop %s -> %s (%s%u inliers%s)\n", sequence->names[size_t(l.query)].c_str(),
+      std::string truth_text;
+      if (l.geometry.has_value()) {
+        char text[128];
+        std::snprintf(text, sizeof(text),
+                      "; cameras %.1f m and %.0f deg apart, %u on the true geometry",
+                      l.geometry->distance_m, l.geometry->angle_deg, l.geometry->agreeing);
+        truth_text = text;
+      }
+      std::printf("loop %s -> %s (%s%u inliers%s%s)\n", sequence->names[size_t(l.query)].c_str(),
                   sequence->names[size_t(l.match)].c_str(),
-                  has_truth ? (l.correct ? "correct, " : "WRONG, ") : "", l.inliers,
-                  metric.c_str());
+                  !has_truth    ? ""
+                  : l.ambiguous ? "ambiguous, "
+                  : l.correct   ? "correct, "
+                                : "WRONG, ",
+                  l.inliers, metric.c_str(), truth_text.c_str());
     }
     if (!args.sweep.empty()) std::printf("precision-recall plot: %s\n", args.plot.c_str());
   }
@@ -624,9 +706,26 @@ void AddEvalCommand(CLI::App& app, int* exit_code) {
                     "the sparse format of recog seqgen; without it, only detections are reported");
   place
       ->add_option("--camera", args->camera,
-                   "fx,fy,cx,cy of the (rectified) images: frames with a depth image (TUM) or a "
-                   "right image (EuRoC, KITTI) get 3D points, loops a 3D check and a metric pose")
+                   "fx,fy,cx,cy of the (rectified) images: loops are checked with the essential "
+                   "matrix; frames with a depth image (TUM) or a right image (EuRoC, KITTI) get "
+                   "3D points, loops a 3D check and a metric pose")
       ->check(Accepts(ParseCamera));
+  place
+      ->add_option("--poses", args->poses,
+                   "With --camera: every frame's pose (a line per frame: r11..r33 camera to world, "
+                   "then the centre cx cy cz, metres): each loop's distance and angle between "
+                   "the cameras and its inliers on the true geometry (a loop whose inliers are "
+                   "not is false), and a PNG of the loops over the trajectory")
+      ->check(CLI::ExistingFile);
+  place
+      ->add_option("--trajectory-plot", args->trajectory_plot,
+                   "With --poses: the PNG of the loops over the trajectory")
+      ->capture_default_str();
+  place
+      ->add_option("--ambiguous", args->ambiguous,
+                   "Pairs 'i j' (frame numbers from 1) neither right nor wrong: their loops are "
+                   "left out of precision")
+      ->check(CLI::ExistingFile);
   place->add_option("--depth-scale", args->depth_scale,
                     "With --camera: 16-bit depth units per metre (default: TUM's 5000, else "
                     "1000)");
