@@ -422,6 +422,40 @@ Triangulation Triangulate(const cv::Matx33d& R, const cv::Vec3d& t,
   return result;
 }
 
+// Of the four decompositions of result->essential, the one that puts the most of the `inlier`
+// pairs (normalised pixels) in front of both cameras; on a tie (a pure rotation puts every point
+// at infinity for the right R), the one whose rotation alone explains the most. Fills R, t,
+// in_front, rotation_only, parallax_deg and found.
+void Decompose(const std::vector<cv::Point2d>& pa, const std::vector<cv::Point2d>& pb,
+               const std::vector<bool>& inlier, double threshold, EssentialResult* result) {
+  cv::Mat R1, R2, t;
+  cv::decomposeEssentialMat(cv::Mat(result->essential), R1, R2, t);
+  Triangulation best;
+  bool chosen = false;
+  for (const cv::Mat& R : {R1, R2}) {
+    for (const double sign : {1.0, -1.0}) {
+      const cv::Matx33d rotation(R);
+      const cv::Vec3d translation = cv::Vec3d(t) * sign;
+      Triangulation candidate = Triangulate(rotation, translation, pa, pb, inlier, threshold);
+      const bool better =
+          !chosen || candidate.in_front > best.in_front ||
+          (candidate.in_front == best.in_front && candidate.rotation_only > best.rotation_only);
+      if (!better) continue;
+      best = std::move(candidate);
+      result->R = rotation;
+      result->t = translation;
+      chosen = true;
+    }
+  }
+  result->found = true;
+  result->in_front = best.in_front;
+  result->rotation_only = best.rotation_only;
+  std::nth_element(best.parallax_deg.begin(),
+                   best.parallax_deg.begin() + long(best.parallax_deg.size() / 2),
+                   best.parallax_deg.end());
+  result->parallax_deg = best.parallax_deg[best.parallax_deg.size() / 2];
+}
+
 }  // namespace
 
 EssentialResult VerifyEssential(const cv::Matx33d& K_a, const cv::Matx33d& K_b,
@@ -454,35 +488,23 @@ EssentialResult VerifyEssential(const cv::Matx33d& K_a, const cv::Matx33d& K_b,
   }
   if (result.inliers.size() < 5) return result;
   result.essential = cv::Matx33d(cv::Mat(essential.rowRange(0, 3)));
-  // Of the four decompositions, the one that puts the most inliers in front of both cameras;
-  // on a tie (a pure rotation puts every point at infinity for the right R), the one whose
-  // rotation alone explains the most.
-  cv::Mat R1, R2, t;
-  cv::decomposeEssentialMat(essential.rowRange(0, 3), R1, R2, t);
-  Triangulation best;
-  bool chosen = false;
-  for (const cv::Mat& R : {R1, R2}) {
-    for (const double sign : {1.0, -1.0}) {
-      const cv::Matx33d rotation(R);
-      const cv::Vec3d translation = cv::Vec3d(t) * sign;
-      Triangulation candidate = Triangulate(rotation, translation, pa, pb, inlier, threshold);
-      const bool better =
-          !chosen || candidate.in_front > best.in_front ||
-          (candidate.in_front == best.in_front && candidate.rotation_only > best.rotation_only);
-      if (!better) continue;
-      best = std::move(candidate);
-      result.R = rotation;
-      result.t = translation;
-      chosen = true;
-    }
-  }
-  result.found = true;
-  result.in_front = best.in_front;
-  result.rotation_only = best.rotation_only;
-  std::nth_element(best.parallax_deg.begin(),
-                   best.parallax_deg.begin() + long(best.parallax_deg.size() / 2),
-                   best.parallax_deg.end());
-  result.parallax_deg = best.parallax_deg[best.parallax_deg.size() / 2];
+  Decompose(pa, pb, inlier, threshold, &result);
+  return result;
+}
+
+EssentialResult MeasureEssential(const cv::Matx33d& essential, const cv::Matx33d& K_a,
+                                 const cv::Matx33d& K_b,
+                                 const std::vector<cv::KeyPoint>& a_keypoints,
+                                 const std::vector<cv::KeyPoint>& b_keypoints,
+                                 const std::vector<Match>& inliers, double threshold_px) {
+  EssentialResult result;
+  if (inliers.size() < 5) return result;
+  std::vector<cv::Point2d> pa, pb;
+  if (!NormalisedPairs(K_a, K_b, a_keypoints, b_keypoints, inliers, &pa, &pb)) return result;
+  const double focal = (K_a(0, 0) + K_a(1, 1) + K_b(0, 0) + K_b(1, 1)) / 4.0;
+  result.inliers = inliers;
+  result.essential = essential;
+  Decompose(pa, pb, std::vector<bool>(inliers.size(), true), threshold_px / focal, &result);
   return result;
 }
 

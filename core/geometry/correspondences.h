@@ -163,6 +163,16 @@ EssentialResult VerifyEssential(const cv::Matx33d& K_a, const cv::Matx33d& K_b,
                                 const std::vector<cv::KeyPoint>& b_keypoints,
                                 const std::vector<Match>& matches, const EssentialOptions& options);
 
+// What a given essential matrix (x_b^T E x_a = 0 in normalised pixels; K_b^T F K_a of a
+// fundamental matrix) says of its `inliers`: the decomposition that puts the most of them in front
+// of both cameras and how they triangulate with it (EssentialResult; `inliers` as given). Fewer
+// than 5 inliers, or one out of range: not found.
+EssentialResult MeasureEssential(const cv::Matx33d& essential, const cv::Matx33d& K_a,
+                                 const cv::Matx33d& K_b,
+                                 const std::vector<cv::KeyPoint>& a_keypoints,
+                                 const std::vector<cv::KeyPoint>& b_keypoints,
+                                 const std::vector<Match>& inliers, double threshold_px);
+
 // The relative pose of two calibrated views (X_b = R * X_a + t, |t| = 1) from their matches,
 // by the five-point algorithm (VerifyEssential): an essential matrix fitted with RANSAC (OpenCV's,
 // deterministic) to the pixels normalised by each camera, `threshold_px` from its epipolar lines,

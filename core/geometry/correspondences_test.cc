@@ -376,5 +376,28 @@ TEST(EssentialTest, RandomPairsFewMatchesOrBadIndicesGiveNoEssentialMatrix) {
   EXPECT_FALSE(VerifyEssential(kCamera, kCamera, ka, kb, out_of_range, {}).found);
 }
 
+// A given essential matrix (K^T F K of a fundamental matrix) measured on its inliers: the same
+// motion and triangulation as the five-point fit; fewer than 5 inliers or one out of range give
+// none.
+TEST(EssentialTest, AGivenEssentialMatrixIsMeasuredOnItsInliers) {
+  std::vector<cv::KeyPoint> ka, kb;
+  PosedViews(Yaw(0.3), {0.8, 0.0, 0.1}, 80, 9, &ka, &kb);
+  const EpipolarResult fitted = VerifyEpipolar(ka, kb, Identity(80), {});
+  ASSERT_TRUE(fitted.verified);
+  const cv::Matx33d essential = kCamera.t() * fitted.fundamental * kCamera;
+  const EssentialResult r =
+      MeasureEssential(essential, kCamera, kCamera, ka, kb, fitted.inliers, 2.0);
+  ASSERT_TRUE(r.found);
+  EXPECT_EQ(r.inliers.size(), fitted.inliers.size());
+  EXPECT_GE(r.in_front, uint32_t(0.95 * double(fitted.inliers.size())));
+  EXPECT_GT(r.parallax_deg, 3.0);
+  EXPECT_LT(cv::norm(r.R - Yaw(0.3)), 0.02);
+  EXPECT_GT(r.t.dot(cv::normalize(cv::Vec3d(0.8, 0.0, 0.1))), 0.99);
+  EXPECT_FALSE(MeasureEssential(essential, kCamera, kCamera, ka, kb, Identity(4), 2.0).found);
+  std::vector<Match> out_of_range = Identity(10);
+  out_of_range[3].b = 500;
+  EXPECT_FALSE(MeasureEssential(essential, kCamera, kCamera, ka, kb, out_of_range, 2.0).found);
+}
+
 }  // namespace
 }  // namespace recog
