@@ -91,33 +91,28 @@ bool PhysicallyPlausible(const EssentialResult& essential, const CalibratedCheck
   return inliers > 0 && (essential.in_front >= options.min_in_front * inliers || rotation);
 }
 
-// The calibrated check (CalibratedCheckOptions) of the query (a: camera K_query) against a
-// candidate (b: K_match): fills the result's inliers, fundamental matrix and evidence, and says
-// whether the loop holds with at least `min_inliers` inliers.
-bool CheckCalibrated(const cv::Matx33d& K_query, const cv::Matx33d& K_match,
-                     const std::vector<cv::KeyPoint>& query_keypoints,
-                     const std::vector<cv::KeyPoint>& match_keypoints,
-                     const std::vector<Match>& matches, size_t min_inliers,
-                     const CalibratedCheckOptions& options, LoopResult* result) {
-  EssentialResult essential = VerifyEssential(K_query, K_match, query_keypoints, match_keypoints,
-                                              matches, options.essential);
-  LoopEvidence& evidence = result->evidence;
-  evidence.calibrated = true;
+// The calibrated evidence of a loop between the query (a: camera K_query) and a candidate (b:
+// K_match), given the fundamental matrix fitted to their matches (`fitted`, verified): how its
+// inliers triangulate through the essential matrix K_match^T F K_query. Fills `evidence` and says
+// whether they make physical sense (CalibratedCheckOptions).
+bool MeasureCalibrated(const cv::Matx33d& K_query, const cv::Matx33d& K_match,
+                       const std::vector<cv::KeyPoint>& query_keypoints,
+                       const std::vector<cv::KeyPoint>& match_keypoints,
+                       const EpipolarResult& fitted, double threshold_px,
+                       const CalibratedCheckOptions& options, LoopEvidence* evidence) {
+  const EssentialResult essential =
+      MeasureEssential(K_match.t() * fitted.fundamental * K_query, K_query, K_match,
+                       query_keypoints, match_keypoints, fitted.inliers, threshold_px);
   if (!essential.found) return false;
-  const bool geometry = PhysicallyPlausible(essential, options, &evidence.pure_rotation);
-  result->inliers = std::move(essential.inliers);
-  // x_match^T F x_query = 0, as VerifyEpipolar's.
-  result->fundamental = K_match.inv().t() * essential.essential * K_query.inv();
-  const double inliers = double(result->inliers.size());
-  evidence.inliers = uint32_t(result->inliers.size());
-  evidence.spread = InlierSpread(query_keypoints, match_keypoints, result->inliers, kSpreadGrid);
-  evidence.in_front = inliers > 0 ? essential.in_front / inliers : 0.0;
-  evidence.parallax_deg = essential.parallax_deg;
-  evidence.rotation_deg = RotationAngleDeg(essential.R);
-  evidence.rotation = essential.R;
-  evidence.translation = essential.t;
-  return result->inliers.size() >= min_inliers && geometry &&
-         evidence.rotation_deg <= options.max_rotation_deg && evidence.spread >= options.min_spread;
+  evidence->calibrated = true;
+  const bool geometry = PhysicallyPlausible(essential, options, &evidence->pure_rotation);
+  evidence->in_front = essential.in_front / double(fitted.inliers.size());
+  evidence->parallax_deg = essential.parallax_deg;
+  evidence->rotation_deg = RotationAngleDeg(essential.R);
+  evidence->rotation = essential.R;
+  evidence->translation = essential.t;
+  return geometry && evidence->rotation_deg <= options.max_rotation_deg &&
+         evidence->spread >= options.min_spread;
 }
 
 }  // namespace
@@ -644,31 +639,32 @@ Status LoopDetector::Verify(const FeatureSet& features, const FeatureVector& dir
     epipolar.min_inliers = std::max<size_t>(epipolar.min_inliers, params_.small_frame_min_inliers);
   }
   LoopEvidence& evidence = result->evidence;
-  const bool calibrated = params_.calibrated.enabled && camera != nullptr && candidate.has_camera();
-  bool verified = false;
-  if (calibrated) {
-    verified = CheckCalibrated(*camera, candidate.camera, features.keypoints, candidate.keypoints,
-                               matches, epipolar.min_inliers, params_.calibrated, result);
-  } else {
-    EpipolarResult fitted =
-        VerifyEpipolar(features.keypoints, candidate.keypoints, matches, epipolar);
-    result->fundamental = fitted.fundamental;
-    result->inliers = std::move(fitted.inliers);
-    evidence.inliers = uint32_t(result->inliers.size());
-    evidence.spread =
-        InlierSpread(features.keypoints, candidate.keypoints, result->inliers, kSpreadGrid);
-    verified = fitted.verified && evidence.spread >= params_.min_spread;
-  }
+  EpipolarResult fitted =
+      VerifyEpipolar(features.keypoints, candidate.keypoints, matches, epipolar);
+  result->fundamental = fitted.fundamental;
+  evidence.inliers = uint32_t(fitted.inliers.size());
+  evidence.spread =
+      InlierSpread(features.keypoints, candidate.keypoints, fitted.inliers, kSpreadGrid);
+  // With both cameras known, the evidence says how the inliers triangulate; the calibrated check,
+  // when enabled, then decides instead of the uncalibrated spread floor.
+  const bool plausible =
+      fitted.verified && camera != nullptr && candidate.has_camera() &&
+      MeasureCalibrated(*camera, candidate.camera, features.keypoints, candidate.keypoints, fitted,
+                        epipolar.threshold_px, params_.calibrated, &evidence);
+  const bool checked_calibrated = params_.calibrated.enabled && evidence.calibrated;
+  const bool verified =
+      fitted.verified && (checked_calibrated ? plausible : evidence.spread >= params_.min_spread);
+  result->inliers = std::move(fitted.inliers);
   if (!verified) result->status = LoopStatus::kFailedGeometry;
   if (strong != nullptr) {
-    // Calibrated, the check itself has ruled out what R_H guards against (no parallax, points
+    // The calibrated check itself has ruled out what R_H guards against (no parallax, points
     // behind a camera); otherwise the homography's RANSAC runs only when still needed.
-    *strong =
-        verified && evidence.spread >= params_.strong_min_spread &&
-        (calibrated ? !evidence.pure_rotation
-                    : SelectTwoViewModel(features.keypoints, candidate.keypoints, result->inliers,
-                                         result->fundamental, params_.model_selection)
-                              .homography_ratio <= params_.strong_max_homography_ratio);
+    *strong = verified && evidence.spread >= params_.strong_min_spread &&
+              (checked_calibrated
+                   ? !evidence.pure_rotation
+                   : SelectTwoViewModel(features.keypoints, candidate.keypoints, result->inliers,
+                                        result->fundamental, params_.model_selection)
+                             .homography_ratio <= params_.strong_max_homography_ratio);
   }
   result->timings.verification = MsSince(start);
   return Status::Ok();

@@ -116,26 +116,24 @@ struct MetricCheckOptions {
   double min_sigma_px = 0.5;      // floor of the residual sigma of the covariance (pixels)
 };
 
-// The calibrated check of a loop (Verify, when the query and the candidate both have a camera
-// matrix: a keyframe client that sends its intrinsics, `recog eval place --camera`). Twelve
-// inliers of a fundamental matrix is what a repeated façade seen from elsewhere can give; the
-// essential matrix (5 degrees of freedom, fitted by the five-point algorithm, so that few
-// correspondences suffice) must also make physical sense:
-//  - its inliers triangulate in front of both cameras (min_in_front; a point whose two rays are
-//    parallel counts when they point the same way): matches between look-alike structures fit
-//    some geometry, often one that puts points behind a camera; or else, without parallax (the
-//    inliers' median ray angle under min_parallax_deg), the rotation alone explains them
-//    (min_rotation_only of them): a camera that turned on the spot, where depth and F are
-//    undefined;
-//  - the cameras look at most max_rotation_deg apart: two views of one place share their field
-//    of view;
-//  - the inliers cover min_spread of both images (InlierSpread, 4 x 4 cells): not one row of
-//    windows.
-// Defaults chosen on the Strecha keyframe walks of shared/data (docs/places.md, "Keyframe
-// streams"): over all their pairs with 12 or more inliers, ORB pairs of different places put
-// fewer than 20 % of their inliers on the true geometry, same-place pairs mostly over 30 %.
+// The calibrated evidence and check of a loop (Verify, when the query and the candidate both
+// have a camera matrix: a keyframe client that sends its intrinsics, `recog eval place
+// --camera`). The fundamental matrix's inliers are triangulated through the essential matrix
+// K_match^T F K_query, which gives LoopEvidence its share in front, parallax and rotation. With
+// `enabled`, they must also make physical sense, instead of the uncalibrated spread floor:
+//  - they triangulate in front of both cameras (min_in_front; a point whose two rays are
+//    parallel counts when they point the same way); or else, without parallax (the inliers'
+//    median ray angle under min_parallax_deg), the rotation alone explains them
+//    (min_rotation_only of them): a camera that turned on the spot;
+//  - the cameras look at most max_rotation_deg apart;
+//  - the inliers cover min_spread of both images (InlierSpread, 4 x 4 cells).
+// Default off: on the Strecha keyframe walks of shared/data it costs recall and lets through
+// false loops the spread floor stops (keyframes preset with the camera: 10 of 51 right and none
+// false without it, 8 right and 2 false with it; docs/places.md, "Repeated architecture and wide
+// baselines"): the look-alike façades triangulate in front with ample parallax, while true
+// pairs seen at 3 m or 80 degrees put a third of their inliers behind.
 struct CalibratedCheckOptions {
-  bool enabled = true;  // false: the fundamental matrix, as without camera matrices
+  bool enabled = false;  // true: decides instead of the spread floor (see above)
   EssentialOptions essential;
   double min_in_front = 0.9;
   double max_rotation_deg = 90.0;
@@ -199,7 +197,7 @@ struct LoopDetectorParams {
   MatchOptions matching;              // ratio 0.6 (§4.4.6), max Hamming distance 50
   EpipolarOptions epipolar;           // 2 px, 12 inliers (Table 4.4)
   MetricCheckOptions metric;          // the 3D check, for frames with a FrameGeometry
-  CalibratedCheckOptions calibrated;  // step 6 when both frames have a camera matrix
+  CalibratedCheckOptions calibrated;  // evidence (and, enabled, the check) of calibrated frames
 
   // Acceptance on strong evidence (step 6; not in the thesis): a candidate consistent with fewer
   // than temporal_matches previous queries, but at least strong_temporal_matches, is verified and
@@ -215,8 +213,8 @@ struct LoopDetectorParams {
   // Default 0.25: the inliers occupy at least 4 of the 4 x 4 cells over each image's keypoints,
   // in both images (InlierSpread): a match of one small textured patch is not a place.
   double strong_min_spread = 0.25;
-  // The spread every verified loop needs without camera matrices (the calibrated check has its
-  // own, CalibratedCheckOptions::min_spread). Default 0 (video: consecutive queries back a loop);
+  // The spread every verified loop needs (unless the calibrated check, enabled, decides with its
+  // own CalibratedCheckOptions::min_spread). Default 0 (video: consecutive queries back a loop);
   // the keyframes preset 0.25: on the Strecha courtyard the look-alike façades' loops kept their
   // inliers on 2 or 3 of the 16 cells, one row of windows.
   double min_spread = 0.0;
@@ -271,10 +269,10 @@ StatusOr<LoopDetectorParams> ParseLoopDetectorMode(std::string_view mode);
 
 // The figures behind a verified loop, so that a client can gate on its own thresholds (step 6).
 struct LoopEvidence {
-  uint32_t inliers = 0;  // of the two-view model: E when calibrated, else F
+  uint32_t inliers = 0;  // of the fundamental matrix
   double spread = 0;     // InlierSpread over 4 x 4 cells: the smaller share of the two images
-  // Both frames had a camera matrix and the essential matrix was checked; the fields below are
-  // set only then.
+  // Both frames had a camera matrix and the inliers were triangulated through the essential
+  // matrix K_match^T F K_query; the fields below are set only then.
   bool calibrated = false;
   double in_front = 0;         // share of the inliers in front of both cameras
   double parallax_deg = 0;     // median angle between an inlier's two rays
@@ -473,7 +471,8 @@ class LoopDetector {
   // kNone) and `epipolar`, filling correspondences, inliers, fundamental matrix and verification
   // time; the status becomes kFailedGeometry when the check fails. With `strong`, also sets
   // *strong to whether a verified match is strong evidence (inliers, spread, R_H). With a
-  // `camera` for the query (may be null) and a candidate stored with one, the calibrated check.
+  // `camera` for the query (may be null) and a candidate stored with one, the calibrated evidence
+  // (and, enabled, check).
   Status Verify(const FeatureSet& features, const FeatureVector& direct, const cv::Matx33d* camera,
                 const EpipolarOptions& epipolar, LoopResult* result, bool* strong = nullptr) const;
   // Keyframe confirmations for a verified loop of frame `frame` (status kLoopDetected): counts the
@@ -481,9 +480,10 @@ class LoopDetector {
   // kCandidate while they are fewer than keyframe_confirmations.
   Status Confirm(const FeatureSet& features, const FeatureVector& direct, const cv::Matx33d* camera,
                  uint64_t frame, LoopResult* result) const;
-  // The rotation X_b = R X_a between two frames from their own matches (the calibrated check's
-  // essential matrix; nullopt when they do not hold one with epipolar.min_inliers inliers): `a` is
-  // the frame being processed or an entry, `b` an entry of the map.
+  // The rotation X_b = R X_a between two frames from their own matches (the five-point essential
+  // matrix, CalibratedCheckOptions::essential; nullopt when they do not hold one with
+  // epipolar.min_inliers inliers): `a` is the frame being processed or an entry, `b` an entry of
+  // the map.
   StatusOr<std::optional<cv::Matx33d>> RotationBetween(const std::vector<cv::KeyPoint>& a_keypoints,
                                                        const cv::Mat& a_descriptors,
                                                        const FeatureVector& a_direct,

@@ -788,10 +788,10 @@ TEST_F(LoopDetectorTest, BadFrameGeometryAndMetricParametersAreInvalidArgument) 
   EXPECT_EQ(db_->size(), 0u) << "a refused frame is not added";
 }
 
-// Frames with a camera matrix are verified with the essential matrix, and their loops carry its
-// figures: on the tour's revisits (the same views shifted a few pixels: no parallax to speak of,
-// every point in front or at infinity).
-TEST_F(LoopDetectorTest, CalibratedLoopsAreCheckedWithTheEssentialMatrixAndCarryItsEvidence) {
+// Loops between frames with a camera matrix carry the figures of the essential matrix of their
+// inliers: on the tour's revisits (the same views shifted a few pixels: no parallax to speak of,
+// every point in front or at infinity). The calibrated check decides only when enabled.
+TEST_F(LoopDetectorTest, CalibratedLoopsCarryTheEssentialEvidenceAndTheCheckDecidesWhenEnabled) {
   const std::vector<FeatureSet> tour = Extract(TourWithRevisits());
   const std::vector<LoopResult> results = RunCalibrated(tour, params_, NewDatabase("cal").get());
   int loops = 0;
@@ -813,9 +813,16 @@ TEST_F(LoopDetectorTest, CalibratedLoopsAreCheckedWithTheEssentialMatrixAndCarry
     EXPECT_EQ(r.evidence.inliers, r.inliers.size());
     EXPECT_GT(r.evidence.spread, 0.0);
   }
-  // A rotation bound no loop can meet: every candidate fails the check.
+  // A rotation bound no loop can meet: off by default, it changes nothing; enabled, every
+  // candidate fails the check.
   LoopDetectorParams strict = params_;
   strict.calibrated.max_rotation_deg = 0.0;
+  int unchecked = 0;
+  for (const LoopResult& r : RunCalibrated(tour, strict, NewDatabase("unchecked").get())) {
+    unchecked += r.status == LoopStatus::kLoopDetected;
+  }
+  EXPECT_EQ(unchecked, loops);
+  strict.calibrated.enabled = true;
   for (const LoopResult& r : RunCalibrated(tour, strict, NewDatabase("strict").get())) {
     EXPECT_NE(r.status, LoopStatus::kLoopDetected);
   }
