@@ -287,6 +287,9 @@ void CountResult(const LoopResult& r, int query, int match, const GroundTruth& t
         trajectory->poses[size_t(query)], trajectory->poses[size_t(match)], trajectory->K,
         sequence.features[size_t(query)], sequence.features[size_t(match)], r.inliers);
     loop.correct = loop.correct && loop.geometry->agrees;
+    // A pair listed as ambiguous is still false when the loop's own inliers miss the true
+    // geometry: they matched something else (a look-alike façade).
+    loop.ambiguous = loop.ambiguous && loop.geometry->agrees;
   }
   loop.normalized_score = r.normalized_score;
   loop.acceptance = r.acceptance;

@@ -103,7 +103,9 @@ struct DetectedLoop {
   // The ground truth marks the pair and, with a trajectory, the loop's inliers agree with the true
   // geometry (`geometry->agrees`).
   bool correct = false;
-  bool ambiguous = false;  // the pair is listed as ambiguous: left out of precision
+  // The pair is listed as ambiguous (and, with a trajectory, the inliers agree with the true
+  // geometry): left out of precision.
+  bool ambiguous = false;
   double normalized_score = 0;
   uint32_t inliers = 0;
   LoopAcceptance acceptance = LoopAcceptance::kNone;  // how the detector accepted it

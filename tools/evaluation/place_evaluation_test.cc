@@ -45,12 +45,13 @@ TEST(PlaceEvaluationTest, CorridorIsDetectedWithFullPrecisionAndTheTargetRecall)
   EXPECT_EQ(e->timing_ms.count("verification"), 1u);
 }
 
-// The issue-41 courtyard: keyframes metres apart whose other façades repeat the same windows.
-// Judged by the true geometry of their poses (a loop whose inliers do not agree with it is false)
-// with its ambiguous pairs left out: the keyframes preset, with the camera known, has no false
-// loop; the detector before it (F alone, no spread floor) closed 22 -> 2 on 13 inliers none of
-// which lie on the true geometry.
-TEST(PlaceEvaluationTest, TheCourtyardsLookAlikeFacadesCloseNoLoop) {
+// The issue-41 courtyard: keyframes metres apart whose other façades repeat the same windows,
+// judged by the true geometry of their poses. The detector before the calibrated check (F alone,
+// no spread floor) closed 22 -> 2 on 13 inliers none of which lie on the true geometry; the
+// keyframes preset with the camera known does not, and is more precise. It still closes 23 -> 2,
+// a pair listed as ambiguous whose 15 inliers (one on the true geometry) match a look-alike
+// façade: the evaluation counts it false rather than leaving it out of precision.
+TEST(PlaceEvaluationTest, TheCourtyardsLookAlikeFacadesAreJudgedByTheTrueGeometry) {
   RECOG_SKIP_WITHOUT_SHARED_DATA("places/strecha-keyframes/castle-P30/poses.txt");
   const std::string scene = testing::SharedData("places/strecha-keyframes/castle-P30/");
   auto source = FrameSource::Open(scene + "images");
@@ -70,14 +71,19 @@ TEST(PlaceEvaluationTest, TheCourtyardsLookAlikeFacadesCloseNoLoop) {
   keyframes.detector = LoopDetectorParams::Keyframes();
   auto e = EvaluatePlace(*sequence, *truth, PlaceVocabulary(), keyframes, nullptr, &trajectory);
   ASSERT_TRUE(e.ok()) << e.status().ToString();
-  EXPECT_EQ(e->precision, 1.0);
-  EXPECT_EQ(e->correct, e->detections - e->ambiguous);
   EXPECT_GE(e->correct, 6);
   for (const DetectedLoop& loop : e->loops) {
     if (loop.status != LoopStatus::kLoopDetected) continue;
     EXPECT_TRUE(loop.evidence.calibrated);
     ASSERT_TRUE(loop.geometry.has_value());
     EXPECT_GT(loop.geometry->distance_m, 0.0);
+    EXPECT_FALSE(loop.query == 21 && loop.match == 1);
+    // Whatever the pair's listing, a loop is right only when its inliers agree with the truth,
+    // and an ambiguous pair is left out only then.
+    if (!loop.geometry->agrees) {
+      EXPECT_FALSE(loop.correct);
+      EXPECT_FALSE(loop.ambiguous) << loop.query + 1 << " -> " << loop.match + 1;
+    }
   }
 
   PlaceEvaluationOptions before = keyframes;
@@ -85,7 +91,7 @@ TEST(PlaceEvaluationTest, TheCourtyardsLookAlikeFacadesCloseNoLoop) {
   before.detector.min_spread = 0.0;
   auto old = EvaluatePlace(*sequence, *truth, PlaceVocabulary(), before, nullptr, &trajectory);
   ASSERT_TRUE(old.ok());
-  EXPECT_LT(old->precision, 1.0);
+  EXPECT_LT(old->precision, e->precision);
   bool look_alike = false;
   for (const DetectedLoop& loop : old->loops) {
     if (loop.status != LoopStatus::kLoopDetected || loop.query != 21 || loop.match != 1) continue;

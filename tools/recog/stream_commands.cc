@@ -440,6 +440,22 @@ int RunStream(const StreamArgs& args, RecognitionClient& client) {
                     m.inliers());
       }
     }
+    if (r.status() == pb::LOOP_STATUS_CANDIDATE && r.has_match_frame_id()) {
+      // Awaiting the next keyframes' confirmation (MapSettings.keyframe_confirmations): shown,
+      // not counted as a loop.
+      if (args.server.json) {
+        json candidate = {{"event", "candidate"}};
+        candidate.update(LoopJson(r));
+        std::printf("%s\n", candidate.dump().c_str());
+      } else {
+        progress.Finish();
+        std::printf("frame %s: candidate loop with frame %s, %u inliers, awaiting confirmation\n",
+                    sent.Describe(r.frame_id()).c_str(), sent.Describe(r.match_frame_id()).c_str(),
+                    r.inliers());
+      }
+      std::fflush(stdout);
+      return true;
+    }
     if (r.status() != pb::LOOP_STATUS_LOOP_DETECTED || !r.has_match_frame_id()) return true;
     ++loops;
     if (args.server.json) {
