@@ -242,13 +242,12 @@ struct LoopDetectorParams {
   // N > 0, a verified loop is first a candidate (kCandidate), and it is accepted when each of the
   // next N queried frames also closes a verified loop next to it: a match at most island_max_gap
   // ids from the previous loop's, at most consistency_max_query_gap frames later, and, when both
-  // loops were checked calibrated, a relative motion that agrees with the previous loop's (the
-  // rotation the two loops imply between the two query frames within
+  // loops have calibrated evidence (cameras known), a relative motion that agrees with the previous
+  // loop's (the rotation the two loops imply between the two query frames within
   // max_motion_disagreement_deg of the one their own matches give, when their matches and the
   // two match frames' fix one: frames too alike or too far apart leave it unchecked). Once
-  // confirmed, the loops
-  // that go on next to it are accepted at once. Latency: the first loop of a revisit is answered
-  // N frames late (as a candidate before). Default 0: accepted at once.
+  // confirmed, the loops that go on next to it are accepted at once. Latency: the first loop of a
+  // revisit is answered N frames late (as a candidate before). Default 0: accepted at once.
   uint32_t keyframe_confirmations = 0;
   double max_motion_disagreement_deg = 15.0;
 
@@ -438,7 +437,7 @@ class LoopDetector {
     uint64_t frame = 0;               // index of its query frame in the sequence
     EntryId query = kInvalidEntryId;  // the entry its query frame became
     EntryId match = kInvalidEntryId;
-    std::optional<cv::Matx33d> rotation;  // X_match = R X_query, when checked calibrated
+    std::optional<cv::Matx33d> rotation;  // X_match = R X_query, when the evidence is calibrated
     uint32_t confirmations = 0;
   };
 
