@@ -268,6 +268,11 @@ Status LoopDetectorParams::Validate() const {
         "the calibrated check needs a threshold > 0, a confidence in (0, 1), iterations >= 1, "
         "shares in [0, 1], a rotation in [0, 180] and a parallax >= 0");
   }
+  if (keyframe_confirmations > kMaxKeyframeConfirmations) {
+    return Status::InvalidArgument("keyframe_confirmations must be at most " +
+                                   std::to_string(kMaxKeyframeConfirmations) + ", not " +
+                                   std::to_string(keyframe_confirmations));
+  }
   if (!(max_motion_disagreement_deg >= 0.0 && max_motion_disagreement_deg <= 180.0)) {
     return Status::InvalidArgument("max_motion_disagreement_deg must be in [0, 180], not " +
                                    std::to_string(max_motion_disagreement_deg));

@@ -248,6 +248,8 @@ struct LoopDetectorParams {
   // two match frames' fix one: frames too alike or too far apart leave it unchecked). Once
   // confirmed, the loops that go on next to it are accepted at once. Latency: the first loop of a
   // revisit is answered N frames late (as a candidate before). Default 0: accepted at once.
+  // At most kMaxKeyframeConfirmations: more would hold every loop back for ever.
+  static constexpr uint32_t kMaxKeyframeConfirmations = 100;
   uint32_t keyframe_confirmations = 0;
   double max_motion_disagreement_deg = 15.0;
 

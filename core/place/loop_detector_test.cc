@@ -862,6 +862,11 @@ TEST_F(LoopDetectorTest, AKeyframeConfirmationTurnsTheFirstLoopIntoACandidate) {
   }
   confirmed.max_motion_disagreement_deg = 181.0;
   EXPECT_EQ(confirmed.Validate().code(), StatusCode::kInvalidArgument);
+  confirmed.max_motion_disagreement_deg = 15.0;
+  confirmed.keyframe_confirmations = LoopDetectorParams::kMaxKeyframeConfirmations;
+  EXPECT_TRUE(confirmed.Validate().ok());
+  confirmed.keyframe_confirmations = 0xFFFFFFFFu;
+  EXPECT_EQ(confirmed.Validate().code(), StatusCode::kInvalidArgument);
 }
 
 // A small frame needs small_frame_min_inliers in every verification; a frame of unknown size

@@ -374,6 +374,14 @@ TEST_F(PlaceServiceTest, AConfirmedLoopComesAfterItsCandidateAndCarriesItsEviden
   pb::MapInfo info;
   ASSERT_TRUE(GetMap("confirmed", &info).ok());
   EXPECT_EQ(info.settings().keyframe_confirmations(), 1u);
+  // A number that would hold every loop back for ever is refused, and no map is made.
+  pb::MapSettings forever;
+  forever.set_keyframe_confirmations(4000000000u);
+  const grpc::Status refused = CreateMap("forever", forever);
+  EXPECT_EQ(refused.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_NE(refused.error_message().find("keyframe_confirmations"), std::string::npos)
+      << refused.error_message();
+  EXPECT_EQ(GetMap("forever", &info).error_code(), grpc::StatusCode::NOT_FOUND);
 }
 
 TEST_F(PlaceServiceTest, AKeyframeMapKeepsItsPresetAcrossARestartAndAnUnknownPresetIsRefused) {

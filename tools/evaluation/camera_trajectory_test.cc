@@ -71,7 +71,8 @@ TEST_F(CameraTrajectoryTest, PosesAreReadAndBadLinesNamed) {
   EXPECT_EQ(ReadCameraPoses((dir_ / "none.txt").string()).status().code(), StatusCode::kNotFound);
   for (const std::string& bad :
        {std::string("1 0 0 0 1 0 0 0 1 0 0\n"), std::string("2 0 0 0 1 0 0 0 1 0 0 0\n"),
-        std::string("1 0 0 0 1 0 0 0 1 0 0 x\n"), std::string("# nothing\n")}) {
+        std::string("1 0 0 0 1 0 0 0 1 0 0 x\n"), std::string("1 0 0 0 1 0 0 0 1 nan 0 0\n"),
+        std::string("1 0 0 0 1 0 0 0 1 0 inf 0\n"), std::string("# nothing\n")}) {
     const Status status = ReadCameraPoses(Write("bad.txt", bad)).status();
     EXPECT_EQ(status.code(), StatusCode::kInvalidArgument) << bad;
   }
