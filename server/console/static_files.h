@@ -2,7 +2,7 @@
 // from the folders given (the pages, Debian's three.js and Chart.js): every regular file of a
 // known type gets the URL path of its place in its folder, and a request is answered only when
 // its decoded path is one of them. Nothing else is reachable (no "..", no NUL trick such as
-// "app.js%00.html", no file added later), and each file's type comes from its own extension.
+// "main.js%00.html", no file added later), and each file's type comes from its own extension.
 // Thread-safe once built (const).
 #pragma once
 

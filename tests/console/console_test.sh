@@ -6,15 +6,17 @@
 # token: the map and its loops with inlier lines, the lion's 3D points, the photo recognised, a
 # corridor photo found in the map, the live charts, and the corridor's precision-recall curve
 # (`recog eval place --plot`) on the Charts page. Screenshots go to $RECOG_CONSOLE_SCREENSHOTS (default: a temporary folder).
-# Skips (77) without $RECOG_SHARED_DATA or without Chromium, chromedriver and Selenium.
+# The shared data: $RECOG_SHARED_DATA, default ../shared/data next to the project (PROJECT_DIR).
+# Skips (77) when it has no corridor or RoboEarth data, or without Chromium, chromedriver and
+# Selenium.
 # Usage: console_test.sh RECOG_BINARY RECOGD_BINARY PROJECT_DIR
 set -u
 recog=$1
 recogd=$2
 project=$3
-data=${RECOG_SHARED_DATA:-}
-if [ -z "$data" ] || [ ! -d "$data/places/corridor" ] || [ ! -d "$data/objects/roboearth" ]; then
-  echo "skip: RECOG_SHARED_DATA (corridor and RoboEarth) is not set"
+data=${RECOG_SHARED_DATA:-$project/../shared/data}
+if [ ! -d "$data/places/corridor" ] || [ ! -d "$data/objects/roboearth" ]; then
+  echo "skip: the corridor or RoboEarth data is not under $data (set RECOG_SHARED_DATA)"
   exit 77
 fi
 for tool in /usr/bin/chromium /usr/bin/chromedriver; do

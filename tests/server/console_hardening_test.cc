@@ -437,10 +437,14 @@ TEST_F(ConsoleHardeningTest, EveryAnswerForbidsFramingAndSniffingAndOnlyTheConso
     EXPECT_NE(response.find("X-Content-Type-Options: nosniff"), std::string::npos) << path;
     EXPECT_NE(response.find("X-Frame-Options: DENY"), std::string::npos) << path;
   }
-  EXPECT_EQ(StatusOf(RawGet("/static/app.js")), 200);
-  for (const std::string path : {"/static/app.js%00.html", "/static/../../CMakeLists.txt",
-                                 "/static/%2e%2e/%2e%2e/CMakeLists.txt", "/static/",
-                                 "/vendor/three/../../../../etc/passwd"}) {
+  for (const std::string path : {"/static/main.js", "/static/api.js", "/static/dom.js",
+                                 "/static/format.js", "/static/linechart.js", "/static/maps.js"}) {
+    EXPECT_EQ(StatusOf(RawGet(path)), 200) << path;
+  }
+  for (const std::string path :
+       {"/static/main.js%00.html", "/static/app.js", "/static/../../CMakeLists.txt",
+        "/static/%2e%2e/%2e%2e/CMakeLists.txt", "/static/",
+        "/vendor/three/../../../../etc/passwd"}) {
     EXPECT_EQ(StatusOf(RawGet(path)), 404) << path;
   }
   const std::string script = RawGet("/api/%3Cscript%3Ealert(1)%3C%2Fscript%3E%00.html");

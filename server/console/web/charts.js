@@ -3,7 +3,10 @@
 // redrawn from that JSON as a line chart with the same title, axes, ranges, series and colours,
 // the point labels (e.g. each point's alpha) in the tooltip.
 
-import { api, el, errorBox, formatDate, lineChart } from './app.js';
+import { api } from './api.js';
+import { el, errorBox } from './dom.js';
+import { formatDate } from './format.js';
+import { lineChart } from './linechart.js';
 
 // for a series without a colour of its own
 const COLOURS = ['#1450c8', '#dc2828', '#28a028', '#8e24aa', '#fb8c00'];

@@ -2,7 +2,10 @@
 // percentiles, queue depth and errors — as four line charts refreshed every 2 seconds while the
 // page is open.
 
-import { api, el, errorBox, formatTime, lineChart, num } from './app.js';
+import { api } from './api.js';
+import { el, errorBox } from './dom.js';
+import { formatTime, num } from './format.js';
+import { lineChart } from './linechart.js';
 
 const REFRESH_MS = 2000;
 

@@ -2,7 +2,9 @@
 // and the loops it answered since the server started, each drawn as the two frames' thumbnails
 // with the RANSAC inlier pairs between them.
 
-import { api, apiImage, el, errorBox, definitionList, formatBytes, formatCount, formatDate, enumName, num } from './app.js';
+import { api, apiImage } from './api.js';
+import { el, errorBox, definitionList } from './dom.js';
+import { formatBytes, formatCount, formatDate, enumName, num } from './format.js';
 import { drawPairs } from './pairs.js';
 
 export async function render(section, name, signal) {

@@ -4,7 +4,9 @@
 
 import * as THREE from 'three';
 import { OrbitControls } from 'three/OrbitControls';
-import { api, apiImage, rpc, el, errorBox, definitionList, formatBytes, formatCount, formatDate, enumName, num } from './app.js';
+import { api, apiImage, rpc } from './api.js';
+import { el, errorBox, definitionList } from './dom.js';
+import { formatBytes, formatCount, formatDate, enumName, num } from './format.js';
 
 export async function render(section, name, signal) {
   if (name) await renderModel(section, name, signal);

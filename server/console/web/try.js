@@ -2,7 +2,9 @@
 // repository (each drawn with its outline and its pose's axes) or the place in a map (the photo
 // beside the recognised frame, with the inlier pairs between them).
 
-import { api, apiImage, rpc, el, errorBox, enumName, num } from './app.js';
+import { api, apiImage, rpc } from './api.js';
+import { el, errorBox } from './dom.js';
+import { enumName, num } from './format.js';
 import { drawPairs } from './pairs.js';
 
 const STATUS_TEXT = {
