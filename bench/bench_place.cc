@@ -39,6 +39,8 @@
 #include <thread>
 
 #include "bench/bench_support.h"
+#include "core/common/elapsed.h"
+#include "core/common/median.h"
 #include "core/geometry/frame_points.h"
 #include "core/index/memory_index_store.h"
 #include "core/place/map_registry.h"
@@ -76,9 +78,7 @@ std::vector<FeatureSet> ExtractFrames(const cli::SequenceGenerator& generator, i
       if (!frame.ok()) std::exit(2);
       const auto start = std::chrono::steady_clock::now();
       if (!extractor->Extract(frame->image, &features[size_t(i - begin)]).ok()) std::exit(2);
-      (*feature_ms)[size_t(i - begin)] =
-          std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
-              .count();
+      (*feature_ms)[size_t(i - begin)] = MillisecondsSince(start);
     }
   };
   std::thread helper(work);
@@ -148,9 +148,7 @@ void RunPipeline(benchmark::State& state, const LoopDetectorParams& params, bool
                  .ok()) {
           std::exit(2);
         }
-        points_ms =
-            std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
-                .count();
+        points_ms = MillisecondsSince(start);
       }
       auto r = detector.Process(features, std::nullopt, {}, with_depth ? &geometry : nullptr);
       if (!r.ok()) std::exit(2);
@@ -179,7 +177,7 @@ void RunPipeline(benchmark::State& state, const LoopDetectorParams& params, bool
     }
   }
   for (const auto& [stage, values] : times) {
-    state.counters["median_ms_" + stage] = cli::Median(values);
+    state.counters["median_ms_" + stage] = Median(values);
   }
   state.counters["measured_frames"] = double(times["total"].size());
   state.counters["verifications"] = double(times["verification_when_run"].size());
@@ -239,7 +237,7 @@ void BM_Table42(benchmark::State& state) {
       }
       state.counters[m.name + "_recall"] = e->recall;
       state.counters[m.name + "_precision"] = e->precision;
-      state.counters[m.name + "_verify_median_ms"] = cli::Median(verification);
+      state.counters[m.name + "_verify_median_ms"] = Median(verification);
       state.counters[m.name + "_verify_max_ms"] =
           verification.empty() ? 0 : *std::max_element(verification.begin(), verification.end());
     }
@@ -276,12 +274,11 @@ std::vector<FeatureSet> PhotoFeatures(double* extraction_median_ms) {
     if (!image.ok()) continue;
     const auto start = std::chrono::steady_clock::now();
     if (!extractor->Extract(*image, &features).ok()) continue;
-    ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
-                     .count());
+    ms.push_back(MillisecondsSince(start));
     if (features.size() >= 50) photos.push_back(features);
   }
   std::fprintf(stderr, "bench_place: features of %zu photos\n", photos.size());
-  if (extraction_median_ms != nullptr) *extraction_median_ms = cli::Median(ms);
+  if (extraction_median_ms != nullptr) *extraction_median_ms = Median(ms);
   return photos;
 }
 
@@ -345,9 +342,7 @@ void BM_Relocalize_Group10x2600_vs_One26K(benchmark::State& state) {
     const RelocalizationFrame query{&frame, std::nullopt, nullptr};
     const auto start = std::chrono::steady_clock::now();
     auto found = Relocalize(maps, std::span(&query, 1));
-    ms->push_back(
-        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
-            .count());
+    ms->push_back(MillisecondsSince(start));
     if (!found.ok()) std::exit(2);
     return std::move(found).value();
   };
@@ -362,14 +357,10 @@ void BM_Relocalize_Group10x2600_vs_One26K(benchmark::State& state) {
   // Where a group query's time goes: SearchMaps' steps, timed one by one.
   std::vector<double> convert_ms, shortlist_ms, one_shortlist_ms, recognise_ms, verified_maps;
   for (const FeatureSet& query : fleet.queries) {
-    const auto since = [](auto start) {
-      return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
-          .count();
-    };
     LoopDetector::ConvertedFrame frame;
     auto start = std::chrono::steady_clock::now();
     if (!fleet.group[0]->ConvertForQuery(query, &frame).ok()) std::exit(2);
-    convert_ms.push_back(since(start));
+    convert_ms.push_back(MillisecondsSince(start));
     start = std::chrono::steady_clock::now();
     std::vector<LoopDetector::Shortlist> shortlists;
     double reference = 0;
@@ -377,27 +368,27 @@ void BM_Relocalize_Group10x2600_vs_One26K(benchmark::State& state) {
       shortlists.push_back(std::move(map->Shortlist(frame)).value());
       reference = std::max(reference, shortlists.back().best_score);
     }
-    shortlist_ms.push_back(since(start));
+    shortlist_ms.push_back(MillisecondsSince(start));
     start = std::chrono::steady_clock::now();
     if (!fleet.one[0]->Shortlist(frame).ok()) std::exit(2);
-    one_shortlist_ms.push_back(since(start));
+    one_shortlist_ms.push_back(MillisecondsSince(start));
     start = std::chrono::steady_clock::now();
     int verified = 0;
     for (size_t m = 0; m < fleet.group.size(); ++m) {
       auto r = fleet.group[m]->Recognise(query, frame, shortlists[m], reference);
       verified += r.ok() && r->loop.timings.verification > 0;
     }
-    recognise_ms.push_back(since(start));
+    recognise_ms.push_back(MillisecondsSince(start));
     verified_maps.push_back(verified);
   }
-  state.counters["group_conversion_median_ms"] = cli::Median(convert_ms);
-  state.counters["group_shortlists_median_ms"] = cli::Median(shortlist_ms);
-  state.counters["group_recognise_median_ms"] = cli::Median(recognise_ms);
-  state.counters["one_map_shortlist_median_ms"] = cli::Median(one_shortlist_ms);
-  state.counters["group_verified_maps_median"] = cli::Median(verified_maps);
-  state.counters["group_median_ms"] = cli::Median(group_ms);
-  state.counters["one_map_median_ms"] = cli::Median(one_ms);
-  state.counters["ratio"] = cli::Median(group_ms) / cli::Median(one_ms);
+  state.counters["group_conversion_median_ms"] = Median(convert_ms);
+  state.counters["group_shortlists_median_ms"] = Median(shortlist_ms);
+  state.counters["group_recognise_median_ms"] = Median(recognise_ms);
+  state.counters["one_map_shortlist_median_ms"] = Median(one_shortlist_ms);
+  state.counters["group_verified_maps_median"] = Median(verified_maps);
+  state.counters["group_median_ms"] = Median(group_ms);
+  state.counters["one_map_median_ms"] = Median(one_ms);
+  state.counters["ratio"] = Median(group_ms) / Median(one_ms);
   state.counters["queries"] = double(fleet.queries.size());
   state.counters["group_right_map_first"] = group_found;
   state.counters["one_map_recognised"] = one_found;
@@ -466,7 +457,7 @@ void BM_Rig_2Cameras_26K(benchmark::State& state) {
     state.counters["map_camera_images"] = double(2 * kRigFrames);
   }
   for (const auto& [stage, values] : times) {
-    state.counters["median_ms_" + stage] = cli::Median(values);
+    state.counters["median_ms_" + stage] = Median(values);
   }
   state.counters["median_ms_features_one_image"] = extraction_ms;
   state.counters["rig_frames_measured"] = double(times["detector"].size());

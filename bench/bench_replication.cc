@@ -35,6 +35,7 @@
 
 #include "bench/bench_support.h"
 #include "client/cpp/recognition_client.h"
+#include "core/common/elapsed.h"
 #include "core/object/builder/model_builder.h"
 #include "core/object/formats/model_file.h"
 #include "core/vocabulary/vocabulary_io.h"
@@ -52,10 +53,6 @@ struct Options {
   int uploads = 30;
   std::string json_path;
 };
-
-double MsSince(Clock::time_point from) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - from).count();
-}
 
 StatusOr<std::string> PosterModelFile() {
   RECOG_ASSIGN_OR_RETURN(Vocabulary vocabulary, LoadVocabulary(DefaultObjectVocabularyPath()));
@@ -126,10 +123,11 @@ int Run(const Options& options) {
   while (true) {
     client::Result<std::vector<pb::ModelInfo>> listed = (*replica)->ListModels();
     if (listed.ok() && int(listed->size()) == options.models) break;
-    if (MsSince(start) > 600000) return fail(Status::Unavailable("the replica did not sync"));
+    if (MillisecondsSince(start) > 600000)
+      return fail(Status::Unavailable("the replica did not sync"));
     std::this_thread::sleep_for(std::chrono::milliseconds(2));
   }
-  const double sync_ms = MsSince(start);
+  const double sync_ms = MillisecondsSince(start);
 
   // follow: the lag of each upload, seen by a watcher of the replica's repository.
   std::mutex mutex;

@@ -36,7 +36,5 @@ std::string TempPath(const std::string& name);
 
 // Nearest-rank percentile `p` (0..100) of `sorted` (ascending), 0 when empty.
 double Percentile(const std::vector<double>& sorted, double p);
-// The nearest-rank median of `values`, 0 when empty.
-double Median(std::vector<double> values);
 
 }  // namespace recog::bench

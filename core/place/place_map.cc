@@ -5,6 +5,42 @@
 #include "core/geometry/correspondences.h"
 
 namespace recog {
+namespace {
+
+// `entry` of `database` with `parts`, or nullopt when it is no longer stored (removed since the
+// query, or its map deleted).
+StatusOr<std::optional<EntryRecord>> StoredEntry(const Database& database, EntryId entry,
+                                                 uint32_t parts) {
+  StatusOr<EntryRecord> record = database.Get(entry, parts);
+  if (record.ok()) return std::optional<EntryRecord>(std::move(record).value());
+  if (record.status().code() == StatusCode::kNotFound) return std::optional<EntryRecord>();
+  return record.status();
+}
+
+// The match's timestamp and client id (PlaceFrameResult, RigPlaceResult) from its stored record.
+template <typename Result>
+void SetMatchMetadata(EntryRecord& match, Result* result) {
+  result->match_timestamp = match.metadata.timestamp;
+  result->match_client_id = std::move(match.metadata.client_id);
+}
+
+// Appends a verified loop's inliers as correspondences: inlier (a, b) pairs keypoint a of the
+// query frame with keypoint b of the stored match. INTERNAL for an inlier beyond the keypoints.
+Status AppendCorrespondences(const std::vector<Match>& inliers,
+                             const std::vector<cv::KeyPoint>& query,
+                             const std::vector<cv::KeyPoint>& stored,
+                             std::vector<PlaceCorrespondence>* out) {
+  out->reserve(out->size() + inliers.size());
+  for (const Match& m : inliers) {
+    if (m.a >= query.size() || m.b >= stored.size()) {
+      return Status::Internal("an inlier of the loop refers to no keypoint");
+    }
+    out->push_back({m.a, query[m.a].pt, m.b, stored[m.b].pt});
+  }
+  return Status::Ok();
+}
+
+}  // namespace
 
 Status PlaceResultOptions::Validate() const {
   if (top_k > kMaxTopK) {
@@ -93,25 +129,15 @@ Status PlaceMap::AddRigExtras(const RigFrame& frame, bool correspondences,
   // Any stored camera image of the match carries its timestamp and client id.
   const EntryId any_image =
       loop.pairs.empty() ? EntryId(*loop.match_frame) : loop.pairs.front().entry;
-  StatusOr<EntryRecord> match = database_->Get(any_image, kEntryMetadata);
-  if (match.ok()) {
-    result->match_timestamp = match->metadata.timestamp;
-    result->match_client_id = std::move(match->metadata.client_id);
-  } else if (match.status().code() != StatusCode::kNotFound) {  // a partial frame: no extras
-    return match.status();
-  }
+  RECOG_ASSIGN_OR_RETURN(std::optional<EntryRecord> match,
+                         StoredEntry(*database_, any_image, kEntryMetadata));
+  if (match.has_value()) SetMatchMetadata(*match, result);  // none for a partial frame
   if (!correspondences || loop.status != RigLoopStatus::kLoopDetected) return Status::Ok();
   for (const RigCameraMatch& pair : loop.pairs) {
     RECOG_ASSIGN_OR_RETURN(const EntryRecord stored, database_->Get(pair.entry, kEntryFeatures));
-    const std::vector<cv::KeyPoint>& query = frame.cameras[pair.query_camera].keypoints;
-    std::vector<PlaceCorrespondence>& out = result->correspondences.emplace_back();
-    out.reserve(pair.verification.inliers.size());
-    for (const Match& m : pair.verification.inliers) {
-      if (m.a >= query.size() || m.b >= stored.keypoints.size()) {
-        return Status::Internal("an inlier of the rig loop refers to no keypoint");
-      }
-      out.push_back({m.a, query[m.a].pt, m.b, stored.keypoints[m.b].pt});
-    }
+    RECOG_RETURN_IF_ERROR(
+        AppendCorrespondences(pair.verification.inliers, frame.cameras[pair.query_camera].keypoints,
+                              stored.keypoints, &result->correspondences.emplace_back()));
   }
   return Status::Ok();
 }
@@ -262,13 +288,11 @@ Status PlaceMap::AddExtras(const FeatureSet& features, const PlaceResultOptions&
   const size_t top_k = std::min<size_t>(options.top_k, loop.candidates.size());
   for (size_t i = 0; i < top_k; ++i) {
     const LoopCandidate& candidate = loop.candidates[i];
-    StatusOr<EntryRecord> entry = database_->Get(candidate.entry, kEntryMetadata);
-    if (!entry.ok()) {  // removed since the query (or its map deleted): no longer a candidate
-      if (entry.status().code() == StatusCode::kNotFound) continue;
-      return entry.status();
-    }
-    PlaceCandidate out{candidate.entry, std::move(entry.value().metadata.client_id),
-                       candidate.score, candidate.normalized_score, std::nullopt};
+    RECOG_ASSIGN_OR_RETURN(std::optional<EntryRecord> entry,
+                           StoredEntry(*database_, candidate.entry, kEntryMetadata));
+    if (!entry.has_value()) continue;  // no longer a candidate
+    PlaceCandidate out{candidate.entry, std::move(entry->metadata.client_id), candidate.score,
+                       candidate.normalized_score, std::nullopt};
     if (checked && candidate.entry == loop.match) out.inliers = uint32_t(loop.inliers.size());
     result->candidates.push_back(std::move(out));
   }
@@ -279,32 +303,23 @@ Status PlaceMap::AddExtras(const FeatureSet& features, const PlaceResultOptions&
   const bool correspondences = options.include_correspondences && verified;
   uint32_t parts = kEntryMetadata;
   if (pose || correspondences) parts |= kEntryFeatures;
-  StatusOr<EntryRecord> match = database_->Get(loop.match, parts);
-  if (!match.ok()) {
-    // The matched frame went away with its map (deleted meanwhile): answer without the extras.
-    return match.status().code() == StatusCode::kNotFound ? Status::Ok() : match.status();
-  }
-  result->match_timestamp = match.value().metadata.timestamp;
-  result->match_client_id = std::move(match.value().metadata.client_id);
+  RECOG_ASSIGN_OR_RETURN(std::optional<EntryRecord> match,
+                         StoredEntry(*database_, loop.match, parts));
+  // The matched frame went away with its map (deleted meanwhile): answer without the extras.
+  if (!match.has_value()) return Status::Ok();
+  SetMatchMetadata(*match, result);
   if (options.include_fundamental && verified) result->fundamental = loop.fundamental;
   if (correspondences) {
-    const std::vector<cv::KeyPoint>& stored = match.value().keypoints;
-    result->correspondences.reserve(loop.inliers.size());
-    for (const Match& m : loop.inliers) {
-      if (m.a >= features.keypoints.size() || m.b >= stored.size()) {
-        return Status::Internal("an inlier of the loop refers to no keypoint");
-      }
-      result->correspondences.push_back({m.a, features.keypoints[m.a].pt, m.b, stored[m.b].pt});
-    }
+    RECOG_RETURN_IF_ERROR(AppendCorrespondences(loop.inliers, features.keypoints, match->keypoints,
+                                                &result->correspondences));
   }
   if (pose) {
     RelativePose relative;
     // The matched frame's own camera when it came with one (another robot's), else the query's.
-    const cv::Matx33d& match_camera =
-        match.value().has_camera() ? match.value().camera : *options.camera_matrix;
+    const cv::Matx33d& match_camera = match->has_camera() ? match->camera : *options.camera_matrix;
     if (RelativePoseFromFundamental(loop.fundamental, *options.camera_matrix, match_camera,
-                                    features.keypoints, match.value().keypoints, loop.inliers,
-                                    &relative.R, &relative.t)) {
+                                    features.keypoints, match->keypoints, loop.inliers, &relative.R,
+                                    &relative.t)) {
       result->relative_pose = relative;
     }
   }

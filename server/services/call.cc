@@ -7,6 +7,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include "core/common/elapsed.h"
 #include "core/common/text.h"
 #include "server/api/status_mapping.h"
 
@@ -170,9 +171,7 @@ grpc::ServerUnaryReactor* RunUnary(ServerState& state, grpc::CallbackServerConte
   if (status.ok()) {
     const bool queued =
         state.pool->TrySubmit([&state, context, reactor, call, work](WorkerContext& worker) {
-          call->queue_ms = std::chrono::duration<double, std::milli>(
-                               std::chrono::steady_clock::now() - call->start)
-                               .count();
+          call->queue_ms = MillisecondsSince(call->start);
           grpc::Status result = CheckStillWanted(context);
           if (result.ok()) result = Final(context, work(*call, worker));
           EndCall(state, *call, result);

@@ -6,8 +6,10 @@
 
 #include <spdlog/spdlog.h>
 
+#include "core/common/elapsed.h"
 #include "core/place/map_search.h"
 #include "server/api/converters.h"
+#include "server/api/prepared_frame.h"
 #include "server/api/status_mapping.h"
 #include "server/services/call.h"
 #include "server/services/frame_stream.h"
@@ -21,11 +23,6 @@ constexpr size_t kMaxSearchMaps = 100;    // maps a query may search besides its
 constexpr int kMaxRelocalizeFrames = 10;  // frames of one Relocalize
 
 using SearchSet = std::vector<std::shared_ptr<PlaceMap>>;
-
-using Clock = std::chrono::steady_clock;
-double MsSince(Clock::time_point start) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
-}
 
 std::string Method(const char* name) { return std::string(kService) + name; }
 
@@ -140,6 +137,13 @@ std::string GroupOf(const pb::MapSettings& settings) {
   return settings.has_group() ? settings.group() : std::string();
 }
 
+// The worker's place feature extractor, for PreparedFrame.
+ExtractPlaceFeatures PlaceExtractor(WorkerContext& worker) {
+  return [&worker](const cv::Mat& image, FeatureSet* out) {
+    return worker.ExtractPlaceFeatures(image, out);
+  };
+}
+
 StatusOr<PlaceFrameResult> RunMode(PlaceMap& map, FrameMode mode, const FeatureSet& features,
                                    const DecodedFrame& frame, const PlaceResultOptions& extras,
                                    const FrameGeometry* geometry) {
@@ -155,167 +159,6 @@ StatusOr<PlaceFrameResult> RunMode(PlaceMap& map, FrameMode mode, const FeatureS
   }
   return map.Query(features, timestamp, extras, geometry, frame.excluded_frames);
 }
-
-// A request frame ready for the core: decoded, with its features (the client's, or extracted
-// from its image) and its geometry (3D points from depth or a right image, or only the
-// intrinsics of a pinhole camera) when it has any.
-class PreparedFrame {
- public:
-  // Decodes `request` for maps of `descriptor`, extracts its features and its 3D points, adding
-  // the time each step took to `timing` (decode_ms, features_ms, recognition_ms for the points).
-  // Its images are charged to `budget`, the call's.
-  static StatusOr<PreparedFrame> Prepare(WorkerContext& worker, const pb::Frame& request,
-                                         const DescriptorFormat& descriptor, PixelBudget& budget,
-                                         pb::Timing* timing) {
-    PreparedFrame prepared;
-    RECOG_ASSIGN_OR_RETURN(prepared.frame_, DecodeFrame(request, descriptor, budget));
-    const DecodedFrame& frame = prepared.frame_;
-    timing->set_decode_ms(timing->decode_ms() + frame.decode_ms);
-    if (frame.has_image()) {
-      const auto start = Clock::now();
-      RECOG_RETURN_IF_ERROR(worker.ExtractPlaceFeatures(frame.image, &prepared.extracted_));
-      timing->set_features_ms(timing->features_ms() + MsSince(start));
-    }
-    const auto start = Clock::now();
-    if (!frame.depth.empty() || !frame.right.empty()) {
-      prepared.geometry_.emplace();
-      RECOG_RETURN_IF_ERROR(
-          worker.PlaceFrameGeometry(frame, prepared.features(), &*prepared.geometry_));
-    } else if (frame.intrinsics.has_value() &&
-               std::all_of(frame.intrinsics->distortion.begin(), frame.intrinsics->distortion.end(),
-                           [](double d) { return d == 0; })) {  // pinhole keypoints
-      prepared.geometry_.emplace().K = frame.intrinsics->K();
-    }
-    timing->set_recognition_ms(timing->recognition_ms() + MsSince(start));
-    return prepared;
-  }
-
-  const DecodedFrame& frame() const { return frame_; }
-  const FeatureSet& features() const { return frame_.has_image() ? extracted_ : frame_.features; }
-  const FrameGeometry* geometry() const { return geometry_ ? &*geometry_ : nullptr; }
-  // The extras `options` asks for, with the frame's intrinsics (for relative poses).
-  PlaceResultOptions Extras(const pb::ResultOptions& options) const {
-    return FromProto(options, frame_.intrinsics);
-  }
-
- private:
-  PreparedFrame() = default;
-
-  DecodedFrame frame_;
-  FeatureSet extracted_;  // when the frame carried an image
-  std::optional<FrameGeometry> geometry_;
-};
-
-// A request's rig frame ready for a rig map: each camera's view decoded with the camera's
-// intrinsics, its features (the client's, or extracted) moved into the camera's pinhole model,
-// and its 3D points from depth or a right image.
-class PreparedRigFrame {
- public:
-  // INVALID_ARGUMENT naming the camera for a view of an unknown camera, a camera without a view
-  // or with two, a view carrying more than its image and structure, or an image of another size
-  // than its camera's; and for a frame with content of its own.
-  static StatusOr<PreparedRigFrame> Prepare(WorkerContext& worker, const pb::Frame& request,
-                                            const PlaceMap& map, pb::Timing* timing) {
-    const std::vector<RigCamera>& rig = map.rig();
-    std::string cameras;
-    for (const RigCamera& camera : rig) cameras += (cameras.empty() ? "" : ", ") + camera.name;
-    if (request.content_case() != pb::Frame::CONTENT_NOT_SET || request.has_depth() ||
-        request.has_right() || request.has_intrinsics() || request.views_size() == 0) {
-      return Status::InvalidArgument("map '" + map.name() + "' is a rig map: a frame carries " +
-                                     "its images in frame.views, one per camera (" + cameras +
-                                     "), and nothing of its own but its timestamp and ids");
-    }
-    PreparedRigFrame prepared;
-    RECOG_RETURN_IF_ERROR(DecodeFrameHeader(request, &prepared.header_));
-    std::vector<int> view_of(rig.size(), -1);
-    for (int i = 0; i < request.views_size(); ++i) {
-      const pb::Frame& view = request.views(i);
-      const std::string where = "frame.views[" + std::to_string(i) + "]";
-      const auto camera = std::find_if(
-          rig.begin(), rig.end(), [&](const RigCamera& c) { return c.name == view.camera_id(); });
-      if (camera == rig.end()) {
-        return Status::InvalidArgument(where + " is for camera '" + view.camera_id() +
-                                       "', which the rig of map '" + map.name() +
-                                       "' does not have (" + cameras + ")");
-      }
-      int& slot = view_of[size_t(camera - rig.begin())];
-      if (slot >= 0) {
-        return Status::InvalidArgument(where + ": camera '" + camera->name + "' has two views");
-      }
-      if (view.has_timestamp() || !view.client_frame_id().empty() || view.has_intrinsics() ||
-          view.exclude_frame_ids_size() > 0 || view.views_size() > 0) {
-        return Status::InvalidArgument(
-            where + " (camera '" + camera->name + "') holds more than its image and its depth " +
-            "or right image: timestamp, client_frame_id and exclude_frame_ids belong to the " +
-            "frame, intrinsics to the map's rig");
-      }
-      slot = i;
-    }
-    for (size_t c = 0; c < rig.size(); ++c) {
-      if (view_of[c] < 0) {
-        return Status::InvalidArgument("frame.views has no view for camera '" + rig[c].name +
-                                       "'; a rig frame needs one per camera (" + cameras + ")");
-      }
-    }
-    prepared.frame_.timestamp = prepared.header_.timestamp;
-    prepared.frame_.client_id = prepared.header_.client_frame_id;
-    PixelBudget budget;  // every camera's images together
-    for (size_t c = 0; c < rig.size(); ++c) {
-      const Status status = prepared.AddCamera(worker, request.views(view_of[c]), rig[c],
-                                               map.vocabulary().info().descriptor, budget, timing);
-      if (!status.ok()) return status.WithContext("rig camera '" + rig[c].name + "'");
-    }
-    return prepared;
-  }
-
-  const RigFrame& frame() const { return frame_; }
-  // The rig frames the client left out (exclude_frame_ids).
-  std::vector<uint64_t> excluded() const {
-    return {header_.excluded_frames.begin(), header_.excluded_frames.end()};
-  }
-  size_t features() const {
-    size_t total = 0;
-    for (const FeatureSet& camera : frame_.cameras) total += camera.size();
-    return total;
-  }
-
- private:
-  PreparedRigFrame() = default;
-
-  // Prepares `view` as a frame of `camera` and appends it to the rig frame.
-  Status AddCamera(WorkerContext& worker, const pb::Frame& view, const RigCamera& camera,
-                   const DescriptorFormat& descriptor, PixelBudget& budget, pb::Timing* timing) {
-    pb::Frame with_intrinsics = view;
-    pb::CameraIntrinsics* k = with_intrinsics.mutable_intrinsics();
-    k->set_fx(camera.K(0, 0));
-    k->set_fy(camera.K(1, 1));
-    k->set_cx(camera.K(0, 2));
-    k->set_cy(camera.K(1, 2));
-    k->mutable_distortion()->Assign(camera.distortion.begin(), camera.distortion.end());
-    RECOG_ASSIGN_OR_RETURN(
-        PreparedFrame prepared,
-        PreparedFrame::Prepare(worker, with_intrinsics, descriptor, budget, timing));
-    const DecodedFrame& decoded = prepared.frame();
-    cv::Size size = decoded.image.size();
-    if (!decoded.has_image() && view.features().image_width() != 0) {
-      size = cv::Size(int(view.features().image_width()), int(view.features().image_height()));
-    }
-    if ((decoded.has_image() || view.features().image_width() != 0) && size != camera.size) {
-      return Status::InvalidArgument("its image is " + std::to_string(size.width) + "x" +
-                                     std::to_string(size.height) + "; the camera's are " +
-                                     std::to_string(camera.size.width) + "x" +
-                                     std::to_string(camera.size.height));
-    }
-    FeatureSet& features = frame_.cameras.emplace_back(prepared.features());
-    UndistortKeypoints(camera, &features.keypoints);
-    const FrameGeometry* geometry = prepared.geometry();
-    frame_.points.push_back(geometry != nullptr ? geometry->points : std::vector<cv::Point3f>());
-    return Status::Ok();
-  }
-
-  DecodedFrame header_;  // the rig frame's timestamp and ids
-  RigFrame frame_;
-};
 
 // What a rig map refuses of a request (INVALID_ARGUMENT): the options of single-camera loops,
 // and other maps to search. OK for a map without a rig.
@@ -340,9 +183,9 @@ Status RunRigFrame(ServerState& state, WorkerContext& worker, PlaceMap& map, Fra
                    const pb::Frame& request, const pb::ResultOptions& options, pb::LoopResult* out,
                    pb::Timing* timing, uint32_t* num_features) {
   RECOG_ASSIGN_OR_RETURN(PreparedRigFrame prepared,
-                         PreparedRigFrame::Prepare(worker, request, map, timing));
+                         PreparedRigFrame::Prepare(request, map, PlaceExtractor(worker), timing));
   if (num_features != nullptr) *num_features = uint32_t(prepared.features());
-  const auto start = Clock::now();
+  const auto start = std::chrono::steady_clock::now();
   const std::vector<uint64_t> excluded = prepared.excluded();
   const bool correspondences = options.include_correspondences();
   StatusOr<RigPlaceResult> result = mode == FrameMode::kAdd ? map.AddRig(prepared.frame())
@@ -356,7 +199,7 @@ Status RunRigFrame(ServerState& state, WorkerContext& worker, PlaceMap& map, Fra
   }
   if (mode != FrameMode::kQuery) state.metrics.SetMapEntries(map.name(), map.frames());
   ToProto(result.value(), map.rig(), out);
-  timing->set_recognition_ms(timing->recognition_ms() + MsSince(start));
+  timing->set_recognition_ms(timing->recognition_ms() + MillisecondsSince(start));
   return Status::Ok();
 }
 
@@ -417,12 +260,12 @@ Status RunPlaceFrame(ServerState& state, WorkerContext& worker, PlaceMap& map, F
     return RunRigFrame(state, worker, map, mode, request, options, out, timing, num_features);
   }
   PixelBudget budget;
-  RECOG_ASSIGN_OR_RETURN(
-      PreparedFrame prepared,
-      PreparedFrame::Prepare(worker, request, map.vocabulary().info().descriptor, budget, timing));
+  RECOG_ASSIGN_OR_RETURN(PreparedFrame prepared,
+                         PreparedFrame::Prepare(request, map.vocabulary().info().descriptor,
+                                                PlaceExtractor(worker), budget, timing));
   const FeatureSet& features = prepared.features();
   if (num_features != nullptr) *num_features = uint32_t(features.size());
-  const auto start = Clock::now();
+  const auto start = std::chrono::steady_clock::now();
   PlaceResultOptions extras = prepared.Extras(options);
   // The console shows a detected loop's inliers: asked for whenever it records loops.
   const bool recording = state.recent_loops != nullptr && mode == FrameMode::kDetect;
@@ -448,7 +291,7 @@ Status RunPlaceFrame(ServerState& state, WorkerContext& worker, PlaceMap& map, F
       ToProto(match.result, found->mutable_result());
     }
   }
-  timing->set_recognition_ms(timing->recognition_ms() + MsSince(start));
+  timing->set_recognition_ms(timing->recognition_ms() + MillisecondsSince(start));
   return Status::Ok();
 }
 
@@ -529,9 +372,10 @@ Status RunRelocalize(ServerState& state, WorkerContext& worker, const Caller& ca
   std::vector<PreparedFrame> prepared;
   prepared.reserve(size_t(request.frames_size()));
   PixelBudget budget;  // every frame's images together
+  const ExtractPlaceFeatures extract = PlaceExtractor(worker);
   for (int i = 0; i < request.frames_size(); ++i) {
     StatusOr<PreparedFrame> frame = PreparedFrame::Prepare(
-        worker, request.frames(i), maps.front()->vocabulary().info().descriptor, budget, timing);
+        request.frames(i), maps.front()->vocabulary().info().descriptor, extract, budget, timing);
     if (!frame.ok()) return frame.status().WithContext("frames[" + std::to_string(i) + "]");
     prepared.push_back(std::move(frame).value());
   }
@@ -540,11 +384,11 @@ Status RunRelocalize(ServerState& state, WorkerContext& worker, const Caller& ca
   for (const PreparedFrame& p : prepared) {
     frames.push_back({&p.features(), p.frame().timestamp, p.geometry()});
   }
-  const auto start = Clock::now();
+  const auto start = std::chrono::steady_clock::now();
   // Frames of one request share their options; the intrinsics for relative poses are the first's.
   RECOG_ASSIGN_OR_RETURN(std::vector<Relocalization> found,
                          Relocalize(maps, frames, prepared.front().Extras(request.options())));
-  timing->set_recognition_ms(timing->recognition_ms() + MsSince(start));
+  timing->set_recognition_ms(timing->recognition_ms() + MillisecondsSince(start));
   state.metrics.AddFrames(FrameKind::kPlace, prepared.size());
   const size_t limit = request.max_results() == 0 ? found.size() : request.max_results();
   for (size_t i = 0; i < found.size() && i < limit; ++i) {

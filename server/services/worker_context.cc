@@ -1,6 +1,5 @@
 #include "server/services/worker_context.h"
 
-#include "core/geometry/frame_points.h"
 #include "server/services/server_state.h"
 
 namespace recog::server {
@@ -12,25 +11,17 @@ Status WorkerContext::ExtractPlaceFeatures(const cv::Mat& image, FeatureSet* out
   return place_extractor_->Extract(image, out);
 }
 
-Status WorkerContext::PlaceFrameGeometry(const DecodedFrame& frame, const FeatureSet& features,
-                                         FrameGeometry* out) {
-  out->K = frame.intrinsics->K();
-  if (!frame.depth.empty()) {
-    const cv::Size size = frame.has_image() ? frame.image.size() : frame.depth.size();
-    return PointsFromDepth(features.keypoints, size, out->K, frame.depth, frame.depth_scale,
-                           &out->points);
-  }
-  FeatureSet right_features;
-  RECOG_RETURN_IF_ERROR(ExtractPlaceFeatures(frame.right, &right_features));
-  return PointsFromStereo(features, frame.image, right_features, frame.right, out->K,
-                          frame.baseline_m, StereoOptions{}, &out->points);
-}
-
-ObjectRecognizer& WorkerContext::Recognizer() {
+StatusOr<ObjectRecognizer*> WorkerContext::Recognizer() {
   if (recognizer_ == nullptr) {
-    recognizer_ = std::make_unique<ObjectRecognizer>(state_.objects, state_.recognition);
+    StatusOr<ObjectRecognizer> created =
+        ObjectRecognizer::Create(state_.objects, state_.recognition);
+    // The settings are the server's, not the caller's: refused, they are the server's fault.
+    if (!created.ok()) {
+      return created.status().WithContext("recognition settings", StatusCode::kInternal);
+    }
+    recognizer_ = std::make_unique<ObjectRecognizer>(std::move(created).value());
   }
-  return *recognizer_;
+  return recognizer_.get();
 }
 
 }  // namespace recog::server

@@ -26,16 +26,12 @@ class WorkerContext {
  public:
   explicit WorkerContext(const ServerState& state) : state_(state) {}
 
-  // Extracts the image's features with the server's place settings.
+  // Extracts the image's features with the server's place settings (a place frame's, or the
+  // right image of its stereo pair: server/api/prepared_frame.h).
   Status ExtractPlaceFeatures(const cv::Mat& image, FeatureSet* out);
-  // The 3D structure of a place frame (core/geometry/frame_points.h) from its depth or right
-  // image, for its `features` (the right image is described with the server's place settings).
-  // Only for frames with depth or a right image (and so intrinsics); errors as the core's.
-  Status PlaceFrameGeometry(const DecodedFrame& frame, const FeatureSet& features,
-                            FrameGeometry* out);
-  // The recogniser over the server's object database, with its recognition settings. Only once
-  // the server is ready.
-  ObjectRecognizer& Recognizer();
+  // The recogniser over the server's object database, with its recognition settings (INTERNAL
+  // when they are out of range). Only once the server is ready.
+  StatusOr<ObjectRecognizer*> Recognizer();
 
  private:
   const ServerState& state_;

@@ -243,8 +243,10 @@ DatasetLayout DetectDatasetLayout(const std::string& dir) {
       fs::exists(root / "cam0" / "data.csv", ec)) {
     return DatasetLayout::kEuroc;
   }
-  if (fs::exists(root / "times.txt", ec) && fs::is_directory(root / "image_0", ec)) {
-    return DatasetLayout::kKitti;
+  if (fs::exists(root / "times.txt", ec)) {
+    for (int n = 0; n < kKittiCameras; ++n) {
+      if (fs::is_directory(root / ("image_" + std::to_string(n)), ec)) return DatasetLayout::kKitti;
+    }
   }
   return DatasetLayout::kFolder;
 }

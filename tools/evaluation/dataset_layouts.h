@@ -8,7 +8,8 @@
 //    with the images in cam0/data/, "#" comments (the header). The right image is cam1's row of
 //    the same timestamp (none when cam1/data.csv is missing or has no such row).
 //  - KITTI odometry: DIR/times.txt, one time in seconds per line, frame i being
-//    DIR/image_0/%06d.png (left) and DIR/image_1/%06d.png (right, when it exists).
+//    DIR/image_0/%06d.png (left) and DIR/image_1/%06d.png (right, when it exists). (The rig reader,
+//    rig_dataset.h, reads every camera folder image_N/ with its calib.txt.)
 // Every listed image must exist (NOT_FOUND naming it); a malformed line (INVALID_ARGUMENT naming
 // the file and line), a negative or non-finite time, timestamps that do not strictly increase, or
 // a list without frames are INVALID_ARGUMENT; a missing list file is NOT_FOUND.
@@ -30,9 +31,17 @@ std::string_view DatasetLayoutName(DatasetLayout layout);  // "folder", "tum", "
 // INVALID_ARGUMENT for another name.
 StatusOr<DatasetLayout> ParseDatasetLayout(std::string_view name);
 
-// The layout of folder `dir` by its files: kTum with rgb.txt, kEuroc with mav0/cam0/data.csv or
-// cam0/data.csv, kKitti with times.txt and image_0/, kFolder otherwise.
+// The layout of folder `dir` by its files, for the single-camera readers here and the rig readers
+// (DetectRigLayout) alike: kTum with rgb.txt; kEuroc with mav0/cam0/data.csv or cam0/data.csv;
+// kKitti with times.txt beside a camera folder image_N/ (N < kKittiCameras); kFolder otherwise.
+// The KITTI rule is what every KITTI sequence a reader can use has: its times and its images.
+// calib.txt is no part of it (only the rig reader needs it, and names it when it is missing), nor
+// is image_0/ (KITTI's colour sequences are image_2/ and image_3/, which a rig reads; the
+// single-camera reader names the image_0/000000.png it lacks).
 DatasetLayout DetectDatasetLayout(const std::string& dir);
+
+// KITTI odometry's cameras: image_0/ and image_1/ grey, image_2/ and image_3/ colour.
+inline constexpr int kKittiCameras = 4;
 
 // Largest |t_depth - t_rgb| (seconds) for a TUM depth image to go with a colour image.
 inline constexpr double kTumMaxDepthOffset = 0.02;

@@ -176,6 +176,27 @@ TEST(KittiTest, TimesInSecondsWithLeftAndRightImages) {
               "line 2");
 }
 
+// One KITTI rule for every reader: times.txt beside a camera folder image_N/, with or without
+// calib.txt and whichever cameras the sequence has.
+TEST(KittiTest, DetectedByItsTimesBesideACameraFolder) {
+  Fixture dir("kitti_rule");
+  dir.Text("times.txt", "0.0\n0.1\n");
+  EXPECT_EQ(DetectDatasetLayout(dir.path()), DatasetLayout::kFolder) << "times.txt alone";
+  dir.Png("image_2/000000.png");
+  dir.Png("image_2/000001.png");
+  EXPECT_EQ(DetectDatasetLayout(dir.path()), DatasetLayout::kKitti) << "a colour sequence";
+  // The single-camera reader takes image_0/ and names it when the sequence has none.
+  ExpectError(ReadDatasetFrames(dir.path(), DatasetLayout::kKitti), StatusCode::kNotFound,
+              "image_0/000000.png");
+  dir.Text("calib.txt", "P0: 1 0 0 0 0 1 0 0 0 0 1 0\n");
+  EXPECT_EQ(DetectDatasetLayout(dir.path()), DatasetLayout::kKitti);
+
+  Fixture images_only("kitti_no_times");
+  images_only.Png("image_0/000000.png");
+  images_only.Text("calib.txt", "P0: 1 0 0 0 0 1 0 0 0 0 1 0\n");
+  EXPECT_EQ(DetectDatasetLayout(images_only.path()), DatasetLayout::kFolder);
+}
+
 TEST(DatasetLayoutTest, NamesParseAndAPlainFolderHasNoTimestamps) {
   for (const DatasetLayout layout : {DatasetLayout::kFolder, DatasetLayout::kTum,
                                      DatasetLayout::kEuroc, DatasetLayout::kKitti}) {

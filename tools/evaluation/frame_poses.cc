@@ -7,8 +7,8 @@
 #include <fstream>
 #include <sstream>
 
+#include "core/common/median.h"
 #include "tools/common/cli_support.h"
-#include "tools/evaluation/place_evaluation.h"
 #include "tools/evaluation/plot.h"
 #include "tools/evaluation/visp_files.h"
 

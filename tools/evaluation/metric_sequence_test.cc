@@ -16,6 +16,7 @@
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgcodecs.hpp>
 
+#include "core/common/elapsed.h"
 #include "core/features/feature_extractor.h"
 #include "core/geometry/frame_points.h"
 #include "core/index/memory_index_store.h"
@@ -28,9 +29,6 @@ namespace recog::cli {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-double MsSince(Clock::time_point start) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
-}
 
 const cv::Matx33d kK(525, 0, 319.5, 0, 525, 239.5, 0, 0, 1);
 const cv::Size kSize(640, 480);
@@ -114,7 +112,7 @@ class MetricSequenceTest : public ::testing::Test {
       FeatureSet features;
       const auto start = Clock::now();
       ASSERT_TRUE((*extractor)->Extract(frame->image, &features).ok());
-      extraction_ms += MsSince(start);
+      extraction_ms += MillisecondsSince(start);
       // The stereo source's right images, described once by the same extractor (not timed).
       FeatureSet right_features;
       ASSERT_TRUE((*extractor)->Extract(frame->right, &right_features).ok());
@@ -160,11 +158,11 @@ class MetricSequenceTest : public ::testing::Test {
                             0.001, &geometry.points);
       }
       EXPECT_TRUE(s.ok()) << s.ToString();
-      run.points_ms += MsSince(start);
+      run.points_ms += MillisecondsSince(start);
       start = Clock::now();
       auto r = detector->Process(features, std::nullopt, {},
                                  source == Source::kNone ? nullptr : &geometry);
-      run.detector_ms += MsSince(start);
+      run.detector_ms += MillisecondsSince(start);
       EXPECT_TRUE(r.ok()) << r.status().ToString();
       run.results.push_back(std::move(r).value());
     }
@@ -202,7 +200,7 @@ class MetricSequenceTest : public ::testing::Test {
       const FrameGeometry geometry = geometry_of(i, sides.query_depth);
       const auto start = Clock::now();
       auto r = detector->Query((*features_)[i], 0.0, &geometry);
-      run.detector_ms += MsSince(start) / kLapFrames;
+      run.detector_ms += MillisecondsSince(start) / kLapFrames;
       EXPECT_TRUE(r.ok()) << r.status().ToString();
       EXPECT_EQ(r->status, LoopStatus::kLoopDetected) << i;
       run.results.push_back(std::move(r).value());

@@ -1,11 +1,9 @@
 #include "tools/evaluation/place_evaluation.h"
 
-#include <algorithm>
 #include <charconv>
 #include <chrono>
 #include <filesystem>
 #include <fstream>
-#include <numeric>
 #include <string_view>
 
 #include <opencv2/core/utils/logger.hpp>
@@ -13,6 +11,7 @@
 #include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
 
+#include "core/common/elapsed.h"
 #include "core/index/memory_index_store.h"
 #include "tools/common/cli_support.h"
 
@@ -174,18 +173,14 @@ StatusOr<SequenceFeatures> ExtractSequence(FrameSource& source, const FeatureOpt
     FeatureSet features;
     const auto start = std::chrono::steady_clock::now();
     RECOG_RETURN_IF_ERROR(extractor->Extract(image, &features));
-    sequence.feature_ms.push_back(
-        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
-            .count());
+    sequence.feature_ms.push_back(MillisecondsSince(start));
     if (geometry) {
       const auto points_start = std::chrono::steady_clock::now();
       FrameGeometry frame_geometry;
       RECOG_RETURN_IF_ERROR(
           FramePoints(source, image, features, *geometry, *extractor, &frame_geometry)
               .WithContext("frame '" + name + "'"));
-      sequence.points_ms.push_back(
-          std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - points_start)
-              .count());
+      sequence.points_ms.push_back(MillisecondsSince(points_start));
       sequence.geometry.push_back(std::move(frame_geometry));
     }
     sequence.features.push_back(std::move(features));
@@ -198,17 +193,6 @@ StatusOr<SequenceFeatures> ExtractSequence(FrameSource& source, const FeatureOpt
   return sequence;
 }
 
-double Median(std::vector<double> values) {
-  if (values.empty()) return 0.0;
-  const size_t mid = values.size() / 2;
-  std::nth_element(values.begin(), values.begin() + long(mid), values.end());
-  double m = values[mid];
-  if (values.size() % 2 == 0) {
-    m = (m + *std::max_element(values.begin(), values.begin() + long(mid))) / 2.0;
-  }
-  return m;
-}
-
 namespace {
 
 std::optional<double> TimestampOf(const SequenceFeatures& sequence, size_t i) {
@@ -219,15 +203,6 @@ const FrameGeometry* GeometryOf(const SequenceFeatures& sequence, size_t i) {
 }
 
 }  // namespace
-
-StageStats StatsOf(const std::vector<double>& values) {
-  StageStats s;
-  if (values.empty()) return s;
-  s.mean = std::accumulate(values.begin(), values.end(), 0.0) / double(values.size());
-  s.median = Median(values);
-  s.max = *std::max_element(values.begin(), values.end());
-  return s;
-}
 
 StatusOr<std::vector<LoopResult>> DetectLoops(const SequenceFeatures& sequence,
                                               std::shared_ptr<const Vocabulary> vocabulary,
@@ -250,31 +225,30 @@ StatusOr<std::vector<LoopResult>> DetectLoops(const SequenceFeatures& sequence,
 
 namespace {
 
-// The detector's time spent on one frame, per stage, into `times` (what timing_ms summarises).
+// The detector's time spent on one frame, per stage (what timing_ms summarises).
 void AddTimings(const LoopTimings& t, double features_ms, const double* points_ms,
-                std::map<std::string, std::vector<double>>* times) {
-  (*times)["features"].push_back(features_ms);
-  (*times)["conversion"].push_back(t.conversion);
-  (*times)["query"].push_back(t.query);
-  (*times)["islands"].push_back(t.islands);
-  (*times)["insertion"].push_back(t.insertion);
-  (*times)["verification"].push_back(t.verification);
+                LoopTally* tally) {
+  tally->AddTime("features", features_ms);
+  tally->AddTime("conversion", t.conversion);
+  tally->AddTime("query", t.query);
+  tally->AddTime("islands", t.islands);
+  tally->AddTime("insertion", t.insertion);
+  tally->AddTime("verification", t.verification);
   if (points_ms != nullptr) {
-    (*times)["points"].push_back(*points_ms);
-    (*times)["metric_verification"].push_back(t.metric_verification);
+    tally->AddTime("points", *points_ms);
+    tally->AddTime("metric_verification", t.metric_verification);
   }
-  (*times)["total"].push_back(features_ms + (points_ms ? *points_ms : 0.0) + t.conversion +
-                              t.query + t.islands + t.insertion + t.verification +
-                              t.metric_verification);
+  tally->AddTime("total", features_ms + (points_ms ? *points_ms : 0.0) + t.conversion + t.query +
+                              t.islands + t.insertion + t.verification + t.metric_verification);
 }
 
-// Counts frame `query`'s result in `eval`: its status, and its match (frame `match` of the
-// sequence, when it has one) scored against the ground truth and, with a trajectory, against the
-// true geometry of its inliers.
+// Counts frame `query`'s result: its status, and its match (frame `match` of the sequence, when it
+// has one) scored against the ground truth and, with a trajectory, against the true geometry of
+// its inliers, into `loops`.
 void CountResult(const LoopResult& r, int query, int match, const GroundTruth& truth,
                  const SequenceFeatures& sequence, const CameraTrajectory* trajectory,
-                 PlaceEvaluation* eval) {
-  ++eval->statuses[std::string(LoopStatusName(r.status))];
+                 LoopTally* tally, std::vector<DetectedLoop>* loops) {
+  tally->CountStatus(LoopStatusName(r.status));
   if (r.match == kInvalidEntryId) return;
   DetectedLoop loop;
   loop.query = query;
@@ -296,33 +270,8 @@ void CountResult(const LoopResult& r, int query, int match, const GroundTruth& t
   loop.inliers = uint32_t(r.inliers.size());
   loop.metric = r.metric;
   loop.evidence = r.evidence;
-  if (r.status == LoopStatus::kLoopDetected) {
-    ++eval->detections;
-    if (loop.ambiguous) {
-      ++eval->ambiguous;
-    } else {
-      eval->correct += loop.correct;
-    }
-  }
-  eval->loops.push_back(loop);
-}
-
-void Finish(const std::map<std::string, std::vector<double>>& times, PlaceEvaluation* eval) {
-  for (const auto& [stage, values] : times) eval->timing_ms[stage] = StatsOf(values);
-  const int judged = eval->detections - eval->ambiguous;
-  eval->precision = judged > 0 ? double(eval->correct) / judged : 1.0;
-  eval->recall = eval->query_frames_with_truth > 0
-                     ? double(eval->correct) / eval->query_frames_with_truth
-                     : 0.0;
-}
-
-Status CheckTruthCoversSequence(const GroundTruth& truth, const SequenceFeatures& sequence) {
-  if (truth.frames != int(sequence.features.size())) {
-    return Status::InvalidArgument("the ground truth covers " + std::to_string(truth.frames) +
-                                   " frames but the sequence has " +
-                                   std::to_string(sequence.features.size()));
-  }
-  return Status::Ok();
+  if (r.status == LoopStatus::kLoopDetected) tally->CountDetection(loop.correct, loop.ambiguous);
+  loops->push_back(loop);
 }
 
 const double* PointsMsOf(const SequenceFeatures& sequence, size_t i) {
@@ -336,7 +285,7 @@ StatusOr<PlaceEvaluation> EvaluatePlace(const SequenceFeatures& sequence, const 
                                         const PlaceEvaluationOptions& options,
                                         std::vector<LoopResult>* results,
                                         const CameraTrajectory* trajectory) {
-  RECOG_RETURN_IF_ERROR(CheckTruthCoversSequence(truth, sequence));
+  RECOG_RETURN_IF_ERROR(CheckTruthCovers(truth, sequence.features.size(), "sequence"));
   if (trajectory != nullptr && trajectory->poses.size() != sequence.features.size()) {
     return Status::InvalidArgument("the poses cover " + std::to_string(trajectory->poses.size()) +
                                    " frames but the sequence has " +
@@ -348,13 +297,13 @@ StatusOr<PlaceEvaluation> EvaluatePlace(const SequenceFeatures& sequence, const 
   PlaceEvaluation eval;
   eval.frames = truth.frames;
   eval.query_frames_with_truth = truth.QueriesWithMatches();
-  std::map<std::string, std::vector<double>> times;
+  LoopTally tally(&eval);
   for (int i = 0; i < eval.frames; ++i) {
     const LoopResult& r = detected[size_t(i)];
-    AddTimings(r.timings, sequence.feature_ms[size_t(i)], PointsMsOf(sequence, size_t(i)), &times);
-    CountResult(r, i, int(r.match), truth, sequence, trajectory, &eval);
+    AddTimings(r.timings, sequence.feature_ms[size_t(i)], PointsMsOf(sequence, size_t(i)), &tally);
+    CountResult(r, i, int(r.match), truth, sequence, trajectory, &tally, &eval.loops);
   }
-  Finish(times, &eval);
+  tally.Finish();
   if (results != nullptr) *results = std::move(detected);
   return eval;
 }
@@ -381,7 +330,7 @@ StatusOr<AcrossMapsEvaluation> EvaluateAcrossMaps(const SequenceFeatures& sequen
                                                   const GroundTruth& truth, int split,
                                                   std::shared_ptr<const Vocabulary> vocabulary,
                                                   const PlaceEvaluationOptions& options) {
-  RECOG_RETURN_IF_ERROR(CheckTruthCoversSequence(truth, sequence));
+  RECOG_RETURN_IF_ERROR(CheckTruthCovers(truth, sequence.features.size(), "sequence"));
   const int frames = truth.frames;
   if (split < 1 || split >= frames) {
     return Status::InvalidArgument("the split must leave frames to both robots: 1.." +
@@ -405,7 +354,7 @@ StatusOr<AcrossMapsEvaluation> EvaluateAcrossMaps(const SequenceFeatures& sequen
 
   AcrossMapsEvaluation eval;
   eval.inter_map.frames = eval.own_map.frames = frames - split;
-  std::map<std::string, std::vector<double>> inter_times, own_times;
+  LoopTally inter_map(&eval.inter_map), own_map(&eval.own_map);
   for (int i = split; i < frames; ++i) {
     const size_t f = size_t(i);
     bool in_a = false, in_b = false;
@@ -415,16 +364,18 @@ StatusOr<AcrossMapsEvaluation> EvaluateAcrossMaps(const SequenceFeatures& sequen
     RECOG_ASSIGN_OR_RETURN(
         LoopResult own,
         map_b.Process(sequence.features[f], TimestampOf(sequence, f), {}, GeometryOf(sequence, f)));
-    AddTimings(own.timings, sequence.feature_ms[f], PointsMsOf(sequence, f), &own_times);
-    CountResult(own, i, split + int(own.match), truth, sequence, nullptr, &eval.own_map);
+    AddTimings(own.timings, sequence.feature_ms[f], PointsMsOf(sequence, f), &own_map);
+    CountResult(own, i, split + int(own.match), truth, sequence, nullptr, &own_map,
+                &eval.own_map.loops);
     RECOG_ASSIGN_OR_RETURN(
         LoopResult across,
         map_a.Query(sequence.features[f], TimestampOf(sequence, f), GeometryOf(sequence, f)));
-    AddTimings(across.timings, 0.0, nullptr, &inter_times);
-    CountResult(across, i, int(across.match), truth, sequence, nullptr, &eval.inter_map);
+    AddTimings(across.timings, 0.0, nullptr, &inter_map);
+    CountResult(across, i, int(across.match), truth, sequence, nullptr, &inter_map,
+                &eval.inter_map.loops);
   }
-  Finish(inter_times, &eval.inter_map);
-  Finish(own_times, &eval.own_map);
+  inter_map.Finish();
+  own_map.Finish();
   eval.inter_map.timing_ms.erase("features");  // extracted once, counted in own_map
   return eval;
 }

@@ -3,7 +3,6 @@
 // pieces it is made of, usable from benchmarks too.
 #pragma once
 
-#include <map>
 #include <memory>
 #include <optional>
 #include <string>
@@ -17,6 +16,7 @@
 #include "tools/evaluation/camera_trajectory.h"
 #include "tools/evaluation/dataset_layouts.h"
 #include "tools/evaluation/ground_truth.h"
+#include "tools/evaluation/loop_tally.h"
 
 namespace recog::cli {
 
@@ -92,10 +92,6 @@ StatusOr<SequenceFeatures> ExtractSequence(
     const std::function<void(size_t)>& progress = nullptr,
     const std::optional<SequenceGeometryOptions>& geometry = std::nullopt);
 
-struct StageStats {
-  double mean = 0, median = 0, max = 0;
-};
-
 struct DetectedLoop {
   int query = 0;  // 0-based frame index
   int match = 0;  // 0-based frame index of the matched frame
@@ -114,17 +110,11 @@ struct DetectedLoop {
   std::optional<LoopGeometryTruth> geometry;          // with a trajectory: what the poses say
 };
 
-struct PlaceEvaluation {
-  int frames = 0;
-  int query_frames_with_truth = 0;
-  int detections = 0;
-  int correct = 0;
-  int ambiguous = 0;       // detections of ambiguous pairs (in `detections`, not in precision)
-  double precision = 1.0;  // correct / (detections - ambiguous); 1 when that is 0
-  double recall = 0.0;
-  std::map<std::string, StageStats> timing_ms;  // features, conversion, query, islands, ...
-  std::map<std::string, int> statuses;          // frames per LoopStatus name
-  std::vector<DetectedLoop> loops;              // every frame that had a candidate match
+// The figures over the sequence (statuses by LoopStatus name; timing_ms of features, points,
+// conversion, query, islands, insertion, verification, metric_verification and total), with the
+// loops.
+struct PlaceEvaluation : LoopFigures {
+  std::vector<DetectedLoop> loops;  // every frame that had a candidate match
 };
 
 struct PlaceEvaluationOptions {
@@ -173,10 +163,5 @@ StatusOr<AcrossMapsEvaluation> EvaluateAcrossMaps(const SequenceFeatures& sequen
 // (split = A's frame count). Per-frame data that only one of them has (timestamps, 3D points,
 // images) is left empty for the other's frames; each robot keeps its own clock.
 void AppendSequence(SequenceFeatures robot_b, SequenceFeatures* robot_a);
-
-// Median of a copy of the values (0 for none).
-double Median(std::vector<double> values);
-// Mean, median and max of the values (zeros for none).
-StageStats StatsOf(const std::vector<double>& values);
 
 }  // namespace recog::cli

@@ -343,17 +343,19 @@ StatusOr<RigLayout> DetectRigLayout(const std::string& path) {
   std::error_code ec;
   if (!fs::exists(root, ec)) return Status::NotFound("rig sequence " + Quoted(root) + " not found");
   if (fs::is_regular_file(root, ec) || fs::exists(root / "rig.yaml", ec)) return RigLayout::kPlain;
-  if (fs::exists(root / "mav0" / "cam0" / "sensor.yaml", ec) ||
-      fs::exists(root / "cam0" / "sensor.yaml", ec)) {
-    return RigLayout::kEuroc;
-  }
-  if (fs::exists(root / "calib.txt", ec) && fs::exists(root / "times.txt", ec)) {
-    return RigLayout::kKitti;
+  switch (DetectDatasetLayout(path)) {
+    case DatasetLayout::kEuroc:
+      return RigLayout::kEuroc;
+    case DatasetLayout::kKitti:
+      return RigLayout::kKitti;
+    case DatasetLayout::kTum:
+    case DatasetLayout::kFolder:
+      break;
   }
   return Status::InvalidArgument(Quoted(root) +
                                  " is not a rig sequence: expected a rig file or a folder with "
-                                 "rig.yaml (plain), mav0/cam0/sensor.yaml or cam0/sensor.yaml "
-                                 "(EuRoC), or calib.txt and times.txt (KITTI)");
+                                 "rig.yaml (plain), mav0/cam0/data.csv or cam0/data.csv (EuRoC), "
+                                 "or times.txt and image_N/ (KITTI)");
 }
 
 StatusOr<RigDataset> ReadRigDataset(const std::string& path) {

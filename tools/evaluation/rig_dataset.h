@@ -42,9 +42,9 @@ struct RigDataset {
   std::vector<std::vector<std::string>> depths;  // depths[frame][camera]: path, "" when none
 };
 
-// The layout of PATH: kPlain for a file, or a folder with rig.yaml; kEuroc for a folder with
-// cam0/sensor.yaml or mav0/cam0/sensor.yaml; kKitti for a folder with calib.txt and times.txt.
-// INVALID_ARGUMENT (naming the three) for anything else; NOT_FOUND when PATH does not exist.
+// The layout of PATH: kPlain for a file, or a folder with rig.yaml; else the EuRoC or KITTI layout
+// DetectDatasetLayout (dataset_layouts.h) finds in the folder. INVALID_ARGUMENT (naming the three)
+// for anything else, a TUM folder included; NOT_FOUND when PATH does not exist.
 StatusOr<RigLayout> DetectRigLayout(const std::string& path);
 
 // Reads the rig sequence at PATH in the layout DetectRigLayout finds.

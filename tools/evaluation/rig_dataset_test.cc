@@ -301,6 +301,39 @@ TEST_F(RigDatasetKittiTest, MissingImagesAreRefusedNamingTheCamera) {
   ExpectError(ReadRigDataset(dir_.path()), StatusCode::kInvalidArgument, "calib.txt' line 1");
 }
 
+// The colour cameras of a KITTI sequence (image_2, image_3), without the grey ones.
+TEST_F(RigDatasetKittiTest, AColourSequenceIsReadFromItsOwnCameras) {
+  fs::remove_all(dir_ / "image_0");
+  fs::remove_all(dir_ / "image_1");
+  dir_.Png("image_2/000000.png");
+  dir_.Png("image_2/000001.png");
+  auto layout = DetectRigLayout(dir_.path());
+  ASSERT_TRUE(layout.ok()) << layout.status().ToString();
+  EXPECT_EQ(*layout, RigLayout::kKitti);
+  auto rig = ReadRigDataset(dir_.path());
+  ASSERT_TRUE(rig.ok()) << rig.status().ToString();
+  ASSERT_EQ(rig->cameras.size(), 1u);
+  EXPECT_EQ(rig->cameras[0].name, "image_2");
+  EXPECT_EQ(rig->images[1], (std::vector<std::string>{dir_ / "image_2/000001.png"}));
+}
+
+// Detected by its times and images (dataset_layouts.h), a KITTI folder without calib.txt is
+// refused by the reader naming the file, not taken for no rig at all.
+TEST_F(RigDatasetKittiTest, AMissingCalibrationIsNamed) {
+  fs::remove(dir_ / "calib.txt");
+  auto layout = DetectRigLayout(dir_.path());
+  ASSERT_TRUE(layout.ok()) << layout.status().ToString();
+  EXPECT_EQ(*layout, RigLayout::kKitti);
+  ExpectError(ReadRigDataset(dir_.path()), StatusCode::kNotFound, dir_ / "calib.txt");
+}
+
+TEST(RigDatasetTest, ATumFolderIsNoRig) {
+  Folder dir("tum");
+  dir.Png("rgb/0.png");
+  dir.Text("rgb.txt", "10.0 rgb/0.png\n");
+  ExpectError(DetectRigLayout(dir.path()), StatusCode::kInvalidArgument, "not a rig sequence");
+}
+
 TEST(RigDatasetTest, DetectRigLayoutRefusesAnEmptyFolderAndAMissingPath) {
   Folder dir("empty");
   auto empty = DetectRigLayout(dir.path());

@@ -9,6 +9,8 @@
 #include <Eigen/Geometry>
 #include <opencv2/imgcodecs.hpp>
 
+#include "core/common/elapsed.h"
+#include "core/common/rotation_angle.h"
 #include "core/geometry/frame_points.h"
 #include "core/index/memory_index_store.h"
 
@@ -16,10 +18,6 @@ namespace recog::cli {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-double MsSince(Clock::time_point start) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
-}
 
 // The indices of the cameras to keep, in the order asked (all of them when none is named).
 StatusOr<std::vector<size_t>> CamerasKept(const RigDataset& dataset,
@@ -44,12 +42,6 @@ StatusOr<std::vector<size_t>> CamerasKept(const RigDataset& dataset,
 
 Status CameraFault(const RigCamera& camera, const std::string& file, const std::string& what) {
   return Status::InvalidArgument("rig camera '" + camera.name + "': '" + file + "' " + what);
-}
-
-// Angle of R_a R_bᵀ, degrees.
-double AngleBetweenDeg(const cv::Matx33d& a, const cv::Matx33d& b) {
-  const double c = std::clamp((cv::trace(a * b.t()) - 1.0) / 2.0, -1.0, 1.0);
-  return std::acos(c) * 180.0 / CV_PI;
 }
 
 }  // namespace
@@ -84,7 +76,7 @@ StatusOr<RigSequenceFeatures> ExtractRigSequence(
       const auto start = Clock::now();
       RECOG_RETURN_IF_ERROR(extractor->Extract(image, &frame.cameras[k]));
       UndistortKeypoints(camera, &frame.cameras[k].keypoints);
-      feature_ms += MsSince(start);
+      feature_ms += MillisecondsSince(start);
       const std::string& depth_path =
           f < dataset.depths.size() ? dataset.depths[f][kept[k]] : std::string();
       if (!options.use_depth || depth_path.empty()) continue;
@@ -95,7 +87,7 @@ StatusOr<RigSequenceFeatures> ExtractRigSequence(
           PointsFromDepth(frame.cameras[k].keypoints, image.size(), camera.K, depth,
                           options.depth_scale, &frame.points[k])
               .WithContext("rig camera '" + camera.name + "': '" + depth_path + "'"));
-      points_ms += MsSince(points_start);
+      points_ms += MillisecondsSince(points_start);
       any_depth = true;
     }
     sequence.frames.push_back(std::move(frame));
@@ -118,10 +110,7 @@ StatusOr<RigPlaceEvaluation> EvaluateRigPlace(const RigSequenceFeatures& sequenc
                                               const RigPlaceOptions& options,
                                               const std::vector<CameraPose>* body_poses) {
   const size_t frames = sequence.frames.size();
-  if (truth.frames != int(frames)) {
-    return Status::InvalidArgument("the ground truth covers " + std::to_string(truth.frames) +
-                                   " frames but the rig sequence has " + std::to_string(frames));
-  }
+  RECOG_RETURN_IF_ERROR(CheckTruthCovers(truth, frames, "rig sequence"));
   if (body_poses != nullptr && body_poses->size() != frames) {
     return Status::InvalidArgument("the body poses cover " + std::to_string(body_poses->size()) +
                                    " frames but the rig sequence has " + std::to_string(frames));
@@ -135,23 +124,24 @@ StatusOr<RigPlaceEvaluation> EvaluateRigPlace(const RigSequenceFeatures& sequenc
   RigPlaceEvaluation eval;
   eval.frames = int(frames);
   eval.query_frames_with_truth = truth.QueriesWithMatches();
-  std::map<std::string, std::vector<double>> times;
+  LoopTally tally(&eval);
   std::vector<double> rotation_errors, translation_errors;
   std::vector<uint64_t> frame_ids;  // the id each rig frame got, by sequence index
   for (size_t i = 0; i < frames; ++i) {
     RECOG_ASSIGN_OR_RETURN(RigLoopResult r, detector.Process(sequence.frames[i]));
     frame_ids.push_back(*r.frame);
     const double points_ms = sequence.points_ms.empty() ? 0.0 : sequence.points_ms[i];
-    times["features"].push_back(sequence.feature_ms[i]);
-    if (!sequence.points_ms.empty()) times["points"].push_back(points_ms);
-    times["conversion"].push_back(r.timings.conversion);
-    times["query"].push_back(r.timings.query);
-    times["verification"].push_back(r.timings.verification);
-    times["insertion"].push_back(r.timings.insertion);
-    times["detector"].push_back(r.timings.conversion + r.timings.query + r.timings.verification +
-                                r.timings.insertion);
-    times["total"].push_back(sequence.feature_ms[i] + points_ms + times["detector"].back());
-    ++eval.statuses[std::string(RigLoopStatusName(r.status))];
+    const double detector_ms =
+        r.timings.conversion + r.timings.query + r.timings.verification + r.timings.insertion;
+    tally.AddTime("features", sequence.feature_ms[i]);
+    if (!sequence.points_ms.empty()) tally.AddTime("points", points_ms);
+    tally.AddTime("conversion", r.timings.conversion);
+    tally.AddTime("query", r.timings.query);
+    tally.AddTime("verification", r.timings.verification);
+    tally.AddTime("insertion", r.timings.insertion);
+    tally.AddTime("detector", detector_ms);
+    tally.AddTime("total", sequence.feature_ms[i] + points_ms + detector_ms);
+    tally.CountStatus(RigLoopStatusName(r.status));
     if (!r.match_frame.has_value()) continue;
     RigDetectedLoop loop;
     loop.query = int(i);
@@ -173,14 +163,14 @@ StatusOr<RigPlaceEvaluation> EvaluateRigPlace(const RigSequenceFeatures& sequenc
       const CameraPose& m = (*body_poses)[size_t(loop.match)];
       const cv::Matx33d R_true = q.world_from_camera.t() * m.world_from_camera;
       const cv::Vec3d t_true = q.world_from_camera.t() * (m.center - q.center);
-      loop.rotation_error_deg = AngleBetweenDeg(r.R, R_true);
+      loop.rotation_error_deg = RotationAngleDeg(r.R, R_true);
       if (r.metric && cv::norm(t_true) > 0) {
         loop.translation_error_pct = 100.0 * cv::norm(r.t - t_true) / cv::norm(t_true);
       }
     }
     if (r.status == RigLoopStatus::kLoopDetected) {
-      ++eval.detections;
-      eval.correct += loop.correct;
+      // Over rig frames, pairs listed as ambiguous are judged like the others.
+      tally.CountDetection(loop.correct, /*ambiguous=*/false);
       if (loop.correct && loop.rotation_error_deg) {
         rotation_errors.push_back(*loop.rotation_error_deg);
       }
@@ -191,10 +181,7 @@ StatusOr<RigPlaceEvaluation> EvaluateRigPlace(const RigSequenceFeatures& sequenc
     loop.result = std::move(r);
     eval.loops.push_back(std::move(loop));
   }
-  for (const auto& [stage, values] : times) eval.timing_ms[stage] = StatsOf(values);
-  eval.precision = eval.detections > 0 ? double(eval.correct) / eval.detections : 1.0;
-  eval.recall =
-      eval.query_frames_with_truth > 0 ? double(eval.correct) / eval.query_frames_with_truth : 0.0;
+  tally.Finish();
   eval.posed_correct = int(rotation_errors.size());
   eval.metric_correct = int(translation_errors.size());
   eval.median_rotation_error_deg = Median(rotation_errors);

@@ -5,7 +5,6 @@
 #pragma once
 
 #include <functional>
-#include <map>
 #include <memory>
 #include <optional>
 #include <string>
@@ -14,8 +13,8 @@
 #include "core/features/feature_extractor.h"
 #include "core/place/rig_loop_detector.h"
 #include "tools/evaluation/ground_truth.h"
+#include "tools/evaluation/loop_tally.h"
 #include "tools/evaluation/metric_sequence.h"
-#include "tools/evaluation/place_evaluation.h"
 #include "tools/evaluation/rig_dataset.h"
 
 namespace recog::cli {
@@ -61,14 +60,11 @@ struct RigDetectedLoop {
   RigLoopResult result;
 };
 
-struct RigPlaceEvaluation {
-  int frames = 0;
-  int query_frames_with_truth = 0;
-  int detections = 0, correct = 0;
-  double precision = 1.0, recall = 0.0;
-  std::map<std::string, int> statuses;          // rig frames per RigLoopStatus name
-  std::map<std::string, StageStats> timing_ms;  // per rig frame: features, points, conversion...
-  std::vector<RigDetectedLoop> loops;           // every frame with a candidate that was verified
+// The figures over rig frames (statuses by RigLoopStatus name, no ambiguous pairs; timing_ms of
+// features, points, conversion, query, verification, insertion, detector and total per rig frame),
+// with the loops and the pose errors.
+struct RigPlaceEvaluation : LoopFigures {
+  std::vector<RigDetectedLoop> loops;  // every frame with a candidate that was verified
   // Over the correct detections, with body poses: medians of the pose errors.
   int posed_correct = 0, metric_correct = 0;
   double median_rotation_error_deg = 0, median_translation_error_pct = 0;

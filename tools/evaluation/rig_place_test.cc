@@ -7,6 +7,7 @@
 
 #include <gtest/gtest.h>
 
+#include "core/geometry/frame_points.h"
 #include "core/vocabulary/vocabulary_io.h"
 #include "tools/common/cli_support.h"
 #include "tools/evaluation/rig_sequence.h"

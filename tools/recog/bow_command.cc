@@ -6,6 +6,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "core/common/elapsed.h"
 #include "core/features/feature_extractor.h"
 #include "core/vocabulary/vocabulary_io.h"
 #include "tools/common/cli_support.h"
@@ -49,8 +50,7 @@ int RunBow(const BowArgs& args) {
       !s.ok()) {
     return fail(s);
   }
-  const double transform_ms =
-      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  const double transform_ms = MillisecondsSince(start);
 
   if (args.json) {
     nlohmann::json words = nlohmann::json::array();

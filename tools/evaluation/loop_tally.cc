@@ -1,0 +1,47 @@
+#include "tools/evaluation/loop_tally.h"
+
+#include <algorithm>
+#include <numeric>
+
+namespace recog::cli {
+
+StageStats StatsOf(const std::vector<double>& values) {
+  StageStats s;
+  if (values.empty()) return s;
+  s.mean = std::accumulate(values.begin(), values.end(), 0.0) / double(values.size());
+  s.median = Median(values);
+  s.max = *std::max_element(values.begin(), values.end());
+  return s;
+}
+
+void LoopTally::CountStatus(std::string_view status) { ++figures_->statuses[std::string(status)]; }
+
+void LoopTally::CountDetection(bool correct, bool ambiguous) {
+  ++figures_->detections;
+  if (ambiguous) {
+    ++figures_->ambiguous;
+  } else if (correct) {
+    ++figures_->correct;
+  }
+}
+
+void LoopTally::AddTime(const std::string& stage, double ms) { times_[stage].push_back(ms); }
+
+void LoopTally::Finish() {
+  LoopFigures& f = *figures_;
+  for (const auto& [stage, values] : times_) f.timing_ms[stage] = StatsOf(values);
+  const int judged = f.detections - f.ambiguous;
+  f.precision = judged > 0 ? double(f.correct) / judged : 1.0;
+  f.recall = f.query_frames_with_truth > 0 ? double(f.correct) / f.query_frames_with_truth : 0.0;
+}
+
+Status CheckTruthCovers(const GroundTruth& truth, size_t frames, std::string_view sequence) {
+  if (truth.frames != int(frames)) {
+    return Status::InvalidArgument("the ground truth covers " + std::to_string(truth.frames) +
+                                   " frames but the " + std::string(sequence) + " has " +
+                                   std::to_string(frames));
+  }
+  return Status::Ok();
+}
+
+}  // namespace recog::cli
