@@ -57,6 +57,7 @@
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgcodecs.hpp>
 
+#include "core/common/median.h"
 #include "core/features/feature_extractor.h"
 #include "core/geometry/p3p.h"
 #include "core/index/memory_index_store.h"
@@ -282,7 +283,12 @@ void RunRecognition(benchmark::State& state, const std::vector<QueryImage>& quer
     state.SkipWithError(fixture.status.ToString().c_str());
     return;
   }
-  ObjectRecognizer recognizer(fixture.database);
+  StatusOr<ObjectRecognizer> created = ObjectRecognizer::Create(fixture.database);
+  if (!created.ok()) {
+    state.SkipWithError(created.status().ToString().c_str());
+    return;
+  }
+  ObjectRecognizer recognizer = std::move(created).value();
   std::vector<Detection> detections;
   // Warm-up, untimed: creates the ORB extractor and sizes the scratch memory.
   if (Status s = recognizer.Recognize(queries[0].image, queries[0].camera, &detections); !s.ok()) {
@@ -321,7 +327,7 @@ void RunRecognition(benchmark::State& state, const std::vector<QueryImage>& quer
   auto median = [&](double RecognitionTiming::*stage) {
     std::vector<double> values;
     for (const RecognitionTiming& t : object_timings) values.push_back(t.*stage);
-    return cli::Median(values);
+    return Median(values);
   };
   state.counters["orb_ms"] = median(&RecognitionTiming::orb);
   state.counters["clustering_ms"] = median(&RecognitionTiming::clustering);
@@ -334,7 +340,7 @@ void RunRecognition(benchmark::State& state, const std::vector<QueryImage>& quer
   state.counters["total_ms"] = median(&RecognitionTiming::total);
   state.counters["object_images"] = double(object_timings.size());
   state.counters["object_images_detected"] = double(detected[1]);
-  state.counters["no_object_total_ms"] = cli::Median(no_object_totals);
+  state.counters["no_object_total_ms"] = Median(no_object_totals);
   state.counters["no_object_images"] = double(no_object_totals.size());
   state.counters["no_object_images_detected"] = double(detected[0]);
   state.counters["objects"] = double(fixture.database->size());

@@ -53,6 +53,7 @@
 
 #include "bench/bench_support.h"
 #include "client/cpp/frames.h"
+#include "core/common/median.h"
 #include "core/features/feature_extractor.h"
 #include "recognition/v1/place.grpc.pb.h"
 #include "server/app/recognition_server.h"

@@ -23,6 +23,7 @@
 
 #include <opencv2/core/utility.hpp>
 
+#include "core/common/median.h"
 #include "core/index/memory_index_store.h"
 #include "core/object/builder/model_builder.h"
 #include "core/object/tracking/object_tracker.h"
@@ -85,7 +86,12 @@ void BM_TrackVispCube(benchmark::State& state) {
     state.SkipWithError(fixture.status.ToString().c_str());
     return;
   }
-  ObjectRecognizer recognizer(fixture.database);
+  StatusOr<ObjectRecognizer> created = ObjectRecognizer::Create(fixture.database);
+  if (!created.ok()) {
+    state.SkipWithError(created.status().ToString().c_str());
+    return;
+  }
+  ObjectRecognizer recognizer = std::move(created).value();
   ObjectTracker tracker(fixture.database);
   std::vector<Detection> detections;
   if (Status s = tracker.Track(recognizer, fixture.frames[0], fixture.camera, &detections);
@@ -112,9 +118,9 @@ void BM_TrackVispCube(benchmark::State& state) {
       per_object.push_back(timing.tracking / double(timing.tracked + timing.lost));
     }
   }
-  state.counters["tracking_ms_per_object"] = cli::Median(per_object);
-  state.counters["tracked_frame_ms"] = cli::Median(tracked_frames);
-  state.counters["recognized_frame_ms"] = cli::Median(recognized_frames);
+  state.counters["tracking_ms_per_object"] = Median(per_object);
+  state.counters["tracked_frame_ms"] = Median(tracked_frames);
+  state.counters["recognized_frame_ms"] = Median(recognized_frames);
   state.counters["frames_tracked"] = double(tracked_frames.size());
   state.counters["frames_recognized"] = double(recognized_frames.size());
   state.counters["frames_found"] = double(found);

@@ -115,29 +115,33 @@ Status CheckIntRange(const std::string& field, int value, int lo, int hi) {
   return Status::Ok();
 }
 
-Status ValidateOrb(const OrbOptions& o) {
-  RECOG_RETURN_IF_ERROR(CheckIntRange("orb.max_features", o.max_features, 1, kMaxFeaturesLimit));
+// `name` is the options' path in the messages ("orb", "RecognitionOptions.orb").
+Status ValidateOrb(const OrbOptions& o, std::string_view name) {
+  const auto field = [&](const char* member) { return std::string(name) + "." + member; };
+  RECOG_RETURN_IF_ERROR(CheckIntRange(field("max_features"), o.max_features, 1, kMaxFeaturesLimit));
   if (!(o.scale_factor > 1.f) || !std::isfinite(o.scale_factor)) {
-    return Status::InvalidArgument(
-        OutOfRange("orb.scale_factor", "a finite number greater than 1", ToText(o.scale_factor)));
+    return Status::InvalidArgument(OutOfRange(
+        field("scale_factor"), "a finite number greater than 1", ToText(o.scale_factor)));
   }
-  RECOG_RETURN_IF_ERROR(CheckIntRange("orb.levels", o.levels, 1, kMaxOrbLevels));
-  RECOG_RETURN_IF_ERROR(CheckIntRange("orb.fast_threshold", o.fast_threshold, 1, 255));
+  RECOG_RETURN_IF_ERROR(CheckIntRange(field("levels"), o.levels, 1, kMaxOrbLevels));
+  RECOG_RETURN_IF_ERROR(CheckIntRange(field("fast_threshold"), o.fast_threshold, 1, 255));
   if (o.edge_threshold < 0) {
     return Status::InvalidArgument(
-        OutOfRange("orb.edge_threshold", ">= 0", std::to_string(o.edge_threshold)));
+        OutOfRange(field("edge_threshold"), ">= 0", std::to_string(o.edge_threshold)));
   }
   if (o.grid_rows < 0 || o.grid_cols < 0 || (o.grid_rows == 0) != (o.grid_cols == 0)) {
-    return Status::InvalidArgument(
-        "orb.grid_rows and orb.grid_cols must both be 0 (no bucketing) or both be positive, got " +
-        std::to_string(o.grid_rows) + " x " + std::to_string(o.grid_cols));
+    return Status::InvalidArgument(field("grid_rows") + " and " + field("grid_cols") +
+                                   " must both be 0 (no bucketing) or both be positive, got " +
+                                   std::to_string(o.grid_rows) + " x " +
+                                   std::to_string(o.grid_cols));
   }
-  RECOG_RETURN_IF_ERROR(CheckIntRange("orb.grid_rows", o.grid_rows, 0, kMaxGridSide));
-  RECOG_RETURN_IF_ERROR(CheckIntRange("orb.grid_cols", o.grid_cols, 0, kMaxGridSide));
-  RECOG_RETURN_IF_ERROR(CheckIntRange("orb.min_short_side", o.min_short_side, 0, kMaxMinShortSide));
+  RECOG_RETURN_IF_ERROR(CheckIntRange(field("grid_rows"), o.grid_rows, 0, kMaxGridSide));
+  RECOG_RETURN_IF_ERROR(CheckIntRange(field("grid_cols"), o.grid_cols, 0, kMaxGridSide));
+  RECOG_RETURN_IF_ERROR(
+      CheckIntRange(field("min_short_side"), o.min_short_side, 0, kMaxMinShortSide));
   if (!(std::isfinite(o.grid_fill_cap) && o.grid_fill_cap >= 0)) {
     return Status::InvalidArgument(OutOfRange(
-        "orb.grid_fill_cap", "0 (no fill) or a positive number", ToText(o.grid_fill_cap)));
+        field("grid_fill_cap"), "0 (no fill) or a positive number", ToText(o.grid_fill_cap)));
   }
   return Status::Ok();
 }
@@ -508,11 +512,13 @@ StatusOr<FeatureType> ParseFeatureType(std::string_view name) {
                                  "'; expected 'orb', 'brief' or 'sift'");
 }
 
+Status OrbOptions::Validate(std::string_view name) const { return ValidateOrb(*this, name); }
+
 Status FeatureOptions::Validate() const {
   if (type != FeatureType::kOrb && type != FeatureType::kFastBrief && type != FeatureType::kSift) {
     return Status::InvalidArgument("unknown feature type " + std::to_string(int(type)));
   }
-  RECOG_RETURN_IF_ERROR(ValidateOrb(orb));
+  RECOG_RETURN_IF_ERROR(orb.Validate("orb"));
   RECOG_RETURN_IF_ERROR(ValidateBrief(brief));
   RECOG_RETURN_IF_ERROR(
       CheckIntRange("sift.max_features", sift.max_features, 1, kMaxFeaturesLimit));

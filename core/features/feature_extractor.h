@@ -53,6 +53,10 @@ struct OrbOptions {
   // enlarge (the default: object crops are enlarged by their own rules). Places use
   // PlaceFeatureOptions() below.
   int min_short_side = 0;
+
+  // OK, or INVALID_ARGUMENT naming the first field out of its range; `name` names the options in
+  // the message (a holder passes the member's path, "RecognitionOptions.orb").
+  Status Validate(std::string_view name = "OrbOptions") const;
 };
 
 struct BriefOptions {

@@ -3,13 +3,28 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <span>
+#include <string>
 
 #include <opencv2/calib3d.hpp>
 
 #include "core/common/descriptor.h"
+#include "core/common/option_checks.h"
 
 namespace recog {
 namespace {
+
+// DATA_LOSS unless every feature that `features` (a node of a direct index) names is a row of
+// `rows` descriptors; `side` says whose index it is ("A", "B").
+Status CheckDirectFeatures(std::span<const uint32_t> features, uint32_t rows,
+                           std::string_view side) {
+  if (features.empty()) return Status::Ok();
+  const uint32_t last = *std::max_element(features.begin(), features.end());
+  if (last < rows) return Status::Ok();
+  return Status::DataLoss("the direct index of " + std::string(side) + " names feature " +
+                          std::to_string(last) + ", but " + std::string(side) + " has " +
+                          std::to_string(rows) + " features");
+}
 
 Status CheckBinary(const cv::Mat& a, const cv::Mat& b) {
   const bool a_ok = a.empty() || (a.type() == CV_8UC1 && a.isContinuous() && a.cols % 8 == 0);
@@ -85,14 +100,8 @@ Status MatchSharedNodes(const FeatureVector& a_direct, const cv::Mat& a_descript
         const std::span<const uint32_t> a_features = a_direct.features(i);
         const std::span<const uint32_t> b_features = b_direct.features(j);
         // Checked here, not trusted: a direct index may come from a decoded record.
-        if (!a_features.empty() &&
-            *std::max_element(a_features.begin(), a_features.end()) >= a_rows) {
-          return Status::InvalidArgument("direct index of A exceeds its features");
-        }
-        if (!b_features.empty() &&
-            *std::max_element(b_features.begin(), b_features.end()) >= b_rows) {
-          return Status::InvalidArgument("direct index of B exceeds its features");
-        }
+        RECOG_RETURN_IF_ERROR(CheckDirectFeatures(a_features, a_rows, "A"));
+        RECOG_RETURN_IF_ERROR(CheckDirectFeatures(b_features, b_rows, "B"));
         for (uint32_t fa : a_features) {
           const uint8_t* a_row = a_base + size_t(fa) * stride;
           Nearest nearest;
@@ -120,6 +129,12 @@ Status MatchSharedNodes(const FeatureVector& a_direct, const cv::Mat& a_descript
 
 }  // namespace
 
+Status MatchOptions::Validate(std::string_view name) const {
+  OptionChecks check(name);
+  check.InRange("ratio", ratio, RealRange::OpenClosed(0, 1));
+  return check.status();
+}
+
 Status MatchByDirectIndex(const FeatureVector& a_direct, const cv::Mat& a_descriptors,
                           const FeatureVector& b_direct, const cv::Mat& b_descriptors,
                           const MatchOptions& options, std::vector<Match>* matches) {
@@ -139,12 +154,9 @@ StatusOr<cv::Mat> DescriptorsInDirectOrder(const FeatureVector& b_direct,
   cv::Mat ordered(int(b_direct.num_features()), descriptors.cols, CV_8U);
   int row = 0;
   for (size_t j = 0; j < b_direct.size(); ++j) {
-    for (uint32_t f : b_direct.features(j)) {
-      if (f >= uint32_t(descriptors.rows)) {
-        return Status::InvalidArgument("direct index exceeds its features");
-      }
-      descriptors.row(int(f)).copyTo(ordered.row(row++));
-    }
+    RECOG_RETURN_IF_ERROR(
+        CheckDirectFeatures(b_direct.features(j), uint32_t(descriptors.rows), "B"));
+    for (uint32_t f : b_direct.features(j)) descriptors.row(int(f)).copyTo(ordered.row(row++));
   }
   return ordered;
 }
@@ -155,9 +167,10 @@ Status MatchByDirectIndexInOrder(const FeatureVector& a_direct, const cv::Mat& a
   matches->clear();
   RECOG_RETURN_IF_ERROR(CheckBinary(a_descriptors, b_in_direct_order));
   if (size_t(b_in_direct_order.rows) != b_direct.num_features()) {
-    return Status::InvalidArgument("B's descriptors in direct order have " +
-                                   std::to_string(b_in_direct_order.rows) + " rows for " +
-                                   std::to_string(b_direct.num_features()) + " features");
+    return Status::DataLoss("B's descriptors in direct order have " +
+                            std::to_string(b_in_direct_order.rows) + " rows for the " +
+                            std::to_string(b_direct.num_features()) +
+                            " features of its direct index");
   }
   const size_t stride = size_t(a_descriptors.cols);
   const uint8_t* b_base = b_in_direct_order.data;

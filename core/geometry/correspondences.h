@@ -15,6 +15,7 @@
 // InlierSpread says how much of both images the inliers cover.
 #pragma once
 
+#include <string_view>
 #include <vector>
 
 #include <opencv2/core.hpp>
@@ -32,26 +33,35 @@ struct Match {
 };
 
 struct MatchOptions {
-  double ratio = 0.6;          // best < ratio * second best; 1 disables the test
+  double ratio = 0.6;          // best < ratio * second best, in (0, 1]; 1 disables the test
   uint32_t max_distance = 50;  // Hamming distance of an acceptable match (of 256 bits)
+
+  // OK, or INVALID_ARGUMENT naming the field out of range; `name` names the struct in the message
+  // (a holder passes the member's path, "RecognitionOptions.match").
+  Status Validate(std::string_view name = "MatchOptions") const;
 };
 
 // Putative matches through the direct index. `a_direct`/`b_direct` index the rows of
 // `a_descriptors`/`b_descriptors` (binary, CV_8U, same width). Matches come sorted by a.
+// INVALID_ARGUMENT for descriptors that are not binary or not of one width; DATA_LOSS when a
+// direct index names a feature its descriptors do not have: a direct index and its descriptors
+// come from a stored record, which the caller names in the message.
 Status MatchByDirectIndex(const FeatureVector& a_direct, const cv::Mat& a_descriptors,
                           const FeatureVector& b_direct, const cv::Mat& b_descriptors,
                           const MatchOptions& options, std::vector<Match>* matches);
 
 // B's descriptors rearranged node by node in the order of `b_direct`: row p is the descriptor of
-// the p-th feature b_direct lists (every node's features in turn). INVALID_ARGUMENT when b_direct
-// names a row `descriptors` does not have.
+// the p-th feature b_direct lists (every node's features in turn). DATA_LOSS when b_direct names a
+// row `descriptors` does not have.
 StatusOr<cv::Mat> DescriptorsInDirectOrder(const FeatureVector& b_direct,
                                            const cv::Mat& descriptors);
 
 // MatchByDirectIndex with B's descriptors given node by node (DescriptorsInDirectOrder): the
-// same matches, but each node's candidates are read from contiguous memory. For a large B read
-// once per query (an object model out of the cache) the matching takes about half the time.
-// INVALID_ARGUMENT when `b_in_direct_order` does not have one row per feature of b_direct.
+// same matches, but each node's candidates are read from contiguous memory, which is much faster
+// for a large B read once per query (an object model out of the cache; docs/evaluation.md,
+// "Benchmarks").
+// Errors as MatchByDirectIndex's; DATA_LOSS too when `b_in_direct_order` does not have one row per
+// feature of b_direct.
 Status MatchByDirectIndexInOrder(const FeatureVector& a_direct, const cv::Mat& a_descriptors,
                                  const FeatureVector& b_direct, const cv::Mat& b_in_direct_order,
                                  const MatchOptions& options, std::vector<Match>* matches);

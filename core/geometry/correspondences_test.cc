@@ -1,7 +1,10 @@
 #include "core/geometry/correspondences.h"
 
 #include <algorithm>
+#include <cmath>
+#include <limits>
 #include <random>
+#include <string>
 
 #include <gtest/gtest.h>
 
@@ -81,11 +84,33 @@ TEST(CorrespondencesTest, NonBinaryOrMismatchedDescriptorsAreRefused) {
             StatusCode::kInvalidArgument);
   EXPECT_EQ(MatchExhaustive(cv::Mat(3, 32, CV_8U), cv::Mat(3, 64, CV_8U), {}, &matches).code(),
             StatusCode::kInvalidArgument);
-  EXPECT_EQ(
-      MatchByDirectIndex(AllUnderOneNode(9), cv::Mat(3, 32, CV_8U, cv::Scalar(0)),
-                         AllUnderOneNode(3), cv::Mat(3, 32, CV_8U, cv::Scalar(0)), {}, &matches)
-          .code(),
-      StatusCode::kInvalidArgument);
+}
+
+// A direct index that names features its descriptors lack comes from a damaged record: DATA_LOSS,
+// saying which side and by how much (the caller adds which record).
+TEST(CorrespondencesTest, ADirectIndexBeyondItsDescriptorsIsDataLoss) {
+  const cv::Mat three(3, 32, CV_8U, cv::Scalar(0));
+  std::vector<Match> matches;
+  const Status a =
+      MatchByDirectIndex(AllUnderOneNode(9), three, AllUnderOneNode(3), three, {}, &matches);
+  EXPECT_EQ(a.code(), StatusCode::kDataLoss);
+  EXPECT_EQ(a.message(), "the direct index of A names feature 8, but A has 3 features");
+  const Status b =
+      MatchByDirectIndex(AllUnderOneNode(3), three, AllUnderOneNode(4), three, {}, &matches);
+  EXPECT_EQ(b.code(), StatusCode::kDataLoss);
+  EXPECT_EQ(b.message(), "the direct index of B names feature 3, but B has 3 features");
+}
+
+TEST(CorrespondencesTest, MatchOptionsValidateTheRatio) {
+  EXPECT_TRUE(MatchOptions{}.Validate().ok());
+  EXPECT_TRUE((MatchOptions{.ratio = 1.0}).Validate().ok());
+  for (const double ratio :
+       {0.0, -0.5, 1.5, std::nan(""), std::numeric_limits<double>::infinity()}) {
+    const Status s = MatchOptions{.ratio = ratio}.Validate("RecognitionOptions.match");
+    EXPECT_EQ(s.code(), StatusCode::kInvalidArgument) << ratio;
+    EXPECT_EQ(s.message().rfind("RecognitionOptions.match.ratio = ", 0), 0u) << s.message();
+    EXPECT_NE(s.message().find("must be in (0, 1]"), std::string::npos) << s.message();
+  }
 }
 
 // B holds a noisy copy of each of A's descriptors among random ones, its nodes listing their
@@ -119,12 +144,14 @@ TEST(CorrespondencesTest, MatchingAgainstDescriptorsInDirectOrderGivesTheSameMat
 
 TEST(CorrespondencesTest, DescriptorsInDirectOrderMustMatchTheirDirectIndex) {
   const cv::Mat d = testing::RandomDescriptors(3, 2);
-  EXPECT_EQ(DescriptorsInDirectOrder(AllUnderOneNode(9), d).status().code(),
-            StatusCode::kInvalidArgument);
+  const Status beyond = DescriptorsInDirectOrder(AllUnderOneNode(9), d).status();
+  EXPECT_EQ(beyond.code(), StatusCode::kDataLoss);
+  EXPECT_EQ(beyond.message(), "the direct index of B names feature 8, but B has 3 features");
   std::vector<Match> matches;
-  EXPECT_EQ(
-      MatchByDirectIndexInOrder(AllUnderOneNode(3), d, AllUnderOneNode(4), d, {}, &matches).code(),
-      StatusCode::kInvalidArgument);
+  const Status rows =
+      MatchByDirectIndexInOrder(AllUnderOneNode(3), d, AllUnderOneNode(4), d, {}, &matches);
+  EXPECT_EQ(rows.code(), StatusCode::kDataLoss);
+  EXPECT_NE(rows.message().find("3 rows for the 4 features"), std::string::npos) << rows.message();
 }
 
 // Two views of random 3D points: camera A at the origin, camera B moved sideways and turned; both

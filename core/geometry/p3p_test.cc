@@ -6,6 +6,8 @@
 #include <gtest/gtest.h>
 #include <opencv2/calib3d.hpp>
 
+#include "core/common/rotation_angle.h"
+
 namespace recog {
 namespace {
 
@@ -29,12 +31,6 @@ Sample RandomSample(std::mt19937_64& random) {
     s.rays[i] = camera / camera[2];  // a pinhole pixel without K
   }
   return s;
-}
-
-double RotationErrorDegrees(const cv::Matx33d& a, const cv::Matx33d& b) {
-  const cv::Matx33d d = a.t() * b;
-  const double cosine = std::clamp((cv::trace(d) - 1) / 2, -1.0, 1.0);
-  return std::acos(cosine) * 180 / CV_PI;
 }
 
 TEST(P3PTest, TheTruePoseIsAmongTheSolutionsAndEverySolutionFitsTheRays) {
@@ -62,8 +58,7 @@ TEST(P3PTest, TheTruePoseIsAmongTheSolutionsAndEverySolutionFitsTheRays) {
       }
       EXPECT_NEAR(cv::determinant(solutions[k].R), 1.0, 1e-9);
       // The truth within 0.05 degrees and 0.1 mm: what RANSAC's refinement starts from.
-      if (RotationErrorDegrees(solutions[k].R, s.R) < 0.05 &&
-          cv::norm(solutions[k].t - s.t) < 1e-4) {
+      if (RotationAngleDeg(solutions[k].R, s.R) < 0.05 && cv::norm(solutions[k].t - s.t) < 1e-4) {
         has_truth = true;
       }
     }

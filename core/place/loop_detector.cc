@@ -7,13 +7,14 @@
 
 #include <opencv2/calib3d.hpp>
 
+#include "core/common/elapsed.h"
+#include "core/common/option_checks.h"
+#include "core/common/rotation_angle.h"
+
 namespace recog {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-double MsSince(Clock::time_point start) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
-}
 
 // Candidates close in id (eq. 4.2): H is the sum of their eta, `best` the one with the highest.
 struct Island {
@@ -73,11 +74,6 @@ bool IsUsablePoint(const cv::Point3f& p) {
 
 // The grid of InlierSpread for strong evidence: 4 x 4 cells over each image.
 constexpr int kSpreadGrid = 4;
-
-// The angle of a rotation matrix, degrees.
-double RotationAngleDeg(const cv::Matx33d& R) {
-  return std::acos(std::clamp((cv::trace(R) - 1.0) / 2.0, -1.0, 1.0)) * 180.0 / CV_PI;
-}
 
 // Whether the inliers of `essential` make a physical two-view geometry (CalibratedCheckOptions):
 // in front of both cameras, or a pure rotation the rotation alone explains; `pure_rotation`, when
@@ -224,83 +220,63 @@ LoopDetectorParams LoopDetectorParams::Keyframes() {
   return params;
 }
 
-StatusOr<LoopDetectorParams> ParseLoopDetectorMode(std::string_view mode) {
-  if (mode == "default") return LoopDetectorParams{};
-  if (mode == "thesis") return LoopDetectorParams::Thesis();
-  if (mode == "keyframes") return LoopDetectorParams::Keyframes();
-  return Status::InvalidArgument("unknown loop detector mode '" + std::string(mode) +
+StatusOr<LoopDetectorParams> ParseDetectorPreset(std::string_view name) {
+  if (name == "default") return LoopDetectorParams{};
+  if (name == "thesis") return LoopDetectorParams::Thesis();
+  if (name == "keyframes") return LoopDetectorParams::Keyframes();
+  return Status::InvalidArgument("unknown detector preset '" + std::string(name) +
                                  "' (default, thesis or keyframes)");
 }
 
-Status LoopDetectorParams::Validate() const {
-  if (!(alpha >= 0.0)) return Status::InvalidArgument("alpha must be >= 0");
-  if (!(min_score_with_previous >= 0.0)) {
-    return Status::InvalidArgument("min_score_with_previous must be >= 0");
-  }
-  if (!(recent_seconds >= 0.0)) return Status::InvalidArgument("recent_seconds must be >= 0");
-  if (max_query_results == 0) return Status::InvalidArgument("max_query_results must be >= 1");
-  if (island_min_size == 0) return Status::InvalidArgument("island_min_size must be >= 1");
-  if (!(matching.ratio > 0.0 && matching.ratio <= 1.0)) {
-    return Status::InvalidArgument("matching ratio must be in (0, 1]");
-  }
-  if (!(epipolar.threshold_px > 0.0) || !(epipolar.confidence > 0.0 && epipolar.confidence < 1.0) ||
-      epipolar.max_iterations < 1 || epipolar.min_inliers < 8) {
-    return Status::InvalidArgument(
-        "RANSAC needs a threshold > 0, a confidence in (0, 1), iterations >= 1 and at least 8 "
-        "inliers");
-  }
-  if (!(metric.threshold_px > 0.0) || !(metric.confidence > 0.0 && metric.confidence < 1.0) ||
-      metric.max_iterations < 1 || metric.min_inliers < 6 ||
-      !(metric.min_inlier_ratio >= 0.0 && metric.min_inlier_ratio <= 1.0) ||
-      !(metric.min_sigma_px >= 0.0)) {
-    return Status::InvalidArgument(
-        "the metric check needs a threshold > 0, a confidence in (0, 1), iterations >= 1, at "
-        "least 6 inliers, an inlier ratio in [0, 1] and a sigma floor >= 0");
-  }
-  const CalibratedCheckOptions& c = calibrated;
-  if (!(c.essential.threshold_px > 0.0) ||
-      !(c.essential.confidence > 0.0 && c.essential.confidence < 1.0) ||
-      c.essential.max_iterations < 1 || !(c.min_in_front >= 0.0 && c.min_in_front <= 1.0) ||
-      !(c.max_rotation_deg >= 0.0 && c.max_rotation_deg <= 180.0) || !(c.min_parallax_deg >= 0.0) ||
-      !(c.min_rotation_only >= 0.0 && c.min_rotation_only <= 1.0) ||
-      !(c.min_spread >= 0.0 && c.min_spread <= 1.0)) {
-    return Status::InvalidArgument(
-        "the calibrated check needs a threshold > 0, a confidence in (0, 1), iterations >= 1, "
-        "shares in [0, 1], a rotation in [0, 180] and a parallax >= 0");
-  }
-  if (keyframe_confirmations > kMaxKeyframeConfirmations) {
-    return Status::InvalidArgument("keyframe_confirmations must be at most " +
-                                   std::to_string(kMaxKeyframeConfirmations) + ", not " +
-                                   std::to_string(keyframe_confirmations));
-  }
-  if (!(max_motion_disagreement_deg >= 0.0 && max_motion_disagreement_deg <= 180.0)) {
-    return Status::InvalidArgument("max_motion_disagreement_deg must be in [0, 180], not " +
-                                   std::to_string(max_motion_disagreement_deg));
-  }
-  if (strong_temporal_matches > temporal_matches) {
-    return Status::InvalidArgument("strong_temporal_matches must be <= temporal_matches");
-  }
-  if (strong_min_inliers < epipolar.min_inliers) {
-    return Status::InvalidArgument("strong_min_inliers must be >= min_inliers");
-  }
-  if (!(min_spread >= 0.0 && min_spread <= 1.0)) {
-    return Status::InvalidArgument("min_spread must be in [0, 1], not " +
-                                   std::to_string(min_spread));
-  }
-  if (!(strong_min_spread >= 0.0 && strong_min_spread <= 1.0)) {
-    return Status::InvalidArgument("strong_min_spread must be in [0, 1]");
-  }
-  if (!(strong_max_homography_ratio >= 0.0 && strong_max_homography_ratio <= 1.0)) {
-    return Status::InvalidArgument("strong_max_homography_ratio must be in [0, 1]");
-  }
-  if (!(model_selection.sigma_px > 0.0) || !(model_selection.threshold_px > 0.0) ||
-      !(model_selection.confidence > 0.0 && model_selection.confidence < 1.0) ||
-      model_selection.max_iterations < 1) {
-    return Status::InvalidArgument(
-        "model selection needs a sigma > 0, a threshold > 0, a confidence in (0, 1) and "
-        "iterations >= 1");
-  }
-  return Status::Ok();
+Status LoopDetectorParams::Validate(std::string_view name) const {
+  OptionChecks check(name);
+  check.InRange("alpha", alpha, RealRange::AtLeast(0));
+  check.InRange("min_score_with_previous", min_score_with_previous, RealRange::AtLeast(0));
+  check.InRange("recent_seconds", recent_seconds, RealRange::AtLeast(0));
+  check.AtLeast("max_query_results", max_query_results, 1);
+  check.AtLeast("island_min_size", island_min_size, 1);
+  check.Member("matching", matching);
+  // RANSAC of F needs 8 correspondences; PnP of the metric check 6.
+  check.InRange("epipolar.threshold_px", epipolar.threshold_px, RealRange::Above(0));
+  check.InRange("epipolar.confidence", epipolar.confidence, RealRange::Open(0, 1));
+  check.AtLeast("epipolar.max_iterations", epipolar.max_iterations, 1);
+  check.AtLeast("epipolar.min_inliers", epipolar.min_inliers, 8);
+  check.InRange("metric.threshold_px", metric.threshold_px, RealRange::Above(0));
+  check.InRange("metric.confidence", metric.confidence, RealRange::Open(0, 1));
+  check.AtLeast("metric.max_iterations", metric.max_iterations, 1);
+  check.AtLeast("metric.min_inliers", metric.min_inliers, 6);
+  check.InRange("metric.min_inlier_ratio", metric.min_inlier_ratio, RealRange::Closed(0, 1));
+  check.InRange("metric.min_sigma_px", metric.min_sigma_px, RealRange::AtLeast(0));
+  check.InRange("calibrated.essential.threshold_px", calibrated.essential.threshold_px,
+                RealRange::Above(0));
+  check.InRange("calibrated.essential.confidence", calibrated.essential.confidence,
+                RealRange::Open(0, 1));
+  check.AtLeast("calibrated.essential.max_iterations", calibrated.essential.max_iterations, 1);
+  check.InRange("calibrated.min_in_front", calibrated.min_in_front, RealRange::Closed(0, 1));
+  check.InRange("calibrated.max_rotation_deg", calibrated.max_rotation_deg,
+                RealRange::Closed(0, 180));
+  check.InRange("calibrated.min_parallax_deg", calibrated.min_parallax_deg, RealRange::AtLeast(0));
+  check.InRange("calibrated.min_rotation_only", calibrated.min_rotation_only,
+                RealRange::Closed(0, 1));
+  check.InRange("calibrated.min_spread", calibrated.min_spread, RealRange::Closed(0, 1));
+  check.InRange("keyframe_confirmations", keyframe_confirmations, 0, kMaxKeyframeConfirmations);
+  check.InRange("max_motion_disagreement_deg", max_motion_disagreement_deg,
+                RealRange::Closed(0, 180));
+  check.Require(strong_temporal_matches <= temporal_matches, "strong_temporal_matches",
+                strong_temporal_matches,
+                "<= temporal_matches (" + std::to_string(temporal_matches) + ")");
+  check.Require(strong_min_inliers >= epipolar.min_inliers, "strong_min_inliers",
+                strong_min_inliers,
+                ">= epipolar.min_inliers (" + std::to_string(epipolar.min_inliers) + ")");
+  check.InRange("min_spread", min_spread, RealRange::Closed(0, 1));
+  check.InRange("strong_min_spread", strong_min_spread, RealRange::Closed(0, 1));
+  check.InRange("strong_max_homography_ratio", strong_max_homography_ratio,
+                RealRange::Closed(0, 1));
+  check.InRange("model_selection.sigma_px", model_selection.sigma_px, RealRange::Above(0));
+  check.InRange("model_selection.threshold_px", model_selection.threshold_px, RealRange::Above(0));
+  check.InRange("model_selection.confidence", model_selection.confidence, RealRange::Open(0, 1));
+  check.AtLeast("model_selection.max_iterations", model_selection.max_iterations, 1);
+  return check.status();
 }
 
 StatusOr<LoopDetector> LoopDetector::Create(Database* database, const LoopDetectorParams& params) {
@@ -309,17 +285,18 @@ StatusOr<LoopDetector> LoopDetector::Create(Database* database, const LoopDetect
   return LoopDetector(database, params);
 }
 
-EntryId LoopDetector::QueryBound(std::optional<double> timestamp) const {
-  const EntryId next = database_->next_entry_id();
+RecencyBound LoopDetector::RecencyBoundFor(std::optional<double> timestamp) const {
   if (!timestamp.has_value()) {
-    return next > params_.recent_frames ? next - params_.recent_frames : 0;
+    const EntryId next = database_->next_entry_id();
+    if (params_.recent_frames == 0) return {};
+    return {next > params_.recent_frames ? next - params_.recent_frames : 0};
   }
   // Entries this detector added after (timestamp - recent_seconds) are too recent; entries from
   // before this detector existed are older than all of them.
   const double limit = *timestamp - params_.recent_seconds;
   const auto it = std::upper_bound(entry_timestamps_.begin(), entry_timestamps_.end(), limit);
-  if (it == entry_timestamps_.end()) return next;
-  return entry_ids_[size_t(it - entry_timestamps_.begin())];
+  if (it == entry_timestamps_.end()) return {};
+  return {entry_ids_[size_t(it - entry_timestamps_.begin())]};
 }
 
 Status LoopDetector::Convert(const FeatureSet& features, BowVector* bow,
@@ -388,13 +365,15 @@ bool LoopDetector::FindBestIsland(const std::vector<QueryResult>& results, doubl
   return true;
 }
 
-Status LoopDetector::QueryDatabase(const BowVector& bow, EntryId bound,
+Status LoopDetector::QueryDatabase(const BowVector& bow, RecencyBound bound,
                                    std::span<const EntryId> excluded,
                                    std::vector<QueryResult>* results) const {
   // Asks for as many more results as entries are left out, so that max_query_results remain.
-  RECOG_RETURN_IF_ERROR(database_->Query(
-      bow, {.max_results = params_.max_query_results + excluded.size(), .max_entry_id = bound},
-      results));
+  RECOG_RETURN_IF_ERROR(
+      database_->Query(bow,
+                       {.max_results = params_.max_query_results + excluded.size(),
+                        .max_entry_id = bound.first_recent},
+                       results));
   if (!excluded.empty()) {
     std::erase_if(*results, [&](const QueryResult& r) {
       return std::find(excluded.begin(), excluded.end(), r.id) != excluded.end();
@@ -418,7 +397,7 @@ StatusOr<LoopResult> LoopDetector::Process(const FeatureSet& features,
   BowVector bow;
   FeatureVector direct;
   RECOG_RETURN_IF_ERROR(Convert(features, &bow, &direct));
-  result.timings.conversion = MsSince(start);
+  result.timings.conversion = MillisecondsSince(start);
 
   const bool enough_features = HasEnoughFeatures(features);
   if (!enough_features) {
@@ -437,8 +416,9 @@ StatusOr<LoopResult> LoopDetector::Process(const FeatureSet& features,
   const bool query = enough_features && result.status != LoopStatus::kLowScoreWithPrevious;
   if (query) {
     start = Clock::now();
-    RECOG_RETURN_IF_ERROR(QueryDatabase(bow, QueryBound(timestamp), excluded, &query_results_));
-    result.timings.query = MsSince(start);
+    RECOG_RETURN_IF_ERROR(
+        QueryDatabase(bow, RecencyBoundFor(timestamp), excluded, &query_results_));
+    result.timings.query = MillisecondsSince(start);
     const double reference = params_.normalisation == ScoreNormalisation::kBestCandidate
                                  ? BestScore(query_results_)
                                  : result.previous_score;
@@ -462,7 +442,7 @@ StatusOr<LoopResult> LoopDetector::Process(const FeatureSet& features,
                           ? LoopStatus::kLoopDetected
                           : LoopStatus::kFailedTemporalConsistency;
     }
-    result.timings.islands = MsSince(start);
+    result.timings.islands = MillisecondsSince(start);
 
     if (result.status == LoopStatus::kLoopDetected) {
       RECOG_RETURN_IF_ERROR(
@@ -500,7 +480,7 @@ StatusOr<LoopResult> LoopDetector::Process(const FeatureSet& features,
   start = Clock::now();
   RECOG_ASSIGN_OR_RETURN(result.entry,
                          Insert(features, bow, direct, timestamp, client_id, geometry));
-  result.timings.insertion = MsSince(start);
+  result.timings.insertion = MillisecondsSince(start);
   if (result.status == LoopStatus::kLoopDetected || result.status == LoopStatus::kCandidate) {
     const LoopEvidence& evidence = result.evidence;
     last_loop_ = LastLoop{frame, result.entry, result.match,
@@ -535,20 +515,20 @@ StatusOr<LoopResult> LoopDetector::Query(const FeatureSet& features,
 Status LoopDetector::ConvertForQuery(const FeatureSet& features, ConvertedFrame* frame) const {
   const auto start = Clock::now();
   RECOG_RETURN_IF_ERROR(Convert(features, &frame->bow, &frame->direct));
-  frame->conversion_ms = MsSince(start);
+  frame->conversion_ms = MillisecondsSince(start);
   return Status::Ok();
 }
 
 StatusOr<LoopDetector::Shortlist> LoopDetector::ShortlistFor(const ConvertedFrame& frame,
                                                              std::span<const EntryId> excluded,
-                                                             EntryId bound) const {
+                                                             RecencyBound bound) const {
   Shortlist shortlist;
   const auto start = Clock::now();
   // The whole map, without tau_c: entry_ids_/entry_timestamps_ belong to Process and Add.
   // (Not query_results_: Process may be using it.)
   RECOG_RETURN_IF_ERROR(QueryDatabase(frame.bow, bound, excluded, &shortlist.results));
   shortlist.best_score = BestScore(shortlist.results);
-  shortlist.query_ms = MsSince(start);
+  shortlist.query_ms = MillisecondsSince(start);
   return shortlist;
 }
 
@@ -565,7 +545,7 @@ StatusOr<LoopResult> LoopDetector::Recognise(const FeatureSet& features,
   result.candidates = Candidates(shortlist.results, reference_score);
   const bool found = FindBestIsland(shortlist.results, reference_score, &result);
   if (found) result.status = LoopStatus::kLoopDetected;
-  result.timings.islands = MsSince(start);
+  result.timings.islands = MillisecondsSince(start);
 
   if (found) RECOG_RETURN_IF_ERROR(VerifyAlone(features, frame, geometry, &result));
   return result;
@@ -636,7 +616,8 @@ Status LoopDetector::Verify(const FeatureSet& features, const FeatureVector& dir
   RECOG_ASSIGN_OR_RETURN(EntryRecord candidate,
                          database_->Get(result->match, kEntryDirect | kEntryFeatures));
   std::vector<Match> matches;
-  RECOG_RETURN_IF_ERROR(Correspondences(features.descriptors, direct, candidate, &matches));
+  RECOG_RETURN_IF_ERROR(
+      Correspondences(kInvalidEntryId, features.descriptors, direct, candidate, &matches));
   result->correspondences = uint32_t(matches.size());
   EpipolarOptions epipolar = epipolar_options;
   const int64_t pixels = int64_t(features.image_size.area());
@@ -671,26 +652,34 @@ Status LoopDetector::Verify(const FeatureSet& features, const FeatureVector& dir
                                         result->fundamental, params_.model_selection)
                              .homography_ratio <= params_.strong_max_homography_ratio);
   }
-  result->timings.verification = MsSince(start);
+  result->timings.verification = MillisecondsSince(start);
   return Status::Ok();
 }
 
-Status LoopDetector::Correspondences(const cv::Mat& a_descriptors, const FeatureVector& a_direct,
-                                     const EntryRecord& b, std::vector<Match>* matches) const {
-  if (params_.geometry == GeometryCheck::kDirectIndex) {
-    return MatchByDirectIndex(a_direct, a_descriptors, b.direct, b.descriptors, params_.matching,
-                              matches);
-  }
-  return MatchExhaustive(a_descriptors, b.descriptors, params_.matching, matches);
+Status LoopDetector::Correspondences(EntryId a_entry, const cv::Mat& a_descriptors,
+                                     const FeatureVector& a_direct, const EntryRecord& b,
+                                     std::vector<Match>* matches) const {
+  const Status matched =
+      params_.geometry == GeometryCheck::kDirectIndex
+          ? MatchByDirectIndex(a_direct, a_descriptors, b.direct, b.descriptors, params_.matching,
+                               matches)
+          : MatchExhaustive(a_descriptors, b.descriptors, params_.matching, matches);
+  if (matched.ok()) return matched;
+  // The matcher calls the two sides A and B: say which frames they are (a damaged entry's
+  // direct index is DATA_LOSS).
+  const std::string a_name =
+      a_entry == kInvalidEntryId ? "the frame" : "entry " + std::to_string(a_entry);
+  return matched.WithContext("matching " + a_name + " (A) with entry " + std::to_string(b.id) +
+                             " (B)");
 }
 
 StatusOr<std::optional<cv::Matx33d>> LoopDetector::RotationBetween(
-    const std::vector<cv::KeyPoint>& a_keypoints, const cv::Mat& a_descriptors,
+    EntryId a_entry, const std::vector<cv::KeyPoint>& a_keypoints, const cv::Mat& a_descriptors,
     const FeatureVector& a_direct, const cv::Matx33d& a_camera, EntryId b) const {
   RECOG_ASSIGN_OR_RETURN(EntryRecord entry, database_->Get(b, kEntryDirect | kEntryFeatures));
   if (!entry.has_camera()) return std::optional<cv::Matx33d>();
   std::vector<Match> matches;
-  RECOG_RETURN_IF_ERROR(Correspondences(a_descriptors, a_direct, entry, &matches));
+  RECOG_RETURN_IF_ERROR(Correspondences(a_entry, a_descriptors, a_direct, entry, &matches));
   const EssentialResult essential = VerifyEssential(
       a_camera, entry.camera, a_keypoints, entry.keypoints, matches, params_.calibrated.essential);
   const bool held = essential.found && essential.inliers.size() >= params_.epipolar.min_inliers &&
@@ -708,22 +697,23 @@ Status LoopDetector::Confirm(const FeatureSet& features, const FeatureVector& di
     if (result->evidence.calibrated && last_loop_->rotation.has_value() && camera != nullptr) {
       // X_match = R X_query for both loops; the two query frames and the two matches by their own
       // matches: predicted R_now = R_matches * R_before * R_queries.
-      RECOG_ASSIGN_OR_RETURN(const std::optional<cv::Matx33d> queries,
-                             RotationBetween(features.keypoints, features.descriptors, direct,
-                                             *camera, last_loop_->query));
+      RECOG_ASSIGN_OR_RETURN(
+          const std::optional<cv::Matx33d> queries,
+          RotationBetween(kInvalidEntryId, features.keypoints, features.descriptors, direct,
+                          *camera, last_loop_->query));
       std::optional<cv::Matx33d> matches = cv::Matx33d::eye();
       if (result->match != last_loop_->match) {
         RECOG_ASSIGN_OR_RETURN(EntryRecord before,
                                database_->Get(last_loop_->match, kEntryDirect | kEntryFeatures));
-        RECOG_ASSIGN_OR_RETURN(matches,
-                               RotationBetween(before.keypoints, before.descriptors, before.direct,
-                                               before.camera, result->match));
+        RECOG_ASSIGN_OR_RETURN(
+            matches, RotationBetween(before.id, before.keypoints, before.descriptors, before.direct,
+                                     before.camera, result->match));
       }
       // Frames too alike (or too far apart) to fix a rotation between them leave the motion
       // unchecked: the neighbourhood alone confirms then.
       agrees = !queries.has_value() || !matches.has_value() ||
-               RotationAngleDeg(result->evidence.rotation *
-                                (*matches * *last_loop_->rotation * *queries).t()) <=
+               RotationAngleDeg(result->evidence.rotation,
+                                *matches * *last_loop_->rotation * *queries) <=
                    params_.max_motion_disagreement_deg;
     }
     if (agrees) confirmations = last_loop_->confirmations + 1;
@@ -825,7 +815,7 @@ Status LoopDetector::VerifyMetric(const FeatureSet& features, const FrameGeometr
     result->status = LoopStatus::kFailedGeometry;
     result->acceptance = LoopAcceptance::kNone;
   }
-  result->timings.metric_verification = MsSince(start);
+  result->timings.metric_verification = MillisecondsSince(start);
   return Status::Ok();
 }
 

@@ -56,7 +56,7 @@
 // Defaults are thesis Table 4.4 where it gives one (k = 3, alpha = 0.3, direct index level 2,
 // 12 RANSAC inliers, minimum score 0.005 with the previous frame, tau_c = 20 s); the others are
 // documented on each field. LoopDetectorParams::Thesis() is the thesis's detector exactly (no
-// acceptance on strong evidence); ParseLoopDetectorMode names the two presets. One detector per
+// acceptance on strong evidence); ParseDetectorPreset names the two presets. One detector per
 // map; independent detectors may run at once.
 //
 // Thread safety: Process and Add change the detector and must be called from one thread at a
@@ -104,9 +104,9 @@ StatusOr<GeometryCheck> ParseGeometryCheck(std::string_view name);
 // The 3D check of a loop where one side has 3D points (VerifyMetric). Defaults: 2 px as the
 // epipolar check's threshold and 12 inliers as its minimum (Table 4.4); 70 % of the 2D-3D
 // correspondences (the epipolar inliers with a 3D point): on the synthetic sequences of
-// tools/evaluation/metric_sequence_test.cc, true loops keep at least 82 % (stereo) and 87 %
-// (RGB-D), while a map built from a flat picture of the place (a poster: right images, wrong
-// structure) keeps at most 60 % and is refused.
+// tools/evaluation/metric_sequence_test.cc, true loops keep more (stereo and RGB-D), while a map
+// built from a flat picture of the place (a poster: right images, wrong structure) keeps fewer
+// and is refused (the shares: docs/places.md, "Metric loops from depth and stereo").
 struct MetricCheckOptions {
   double threshold_px = 2.0;  // reprojection error of a PnP inlier
   int max_iterations = 300;   // RANSAC iterations (OpenCV's solvePnPRansac, deterministic)
@@ -128,10 +128,9 @@ struct MetricCheckOptions {
 //  - the cameras look at most max_rotation_deg apart;
 //  - the inliers cover min_spread of both images (InlierSpread, 4 x 4 cells).
 // Default off: on the Strecha keyframe walks of shared/data it costs recall and lets through
-// false loops the spread floor stops (keyframes preset with the camera: 10 of 51 right and none
-// false without it, 8 right and 2 false with it; docs/places.md, "Repeated architecture and wide
-// baselines"): the look-alike façades triangulate in front with ample parallax, while true
-// pairs seen at 3 m or 80 degrees put a third of their inliers behind.
+// false loops the spread floor stops (docs/places.md, "Repeated architecture and wide
+// baselines", has the counts and the command): the look-alike façades triangulate in front with
+// ample parallax, while true pairs far apart put many of their inliers behind.
 struct CalibratedCheckOptions {
   bool enabled = false;  // true: decides instead of the spread floor (see above)
   EssentialOptions essential;
@@ -171,7 +170,7 @@ enum class ScoreNormalisation {
 std::string_view ScoreNormalisationName(ScoreNormalisation n);  // "previous_frame", ...
 StatusOr<ScoreNormalisation> ParseScoreNormalisation(std::string_view name);
 
-// The named parameter sets (ParseLoopDetectorMode); a map keeps the name of the one it started
+// The named parameter sets (ParseDetectorPreset); a map keeps the name of the one it started
 // from, and its stored settings are applied over that one.
 enum class DetectorPreset { kDefault, kThesis, kKeyframes };
 std::string_view DetectorPresetName(DetectorPreset preset);  // "default", "thesis", "keyframes"
@@ -226,16 +225,17 @@ struct LoopDetectorParams {
   // Query (relocalisation, and searches across maps) accepts a place on one frame's evidence,
   // with no consistent queries behind it: its RANSAC needs at least this many inliers (and at
   // least epipolar.min_inliers). Default 16: robot B's frames looked up in robot A's map
-  // (`recog eval place --split`) gave one false loop at 12 inliers in 763 on a seqgen tour and
-  // none from 16 on, where the corridor's weakest true one has 16 (docs/places.md, "Queries
+  // (`recog eval place --split`) gave a false loop at the epipolar check's 12 inliers on a seqgen
+  // tour and none from 16 on, which the corridor's true loops all reach (docs/places.md, "Queries
   // across maps").
   uint32_t relocalisation_min_inliers = 16;
   // Small frames (a 160x120 or 128x96 robot camera, often a fisheye one): their few features
-  // give few inliers, true loops as false ones, and the false loops seen on such a camera had 12
-  // to 18. A frame of at most small_frame_pixels (FeatureSet::image_size; unknown: not small)
-  // needs small_frame_min_inliers inliers in every verification. Defaults 320 x 240 and 20: on
-  // the shared corridor downscaled to 160x120 and 128x96 its true loops mostly have 20 to 78
-  // (docs/places.md, "Small frames").
+  // give few inliers, true loops as false ones, and the false loops seen on such a camera had
+  // fewer than 20. A frame of at most small_frame_pixels (FeatureSet::image_size; unknown: not
+  // small) needs small_frame_min_inliers inliers in every verification. Defaults 320 x 240 and 20:
+  // the floor costs the shared corridor downscaled to 160x120 and 128x96 few of its true loops
+  // (the counts and the commands: docs/places.md, "Small frames" and "Repeated architecture and
+  // wide baselines").
   uint32_t small_frame_pixels = 320 * 240;
   uint32_t small_frame_min_inliers = 20;
   // Keyframe confirmations (beyond the thesis; ORB-SLAM asks as much of its keyframes): with
@@ -261,12 +261,15 @@ struct LoopDetectorParams {
   // streams"): the scores normalised by the best candidate, tau_c of 4 keyframes, and consecutive
   // loops consistent only when their islands are at most 1 keyframe apart.
   static LoopDetectorParams Keyframes();
-  Status Validate() const;
+  // OK, or INVALID_ARGUMENT naming the first field out of its range with its value
+  // ("LoopDetectorParams.alpha = inf: must be finite and >= 0"); `name` names the struct in the
+  // message (a holder passes the member's path, "RigLoopParams.detector").
+  Status Validate(std::string_view name = "LoopDetectorParams") const;
 };
 
-// The preset named `mode`: "default" (LoopDetectorParams{}), "thesis" (Thesis()) or "keyframes"
+// The preset named `name`: "default" (LoopDetectorParams{}), "thesis" (Thesis()) or "keyframes"
 // (Keyframes()).
-StatusOr<LoopDetectorParams> ParseLoopDetectorMode(std::string_view mode);
+StatusOr<LoopDetectorParams> ParseDetectorPreset(std::string_view name);
 
 // The figures behind a verified loop, so that a client can gate on its own thresholds (step 6).
 struct LoopEvidence {
@@ -341,6 +344,13 @@ struct LoopResult {
   LoopTimings timings;
 };
 
+// tau_c for one query, as both detectors (this one and RigLoopDetector) give it: every id from
+// `first_recent` on (an entry's here, a rig frame's there) is too recent to be a candidate. The
+// default, kInvalidEntryId, is the bound of a query for which no stored frame is too recent.
+struct RecencyBound {
+  EntryId first_recent = kInvalidEntryId;
+};
+
 class LoopDetector {
  public:
   // `database` must outlive the detector. Its map fixes the vocabulary, scoring and the level of
@@ -411,9 +421,10 @@ class LoopDetector {
     double query_ms = 0;
   };
   Status ConvertForQuery(const FeatureSet& features, ConvertedFrame* frame) const;
+  // `bound` leaves the recent entries out (RigLoopDetector's tau_c); by default none is.
   StatusOr<Shortlist> ShortlistFor(const ConvertedFrame& frame,
                                    std::span<const EntryId> excluded = {},
-                                   EntryId bound = kInvalidEntryId) const;
+                                   RecencyBound bound = {}) const;
   StatusOr<LoopResult> Recognise(const FeatureSet& features, const ConvertedFrame& frame,
                                  const Shortlist& shortlist, double reference_score,
                                  const FrameGeometry* geometry = nullptr) const;
@@ -450,11 +461,10 @@ class LoopDetector {
   }
   // Step 1: the frame's bag of words and direct-index entry, as the map wants them.
   Status Convert(const FeatureSet& features, BowVector* bow, FeatureVector* direct) const;
-  // The first entry id too recent to be a candidate for a frame at `timestamp` (tau_c): by
-  // time when the frame has one, else by frames.
-  EntryId QueryBound(std::optional<double> timestamp) const;
+  // tau_c for a frame at `timestamp`: by time when the frame has one, else by frames.
+  RecencyBound RecencyBoundFor(std::optional<double> timestamp) const;
   // Step 2: the best max_query_results entries below `bound` that are not `excluded`.
-  Status QueryDatabase(const BowVector& bow, EntryId bound, std::span<const EntryId> excluded,
+  Status QueryDatabase(const BowVector& bow, RecencyBound bound, std::span<const EntryId> excluded,
                        std::vector<QueryResult>* results) const;
   // Steps 3 and 4: normalises the scores of `results` by `reference` (eta = s / reference), keeps
   // those reaching alpha, groups them into islands and fills the match, score, eta and island of
@@ -483,17 +493,17 @@ class LoopDetector {
                  uint64_t frame, LoopResult* result) const;
   // The rotation X_b = R X_a between two frames from their own matches (the five-point essential
   // matrix, CalibratedCheckOptions::essential; nullopt when they do not hold one with
-  // epipolar.min_inliers inliers): `a` is the frame being processed or an entry, `b` an entry of
-  // the map.
-  StatusOr<std::optional<cv::Matx33d>> RotationBetween(const std::vector<cv::KeyPoint>& a_keypoints,
-                                                       const cv::Mat& a_descriptors,
-                                                       const FeatureVector& a_direct,
-                                                       const cv::Matx33d& a_camera,
-                                                       EntryId b) const;
-  // The putative matches of step 6 (the geometry check's matcher) between features a and an
-  // entry's.
-  Status Correspondences(const cv::Mat& a_descriptors, const FeatureVector& a_direct,
-                         const EntryRecord& b, std::vector<Match>* matches) const;
+  // epipolar.min_inliers inliers): `a` is the frame being processed (a_entry kInvalidEntryId) or
+  // entry a_entry, `b` an entry of the map.
+  StatusOr<std::optional<cv::Matx33d>> RotationBetween(
+      EntryId a_entry, const std::vector<cv::KeyPoint>& a_keypoints, const cv::Mat& a_descriptors,
+      const FeatureVector& a_direct, const cv::Matx33d& a_camera, EntryId b) const;
+  // The putative matches of step 6 (the geometry check's matcher) between features a (the frame
+  // being processed, a_entry kInvalidEntryId, or entry a_entry) and entry b's. An error names
+  // both: DATA_LOSS for a stored entry whose direct index does not fit its features.
+  Status Correspondences(EntryId a_entry, const cv::Mat& a_descriptors,
+                         const FeatureVector& a_direct, const EntryRecord& b,
+                         std::vector<Match>* matches) const;
   // The start of a one-frame result (Recognise, VerifyEntry): its conversion time; false, with
   // kTooFewFeatures, when the frame has too few features to be looked up.
   bool StartAlone(const FeatureSet& features, const ConvertedFrame& frame,

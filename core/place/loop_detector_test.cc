@@ -5,6 +5,7 @@
 #include <set>
 #include <string>
 #include <thread>
+#include <vector>
 
 #include <gtest/gtest.h>
 #include <opencv2/imgproc.hpp>
@@ -12,6 +13,7 @@
 #include "core/features/feature_extractor.h"
 #include "core/index/memory_index_store.h"
 #include "core/place/place_test_frames.h"
+#include "tests/testing/option_cases.h"
 
 namespace recog {
 namespace {
@@ -601,9 +603,9 @@ TEST_F(LoopDetectorTest, ThesisModeIsTheDetectorWithoutStrongAcceptance) {
   EXPECT_EQ(thesis.temporal_matches, 3u);
   EXPECT_DOUBLE_EQ(thesis.alpha, 0.3);
   EXPECT_EQ(thesis.epipolar.min_inliers, 12u);
-  EXPECT_EQ(ParseLoopDetectorMode("thesis")->strong_acceptance, false);
-  EXPECT_EQ(ParseLoopDetectorMode("default")->strong_acceptance, true);
-  EXPECT_EQ(ParseLoopDetectorMode("dloop").status().code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(ParseDetectorPreset("thesis")->strong_acceptance, false);
+  EXPECT_EQ(ParseDetectorPreset("default")->strong_acceptance, true);
+  EXPECT_EQ(ParseDetectorPreset("dloop").status().code(), StatusCode::kInvalidArgument);
 
   // Where no candidate is strong, the trial verifications leave no trace: every result is the
   // thesis detector's, and every loop was accepted by temporal consistency.
@@ -644,7 +646,7 @@ TEST_F(LoopDetectorTest, KeyframesThatShareNoSceneWithTheirPredecessorAreStillQu
   keyframes.recent_frames = 1;
   keyframes.min_score_with_previous = 1.0;
   EXPECT_EQ(keyframes.preset, DetectorPreset::kKeyframes);
-  EXPECT_EQ(ParseLoopDetectorMode("keyframes")->normalisation, ScoreNormalisation::kBestCandidate);
+  EXPECT_EQ(ParseDetectorPreset("keyframes")->normalisation, ScoreNormalisation::kBestCandidate);
 
   const std::vector<LoopResult> by_video = Run(frames, video);
   MemoryIndexStore store;
@@ -723,7 +725,7 @@ TEST(LoopStatusTest, NamesAreDistinctAndGeometryNamesParse) {
   EXPECT_EQ(ParseScoreNormalisation("median").status().code(), StatusCode::kInvalidArgument);
   for (DetectorPreset p :
        {DetectorPreset::kDefault, DetectorPreset::kThesis, DetectorPreset::kKeyframes}) {
-    EXPECT_EQ(ParseLoopDetectorMode(DetectorPresetName(p))->preset, p);
+    EXPECT_EQ(ParseDetectorPreset(DetectorPresetName(p))->preset, p);
   }
   std::set<std::string_view> acceptances;
   for (LoopAcceptance a : {LoopAcceptance::kNone, LoopAcceptance::kTemporalConsistency,
@@ -888,6 +890,118 @@ TEST_F(LoopDetectorTest, SmallFramesNeedTheirOwnFloorOfInliers) {
   EXPECT_EQ(loops("small"), 0);
   for (FeatureSet& f : tour) f.image_size = cv::Size(0, 0);
   EXPECT_GE(loops("unknown"), 4);
+}
+
+TEST(LoopDetectorParamsTest, ThePresetsAreValid) {
+  for (const char* mode : {"default", "thesis", "keyframes"}) {
+    const StatusOr<LoopDetectorParams> params = ParseDetectorPreset(mode);
+    ASSERT_TRUE(params.ok()) << mode;
+    EXPECT_TRUE(params->Validate().ok()) << mode << ": " << params->Validate().ToString();
+  }
+  // The ends of the ranges are in them.
+  LoopDetectorParams edges;
+  edges.alpha = 0;
+  edges.matching.ratio = 1;
+  edges.min_spread = 1;
+  edges.max_motion_disagreement_deg = 180;
+  edges.keyframe_confirmations = LoopDetectorParams::kMaxKeyframeConfirmations;
+  edges.strong_temporal_matches = edges.temporal_matches;
+  edges.strong_min_inliers = uint32_t(edges.epipolar.min_inliers);
+  EXPECT_TRUE(edges.Validate().ok()) << edges.Validate().ToString();
+}
+
+// One field out of its range at a time, NaN and infinity among the values: the message names the
+// field by its path in LoopDetectorParams, its value and its range.
+TEST(LoopDetectorParamsTest, EachFieldOutOfRangeIsRefusedWithItsNameAndValue) {
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const double inf = std::numeric_limits<double>::infinity();
+  using P = LoopDetectorParams;
+  const std::vector<testing::BadOption<P>> cases = {
+      {"alpha = inf", [&](P& p) { p.alpha = inf; }},
+      {"alpha = nan", [&](P& p) { p.alpha = nan; }},
+      {"alpha = -1", [](P& p) { p.alpha = -1; }},
+      {"min_score_with_previous = nan", [&](P& p) { p.min_score_with_previous = nan; }},
+      {"recent_seconds = inf", [&](P& p) { p.recent_seconds = inf; }},
+      {"max_query_results = 0", [](P& p) { p.max_query_results = 0; }},
+      {"island_min_size = 0", [](P& p) { p.island_min_size = 0; }},
+      {"matching.ratio = nan", [&](P& p) { p.matching.ratio = nan; }},
+      {"matching.ratio = 0", [](P& p) { p.matching.ratio = 0; }},
+      {"epipolar.threshold_px = inf", [&](P& p) { p.epipolar.threshold_px = inf; }},
+      {"epipolar.confidence = 1", [](P& p) { p.epipolar.confidence = 1; }},
+      {"epipolar.max_iterations = 0", [](P& p) { p.epipolar.max_iterations = 0; }},
+      {"epipolar.min_inliers = 7", [](P& p) { p.epipolar.min_inliers = 7; }},
+      {"metric.threshold_px = nan", [&](P& p) { p.metric.threshold_px = nan; }},
+      {"metric.confidence = 0", [](P& p) { p.metric.confidence = 0; }},
+      {"metric.max_iterations = -3", [](P& p) { p.metric.max_iterations = -3; }},
+      {"metric.min_inliers = 5", [](P& p) { p.metric.min_inliers = 5; }},
+      {"metric.min_inlier_ratio = 1.5", [](P& p) { p.metric.min_inlier_ratio = 1.5; }},
+      {"metric.min_sigma_px = inf", [&](P& p) { p.metric.min_sigma_px = inf; }},
+      {"calibrated.essential.threshold_px = 0",
+       [](P& p) { p.calibrated.essential.threshold_px = 0; }},
+      {"calibrated.essential.confidence = nan",
+       [&](P& p) { p.calibrated.essential.confidence = nan; }},
+      {"calibrated.essential.max_iterations = 0",
+       [](P& p) { p.calibrated.essential.max_iterations = 0; }},
+      {"calibrated.min_in_front = nan", [&](P& p) { p.calibrated.min_in_front = nan; }},
+      {"calibrated.max_rotation_deg = 181", [](P& p) { p.calibrated.max_rotation_deg = 181; }},
+      {"calibrated.min_parallax_deg = inf", [&](P& p) { p.calibrated.min_parallax_deg = inf; }},
+      {"calibrated.min_rotation_only = -0.5", [](P& p) { p.calibrated.min_rotation_only = -0.5; }},
+      {"calibrated.min_spread = nan", [&](P& p) { p.calibrated.min_spread = nan; }},
+      {"keyframe_confirmations = 101", [](P& p) { p.keyframe_confirmations = 101; }},
+      {"max_motion_disagreement_deg = nan", [&](P& p) { p.max_motion_disagreement_deg = nan; }},
+      {"strong_temporal_matches = 4", [](P& p) { p.strong_temporal_matches = 4; }},
+      {"strong_min_inliers = 11", [](P& p) { p.strong_min_inliers = 11; }},
+      {"min_spread = inf", [&](P& p) { p.min_spread = inf; }},
+      {"strong_min_spread = nan", [&](P& p) { p.strong_min_spread = nan; }},
+      {"strong_max_homography_ratio = -inf", [&](P& p) { p.strong_max_homography_ratio = -inf; }},
+      {"model_selection.sigma_px = nan", [&](P& p) { p.model_selection.sigma_px = nan; }},
+      {"model_selection.threshold_px = inf", [&](P& p) { p.model_selection.threshold_px = inf; }},
+      {"model_selection.confidence = 1", [](P& p) { p.model_selection.confidence = 1; }},
+      {"model_selection.max_iterations = 0", [](P& p) { p.model_selection.max_iterations = 0; }},
+  };
+  testing::ExpectEachRefused("LoopDetectorParams", cases);
+  LoopDetectorParams infinite;
+  infinite.alpha = inf;
+  EXPECT_EQ(infinite.Validate().message(),
+            "LoopDetectorParams.alpha = inf: must be finite and >= 0");
+  LoopDetectorParams rule;
+  rule.strong_temporal_matches = rule.temporal_matches + 1;
+  EXPECT_EQ(rule.Validate().message(),
+            "LoopDetectorParams.strong_temporal_matches = 4: must be <= temporal_matches (3)");
+}
+
+// An entry whose stored features lost rows that its direct index still names (a damaged record):
+// verifying against it is DATA_LOSS naming the entry; the other entries are verified as before.
+TEST_F(LoopDetectorTest, AnEntryWhoseDirectIndexExceedsItsFeaturesIsDataLossNamingIt) {
+  const std::vector<FeatureSet> tour = Extract(TourWithRevisits());
+  auto detector = LoopDetector::Create(db_.get(), params_);
+  ASSERT_TRUE(detector.ok());
+  for (size_t i = 0; i < 4; ++i) ASSERT_TRUE(detector->Add(tour[i]).ok());
+  const MapId map = db_->info().id;
+  EntryRecord damaged;
+  ASSERT_TRUE(store_.ReadEntry(map, 2, kEntryAllParts, &damaged).ok());
+  const int kept = damaged.descriptors.rows / 2;
+  damaged.descriptors = damaged.descriptors.rowRange(0, kept).clone();
+  damaged.keypoints.resize(size_t(kept));
+  ASSERT_TRUE(store_.RemoveEntry(map, 2).ok());
+  ASSERT_TRUE(store_.CommitEntry(map, damaged).ok());
+
+  LoopDetector::ConvertedFrame frame;
+  ASSERT_TRUE(detector->ConvertForQuery(tour[2], &frame).ok());
+  const Status refused = detector->VerifyEntry(tour[2], frame, 2).status();
+  EXPECT_EQ(refused.code(), StatusCode::kDataLoss) << refused.ToString();
+  EXPECT_EQ(refused.message().rfind("matching the frame (A) with entry 2 (B): the direct index of "
+                                    "B names feature ",
+                                    0),
+            0u)
+      << refused.message();
+  EXPECT_NE(refused.message().find("but B has " + std::to_string(kept) + " features"),
+            std::string::npos)
+      << refused.message();
+  ASSERT_TRUE(detector->ConvertForQuery(tour[1], &frame).ok());
+  const StatusOr<LoopResult> intact = detector->VerifyEntry(tour[1], frame, 1);
+  ASSERT_TRUE(intact.ok()) << intact.status().ToString();
+  EXPECT_EQ(intact->status, LoopStatus::kLoopDetected);
 }
 
 }  // namespace

@@ -8,6 +8,9 @@
 
 #include <opencv2/calib3d.hpp>
 
+#include "core/common/elapsed.h"
+#include "core/common/option_checks.h"
+#include "core/common/rotation_angle.h"
 #include "core/geometry/correspondences.h"
 #include "core/geometry/rig_motion.h"
 
@@ -15,17 +18,6 @@ namespace recog {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-double MsSince(Clock::time_point start) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
-}
-
-// Angle of the rotation taking b to a, degrees.
-double RotationAngleDeg(const cv::Matx33d& a, const cv::Matx33d& b) {
-  const cv::Matx33d d = a * b.t();
-  const double c = std::clamp((cv::trace(d) - 1.0) / 2.0, -1.0, 1.0);
-  return std::acos(c) * 180.0 / CV_PI;
-}
 
 cv::Matx33d Skew(const cv::Vec3d& v) { return {0, -v[2], v[1], v[2], 0, -v[0], -v[1], v[0], 0}; }
 
@@ -112,13 +104,14 @@ std::string_view RigLoopStatusName(RigLoopStatus status) {
   return "unknown";
 }
 
-Status RigLoopParams::Validate() const {
-  RECOG_RETURN_IF_ERROR(detector.Validate());
-  if (max_verified_frames == 0) return Status::InvalidArgument("max_verified_frames must be >= 1");
-  if (!(max_rotation_disagreement_deg > 0.0) || !std::isfinite(max_rotation_disagreement_deg)) {
-    return Status::InvalidArgument("max_rotation_disagreement_deg must be finite and > 0");
-  }
-  return Status::Ok();
+Status RigLoopParams::Validate(std::string_view name) const {
+  OptionChecks check(name);
+  check.Member("detector", detector);
+  check.AtLeast("max_verified_frames", max_verified_frames, 1);
+  check.InRange("max_rotation_disagreement_deg", max_rotation_disagreement_deg,
+                RealRange::Above(0));
+  check.InRange("min_consistent_ratio", min_consistent_ratio, RealRange::Closed(0, 1));
+  return check.status();
 }
 
 StatusOr<RigLoopDetector> RigLoopDetector::Create(Database* database, std::vector<RigCamera> rig,
@@ -205,7 +198,7 @@ Status RigLoopDetector::Convert(const RigFrame& frame, Converted* converted) con
   return Status::Ok();
 }
 
-EntryId RigLoopDetector::RecentBound(std::optional<double> timestamp) const {
+RecencyBound RigLoopDetector::RecencyBoundFor(std::optional<double> timestamp) const {
   const LoopDetectorParams& p = params_.detector;
   size_t first_recent = frames_.size();
   if (!timestamp.has_value()) {
@@ -217,7 +210,8 @@ EntryId RigLoopDetector::RecentBound(std::optional<double> timestamp) const {
       --first_recent;
     }
   }
-  return first_recent == frames_.size() ? kInvalidEntryId : EntryId(frames_[first_recent].id);
+  if (first_recent == frames_.size()) return {};
+  return {EntryId(frames_[first_recent].id)};
 }
 
 std::optional<std::pair<uint64_t, uint32_t>> RigLoopDetector::FrameOf(EntryId entry) const {
@@ -239,7 +233,7 @@ std::vector<EntryId> RigLoopDetector::EntriesOf(std::span<const uint64_t> frames
 }
 
 StatusOr<RigLoopResult> RigLoopDetector::Search(const RigFrame& frame, const Converted& converted,
-                                                EntryId bound,
+                                                RecencyBound bound,
                                                 std::span<const uint64_t> excluded_frames) const {
   RigLoopResult result;
   const size_t n = rig_.size();
@@ -313,7 +307,7 @@ StatusOr<RigLoopResult> RigLoopDetector::Search(const RigFrame& frame, const Con
     CheckAcrossRig(frame, &attempt);
     if (attempt.status == RigLoopStatus::kLoopDetected) {
       attempt.timings = result.timings;
-      attempt.timings.verification = MsSince(start);
+      attempt.timings.verification = MillisecondsSince(start);
       return attempt;
     }
     if (!refused.has_value() || attempt.status == RigLoopStatus::kInconsistentCameras) {
@@ -322,7 +316,7 @@ StatusOr<RigLoopResult> RigLoopDetector::Search(const RigFrame& frame, const Con
   }
   if (!refused.has_value()) return result;  // the best frame was under alpha: cannot happen
   refused->timings = result.timings;
-  refused->timings.verification = MsSince(start);
+  refused->timings.verification = MillisecondsSince(start);
   return *std::move(refused);
 }
 
@@ -488,10 +482,10 @@ StatusOr<RigLoopResult> RigLoopDetector::Process(const RigFrame& frame,
   Converted converted;
   RECOG_RETURN_IF_ERROR(Convert(frame, &converted));
   RECOG_ASSIGN_OR_RETURN(RigLoopResult result,
-                         Search(frame, converted, RecentBound(frame.timestamp), excluded));
+                         Search(frame, converted, RecencyBoundFor(frame.timestamp), excluded));
   const auto start = Clock::now();
   RECOG_ASSIGN_OR_RETURN(result.frame, Insert(frame, converted));
-  result.timings.insertion = MsSince(start);
+  result.timings.insertion = MillisecondsSince(start);
   return result;
 }
 
@@ -507,7 +501,7 @@ StatusOr<RigLoopResult> RigLoopDetector::Query(const RigFrame& frame,
   RECOG_RETURN_IF_ERROR(CheckFrame(frame));
   Converted converted;
   RECOG_RETURN_IF_ERROR(Convert(frame, &converted));
-  return Search(frame, converted, kInvalidEntryId, excluded);
+  return Search(frame, converted, RecencyBound{}, excluded);
 }
 
 Status RigLoopDetector::RemoveFrame(uint64_t id) {

@@ -70,7 +70,9 @@ struct RigLoopParams {
   // detector's epipolar.threshold_px) of the body motion of the loop (default 0.9; see step 4).
   double min_consistent_ratio = 0.9;
 
-  Status Validate() const;
+  // OK, or INVALID_ARGUMENT naming the first field out of its range (the detector's included,
+  // "RigLoopParams.detector.alpha = ..."); `name` names the struct in the message.
+  Status Validate(std::string_view name = "RigLoopParams") const;
 };
 
 // One rig frame: camera c's features (keypoints in its pinhole model) and, optionally, the 3D
@@ -175,10 +177,10 @@ class RigLoopDetector {
         detector_(std::move(detector)) {}
   Status CheckFrame(const RigFrame& frame) const;
   Status Convert(const RigFrame& frame, Converted* converted) const;
-  // Steps 1-4 with the entries of frames from id `bound` on, and of the `excluded` frames, left
-  // out.
-  StatusOr<RigLoopResult> Search(const RigFrame& frame, const Converted& converted, EntryId bound,
-                                 std::span<const uint64_t> excluded) const;
+  // Steps 1-4 with the entries of the frames `bound` leaves out, and of the `excluded` frames,
+  // left out.
+  StatusOr<RigLoopResult> Search(const RigFrame& frame, const Converted& converted,
+                                 RecencyBound bound, std::span<const uint64_t> excluded) const;
   // Step 4 for one candidate frame: the pairs' body motions and whether they agree.
   void CheckAcrossRig(const RigFrame& frame, RigLoopResult* result) const;
   // The metric pairs' body poses fused by their covariances into result's R, t and covariance.
@@ -187,9 +189,8 @@ class RigLoopDetector {
   StatusOr<uint64_t> Insert(const RigFrame& frame, const Converted& converted);
   // Reads the stored frames back from their entries' tags (Create).
   Status Rebuild();
-  // The id of the first rig frame too recent to be a candidate for a frame at `timestamp` (tau_c;
-  // kInvalidEntryId when none is).
-  EntryId RecentBound(std::optional<double> timestamp) const;
+  // tau_c for a rig frame at `timestamp`, by rig frame ids.
+  RecencyBound RecencyBoundFor(std::optional<double> timestamp) const;
   // The rig frame and camera of a stored entry (nullopt for others).
   std::optional<std::pair<uint64_t, uint32_t>> FrameOf(EntryId entry) const;
   // The entries of the `frames` this detector stores, increasing.

@@ -6,11 +6,17 @@
 // in tools/evaluation/rig_place_test.cc.
 #include "core/place/rig_loop_detector.h"
 
+#include <cmath>
+#include <limits>
+#include <string>
+#include <vector>
+
 #include <gtest/gtest.h>
 
 #include "core/index/memory_index_store.h"
 #include "core/place/map_registry.h"
 #include "core/place/place_test_frames.h"
+#include "tests/testing/option_cases.h"
 
 namespace recog {
 namespace {
@@ -346,6 +352,39 @@ TEST_F(RigLoopDetectorTest, ARigWithoutRigidExtrinsicsOrBadParametersIsRefused) 
   RigLoopParams no_tolerance = params_;
   no_tolerance.max_rotation_disagreement_deg = 0;
   EXPECT_FALSE(RigLoopDetector::Create(db.get(), FrontAndRear(size_), no_tolerance).ok());
+  RigLoopParams inconsistent = params_;
+  inconsistent.min_consistent_ratio = std::nan("");
+  const Status refused =
+      RigLoopDetector::Create(db.get(), FrontAndRear(size_), inconsistent).status();
+  EXPECT_EQ(refused.code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(refused.message(), "RigLoopParams.min_consistent_ratio = nan: must be in [0, 1]");
+}
+
+TEST(RigLoopParamsTest, EveryPresetAsTheDetectorIsValid) {
+  for (const char* mode : {"default", "thesis", "keyframes"}) {
+    RigLoopParams params;
+    params.detector = *ParseDetectorPreset(mode);
+    EXPECT_TRUE(params.Validate().ok()) << mode << ": " << params.Validate().ToString();
+  }
+}
+
+// One field out of its range at a time, NaN and infinity among the values: the message names the
+// field (the detector's by its path) and the value.
+TEST(RigLoopParamsTest, EachFieldOutOfRangeIsRefusedWithItsNameAndValue) {
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const double inf = std::numeric_limits<double>::infinity();
+  const std::vector<testing::BadOption<RigLoopParams>> cases = {
+      {"max_verified_frames = 0", [](RigLoopParams& p) { p.max_verified_frames = 0; }},
+      {"max_rotation_disagreement_deg = inf",
+       [&](RigLoopParams& p) { p.max_rotation_disagreement_deg = inf; }},
+      {"max_rotation_disagreement_deg = -1",
+       [](RigLoopParams& p) { p.max_rotation_disagreement_deg = -1; }},
+      {"min_consistent_ratio = nan", [&](RigLoopParams& p) { p.min_consistent_ratio = nan; }},
+      {"min_consistent_ratio = 1.5", [](RigLoopParams& p) { p.min_consistent_ratio = 1.5; }},
+      {"detector.alpha = inf", [&](RigLoopParams& p) { p.detector.alpha = inf; }},
+      {"detector.matching.ratio = nan", [&](RigLoopParams& p) { p.detector.matching.ratio = nan; }},
+  };
+  testing::ExpectEachRefused("RigLoopParams", cases);
 }
 
 }  // namespace

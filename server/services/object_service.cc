@@ -34,7 +34,7 @@ Status RunRecognition(ServerState& state, WorkerContext& worker, const pb::Frame
         "frame.intrinsics is required for object recognition (the pose is solved with them)");
   }
   timing->set_decode_ms(frame.decode_ms);
-  ObjectRecognizer& recognizer = worker.Recognizer();
+  RECOG_ASSIGN_OR_RETURN(ObjectRecognizer * recognizer, worker.Recognizer());
   std::vector<Detection> detections;
   std::vector<ObjectExplanation> explained;
   std::vector<ObjectExplanation>* explain = explanations != nullptr ? &explained : nullptr;
@@ -43,16 +43,16 @@ Status RunRecognition(ServerState& state, WorkerContext& worker, const pb::Frame
     // The tracker extracts features only in the tracked objects' boxes: no separate ORB stage.
     TrackingTiming tracking;
     RECOG_RETURN_IF_ERROR(
-        frame.has_image() ? tracker->Track(recognizer, frame.image, *frame.intrinsics, &detections,
+        frame.has_image() ? tracker->Track(*recognizer, frame.image, *frame.intrinsics, &detections,
                                            &tracking, filter, extras)
-                          : tracker->TrackFeatures(recognizer, frame.features, *frame.intrinsics,
+                          : tracker->TrackFeatures(*recognizer, frame.features, *frame.intrinsics,
                                                    &detections, &tracking, filter, extras));
     stages.total = tracking.total;
   } else if (frame.has_image()) {
-    RECOG_RETURN_IF_ERROR(recognizer.Recognize(frame.image, *frame.intrinsics, &detections, &stages,
-                                               filter, extras, explain));
+    RECOG_RETURN_IF_ERROR(recognizer->Recognize(frame.image, *frame.intrinsics, &detections,
+                                                &stages, filter, extras, explain));
   } else {
-    RECOG_RETURN_IF_ERROR(recognizer.RecognizeFeatures(
+    RECOG_RETURN_IF_ERROR(recognizer->RecognizeFeatures(
         frame.features, *frame.intrinsics, &detections, &stages, filter, extras, explain));
   }
   timing->set_features_ms(stages.orb);

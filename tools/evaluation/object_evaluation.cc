@@ -13,12 +13,13 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "core/common/median.h"
+#include "core/common/rotation_angle.h"
 #include "core/features/feature_extractor.h"
 #include "core/index/memory_index_store.h"
 #include "core/object/formats/roboearth.h"
 #include "core/vocabulary/vocabulary_io.h"
 #include "tools/common/cli_support.h"
-#include "tools/evaluation/place_evaluation.h"
 #include "tools/evaluation/plot.h"
 
 namespace recog::cli {
@@ -164,12 +165,6 @@ StatusOr<ObjectEvaluationMethod> ParseObjectEvaluationMethod(std::string_view na
                                  "' (merged, independent-views)");
 }
 
-double RotationErrorDeg(const cv::Matx33d& a, const cv::Matx33d& b) {
-  const cv::Matx33d d = a * b.t();
-  const double c = std::clamp((cv::trace(d) - 1.0) / 2.0, -1.0, 1.0);
-  return std::acos(c) * 180.0 / CV_PI;
-}
-
 bool IsRotationMatrix(const cv::Matx33d& R) {
   return cv::norm(R.t() * R - cv::Matx33d::eye()) <= 1e-3 && cv::determinant(R) > 0;
 }
@@ -303,7 +298,8 @@ StatusOr<ObjectEvaluation> EvaluateObjects(const ObjectEvaluationOptions& option
   total *= options.transforms.size();
   if (!options.draw_dir.empty()) fs::create_directories(options.draw_dir);
 
-  ObjectRecognizer recognizer(database, options.recognition);
+  RECOG_ASSIGN_OR_RETURN(ObjectRecognizer recognizer,
+                         ObjectRecognizer::Create(database, options.recognition));
   std::vector<Detection> detections;
   for (const RoboEarthFolder& folder : evaluated) {
     const std::string object = fs::path(folder.path).filename().string();
@@ -343,7 +339,7 @@ StatusOr<ObjectEvaluation> EvaluateObjects(const ObjectEvaluationOptions& option
             query.detected = true;
             query.matched = d.name;
             query.inliers = d.inliers;
-            query.rotation_error_deg = RotationErrorDeg(d.camera_from_object.R, truth.R);
+            query.rotation_error_deg = RotationAngleDeg(d.camera_from_object.R, truth.R);
             query.translation_error_ratio =
                 cv::norm(d.camera_from_object.t - truth.t) / cv::norm(truth.t);
           }
@@ -401,7 +397,7 @@ TruthFrameScore ScoreTruthFrame(const ObjectTruthFrame& truth, const std::string
     }
     if (score.found) continue;  // the first (best) detection of the object counts
     score.found = true;
-    score.rotation_error_deg = RotationErrorDeg(d.camera_from_object.R, truth.camera_from_object.R);
+    score.rotation_error_deg = RotationAngleDeg(d.camera_from_object.R, truth.camera_from_object.R);
     score.translation_error_m = cv::norm(d.camera_from_object.t - truth.camera_from_object.t);
     score.correct_pose = score.rotation_error_deg <= options.max_rotation_error_deg &&
                          score.translation_error_m <=

@@ -41,9 +41,6 @@ StatusOr<ImageTransform> ParseImageTransform(std::string_view name);
 void TransformView(ImageTransform transform, cv::Mat* image, CameraIntrinsics* camera,
                    RigidTransform* camera_from_object);
 
-// Angle of R_a R_b^T in degrees.
-double RotationErrorDeg(const cv::Matx33d& a, const cv::Matx33d& b);
-
 // Whether R is a rotation matrix: R^T R = I within 1e-3 (norm of the difference) and det R > 0,
 // as a matrix written to a text file with a few decimals still is.
 bool IsRotationMatrix(const cv::Matx33d& R);

@@ -16,6 +16,7 @@
 #include "core/index/memory_index_store.h"
 #include "core/object/recognition/object_recognizer.h"
 #include "tests/testing/data_paths.h"
+#include "tests/testing/recognizers.h"
 #include "tests/testing/vocabularies.h"
 #include "tools/evaluation/object_evaluation.h"
 #include "tools/evaluation/synthetic_images.h"
@@ -302,7 +303,8 @@ TEST(ObjectSequenceGeneratorTest, RecallAgainstSizeWithAModelOfTheFaces) {
   auto database = ObjectDatabase::Open(&store, vocabulary);
   ASSERT_TRUE(database.ok());
   ASSERT_TRUE((*database)->Put(*model).ok());
-  ObjectRecognizer recognizer(std::shared_ptr<const ObjectDatabase>(std::move(*database)));
+  ObjectRecognizer recognizer =
+      testing::MakeRecognizer(std::shared_ptr<const ObjectDatabase>(std::move(*database)));
   SizeRecallOptions options;
   options.bin_edges = {0.1};
   std::vector<TruthFrameScore> scores;

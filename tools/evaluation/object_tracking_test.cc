@@ -12,10 +12,13 @@
 
 #include <gtest/gtest.h>
 
+#include "core/common/median.h"
+#include "core/common/rotation_angle.h"
 #include "core/index/memory_index_store.h"
 #include "core/object/builder/model_builder.h"
 #include "core/object/tracking/object_tracker.h"
 #include "core/object/tracking/recording_learner.h"
+#include "tests/testing/recognizers.h"
 #include "tests/testing/test_data.h"
 #include "tests/testing/vocabularies.h"
 #include "tools/evaluation/visp_files.h"
@@ -24,16 +27,6 @@ namespace recog::cli {
 namespace {
 
 constexpr int kFrames = 218;  // the whole sequence: recognition alone finds the first 120 frames
-
-double RotationErrorDeg(const cv::Matx33d& a, const cv::Matx33d& b) {
-  const cv::Matx33d d = a * b.t();
-  return std::acos(std::clamp((cv::trace(d) - 1.0) / 2.0, -1.0, 1.0)) * 180.0 / CV_PI;
-}
-
-double Median(std::vector<double> values) {
-  std::sort(values.begin(), values.end());
-  return values.empty() ? 0 : values[values.size() / 2];
-}
 
 class VispCubeTrackingTest : public ::testing::Test {
  protected:
@@ -81,7 +74,7 @@ class VispCubeTrackingTest : public ::testing::Test {
 };
 
 TEST_F(VispCubeTrackingTest, TracksTheCubeWithTheRecognisersPosesAndFindsItMoreOften) {
-  ObjectRecognizer recognizer(database_);
+  ObjectRecognizer recognizer = testing::MakeRecognizer(database_);
   ObjectTracker tracker(database_);
   size_t recognised_alone = 0, tracked_found = 0, found_only_by_tracking = 0, tracked_frames = 0;
   std::vector<double> rotation_deg, translation_mm;
@@ -102,7 +95,7 @@ TEST_F(VispCubeTrackingTest, TracksTheCubeWithTheRecognisersPosesAndFindsItMoreO
       ++found_only_by_tracking;
     } else if (followed[0].tracked) {
       rotation_deg.push_back(
-          RotationErrorDeg(followed[0].camera_from_object.R, alone[0].camera_from_object.R));
+          RotationAngleDeg(followed[0].camera_from_object.R, alone[0].camera_from_object.R));
       translation_mm.push_back(
           1000 * cv::norm(followed[0].camera_from_object.t - alone[0].camera_from_object.t));
     }
@@ -123,7 +116,7 @@ TEST_F(VispCubeTrackingTest, TracksTheCubeWithTheRecognisersPosesAndFindsItMoreO
 }
 
 TEST_F(VispCubeTrackingTest, LostOnABlackFrameThenRecognisedAgain) {
-  ObjectRecognizer recognizer(database_);
+  ObjectRecognizer recognizer = testing::MakeRecognizer(database_);
   ObjectTracker tracker(database_);
   std::vector<Detection> detections;
   TrackingTiming timing;
@@ -186,7 +179,8 @@ TEST_F(VispCubeTrackingTest, LearningFromTheRecordingAddsTheFacesFrameZeroDoesNo
   auto learned_database = ObjectDatabase::Open(&store, testing::BundledObjectVocabulary());
   ASSERT_TRUE(learned_database.ok());
   ASSERT_TRUE((*learned_database)->Put(learned->model).ok());
-  ObjectRecognizer with_learned(std::move(*learned_database)), with_first(database_);
+  ObjectRecognizer with_learned = testing::MakeRecognizer(std::move(*learned_database)),
+                   with_first = testing::MakeRecognizer(database_);
   size_t frames = 0, found_learned = 0, found_first = 0;
   std::vector<Detection> detections;
   for (size_t i = 2; i < later.size(); i += 4) {

@@ -22,10 +22,12 @@
 #include <gtest/gtest.h>
 #include <opencv2/imgcodecs.hpp>
 
+#include "core/common/rotation_angle.h"
 #include "core/index/memory_index_store.h"
 #include "core/object/builder/model_builder.h"
 #include "core/object/recognition/object_recognizer.h"
 #include "core/object/tracking/recording_learner.h"
+#include "tests/testing/recognizers.h"
 #include "tests/testing/test_data.h"
 #include "tests/testing/vocabularies.h"
 #include "tools/evaluation/frame_poses.h"
@@ -90,7 +92,7 @@ class OwnViewsTest : public ::testing::Test {
   // Recognises every training view of `model` (which is in the database) and checks that the
   // model is found there with the view's pose.
   void ExpectEveryViewRecognised(const ObjectModel& model) {
-    ObjectRecognizer recognizer(database_);
+    ObjectRecognizer recognizer = testing::MakeRecognizer(database_);
     ASSERT_FALSE(model.views.empty()) << model.metadata.name;
     for (const TrainingView& view : model.views) {
       const std::string where = model.metadata.name + " view " + view.name;
@@ -123,7 +125,7 @@ class OwnViewsTest : public ::testing::Test {
         continue;
       }
       const double rotation =
-          RotationErrorDeg(found->camera_from_object.R, view.camera_from_object.R);
+          RotationAngleDeg(found->camera_from_object.R, view.camera_from_object.R);
       const double translation = cv::norm(found->camera_from_object.t - view.camera_from_object.t);
       EXPECT_LE(rotation, kMaxRotationDeg) << where << " (" << found->inliers << " inliers)";
       if (model.metadata.units == "sfm") {

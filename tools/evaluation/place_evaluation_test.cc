@@ -311,11 +311,5 @@ TEST(PlaceEvaluationTest, AVideoFileIsReadFrameByFrame) {
   EXPECT_NE(sequence.names[2].find("#3"), std::string::npos);
 }
 
-TEST(PlaceEvaluationTest, MedianOfEvenAndOddCounts) {
-  EXPECT_EQ(Median({}), 0.0);
-  EXPECT_EQ(Median({3, 1, 2}), 2.0);
-  EXPECT_EQ(Median({4, 1, 3, 2}), 2.5);
-}
-
 }  // namespace
 }  // namespace recog::cli

@@ -13,6 +13,7 @@
 #include <gtest/gtest.h>
 #include <opencv2/imgcodecs.hpp>
 
+#include "core/common/rotation_angle.h"
 #include "tests/testing/data_paths.h"
 #include "tests/testing/test_data.h"
 #include "tests/testing/vocabularies.h"
@@ -182,7 +183,7 @@ TEST_F(RgbdRecordingTest, LearnsViewsOfASyntheticWalkWithPosesCloseToTheTruth) {
     const std::optional<int> frame = FrameNumber(view.name);
     ASSERT_TRUE(frame && truth.count(*frame)) << view.name;
     const RigidTransform& expected = truth[*frame];
-    EXPECT_LT(RotationErrorDeg(view.camera_from_object.R, expected.R), 2.0) << view.name;
+    EXPECT_LT(RotationAngleDeg(view.camera_from_object.R, expected.R), 2.0) << view.name;
     EXPECT_LT(cv::norm(view.camera_from_object.t - expected.t), 0.01) << view.name;
   }
   EXPECT_EQ(learned->model.metadata.name, "synthetic-box");
@@ -227,7 +228,7 @@ TEST_F(RgbdRecordingTest, VispRbtCubeLearnedFromFrameZerosPose) {
   for (const PosedImage& view : learned->views) {
     const std::optional<int> frame = FrameNumber(view.name);
     ASSERT_TRUE(frame && poses->count(*frame)) << view.name;
-    EXPECT_LT(RotationErrorDeg(view.camera_from_object.R, poses->at(*frame).R), 5.0) << view.name;
+    EXPECT_LT(RotationAngleDeg(view.camera_from_object.R, poses->at(*frame).R), 5.0) << view.name;
     EXPECT_LT(cv::norm(view.camera_from_object.t - poses->at(*frame).t), 0.03) << view.name;
   }
 }

@@ -137,10 +137,10 @@ struct ObjectBox {
 
 // What FromRgbd made of one view, for a caller checking its inputs. With a box, a view's features
 // that have a depth land in the box when its pose is right; when the pose is off, the region
-// (the projected box) and the depth miss each other and many land outside. Measured on
-// visp-rbt-cube, each of frames 0-49 a model alone (`recog model build --views N` warns): 77-100 %
-// in 32 frames, 31-67 % in frames 16-25, 37-41 and 45-49, where the recogniser (model of frames 0
-// and 33) puts the cube 1.1-2.3 cm from the given pose, against 0.1-1.0 cm in the others.
+// (the projected box) and the depth miss each other and many land outside: on visp-rbt-cube the
+// frames whose given pose is off by a centimetre or more have clearly fewer inside, which `recog
+// model build` warns of (the shares and their command are in docs/objects.md, "visp-rbt-cube: a
+// small object in real clutter").
 struct RgbdViewReport {
   std::string name;
   size_t features = 0;    // extracted in the view's region

@@ -7,6 +7,7 @@
 #include <opencv2/calib3d.hpp>
 
 #include "core/common/descriptor.h"
+#include "core/common/option_checks.h"
 #include "core/object/recognition/object_pose.h"
 
 namespace recog {
@@ -15,6 +16,18 @@ namespace {
 constexpr uint32_t kNone = std::numeric_limits<uint32_t>::max();
 
 }  // namespace
+
+Status GuidedMatchOptions::Validate(std::string_view name) const {
+  OptionChecks check(name);
+  check.Member("orb", orb);
+  check.InRange("region_margin_px", region_margin_px, RealRange::AtLeast(0));
+  check.InRange("window_px", window_px, RealRange::Above(0));
+  check.InRange("ratio", ratio, RealRange::OpenClosed(0, 1));
+  check.AtLeast("ransac_iterations", ransac_iterations, 1);
+  check.InRange("reprojection_px", reprojection_px, RealRange::Above(0));
+  check.AtLeast("min_inliers", min_inliers, 1);
+  return check.status();
+}
 
 GuidedMatcher::GuidedMatcher(GuidedMatchOptions options) : options_(std::move(options)) {}
 

@@ -22,6 +22,7 @@
 #pragma once
 
 #include <memory>
+#include <string_view>
 #include <utility>
 #include <vector>
 
@@ -43,6 +44,10 @@ struct GuidedMatchOptions {
   double reprojection_px = 4.0;  // inlier threshold
   size_t min_inliers = 12;       // fewer: not found
   uint64_t seed = 1;             // RANSAC sampling
+
+  // OK, or INVALID_ARGUMENT naming the first field out of its range; `name` names the struct in
+  // the message (a holder passes the member's path, "TrackingOptions.matching").
+  Status Validate(std::string_view name = "GuidedMatchOptions") const;
 
   static OrbOptions DefaultOrb() {
     OrbOptions orb;

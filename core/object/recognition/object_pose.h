@@ -39,8 +39,8 @@ RigidTransform RefinePose(const cv::Matx33d& K, const RigidTransform& pose,
 // seeded, stopping adaptively (99 % confidence) and after `iterations` at most; then LM on the
 // inliers, twice. False with fewer than 5 inliers. P3P rather than the thesis's EPnP: a 3-point
 // sample is all inliers far more often (at 30 % inliers, 2.7 % of samples against 0.24 %), which is
-// what a small object in clutter has; and a hypothesis costs about 1 us with SolveP3P
-// (core/geometry/p3p.h) against ~12 us with OpenCV's solveP3P and ~55 us with its EPnP (4.6).
+// what a small object in clutter has; and a hypothesis of SolveP3P (core/geometry/p3p.h) is far
+// cheaper than one of OpenCV's solveP3P or EPnP (docs/evaluation.md, "Benchmarks").
 bool RansacPnp(const cv::Matx33d& K, const std::vector<cv::Point3f>& object,
                const std::vector<cv::Point2f>& image, int iterations, double threshold_px,
                uint64_t seed, RigidTransform* pose, std::vector<uint32_t>* inliers);

@@ -5,7 +5,10 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <memory>
+#include <string>
+#include <vector>
 
 #include <gtest/gtest.h>
 #include <Eigen/Eigenvalues>
@@ -13,12 +16,15 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "core/common/rotation_angle.h"
 #include "core/index/memory_index_store.h"
 #include "core/object/builder/model_builder.h"
 #include "core/object/formats/roboearth.h"
 #include "core/object/recognition/object_database.h"
 #include "core/object/recognition/object_recognizer.h"
 #include "core/vocabulary/vocabulary_io.h"
+#include "tests/testing/option_cases.h"
+#include "tests/testing/recognizers.h"
 #include "tests/testing/test_data.h"
 #include "tests/testing/vocabularies.h"
 
@@ -31,11 +37,6 @@ std::shared_ptr<const Vocabulary> ObjectVocabulary() { return testing::BundledOb
 
 cv::Mat Poster(const std::string& name = "corridor/1.jpg") {
   return cv::imread(testing::ProjectTestData(name), cv::IMREAD_GRAYSCALE);
-}
-
-double RotationErrorDeg(const cv::Matx33d& a, const cv::Matx33d& b) {
-  const cv::Matx33d d = a * b.t();
-  return std::acos(std::clamp((cv::trace(d) - 1.0) / 2.0, -1.0, 1.0)) * 180.0 / CV_PI;
 }
 
 RigidTransform PoseAt(double yaw_deg, double pitch_deg, const cv::Vec3d& t) {
@@ -97,7 +98,7 @@ TEST_F(ObjectRecognitionTest, APlanarModelPutsEveryPointOnItsFace) {
 
 TEST_F(ObjectRecognitionTest, RecognisesThePosterAndRecoversItsPose) {
   ASSERT_TRUE(database_->Put(poster_).ok());
-  ObjectRecognizer recognizer(database_);
+  ObjectRecognizer recognizer = testing::MakeRecognizer(database_);
   for (const RigidTransform& truth : {PoseAt(0, 0, {0, 0, 0.9}), PoseAt(25, 0, {0.05, 0, 1.0}),
                                       PoseAt(-15, 20, {0, 0.05, 1.1})}) {
     const cv::Mat view = RenderPoster(Poster(), poster_, camera_, truth);
@@ -109,7 +110,7 @@ TEST_F(ObjectRecognitionTest, RecognisesThePosterAndRecoversItsPose) {
     EXPECT_EQ(d.name, "poster");
     EXPECT_EQ(d.version, 1u);
     EXPECT_GE(d.inliers, 30u);
-    EXPECT_LT(RotationErrorDeg(d.camera_from_object.R, truth.R), 1.5);
+    EXPECT_LT(RotationAngleDeg(d.camera_from_object.R, truth.R), 1.5);
     EXPECT_LT(cv::norm(d.camera_from_object.t - truth.t) / cv::norm(truth.t), 0.02);
     EXPECT_LT(d.reprojection_error_px, 2.0);
     EXPECT_GE(d.outline.size(), 4u);
@@ -122,7 +123,7 @@ TEST_F(ObjectRecognitionTest, SameInputGivesTheSameOutput) {
   ASSERT_TRUE(database_->Put(poster_).ok());
   const cv::Mat view = RenderPoster(Poster(), poster_, camera_, PoseAt(20, 10, {0, 0, 1.0}));
   std::vector<Detection> first, second;
-  ObjectRecognizer a(database_), b(database_);
+  ObjectRecognizer a = testing::MakeRecognizer(database_), b = testing::MakeRecognizer(database_);
   ASSERT_TRUE(a.Recognize(view, camera_, &first).ok());
   ASSERT_TRUE(b.Recognize(view, camera_, &second).ok());
   ASSERT_EQ(first.size(), 1u);
@@ -135,7 +136,7 @@ TEST_F(ObjectRecognitionTest, DetectionsCarryTheirModelsMetadata) {
   poster_.metadata.object_class = "poster-class";
   poster_.metadata.units = "cm";
   ASSERT_TRUE(database_->Put(poster_).ok());
-  ObjectRecognizer recognizer(database_);
+  ObjectRecognizer recognizer = testing::MakeRecognizer(database_);
   std::vector<Detection> detections;
   const cv::Mat view = RenderPoster(Poster(), poster_, camera_, PoseAt(10, 0, {0, 0, 1.0}));
   ASSERT_TRUE(recognizer.Recognize(view, camera_, &detections).ok());
@@ -149,7 +150,7 @@ TEST_F(ObjectRecognitionTest, DetectionsCarryTheirModelsMetadata) {
 TEST_F(ObjectRecognitionTest, AFilterDropsCandidatesBeforeVerification) {
   poster_.metadata.object_class = "print";
   ASSERT_TRUE(database_->Put(poster_).ok());
-  ObjectRecognizer recognizer(database_);
+  ObjectRecognizer recognizer = testing::MakeRecognizer(database_);
   const cv::Mat view = RenderPoster(Poster(), poster_, camera_, PoseAt(10, 0, {0, 0, 1.0}));
   std::vector<Detection> detections;
   RecognitionTiming timing;
@@ -182,7 +183,7 @@ TEST_F(ObjectRecognitionTest, AnExplanationSaysWhereEachObjectDroppedOut) {
                                       kPosterWidth, kPosterHeight);
   ASSERT_TRUE(other.ok()) << other.status().ToString();
   ASSERT_TRUE(database_->Put(*other).ok());
-  ObjectRecognizer recognizer(database_);
+  ObjectRecognizer recognizer = testing::MakeRecognizer(database_);
   const cv::Mat view = RenderPoster(Poster(), poster_, camera_, PoseAt(10, 0, {0, 0, 1.0}));
   std::vector<Detection> detections;
   std::vector<ObjectExplanation> explanation;
@@ -226,7 +227,8 @@ TEST_F(ObjectRecognitionTest, RefinementFindsMoreInliersNearThePose) {
   ASSERT_TRUE(database_->Put(poster_).ok());
   RecognitionOptions plain;
   plain.refinement.enabled = false;
-  ObjectRecognizer without(database_, plain), with(database_);
+  ObjectRecognizer without = testing::MakeRecognizer(database_, plain),
+                   with = testing::MakeRecognizer(database_);
   const RigidTransform truth = PoseAt(20, -10, {0.05, 0, 1.6});
   const cv::Mat view = RenderPoster(Poster(), poster_, camera_, truth);
   std::vector<Detection> first, refined;
@@ -240,7 +242,7 @@ TEST_F(ObjectRecognitionTest, RefinementFindsMoreInliersNearThePose) {
   // Twice the inliers, and a pose closer to the truth (a poster seen nearly face-on: its tilt is
   // what the inliers constrain least).
   const auto errors = [&](const Detection& d) {
-    return std::pair(RotationErrorDeg(d.camera_from_object.R, truth.R),
+    return std::pair(RotationAngleDeg(d.camera_from_object.R, truth.R),
                      cv::norm(d.camera_from_object.t - truth.t) / cv::norm(truth.t));
   };
   EXPECT_LT(errors(refined[0]).first, errors(first[0]).first);
@@ -264,7 +266,7 @@ TEST(ObjectFilterTest, EmptyPassesEverythingOtherwiseNameOrClass) {
 
 TEST_F(ObjectRecognitionTest, AnUnrelatedImageRecognisesNothing) {
   ASSERT_TRUE(database_->Put(poster_).ok());
-  ObjectRecognizer recognizer(database_);
+  ObjectRecognizer recognizer = testing::MakeRecognizer(database_);
   std::vector<Detection> detections;
   // Another corridor frame looks alike but is not the poster.
   ASSERT_TRUE(recognizer.Recognize(Poster("corridor/60.jpg"), camera_, &detections).ok());
@@ -275,7 +277,7 @@ TEST_F(ObjectRecognitionTest, AnUnrelatedImageRecognisesNothing) {
 }
 
 TEST_F(ObjectRecognitionTest, BadInputIsRejected) {
-  ObjectRecognizer recognizer(database_);
+  ObjectRecognizer recognizer = testing::MakeRecognizer(database_);
   std::vector<Detection> detections;
   EXPECT_EQ(recognizer.Recognize(cv::Mat(), camera_, &detections).code(),
             StatusCode::kInvalidArgument);
@@ -286,6 +288,115 @@ TEST_F(ObjectRecognitionTest, BadInputIsRejected) {
   wrong_width.descriptors = cv::Mat(2, 16, CV_8U, cv::Scalar(0));
   EXPECT_EQ(recognizer.RecognizeFeatures(wrong_width, camera_, &detections).code(),
             StatusCode::kInvalidArgument);
+}
+
+TEST_F(ObjectRecognitionTest, CreateRefusesOptionsOutOfRangeAndAMissingDatabase) {
+  RecognitionOptions bad;
+  bad.match.ratio = std::numeric_limits<double>::quiet_NaN();
+  const StatusOr<ObjectRecognizer> refused = ObjectRecognizer::Create(database_, bad);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_EQ(refused.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(refused.status().message(), "RecognitionOptions.match.ratio = nan: must be in (0, 1]");
+  EXPECT_EQ(ObjectRecognizer::Create(nullptr).status().code(), StatusCode::kInvalidArgument);
+  const StatusOr<ObjectRecognizer> created = ObjectRecognizer::Create(database_);
+  ASSERT_TRUE(created.ok()) << created.status().ToString();
+  EXPECT_EQ(created->options().min_inliers, RecognitionOptions().min_inliers);
+}
+
+TEST(RecognitionOptionsTest, TheDefaultsAreValid) {
+  EXPECT_TRUE(RecognitionOptions().Validate().ok()) << RecognitionOptions().Validate().ToString();
+  EXPECT_TRUE(SecondPassOptions().Validate().ok());
+  EXPECT_TRUE(RefinementOptions().Validate().ok());
+  EXPECT_TRUE(GuidedMatchOptions().Validate().ok());
+  // The ends of the ranges are in them.
+  RecognitionOptions edges;
+  edges.beta = 0;
+  edges.runner_up_score_ratio = 1;
+  edges.match.ratio = 1;
+  edges.roi.bandwidth_px = 0;
+  edges.second_pass.margin = 0;
+  edges.second_pass.enlarge_to_px = 0;
+  edges.second_pass.max_enlarge = 1;
+  edges.refinement.matching.region_margin_px = 0;
+  EXPECT_TRUE(edges.Validate().ok()) << edges.Validate().ToString();
+}
+
+// One field out of its range at a time, NaN and infinity among the values; the message names the
+// field by its path (the members' fields included), its value and its range.
+TEST(RecognitionOptionsTest, EachFieldOutOfRangeIsRefusedWithItsNameAndValue) {
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const double inf = std::numeric_limits<double>::infinity();
+  using O = RecognitionOptions;
+  const std::vector<testing::BadOption<O>> cases = {
+      {"RecognitionOptions.orb.levels", [](O& o) { o.orb.levels = 0; }},
+      {"RecognitionOptions.roi.seeds = 0: must be in [1, 2048]", [](O& o) { o.roi.seeds = 0; }},
+      {"RecognitionOptions.roi.bandwidth_px = nan", [&](O& o) { o.roi.bandwidth_px = nan; }},
+      {"RecognitionOptions.beta = inf: must be in [0, 1]", [&](O& o) { o.beta = inf; }},
+      {"RecognitionOptions.beta = 1.5", [](O& o) { o.beta = 1.5; }},
+      {"RecognitionOptions.candidates_per_roi = 0", [](O& o) { o.candidates_per_roi = 0; }},
+      {"RecognitionOptions.runner_up_score_ratio = nan",
+       [&](O& o) { o.runner_up_score_ratio = nan; }},
+      {"RecognitionOptions.match.ratio = 0", [](O& o) { o.match.ratio = 0; }},
+      {"RecognitionOptions.ransac_iterations = 0", [](O& o) { o.ransac_iterations = 0; }},
+      {"RecognitionOptions.reprojection_px = inf: must be finite and > 0",
+       [&](O& o) { o.reprojection_px = inf; }},
+      {"RecognitionOptions.reprojection_px = 0", [](O& o) { o.reprojection_px = 0; }},
+      {"RecognitionOptions.min_inliers = 0: must be >= 1", [](O& o) { o.min_inliers = 0; }},
+      {"RecognitionOptions.min_planar_inliers = 0", [](O& o) { o.min_planar_inliers = 0; }},
+      {"RecognitionOptions.second_pass.margin = nan", [&](O& o) { o.second_pass.margin = nan; }},
+      {"RecognitionOptions.second_pass.max_enlarge = inf",
+       [&](O& o) { o.second_pass.max_enlarge = inf; }},
+      {"RecognitionOptions.refinement.matching.window_px = nan",
+       [&](O& o) { o.refinement.matching.window_px = nan; }},
+  };
+  testing::ExpectEachRefusedStartingWith(cases);
+}
+
+TEST(RecognitionOptionsTest, SecondPassOptionsOutOfRangeAreRefused) {
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const double inf = std::numeric_limits<double>::infinity();
+  using O = SecondPassOptions;
+  const std::vector<testing::BadOption<O>> cases = {
+      {"margin = inf", [&](O& o) { o.margin = inf; }},
+      {"margin = -0.1", [](O& o) { o.margin = -0.1; }},
+      {"min_margin_px = -1", [](O& o) { o.min_margin_px = -1; }},
+      {"enlarge_to_px = 5000", [](O& o) { o.enlarge_to_px = 5000; }},
+      {"enlarge_to_px = -1", [](O& o) { o.enlarge_to_px = -1; }},
+      {"max_enlarge = nan", [&](O& o) { o.max_enlarge = nan; }},
+      {"max_enlarge = 0.5", [](O& o) { o.max_enlarge = 0.5; }},
+      {"candidates = 0", [](O& o) { o.candidates = 0; }},
+  };
+  testing::ExpectEachRefused("SecondPassOptions", cases);
+  SecondPassOptions orb;
+  orb.orb.max_features = 0;
+  EXPECT_NE(orb.Validate().message().find("SecondPassOptions.orb.max_features"), std::string::npos)
+      << orb.Validate().message();
+}
+
+TEST(RecognitionOptionsTest, GuidedMatchAndRefinementOptionsOutOfRangeAreRefused) {
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const double inf = std::numeric_limits<double>::infinity();
+  using O = GuidedMatchOptions;
+  const std::vector<testing::BadOption<O>> cases = {
+      {"region_margin_px = nan", [&](O& o) { o.region_margin_px = nan; }},
+      {"region_margin_px = -1", [](O& o) { o.region_margin_px = -1; }},
+      {"window_px = inf", [&](O& o) { o.window_px = inf; }},
+      {"window_px = 0", [](O& o) { o.window_px = 0; }},
+      {"ratio = nan", [&](O& o) { o.ratio = nan; }},
+      {"ratio = 1.1", [](O& o) { o.ratio = 1.1; }},
+      {"ransac_iterations = 0", [](O& o) { o.ransac_iterations = 0; }},
+      {"reprojection_px = -inf", [&](O& o) { o.reprojection_px = -inf; }},
+      {"min_inliers = 0", [](O& o) { o.min_inliers = 0; }},
+  };
+  testing::ExpectEachRefused("GuidedMatchOptions", cases);
+  GuidedMatchOptions orb;
+  orb.orb.scale_factor = 1.f;
+  EXPECT_NE(orb.Validate().message().find("GuidedMatchOptions.orb.scale_factor"), std::string::npos)
+      << orb.Validate().message();
+  RefinementOptions refinement;
+  refinement.matching.reprojection_px = nan;
+  EXPECT_EQ(refinement.Validate().message(),
+            "RefinementOptions.matching.reprojection_px = nan: must be finite and > 0");
 }
 
 TEST_F(ObjectRecognitionTest, DatabaseAddsReplacesListsAndRemovesModels) {
@@ -329,14 +440,14 @@ TEST_F(ObjectRecognitionTest, DatabaseReloadsItsObjectsFromTheStore) {
   std::shared_ptr<ObjectDatabase> database = std::move(*reopened);
   ASSERT_EQ(database->size(), 1u);
   EXPECT_EQ(database->List()[0].version, 2u);
-  ObjectRecognizer recognizer(database);
+  ObjectRecognizer recognizer = testing::MakeRecognizer(database);
   std::vector<Detection> detections;
   const RigidTransform truth = PoseAt(10, 0, {0, 0, 1.0});
   ASSERT_TRUE(
       recognizer.Recognize(RenderPoster(Poster(), poster_, camera_, truth), camera_, &detections)
           .ok());
   ASSERT_EQ(detections.size(), 1u);
-  EXPECT_LT(RotationErrorDeg(detections[0].camera_from_object.R, truth.R), 1.5);
+  EXPECT_LT(RotationAngleDeg(detections[0].camera_from_object.R, truth.R), 1.5);
 }
 
 TEST_F(ObjectRecognitionTest, DatabaseRejectsBadModels) {
@@ -489,7 +600,8 @@ TEST(ModelBuilderTest, RoboEarthLionHeldOutViewIsRecognisedWithItsPose) {
   auto camera_file = ReadBundleCamera(dir + "/face_013.txt");
   ASSERT_TRUE(camera_file.ok());
   const CameraIntrinsics camera{camera_file->focal, camera_file->focal, 320, 240, {}};
-  ObjectRecognizer recognizer(std::shared_ptr<const ObjectDatabase>(std::move(*database)));
+  ObjectRecognizer recognizer =
+      testing::MakeRecognizer(std::shared_ptr<const ObjectDatabase>(std::move(*database)));
   std::vector<Detection> detections;
   ASSERT_TRUE(
       recognizer
@@ -497,7 +609,7 @@ TEST(ModelBuilderTest, RoboEarthLionHeldOutViewIsRecognisedWithItsPose) {
           .ok());
   ASSERT_EQ(detections.size(), 1u);
   const RigidTransform& truth = camera_file->camera_from_object;
-  EXPECT_LT(RotationErrorDeg(detections[0].camera_from_object.R, truth.R), 3.0);
+  EXPECT_LT(RotationAngleDeg(detections[0].camera_from_object.R, truth.R), 3.0);
   EXPECT_LT(cv::norm(detections[0].camera_from_object.t - truth.t) / cv::norm(truth.t), 0.03);
 }
 
@@ -567,14 +679,14 @@ TEST_F(ObjectRecognitionTest, ReportDuplicatesGivesOneDetectionPerRegion) {
   };
 
   std::vector<Detection> once;
-  ASSERT_TRUE(ObjectRecognizer(database_).Recognize(twice, camera_, &once).ok());
+  ASSERT_TRUE(testing::MakeRecognizer(database_).Recognize(twice, camera_, &once).ok());
   ASSERT_EQ(once.size(), 1u);
   EXPECT_EQ(once[0].name, "poster");
 
   RecognitionOptions options;
   options.report_duplicates = true;
   std::vector<Detection> every;
-  ASSERT_TRUE(ObjectRecognizer(database_, options).Recognize(twice, camera_, &every).ok());
+  ASSERT_TRUE(testing::MakeRecognizer(database_, options).Recognize(twice, camera_, &every).ok());
   ASSERT_GE(every.size(), 2u);
   std::vector<int> regions;
   bool seen_left = false, seen_right = false;
@@ -593,7 +705,7 @@ TEST_F(ObjectRecognitionTest, ReportDuplicatesGivesOneDetectionPerRegion) {
 // only when asked.
 TEST_F(ObjectRecognitionTest, DetectionsCarryInliersAndCovarianceWhenAsked) {
   ASSERT_TRUE(database_->Put(poster_).ok());
-  ObjectRecognizer recognizer(database_);
+  ObjectRecognizer recognizer = testing::MakeRecognizer(database_);
   const cv::Mat view = RenderPoster(Poster(), poster_, camera_, PoseAt(20, 10, {0, 0, 1.0}));
   std::vector<Detection> plain, full;
   ASSERT_TRUE(recognizer.Recognize(view, camera_, &plain).ok());
@@ -718,12 +830,12 @@ TEST_F(ObjectRecognitionTest, TheSecondPassFindsASmallObjectInClutter) {
   std::vector<Detection> first;
   RecognitionTiming timing;
   ASSERT_TRUE(
-      ObjectRecognizer(database_, one_pass).Recognize(frame, camera_, &first, &timing).ok());
+      testing::MakeRecognizer(database_, one_pass).Recognize(frame, camera_, &first, &timing).ok());
   EXPECT_TRUE(first.empty()) << "the first pass alone finds it: the test shows nothing";
   EXPECT_EQ(timing.second_pass_regions, 0u);
   EXPECT_EQ(timing.second_pass, 0.0);
 
-  ObjectRecognizer recognizer(database_, SparseFirstPass());
+  ObjectRecognizer recognizer = testing::MakeRecognizer(database_, SparseFirstPass());
   std::vector<Detection> found, again;
   ASSERT_TRUE(recognizer.Recognize(frame, camera_, &found, &timing).ok());
   ASSERT_EQ(found.size(), 1u);
@@ -733,7 +845,7 @@ TEST_F(ObjectRecognitionTest, TheSecondPassFindsASmallObjectInClutter) {
   EXPECT_LE(timing.orb + timing.clustering + timing.conversion + timing.query +
                 timing.correspondences + timing.ransac + timing.second_pass,
             timing.total);
-  EXPECT_LT(RotationErrorDeg(found[0].camera_from_object.R, truth.R), 5.0);
+  EXPECT_LT(RotationAngleDeg(found[0].camera_from_object.R, truth.R), 5.0);
   EXPECT_LT(cv::norm(found[0].camera_from_object.t - truth.t) / cv::norm(truth.t), 0.05);
   // Its inliers are image pixels on the poster (mapped back from the crop).
   cv::Point2d corner[2];
@@ -751,14 +863,14 @@ TEST_F(ObjectRecognitionTest, TheSecondPassFindsASmallObjectInClutter) {
   ASSERT_GE(near_misses_only.second_pass.min_partial_inliers, 5u);
   const size_t every_failed_region = timing.second_pass_regions;
   std::vector<Detection> near_miss_detections;
-  ASSERT_TRUE(ObjectRecognizer(database_, near_misses_only)
+  ASSERT_TRUE(testing::MakeRecognizer(database_, near_misses_only)
                   .Recognize(frame, camera_, &near_miss_detections, &timing)
                   .ok());
   EXPECT_TRUE(near_miss_detections.empty());
   EXPECT_LT(timing.second_pass_regions, every_failed_region);
 
   // Deterministic: a second run, and a second recogniser, give the same detection.
-  ObjectRecognizer fresh(database_, SparseFirstPass());
+  ObjectRecognizer fresh = testing::MakeRecognizer(database_, SparseFirstPass());
   for (ObjectRecognizer* other : {&recognizer, &fresh}) {
     ASSERT_TRUE(other->Recognize(frame, camera_, &again).ok());
     ASSERT_EQ(again.size(), 1u);
@@ -788,7 +900,7 @@ TEST_F(ObjectRecognitionTest, RecognizeFeaturesHasNoSecondPass) {
   ASSERT_TRUE(extractor.ok());
   FeatureSet features;
   ASSERT_TRUE((*extractor)->Extract(frame, &features).ok());
-  ObjectRecognizer recognizer(database_);
+  ObjectRecognizer recognizer = testing::MakeRecognizer(database_);
   std::vector<Detection> detections;
   RecognitionTiming timing;
   ASSERT_TRUE(recognizer.RecognizeFeatures(features, camera_, &detections, &timing).ok());
@@ -819,7 +931,7 @@ TEST_F(ObjectRecognitionTest, ADetectionInsideAStrongerOneOfAnotherObjectIsDropp
   options.candidates_per_roi = 2;     // both models verified in every region
   options.runner_up_score_ratio = 0;  // however far the runner-up's score is below the best's
   options.beta = 0;                   // whatever their BC scores
-  ObjectRecognizer recognizer(database_, options);
+  ObjectRecognizer recognizer = testing::MakeRecognizer(database_, options);
   const cv::Mat view = RenderPoster(poster, poster_, camera_, PoseAt(10, 0, {0, 0, 1.0}));
   std::vector<Detection> detections;
   ASSERT_TRUE(recognizer.Recognize(view, camera_, &detections).ok());
@@ -847,7 +959,7 @@ TEST_F(ObjectRecognitionTest, ARunnerUpIsVerifiedOnlyWhenItsScoreIsCloseToTheBes
     options.report_duplicates = true;  // a model found in one region is verified in the others
     options.second_pass.enabled = false;
     options.beta = 0;  // both models are candidates of every region sharing words with them
-    ObjectRecognizer recognizer(database_, options);
+    ObjectRecognizer recognizer = testing::MakeRecognizer(database_, options);
     std::vector<Detection> detections;
     ASSERT_TRUE(recognizer.Recognize(view, camera_, &detections, timing).ok());
   };

@@ -9,16 +9,14 @@
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "core/common/elapsed.h"
+#include "core/common/option_checks.h"
 #include "core/object/recognition/object_pose.h"
 
 namespace recog {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-double MillisecondsSince(Clock::time_point start) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
-}
 
 // A homography on the face with most correspondences, then the pose by IPPE on its inliers.
 bool HomographyPose(const cv::Matx33d& K, const IndexedObject& object,
@@ -141,6 +139,51 @@ bool ObjectFilter::Passes(const ObjectMetadata& object) const {
   if (names.empty() && classes.empty()) return true;
   return std::find(names.begin(), names.end(), object.name) != names.end() ||
          std::find(classes.begin(), classes.end(), object.object_class) != classes.end();
+}
+
+Status SecondPassOptions::Validate(std::string_view name) const {
+  OptionChecks check(name);
+  check.InRange("margin", margin, RealRange::AtLeast(0));
+  check.AtLeast("min_margin_px", min_margin_px, 0);
+  check.InRange("enlarge_to_px", enlarge_to_px, 0, kMaxEnlargeToPx);
+  check.InRange("max_enlarge", max_enlarge, RealRange::AtLeast(1));
+  check.AtLeast("candidates", candidates, 1);
+  check.Member("orb", orb);
+  return check.status();
+}
+
+Status RefinementOptions::Validate(std::string_view name) const {
+  OptionChecks check(name);
+  check.Member("matching", matching);
+  return check.status();
+}
+
+Status RecognitionOptions::Validate(std::string_view name) const {
+  OptionChecks check(name);
+  check.Member("orb", orb);
+  check.Member("roi", roi);
+  // BC matching keeps the candidates scoring at least beta times the best.
+  check.InRange("beta", beta, RealRange::Closed(0, 1));
+  check.AtLeast("candidates_per_roi", candidates_per_roi, 1);
+  // Above 1 even the best candidate would fall short of it.
+  check.InRange("runner_up_score_ratio", runner_up_score_ratio, RealRange::Closed(0, 1));
+  check.Member("match", match);
+  check.AtLeast("ransac_iterations", ransac_iterations, 1);
+  check.InRange("reprojection_px", reprojection_px, RealRange::Above(0));
+  check.AtLeast("min_inliers", min_inliers, 1);
+  check.AtLeast("min_planar_inliers", min_planar_inliers, 1);
+  check.Member("second_pass", second_pass);
+  check.Member("refinement", refinement);
+  return check.status();
+}
+
+StatusOr<ObjectRecognizer> ObjectRecognizer::Create(std::shared_ptr<const ObjectDatabase> database,
+                                                    RecognitionOptions options) {
+  if (database == nullptr) {
+    return Status::InvalidArgument("an object recogniser needs an object database");
+  }
+  RECOG_RETURN_IF_ERROR(options.Validate());
+  return ObjectRecognizer(std::move(database), std::move(options));
 }
 
 ObjectRecognizer::ObjectRecognizer(std::shared_ptr<const ObjectDatabase> database,

@@ -77,19 +77,25 @@ struct SecondPassOptions {
   size_t weak_inliers = 20;
   // A region whose candidate was not detected is searched again when RANSAC came close there: a
   // pose with at least this many inliers, fewer than a detection needs (RANSAC PnP reports none
-  // below 5). 0 searches every region whose candidate failed, whatever it had. Measured
-  // (bench_objects and recog eval objects, one run each; docs/objects.md): the rule before, every
-  // region with 8 correspondences, took the real cluttered frames without an object to a median
-  // 8.9 ms against 7.4 ms with this one; RoboEarth leave-one-view-out finds the same 47 of 54
-  // views as taken, but 46 rather than 48 rotated by 90 degrees and 47 rather than 48 by 180
-  // (views the second pass found in regions where the first had 8-9 correspondences and no pose).
+  // below 5). 0 searches every region whose candidate failed, whatever it had. The rule before,
+  // every region with 8 correspondences, found a few more rotated RoboEarth views (in regions
+  // where the first pass had 8-9 correspondences and no pose) but made the real cluttered frames
+  // without an object slower (bench_objects and recog eval objects; the figures are in
+  // docs/objects.md, "Evaluation").
   size_t min_partial_inliers = 5;
-  double margin = 0.25;      // added to each side of the region's box, as a fraction of its size
-  int min_margin_px = 16;    // and at least this many pixels
-  int enlarge_to_px = 320;   // crops whose longer side is shorter are enlarged towards this...
-  double max_enlarge = 3.0;  // ...by at most this factor
+  double margin = 0.25;    // added to each side of the region's box, as a fraction of its size
+  int min_margin_px = 16;  // and at least this many pixels
+  // Crops whose longer side is shorter than enlarge_to_px are enlarged towards it (0: never; at
+  // most kMaxEnlargeToPx, which bounds the enlarged crop), by a factor of at most max_enlarge.
+  static constexpr int kMaxEnlargeToPx = 4096;
+  int enlarge_to_px = 320;
+  double max_enlarge = 3.0;  // >= 1
   size_t candidates = 1;     // objects verified per crop (BC matching on the crop's features)
   OrbOptions orb = DefaultCropOrb();
+
+  // OK, or INVALID_ARGUMENT naming the first field out of its range; `name` names the struct in
+  // the message (a holder passes the member's path, "RecognitionOptions.second_pass").
+  Status Validate(std::string_view name = "SecondPassOptions") const;
 
   static OrbOptions DefaultCropOrb() {
     OrbOptions orb;
@@ -106,6 +112,10 @@ struct RefinementOptions {
   // (an object that fills the view has hundreds, and its guided matching would cost most).
   size_t max_inliers = 60;
   GuidedMatchOptions matching;
+
+  // OK, or INVALID_ARGUMENT naming the first field out of its range (its matching's included);
+  // `name` names the struct in the message.
+  Status Validate(std::string_view name = "RefinementOptions") const;
 };
 
 struct RecognitionOptions {
@@ -114,10 +124,10 @@ struct RecognitionOptions {
   double beta = 0.5;  // BC matching (thesis §5.4.4.2)
   // Objects verified per region, best chi-square score first (the thesis verifies the best one).
   // A runner-up is verified only when its score is at least runner_up_score_ratio of the best's.
-  // Measured (docs/objects.md, "Evaluation"): RoboEarth leave-one-view-out finds 48 / 50 / 47 /
-  // 48 views (as taken, x0.5, rotated 90 and 180 degrees) against 47 / 46 / 46 / 47 with the
-  // best only, 0 wrong either way; the real cluttered frames without an object cost ~0.5 ms more.
-  // Every runner-up that became a detection there scored 0.67-0.99 of the best.
+  // The runner-up finds more RoboEarth views in leave-one-view-out (as taken, halved and rotated),
+  // with no wrong object, for a little more time on real cluttered frames without an object; every
+  // runner-up that became a detection there scored above runner_up_score_ratio of the best (the
+  // figures are in docs/objects.md, "Evaluation").
   size_t candidates_per_roi = 2;
   double runner_up_score_ratio = 0.65;
   MatchOptions match = {0.8, 64};  // ratio test and Hamming bound for correspondences
@@ -135,13 +145,18 @@ struct RecognitionOptions {
   SecondPassOptions second_pass;
   RefinementOptions refinement;
 
+  // OK, or INVALID_ARGUMENT naming the first field out of its range, its members' included
+  // ("RecognitionOptions.match.ratio = nan: must be in (0, 1]"); `name` names the struct in the
+  // message.
+  Status Validate(std::string_view name = "RecognitionOptions") const;
+
   // 1300 features over 3 levels at 1.2, spread over the image by an 8x8 grid whose cells short
   // of corners give their share to the strongest keypoints of cells holding fewer than 3 shares.
   // ORB's own ranking is over the whole image: in a real cluttered scene the high-contrast
   // clutter (a fiducial board, a keyboard) takes every feature and a small, softly textured
-  // object gets none (visp-rbt-cube's frame 0: 0 of 1000 features on the cube). A plain grid
-  // starves an object that fills a view on a plain background instead (RoboEarth: 75.9 % against
-  // 88.9 %); the capped fill serves both. Measured (docs/objects.md, "Evaluation") against no grid,
+  // object gets none (visp-rbt-cube's frame 0: not one feature on the cube). A plain grid starves
+  // an object that fills a view on a plain background instead (fewer RoboEarth views found); the
+  // capped fill serves both. Measured (docs/objects.md, "Evaluation") against no grid,
   // a plain grid, caps of 2 and no cap, and 1000 and 1500 features.
   static OrbOptions DefaultQueryOrb() {
     OrbOptions orb;
@@ -196,7 +211,10 @@ struct RecognitionTiming {
 
 class ObjectRecognizer {
  public:
-  ObjectRecognizer(std::shared_ptr<const ObjectDatabase> database, RecognitionOptions options = {});
+  // A recogniser over `database` (not null) with `options`; INVALID_ARGUMENT, naming the field,
+  // for options out of range (RecognitionOptions::Validate).
+  static StatusOr<ObjectRecognizer> Create(std::shared_ptr<const ObjectDatabase> database,
+                                           RecognitionOptions options = {});
 
   // The objects of `filter` found in the image, best first, with the extras `extras` asks for.
   // With `explanation`, also every object of the database that the filter lets through, by
@@ -216,6 +234,8 @@ class ObjectRecognizer {
   const RecognitionOptions& options() const { return options_; }
 
  private:
+  ObjectRecognizer(std::shared_ptr<const ObjectDatabase> database, RecognitionOptions options);
+
   // A set of features with what every region needs of them: their words, level-1 nodes and
   // pixels without lens distortion.
   struct QueryFeatures {

@@ -6,6 +6,8 @@
 #include <numeric>
 #include <random>
 
+#include "core/common/option_checks.h"
+
 namespace recog {
 namespace {
 
@@ -39,6 +41,15 @@ cv::Rect2f Bounds(const std::vector<cv::Point2f>& points, const std::vector<uint
 }
 
 }  // namespace
+
+Status RoiOptions::Validate(std::string_view name) const {
+  OptionChecks check(name);
+  check.InRange("seeds", seeds, 1, kMaxSeeds);
+  check.AtLeast("kmeans_iterations", kmeans_iterations, 0);
+  check.InRange("bandwidth_px", bandwidth_px, RealRange::AtLeast(0));
+  check.AtLeast("min_features", min_features, 0);
+  return check.status();
+}
 
 RoiClusterer::RoiClusterer(RoiOptions options) : options_(options) {}
 

@@ -11,6 +11,7 @@
 #pragma once
 
 #include <cstdint>
+#include <string_view>
 #include <vector>
 
 #include <opencv2/core.hpp>
@@ -20,12 +21,20 @@
 namespace recog {
 
 struct RoiOptions {
-  int seeds = 100;              // k of k-means++ (thesis: ~100)
-  int kmeans_iterations = 5;    // Lloyd iterations after the k-means++ seeding
-  double bandwidth_px = 60;     // Medoidshifts kernel bandwidth (sigma), pixels
+  // At most this many seeds: Medoidshifts holds two seeds x seeds matrices of floats (32 MB).
+  static constexpr int kMaxSeeds = 2048;
+
+  int seeds = 100;            // k of k-means++ (thesis: ~100)
+  int kmeans_iterations = 5;  // Lloyd iterations after the k-means++ seeding
+  // Medoidshifts kernel bandwidth (sigma), pixels; 0 makes every k-means cluster its own mode.
+  double bandwidth_px = 60;
   int min_features = 20;        // smaller regions are dropped
   bool add_whole_image = true;  // one more region with every feature
   uint64_t seed = 1;            // k-means++ seeding
+
+  // OK, or INVALID_ARGUMENT naming the first field out of its range; `name` names the struct in
+  // the message (a holder passes the member's path, "RecognitionOptions.roi").
+  Status Validate(std::string_view name = "RoiOptions") const;
 };
 
 struct RegionOfInterest {

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <numbers>
 #include <numeric>
 #include <random>
@@ -13,6 +14,7 @@
 #include <gtest/gtest.h>
 
 #include "core/features/feature_extractor.h"
+#include "tests/testing/option_cases.h"
 #include "tests/testing/test_data.h"
 
 namespace recog {
@@ -340,6 +342,36 @@ TEST(RoiClusteringTest, OrbFeaturesOfARealImageArePartitionedIntoRegions) {
   ASSERT_EQ(with_whole.size(), regions.size() + 1);
   EXPECT_TRUE(SameRegions({with_whole.begin(), with_whole.end() - 1}, regions));
   ExpectIsWholeImage(with_whole.back(), points.size());
+}
+
+TEST(RoiOptionsTest, TheDefaultsAndTheEndsOfTheRangesAreValid) {
+  EXPECT_TRUE(RoiOptions().Validate().ok());
+  RoiOptions edges;
+  edges.seeds = RoiOptions::kMaxSeeds;
+  edges.kmeans_iterations = 0;
+  edges.bandwidth_px = 0;  // every k-means cluster its own mode
+  edges.min_features = 0;
+  EXPECT_TRUE(edges.Validate().ok()) << edges.Validate().ToString();
+}
+
+// One field out of its range at a time, NaN and infinity among the values.
+TEST(RoiOptionsTest, EachFieldOutOfRangeIsRefusedWithItsNameAndValue) {
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const double inf = std::numeric_limits<double>::infinity();
+  const std::vector<testing::BadOption<RoiOptions>> cases = {
+      {"seeds = 0", [](RoiOptions& o) { o.seeds = 0; }},
+      {"seeds = 2049", [](RoiOptions& o) { o.seeds = RoiOptions::kMaxSeeds + 1; }},
+      {"kmeans_iterations = -1", [](RoiOptions& o) { o.kmeans_iterations = -1; }},
+      {"bandwidth_px = nan", [&](RoiOptions& o) { o.bandwidth_px = nan; }},
+      {"bandwidth_px = inf", [&](RoiOptions& o) { o.bandwidth_px = inf; }},
+      {"bandwidth_px = -5", [](RoiOptions& o) { o.bandwidth_px = -5; }},
+      {"min_features = -1", [](RoiOptions& o) { o.min_features = -1; }},
+  };
+  testing::ExpectEachRefused("RoiOptions", cases);
+  RoiOptions named;
+  named.bandwidth_px = nan;
+  EXPECT_EQ(named.Validate("RecognitionOptions.roi").message(),
+            "RecognitionOptions.roi.bandwidth_px = nan: must be finite and >= 0");
 }
 
 }  // namespace

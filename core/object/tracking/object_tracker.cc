@@ -4,16 +4,22 @@
 #include <chrono>
 #include <cmath>
 
+#include "core/common/elapsed.h"
+#include "core/common/option_checks.h"
+
 namespace recog {
 namespace {
 
 using Clock = std::chrono::steady_clock;
 
-double MillisecondsSince(Clock::time_point start) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
-}
-
 }  // namespace
+
+Status TrackingOptions::Validate(std::string_view name) const {
+  OptionChecks check(name);
+  check.Member("matching", matching);
+  check.AtLeast("recognition_interval", recognition_interval, 0);
+  return check.status();
+}
 
 ObjectTracker::ObjectTracker(std::shared_ptr<const ObjectDatabase> database,
                              TrackingOptions options)

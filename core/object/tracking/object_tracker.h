@@ -23,6 +23,7 @@
 #pragma once
 
 #include <memory>
+#include <string_view>
 #include <vector>
 
 #include <opencv2/core.hpp>
@@ -38,6 +39,10 @@ struct TrackingOptions {
   GuidedMatchOptions matching;    // how a tracked object is found near its predicted pose
   int recognition_interval = 10;  // full recognition every this many frames while tracking; 0 = off
   bool constant_velocity = true;  // predict with the last motion (else the last pose)
+
+  // OK, or INVALID_ARGUMENT naming the first field out of its range (its matching's included);
+  // `name` names the struct in the message (a holder passes the member's path).
+  Status Validate(std::string_view name = "TrackingOptions") const;
 };
 
 // Milliseconds spent on one frame.
@@ -52,6 +57,7 @@ struct TrackingTiming {
 
 class ObjectTracker {
  public:
+  // `options` as TrackingOptions::Validate accepts them.
   explicit ObjectTracker(std::shared_ptr<const ObjectDatabase> database,
                          TrackingOptions options = {});
 

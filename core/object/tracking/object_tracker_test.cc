@@ -6,15 +6,21 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
+#include <string>
+#include <vector>
 
 #include <gtest/gtest.h>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "core/common/rotation_angle.h"
 #include "core/index/memory_index_store.h"
 #include "core/object/builder/model_builder.h"
 #include "core/object/tracking/recording_learner.h"
+#include "tests/testing/option_cases.h"
+#include "tests/testing/recognizers.h"
 #include "tests/testing/test_data.h"
 #include "tests/testing/vocabularies.h"
 
@@ -22,11 +28,6 @@ namespace recog {
 namespace {
 
 constexpr double kWidth = 0.64, kHeight = 0.48;  // metres
-
-double RotationErrorDeg(const cv::Matx33d& a, const cv::Matx33d& b) {
-  const cv::Matx33d d = a * b.t();
-  return std::acos(std::clamp((cv::trace(d) - 1.0) / 2.0, -1.0, 1.0)) * 180.0 / CV_PI;
-}
 
 class ObjectTrackerTest : public ::testing::Test {
  protected:
@@ -71,7 +72,7 @@ class ObjectTrackerTest : public ::testing::Test {
 };
 
 TEST_F(ObjectTrackerTest, RecognisesOnceThenTracksWithThePose) {
-  ObjectRecognizer recognizer(database_);
+  ObjectRecognizer recognizer = testing::MakeRecognizer(database_);
   ObjectTracker tracker(database_);
   std::vector<Detection> detections;
   std::vector<double> rotation_errors;
@@ -88,7 +89,7 @@ TEST_F(ObjectTrackerTest, RecognisesOnceThenTracksWithThePose) {
     // A poster seen nearly face-on constrains its tilt weakly: one frame may be a few degrees off
     // (frame 1, the first tracked, before any motion is known, is 6.4 degrees off), the typical
     // frame is not.
-    rotation_errors.push_back(RotationErrorDeg(d.camera_from_object.R, PoseAt(i).R));
+    rotation_errors.push_back(RotationAngleDeg(d.camera_from_object.R, PoseAt(i).R));
     EXPECT_LT(rotation_errors.back(), 8.0) << "frame " << i;
     EXPECT_LT(cv::norm(d.camera_from_object.t - PoseAt(i).t), 0.02) << "frame " << i;
     EXPECT_GE(d.outline.size(), 4u);
@@ -99,7 +100,7 @@ TEST_F(ObjectTrackerTest, RecognisesOnceThenTracksWithThePose) {
 }
 
 TEST_F(ObjectTrackerTest, LostWithoutTheObjectThenRecognisedAgain) {
-  ObjectRecognizer recognizer(database_);
+  ObjectRecognizer recognizer = testing::MakeRecognizer(database_);
   ObjectTracker tracker(database_);
   std::vector<Detection> detections;
   TrackingTiming timing;
@@ -123,7 +124,7 @@ TEST_F(ObjectTrackerTest, LostWithoutTheObjectThenRecognisedAgain) {
 }
 
 TEST_F(ObjectTrackerTest, RecognitionRunsEveryIntervalWhileTracking) {
-  ObjectRecognizer recognizer(database_);
+  ObjectRecognizer recognizer = testing::MakeRecognizer(database_);
   TrackingOptions options;
   options.recognition_interval = 3;
   ObjectTracker tracker(database_, options);
@@ -144,7 +145,7 @@ TEST_F(ObjectTrackerTest, RecognitionRunsEveryIntervalWhileTracking) {
 }
 
 TEST_F(ObjectTrackerTest, TracksFramesGivenAsFeaturesAndHonoursTheFilter) {
-  ObjectRecognizer recognizer(database_);
+  ObjectRecognizer recognizer = testing::MakeRecognizer(database_);
   ObjectTracker tracker(database_);
   FeatureOptions feature_options;
   feature_options.orb = recognizer.options().orb;
@@ -157,7 +158,7 @@ TEST_F(ObjectTrackerTest, TracksFramesGivenAsFeaturesAndHonoursTheFilter) {
     ASSERT_TRUE(tracker.TrackFeatures(recognizer, features, camera_, &detections).ok());
     ASSERT_EQ(detections.size(), 1u);
     EXPECT_EQ(detections[0].tracked, i > 0);
-    EXPECT_LT(RotationErrorDeg(detections[0].camera_from_object.R, PoseAt(i).R), 1.0);
+    EXPECT_LT(RotationAngleDeg(detections[0].camera_from_object.R, PoseAt(i).R), 1.0);
   }
   ObjectFilter other;
   other.names = {"not-the-poster"};
@@ -167,7 +168,7 @@ TEST_F(ObjectTrackerTest, TracksFramesGivenAsFeaturesAndHonoursTheFilter) {
 }
 
 TEST_F(ObjectTrackerTest, BadInputIsRejectedAndKeepsTheTracks) {
-  ObjectRecognizer recognizer(database_);
+  ObjectRecognizer recognizer = testing::MakeRecognizer(database_);
   ObjectTracker tracker(database_);
   std::vector<Detection> detections;
   ASSERT_TRUE(tracker.Track(recognizer, Render(PoseAt(0)), camera_, &detections).ok());
@@ -250,7 +251,7 @@ TEST_F(RecordingLearnerTest, AddsAViewEachTimeTheObjectHasTurnedFarEnoughWithIts
     // A plane's tilt is the least determined part of its pose: the same frame's rotation comes
     // out 0.4 degrees off in a Release build and 1.7 in RelWithDebInfo, where rounding sends RANSAC
     // down another path. A wrong view would be tens of degrees off.
-    EXPECT_LT(RotationErrorDeg(learned->views[k].camera_from_object.R, PoseAt(frame).R), 2.5);
+    EXPECT_LT(RotationAngleDeg(learned->views[k].camera_from_object.R, PoseAt(frame).R), 2.5);
     EXPECT_LT(cv::norm(learned->views[k].camera_from_object.t - PoseAt(frame).t), 0.02);
     // Truly seen from a new direction (the estimated pose may be a fraction of a degree off).
     for (const cv::Vec3d& seen : true_directions) {
@@ -303,6 +304,14 @@ TEST_F(RecordingLearnerTest, BadInputAndTheBuildersErrorsAreReturned) {
                 .status()
                 .code(),
             StatusCode::kInvalidArgument);
+  options = {};
+  options.tracking.matching.ratio = std::nan("");
+  const Status tracking =
+      LearnFromRecording(build_, testing::BundledObjectVocabulary(), first_, frames_, options)
+          .status();
+  EXPECT_EQ(tracking.code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(tracking.message(),
+            "RecordingLearningOptions.tracking.matching.ratio = nan: must be in (0, 1]");
   EXPECT_EQ(builds_, 0);
   const ModelFromViews failing = [](const std::vector<PosedImage>&) -> StatusOr<ObjectModel> {
     return Status::InvalidArgument("view 'frame0' yields no point");
@@ -311,6 +320,32 @@ TEST_F(RecordingLearnerTest, BadInputAndTheBuildersErrorsAreReturned) {
       LearnFromRecording(failing, testing::BundledObjectVocabulary(), first_, frames_, {});
   EXPECT_EQ(refused.status().code(), StatusCode::kInvalidArgument);
   EXPECT_NE(refused.status().message().find("no point"), std::string::npos);
+}
+
+TEST(TrackingOptionsTest, TheDefaultsAreValid) {
+  EXPECT_TRUE(TrackingOptions().Validate().ok());
+  EXPECT_TRUE(RecordingLearningOptions().Validate().ok());
+  TrackingOptions off;
+  off.recognition_interval = 0;  // no periodic recognition
+  EXPECT_TRUE(off.Validate().ok());
+}
+
+// One field out of its range at a time, NaN and infinity among the values.
+TEST(TrackingOptionsTest, EachFieldOutOfRangeIsRefusedWithItsNameAndValue) {
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const double inf = std::numeric_limits<double>::infinity();
+  const std::vector<testing::BadOption<TrackingOptions>> cases = {
+      {"recognition_interval = -1", [](TrackingOptions& o) { o.recognition_interval = -1; }},
+      {"matching.window_px = nan", [&](TrackingOptions& o) { o.matching.window_px = nan; }},
+      {"matching.reprojection_px = inf",
+       [&](TrackingOptions& o) { o.matching.reprojection_px = inf; }},
+      {"matching.min_inliers = 0", [](TrackingOptions& o) { o.matching.min_inliers = 0; }},
+  };
+  testing::ExpectEachRefused("TrackingOptions", cases);
+  RecordingLearningOptions learning;
+  learning.min_view_angle_deg = inf;
+  EXPECT_EQ(learning.Validate().message(),
+            "RecordingLearningOptions.min_view_angle_deg = inf: must be in (0, 180)");
 }
 
 }  // namespace

@@ -2,6 +2,7 @@
 
 #include <cmath>
 
+#include "core/common/option_checks.h"
 #include "core/index/memory_index_store.h"
 #include "core/object/recognition/object_database.h"
 #include "core/object/recognition/object_recognizer.h"
@@ -16,17 +17,16 @@ cv::Vec3d ViewDirection(const RigidTransform& camera_from_object) {
   return norm > 0 ? centre / norm : cv::Vec3d(0, 0, 1);
 }
 
-Status Validate(const RecordingLearningOptions& options) {
-  if (!(options.min_view_angle_deg > 0 && options.min_view_angle_deg < 180)) {
-    return Status::InvalidArgument("min_view_angle_deg must be in (0, 180)");
-  }
-  if (options.min_inliers == 0 || options.max_views == 0) {
-    return Status::InvalidArgument("min_inliers and max_views must be at least 1");
-  }
-  return Status::Ok();
-}
-
 }  // namespace
+
+Status RecordingLearningOptions::Validate(std::string_view name) const {
+  OptionChecks check(name);
+  check.InRange("min_view_angle_deg", min_view_angle_deg, RealRange::Open(0, 180));
+  check.AtLeast("min_inliers", min_inliers, 1);
+  check.AtLeast("max_views", max_views, 1);
+  check.Member("tracking", tracking);
+  return check.status();
+}
 
 StatusOr<LearnedModel> LearnFromRecording(const ModelFromViews& build,
                                           std::shared_ptr<const Vocabulary> vocabulary,
@@ -34,7 +34,7 @@ StatusOr<LearnedModel> LearnFromRecording(const ModelFromViews& build,
                                           const std::vector<RecordingFrame>& frames,
                                           const RecordingLearningOptions& options,
                                           const LearningProgress& progress) {
-  RECOG_RETURN_IF_ERROR(Validate(options));
+  RECOG_RETURN_IF_ERROR(options.Validate());
   for (size_t i = 0; i < frames.size(); ++i) {
     if (frames[i].image.empty() || frames[i].image.depth() != CV_8U) {
       return Status::InvalidArgument("frame " + std::to_string(i) + " ('" + frames[i].name +
@@ -48,7 +48,7 @@ StatusOr<LearnedModel> LearnFromRecording(const ModelFromViews& build,
   RECOG_ASSIGN_OR_RETURN(std::shared_ptr<ObjectDatabase> database,
                          ObjectDatabase::Open(&store, vocabulary));
   RECOG_RETURN_IF_ERROR(database->Put(learned.model).status());
-  ObjectRecognizer recognizer(database);
+  RECOG_ASSIGN_OR_RETURN(ObjectRecognizer recognizer, ObjectRecognizer::Create(database));
   ObjectTracker tracker(database, options.tracking);
   std::vector<cv::Vec3d> directions = {ViewDirection(first.camera_from_object)};
   const double min_cosine = std::cos(options.min_view_angle_deg * CV_PI / 180.0);

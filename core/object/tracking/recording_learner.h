@@ -22,6 +22,7 @@
 #include <functional>
 #include <memory>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <opencv2/core.hpp>
@@ -45,6 +46,10 @@ struct RecordingLearningOptions {
   size_t min_inliers = 40;
   size_t max_views = 30;  // at most this many views (the first frame included)
   TrackingOptions tracking;
+
+  // OK, or INVALID_ARGUMENT naming the first field out of its range (the tracking's included);
+  // `name` names the struct in the message.
+  Status Validate(std::string_view name = "RecordingLearningOptions") const;
 };
 
 struct RecordingFrame {
