@@ -5,6 +5,7 @@
 #include <sstream>
 
 #include "core/common/names.h"
+#include "core/place/detector_settings.h"
 
 namespace recog {
 namespace {
@@ -58,18 +59,8 @@ StatusOr<RigCamera> DecodeRigCamera(const std::string& name, std::istream& in) {
 
 std::string EncodePlaceSettings(const LoopDetectorParams& p, const std::string& group,
                                 const std::vector<RigCamera>& rig) {
-  char buffer[512];
-  std::snprintf(buffer, sizeof(buffer),
-                "version 1\npreset %s\nalpha %.17g\ntemporal_matches %u\nmin_inliers "
-                "%zu\nrecent_seconds %.17g\nrecent_frames %u\ngeometry %s\n",
-                std::string(DetectorPresetName(p.preset)).c_str(), p.alpha, p.temporal_matches,
-                p.epipolar.min_inliers, p.recent_seconds, p.recent_frames,
-                std::string(GeometryCheckName(p.geometry)).c_str());
-  std::string text = buffer;
-  // Written only when set, so that settings read by an older build stay byte-identical.
-  if (p.keyframe_confirmations > 0) {
-    text += "keyframe_confirmations " + std::to_string(p.keyframe_confirmations) + "\n";
-  }
+  std::string text = "version 1\n";
+  for (const auto& [name, value] : MapDetectorSettings(p)) text += name + " " + value + "\n";
   if (!group.empty()) text += "group " + group + "\n";
   for (const RigCamera& camera : rig) text += EncodeRigCamera(camera);
   return text;
@@ -77,27 +68,20 @@ std::string EncodePlaceSettings(const LoopDetectorParams& p, const std::string& 
 
 StatusOr<LoopDetectorParams> DecodePlaceSettings(std::string_view text, std::string* group,
                                                  std::vector<RigCamera>* rig) {
-  // The preset line comes first: the other keys apply over its values. Settings written before
-  // presets were stored have none and start from the default.
-  LoopDetectorParams p;
+  // The detector's settings apply over the preset's values (DetectorSettings); settings written
+  // before presets were stored have none and start from the default.
   std::istringstream in{std::string(text)};
   std::string key, value;
   bool versioned = false;
   if (group != nullptr) group->clear();
   std::vector<RigCamera> cameras;
+  std::vector<NamedSetting> settings;
   while (in >> key >> value) {
-    char* end = nullptr;
-    const double number = std::strtod(value.c_str(), &end);
-    const bool numeric = end != value.c_str() && *end == '\0';
     if (key == "version") {
-      if (!numeric || number != 1) {
+      if (value != "1") {
         return Status::FailedPrecondition("place settings of an unknown version " + value);
       }
       versioned = true;
-    } else if (key == "preset") {
-      StatusOr<LoopDetectorParams> preset = ParseLoopDetectorMode(value);
-      if (!preset.ok()) return preset.status().WithContext("place settings", StatusCode::kDataLoss);
-      p = preset.value();
     } else if (key == "group") {
       if (!ValidateName("group", value).ok()) {
         return Status::DataLoss("place settings: a malformed group name");
@@ -106,30 +90,13 @@ StatusOr<LoopDetectorParams> DecodePlaceSettings(std::string_view text, std::str
     } else if (key == "rig_camera") {
       RECOG_ASSIGN_OR_RETURN(RigCamera camera, DecodeRigCamera(value, in));
       cameras.push_back(std::move(camera));
-    } else if (key == "geometry") {
-      StatusOr<GeometryCheck> geometry = ParseGeometryCheck(value);
-      if (!geometry.ok()) {
-        return geometry.status().WithContext("place settings", StatusCode::kDataLoss);
-      }
-      p.geometry = geometry.value();
-    } else if (!numeric) {
-      return Status::DataLoss("place settings: '" + key + "' has a non-numeric value");
-    } else if (key == "alpha") {
-      p.alpha = number;
-    } else if (key == "temporal_matches") {
-      p.temporal_matches = uint32_t(number);
-    } else if (key == "min_inliers") {
-      p.epipolar.min_inliers = size_t(number);
-    } else if (key == "recent_seconds") {
-      p.recent_seconds = number;
-    } else if (key == "recent_frames") {
-      p.recent_frames = uint32_t(number);
-    } else if (key == "keyframe_confirmations") {
-      p.keyframe_confirmations = uint32_t(number);
+    } else if (FindDetectorSetting(key) != nullptr) {
+      settings.emplace_back(key, value);
     }  // unknown keys: written by a newer minor version, ignored
   }
   if (!versioned) return Status::DataLoss("place settings without a version line");
-  const Status valid = p.Validate();
+  LoopDetectorParams p;
+  const Status valid = ApplyDetectorSettings(settings, &p);
   if (!valid.ok()) return valid.WithContext("place settings", StatusCode::kDataLoss);
   if (!cameras.empty()) {
     const Status rig_valid = ValidateRig(cameras);

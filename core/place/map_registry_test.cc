@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include "core/index/memory_index_store.h"
+#include "core/place/detector_settings.h"
 #include "core/vocabulary/vocabulary_io.h"
 
 namespace recog {
@@ -133,8 +134,11 @@ TEST(MapRegistryTest, SettingsRoundTripThroughTheirText) {
   EXPECT_EQ(group, "") << "no group line: no group";
   ASSERT_TRUE(DecodePlaceSettings(EncodePlaceSettings(p, "fleet-7"), &group).ok());
   EXPECT_EQ(group, "fleet-7");
-  // Keyframe confirmations are kept when set, and absent (as older settings have it) when not.
-  EXPECT_EQ(EncodePlaceSettings(p).find("keyframe_confirmations"), std::string::npos);
+  // Every setting a map keeps is written (an older build ignores the ones it does not know).
+  for (const auto& [name, value] : MapDetectorSettings(p)) {
+    EXPECT_NE(EncodePlaceSettings(p).find("\n" + name + " " + value + "\n"), std::string::npos)
+        << name;
+  }
   p.keyframe_confirmations = 2;
   decoded = DecodePlaceSettings(EncodePlaceSettings(p));
   ASSERT_TRUE(decoded.ok());
@@ -207,6 +211,7 @@ TEST(MapRegistryTest, SettingsWrittenBeforePresetsOpenWithTheDefaultAndAnUnknown
   ASSERT_TRUE(old.ok()) << old.status().ToString();
   EXPECT_EQ(old->preset, DetectorPreset::kDefault);
   EXPECT_TRUE(old->strong_acceptance);
+  EXPECT_EQ(old->keyframe_confirmations, 0u) << "settings older than keyframe confirmations";
   auto unknown = DecodePlaceSettings("version 1\npreset sideways\n");
   EXPECT_EQ(unknown.status().code(), StatusCode::kDataLoss);
   EXPECT_NE(unknown.status().message().find("sideways"), std::string::npos);

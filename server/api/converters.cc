@@ -7,8 +7,11 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "core/common/elapsed.h"
 #include "core/common/text.h"
+#include "core/place/detector_settings.h"
 #include "server/api/image_header.h"
+#include "wire/map_settings_text.h"
 
 namespace recog::server {
 namespace {
@@ -345,14 +348,16 @@ Status DecodeFrameHeader(const pb::Frame& frame, DecodedFrame* out) {
 }
 
 StatusOr<DecodedFrame> DecodeFrame(const pb::Frame& frame, const DescriptorFormat& format,
-                                   PixelBudget& budget) {
+                                   PixelBudget& budget, const CameraIntrinsics* camera) {
   DecodedFrame out;
   RECOG_RETURN_IF_ERROR(DecodeFrameHeader(frame, &out));
   if (frame.views_size() > 0) {
     return Status::InvalidArgument(
         "frame.views are for rig maps (MapSettings.rig); this call takes one image in the frame");
   }
-  if (frame.has_intrinsics()) {
+  if (camera != nullptr) {
+    out.intrinsics = *camera;
+  } else if (frame.has_intrinsics()) {
     CameraIntrinsics intrinsics;
     RECOG_RETURN_IF_ERROR(DecodeIntrinsics(frame.intrinsics(), &intrinsics));
     out.intrinsics = std::move(intrinsics);
@@ -378,69 +383,21 @@ StatusOr<DecodedFrame> DecodeFrame(const pb::Frame& frame, const DescriptorForma
   if (frame.has_depth() || frame.has_right()) {
     RECOG_RETURN_IF_ERROR(DecodeStructure(frame, budget, &out));
   }
-  out.decode_ms =
-      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  out.decode_ms = MillisecondsSince(start);
   return out;
 }
 
 Status ApplyMapSettings(const pb::MapSettings& settings, LoopDetectorParams* params) {
-  if (settings.has_preset()) {
-    StatusOr<LoopDetectorParams> preset = ParseLoopDetectorMode(settings.preset());
-    if (!preset.ok()) return preset.status().WithContext("settings.preset");
-    *params = preset.value();
-  }
-  if (settings.has_alpha()) params->alpha = settings.alpha();
-  if (settings.has_temporal_matches()) params->temporal_matches = settings.temporal_matches();
-  if (settings.has_min_inliers()) params->epipolar.min_inliers = settings.min_inliers();
-  if (settings.has_recent_seconds()) params->recent_seconds = settings.recent_seconds();
-  if (settings.has_recent_frames()) params->recent_frames = settings.recent_frames();
-  if (settings.has_keyframe_confirmations()) {
-    params->keyframe_confirmations = settings.keyframe_confirmations();
-  }
-  if (settings.has_geometry()) {
-    switch (settings.geometry()) {
-      case pb::GEOMETRY_CHECK_UNSPECIFIED:
-        break;
-      case pb::GEOMETRY_CHECK_DIRECT_INDEX:
-        params->geometry = GeometryCheck::kDirectIndex;
-        break;
-      case pb::GEOMETRY_CHECK_EXHAUSTIVE:
-        params->geometry = GeometryCheck::kExhaustive;
-        break;
-      case pb::GEOMETRY_CHECK_NONE:
-        params->geometry = GeometryCheck::kNone;
-        break;
-      default:
-        return Status::InvalidArgument("settings.geometry has an unknown value " +
-                                       std::to_string(int(settings.geometry())));
-    }
-  }
-  if (settings.has_min_inliers() && settings.min_inliers() > 100000) {
-    return Status::InvalidArgument("settings.min_inliers is too large");
-  }
-  const Status valid = params->Validate();
-  if (!valid.ok()) return valid.WithContext("settings", StatusCode::kInvalidArgument);
+  const std::vector<NamedSetting> values = MapSettingsAsText(settings, MapDetectorSettingNames());
+  const Status applied = ApplyDetectorSettings(values, params);
+  if (!applied.ok()) return applied.WithContext("settings", StatusCode::kInvalidArgument);
   return Status::Ok();
 }
 
 void ToProto(const LoopDetectorParams& params, pb::MapSettings* out) {
-  out->set_preset(std::string(DetectorPresetName(params.preset)));
-  out->set_alpha(params.alpha);
-  out->set_temporal_matches(params.temporal_matches);
-  out->set_min_inliers(uint32_t(params.epipolar.min_inliers));
-  out->set_recent_seconds(params.recent_seconds);
-  out->set_recent_frames(params.recent_frames);
-  out->set_keyframe_confirmations(params.keyframe_confirmations);
-  switch (params.geometry) {
-    case GeometryCheck::kDirectIndex:
-      out->set_geometry(pb::GEOMETRY_CHECK_DIRECT_INDEX);
-      break;
-    case GeometryCheck::kExhaustive:
-      out->set_geometry(pb::GEOMETRY_CHECK_EXHAUSTIVE);
-      break;
-    case GeometryCheck::kNone:
-      out->set_geometry(pb::GEOMETRY_CHECK_NONE);
-      break;
+  for (const auto& [name, text] : MapDetectorSettings(params)) {
+    // The table and MapSettings agree (tested), and the text is the table's own.
+    (void)SetMapSettingFromText(out, name, text);
   }
 }
 

@@ -70,15 +70,18 @@ class PixelBudget {
 // including a frame without content, and for depth or a right image that cannot go with the frame:
 // another size than the image, 8-bit depth, a missing or non-positive baseline, no intrinsics (or
 // intrinsics with distortion), both depth and a right image, a right image with client features,
-// more than kMaxExcludedFrames exclude_frame_ids.
+// more than kMaxExcludedFrames exclude_frame_ids. `camera`, when given, is the frame's intrinsics
+// in place of frame.intrinsics (a rig view's, which its camera in the map's rig holds).
 inline constexpr int kMaxExcludedFrames = 1000;
 StatusOr<DecodedFrame> DecodeFrame(const pb::Frame& frame, const DescriptorFormat& format,
-                                   PixelBudget& budget);
+                                   PixelBudget& budget, const CameraIntrinsics* camera = nullptr);
 // The part of DecodeFrame that does not look at the content: the timestamp, the ids and
 // exclude_frame_ids (a rig frame's, whose content is in its views).
 Status DecodeFrameHeader(const pb::Frame& frame, DecodedFrame* out);
 
-// Map settings. ApplyMapSettings overwrites the fields `settings` sets and validates the result.
+// Map settings, through the one settings table (core/place/detector_settings.h) by field name:
+// ApplyMapSettings applies the detector fields `settings` sets (its preset first) and validates
+// the result (INVALID_ARGUMENT naming the setting); ToProto sets every one a map keeps.
 Status ApplyMapSettings(const pb::MapSettings& settings, LoopDetectorParams* params);
 void ToProto(const LoopDetectorParams& params, pb::MapSettings* out);
 // A rig map's cameras (MapSettings.rig; empty for none). INVALID_ARGUMENT naming settings.rig[i]

@@ -16,8 +16,10 @@
 #include <vector>
 
 #include <spdlog/common.h>
+#include <spdlog/spdlog.h>
 
 #include "core/common/file_io.h"
+#include "core/place/detector_settings.h"
 #include "server/config/placement_table.h"
 
 namespace recog::server {
@@ -108,6 +110,9 @@ class YamlSection {
     return YamlSection(child, Name(key));
   }
 
+  // Whether `key` is given (a Read of it still counts it as known).
+  bool Has(const std::string& key) const { return Child(key).IsDefined(); }
+
   // INVALID_ARGUMENT naming the first key that no Read or Section asked for.
   Status RejectUnknownKeys() const {
     if (!node_.IsMap()) return Status::Ok();
@@ -140,6 +145,32 @@ class YamlSection {
   std::string path_;  // "" for the root, "keepalive" for a section
   std::vector<std::string> known_;
 };
+
+// The section "place": the settings a map keeps, by the settings table's names
+// (core/place/detector_settings.h), its preset first whatever the order. "mode" is the deprecated
+// name of "preset": still read, with a warning.
+Status ReadPlaceSettings(YamlSection& place, LoopDetectorParams* params) {
+  std::vector<NamedSetting> values;
+  if (place.Has("mode")) {
+    if (place.Has("preset")) {
+      return Status::InvalidArgument(
+          "keys 'place.mode' and 'place.preset' are both given: 'mode' is the old name of "
+          "'preset'; keep 'preset'");
+    }
+    std::string mode;
+    RECOG_RETURN_IF_ERROR(place.Read("mode", &mode));
+    spdlog::warn("configuration: 'place.mode' is deprecated, write 'place.preset: {}'", mode);
+    values.emplace_back("preset", mode);
+  }
+  for (const std::string_view name : MapDetectorSettingNames()) {
+    const std::string key(name);
+    std::string text;
+    RECOG_RETURN_IF_ERROR(place.Read(key, &text));
+    if (place.Has(key)) values.emplace_back(key, text);
+  }
+  const Status applied = ApplyDetectorSettings(values, params);
+  return applied.ok() ? applied : applied.WithContext("section 'place'");
+}
 
 Status ReadConfig(const YAML::Node& root, ServerConfig* config) {
   YamlSection top(root, "");
@@ -206,14 +237,7 @@ Status ReadConfig(const YAML::Node& root, ServerConfig* config) {
   RECOG_RETURN_IF_ERROR(store.RejectUnknownKeys());
 
   RECOG_ASSIGN_OR_RETURN(YamlSection place, top.Section("place"));
-  // The preset first: the keys below override its values.
-  RECOG_RETURN_IF_ERROR(place.ReadParsed("mode", &config->place, ParseLoopDetectorMode));
-  RECOG_RETURN_IF_ERROR(place.Read("alpha", &config->place.alpha));
-  RECOG_RETURN_IF_ERROR(place.Read("temporal_matches", &config->place.temporal_matches));
-  RECOG_RETURN_IF_ERROR(place.Read("min_inliers", &config->place.epipolar.min_inliers));
-  RECOG_RETURN_IF_ERROR(place.ReadParsed("geometry", &config->place.geometry, ParseGeometryCheck));
-  RECOG_RETURN_IF_ERROR(place.Read("recent_seconds", &config->place.recent_seconds));
-  RECOG_RETURN_IF_ERROR(place.Read("recent_frames", &config->place.recent_frames));
+  RECOG_RETURN_IF_ERROR(ReadPlaceSettings(place, &config->place));
   RECOG_RETURN_IF_ERROR(place.RejectUnknownKeys());
 
   return top.RejectUnknownKeys();
@@ -403,8 +427,7 @@ Status ServerConfig::Validate() const {
         "log_level must be trace, debug, info, warn, err, critical or off, got '" + log_level +
         "'");
   }
-  const Status place_status = place.Validate();
-  if (!place_status.ok()) return place_status.WithContext("place", StatusCode::kInvalidArgument);
+  RECOG_RETURN_IF_ERROR(place.Validate("place"));
   return Status::Ok();
 }
 

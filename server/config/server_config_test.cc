@@ -267,16 +267,31 @@ TEST_F(ServerConfigTest, AbsentKeysKeepTheirDefaults) {
   EXPECT_DOUBLE_EQ(config->place.alpha, 0.3);
 }
 
-TEST_F(ServerConfigTest, ThePlaceModeIsThePresetTheOtherPlaceKeysOverride) {
-  EXPECT_TRUE(ServerConfig().place.strong_acceptance) << "the default mode";
-  StatusOr<ServerConfig> thesis = Load("place:\n  temporal_matches: 4\n  mode: thesis\n");
+TEST_F(ServerConfigTest, ThePlacePresetIsWhatTheOtherPlaceKeysOverride) {
+  EXPECT_TRUE(ServerConfig().place.strong_acceptance) << "the default preset";
+  StatusOr<ServerConfig> thesis = Load("place:\n  temporal_matches: 4\n  preset: thesis\n");
   ASSERT_TRUE(thesis.ok()) << thesis.status().ToString();
   EXPECT_FALSE(thesis->place.strong_acceptance);
   EXPECT_EQ(thesis->place.temporal_matches, 4u) << "keys override the preset wherever they stand";
-  StatusOr<ServerConfig> bad = Load("place:\n  mode: dloop\n");
+  StatusOr<ServerConfig> keyframes =
+      Load("place:\n  preset: keyframes\n  keyframe_confirmations: 2\n");
+  ASSERT_TRUE(keyframes.ok()) << keyframes.status().ToString();
+  EXPECT_EQ(keyframes->place.preset, DetectorPreset::kKeyframes);
+  EXPECT_EQ(keyframes->place.keyframe_confirmations, 2u) << "every setting a map keeps";
+  StatusOr<ServerConfig> bad = Load("place:\n  preset: dloop\n");
   ASSERT_FALSE(bad.ok());
   EXPECT_EQ(bad.status().code(), StatusCode::kInvalidArgument);
-  EXPECT_THAT(bad.status().message(), HasSubstr("place.mode"));
+  EXPECT_THAT(bad.status().message(), HasSubstr("setting preset = 'dloop'"));
+}
+
+TEST_F(ServerConfigTest, TheOldNameModeStillSetsThePresetButNotBesideIt) {
+  StatusOr<ServerConfig> old = Load("place:\n  mode: thesis\n  alpha: 0.2\n");
+  ASSERT_TRUE(old.ok()) << old.status().ToString();
+  EXPECT_EQ(old->place.preset, DetectorPreset::kThesis);
+  EXPECT_DOUBLE_EQ(old->place.alpha, 0.2);
+  StatusOr<ServerConfig> both = Load("place:\n  mode: thesis\n  preset: keyframes\n");
+  ASSERT_FALSE(both.ok());
+  EXPECT_THAT(both.status().message(), HasSubstr("'place.mode' and 'place.preset'"));
 }
 
 TEST_F(ServerConfigTest, EmptyFileGivesTheDefaults) {
@@ -337,8 +352,10 @@ TEST_F(ServerConfigTest, ValuesOfTheWrongTypeAreRejectedByName) {
       {"data_dir:\n", "key 'data_dir' must be a string, got nothing"},
       {"keepalive:\n  permit_without_calls: sometimes\n",
        "key 'keepalive.permit_without_calls' must be true or false"},
-      {"place:\n  alpha: high\n", "key 'place.alpha' must be a number"},
-      {"place:\n  geometry: magic\n", "key 'place.geometry': unknown geometry check 'magic'"},
+      {"place:\n  alpha: high\n",
+       "section 'place': setting alpha = 'high': must be a finite number >= 0"},
+      {"place:\n  geometry: magic\n",
+       "setting geometry = 'magic': must be one of direct_index, exhaustive, none"},
       {"store:\n  sync: sometimes\n", "key 'store.sync': unknown store sync policy 'sometimes'"},
       {"tls: yes\n", "key 'tls' must be a section"},
   };
@@ -398,8 +415,8 @@ TEST_F(ServerConfigTest, ValidateNamesTheBadField) {
       {[](ServerConfig& c) { c.repository.token_file = "t"; }, "need repository.primary"},
       {[](ServerConfig& c) { c.repository.tls_ca = "ca.pem"; }, "need repository.primary"},
       {[](ServerConfig& c) { c.repository.primary = c.listen; }, "repository.primary is this"},
-      {[](ServerConfig& c) { c.place.alpha = -1; }, "place: alpha"},
-      {[](ServerConfig& c) { c.place.epipolar.min_inliers = 3; }, "place: RANSAC"},
+      {[](ServerConfig& c) { c.place.alpha = -1; }, "place.alpha = -1: must be"},
+      {[](ServerConfig& c) { c.place.epipolar.min_inliers = 3; }, "place.epipolar.min_inliers = 3"},
       {[](ServerConfig& c) { c.console.listen = c.listen; }, "console.listen"},
       {[](ServerConfig& c) { c.console.listen = c.metrics_listen; }, "console.listen"},
       {[](ServerConfig& c) { c.console.loops_per_map = 0; }, "console.loops_per_map"},

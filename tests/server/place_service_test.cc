@@ -394,7 +394,7 @@ TEST_F(PlaceServiceTest, AKeyframeMapKeepsItsPresetAcrossARestartAndAnUnknownPre
   unknown.set_preset("sideways");
   const grpc::Status refused = CreateMap("bad", unknown);
   EXPECT_EQ(refused.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
-  EXPECT_NE(refused.error_message().find("settings.preset"), std::string::npos)
+  EXPECT_NE(refused.error_message().find("setting preset = 'sideways'"), std::string::npos)
       << refused.error_message();
   RestartServer();
   pb::MapInfo info;

@@ -20,13 +20,14 @@
 #include "client/cpp/frame_stream.h"
 #include "client/cpp/frames.h"
 #include "core/features/feature_extractor.h"
+#include "core/place/detector_settings.h"
 #include "core/vocabulary/vocabulary_io.h"
 #include "tools/common/cli_support.h"
 #include "tools/common/remote_support.h"
 #include "tools/common/server_flags.h"
-#include "tools/evaluation/place_evaluation.h"
 #include "tools/evaluation/plot.h"
 #include "wire/grpc_code_names.h"
+#include "wire/map_settings_text.h"
 
 namespace recog::cli {
 namespace {
@@ -96,27 +97,6 @@ struct FirstPassAnswer {
   bool loop = false;
   uint64_t match = 0;  // with `loop`
 };
-
-// The offline detector's settings for a map with `settings` (every field set, as MapInfo has
-// them): its six settings, the other parameters at their defaults, as recogd does.
-StatusOr<PlaceEvaluationOptions> OfflineOptions(const pb::MapSettings& settings) {
-  PlaceEvaluationOptions options;
-  LoopDetectorParams& p = options.detector;
-  p.alpha = settings.alpha();
-  p.temporal_matches = settings.temporal_matches();
-  p.epipolar.min_inliers = settings.min_inliers();
-  p.recent_seconds = settings.recent_seconds();
-  p.recent_frames = settings.recent_frames();
-  // GEOMETRY_CHECK_DIRECT_INDEX -> "direct_index" (GeometryCheckName).
-  std::string geometry = pb::GeometryCheck_Name(settings.geometry());
-  const std::string prefix = "GEOMETRY_CHECK_";
-  if (geometry.rfind(prefix, 0) == 0) geometry.erase(0, prefix.size());
-  std::transform(geometry.begin(), geometry.end(), geometry.begin(),
-                 [](unsigned char c) { return char(std::tolower(c)); });
-  RECOG_ASSIGN_OR_RETURN(p.geometry, ParseGeometryCheck(geometry));
-  RECOG_RETURN_IF_ERROR(p.Validate());
-  return options;
-}
 
 // One simulated robot: its map, its stream and what it measured.
 //
@@ -667,7 +647,8 @@ StatusOr<LoadReport> LoadGenerator::Run(
         const pb::MapSettings& settings = robot.map()->settings();
         const auto key = std::make_pair(folder, settings.SerializeAsString());
         if (!offline.contains(key)) {
-          RECOG_ASSIGN_OR_RETURN(PlaceEvaluationOptions offline_options, OfflineOptions(settings));
+          RECOG_ASSIGN_OR_RETURN(PlaceEvaluationOptions offline_options,
+                                 OfflineDetectorOptions(settings));
           RECOG_ASSIGN_OR_RETURN(offline[key],
                                  DetectLoops(features[folder], shared, offline_options));
         }
@@ -677,6 +658,13 @@ StatusOr<LoadReport> LoadGenerator::Run(
     }
   }
   return report;
+}
+
+StatusOr<PlaceEvaluationOptions> OfflineDetectorOptions(const pb::MapSettings& settings) {
+  PlaceEvaluationOptions options;
+  RECOG_RETURN_IF_ERROR(ApplyDetectorSettings(
+      MapSettingsAsText(settings, MapDetectorSettingNames()), &options.detector));
+  return options;
 }
 
 json LoadReportJson(const LoadReport& report) {

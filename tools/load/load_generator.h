@@ -54,6 +54,7 @@
 #include "core/common/status.h"
 #include "core/object/model/object_model.h"
 #include "recognition/v1/common.pb.h"
+#include "tools/evaluation/place_evaluation.h"
 
 namespace recog::cli {
 
@@ -198,6 +199,11 @@ class LoadGenerator {
   std::vector<Sequence> sequences_;
   std::optional<pb::Frame> object_frame_;  // with the intrinsics
 };
+
+// The offline detector that --verify compares a robot's answers with, for a map with `settings`
+// (every field set, as MapInfo has them): its preset, with the settings the map keeps over it
+// (core/place/detector_settings.h), as recogd runs it.
+StatusOr<PlaceEvaluationOptions> OfflineDetectorOptions(const pb::MapSettings& settings);
 
 // The report as JSON: run, per-RPC counts, throughput, latency percentiles and errors, loops,
 // client CPU and capacity, robots with their verification.

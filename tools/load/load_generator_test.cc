@@ -123,6 +123,31 @@ TEST_F(LoadGeneratorTest, VerificationPassesOnASequenceWithoutLoops) {
   }
 }
 
+TEST(OfflineDetectorOptionsTest, AKeyframesMapIsCheckedAgainstTheKeyframesDetector) {
+  // As MapInfo has a keyframes map's settings: every field set, the preset's values.
+  pb::MapSettings settings;
+  settings.set_preset("keyframes");
+  settings.set_alpha(0.3);
+  settings.set_temporal_matches(3);
+  settings.set_min_inliers(12);
+  settings.set_geometry(pb::GEOMETRY_CHECK_DIRECT_INDEX);
+  settings.set_recent_seconds(20);
+  settings.set_recent_frames(6);  // the map's own value over the preset's
+  settings.set_keyframe_confirmations(1);
+  const StatusOr<PlaceEvaluationOptions> options = OfflineDetectorOptions(settings);
+  ASSERT_TRUE(options.ok()) << options.status().ToString();
+  const LoopDetectorParams keyframes = LoopDetectorParams::Keyframes();
+  EXPECT_EQ(options->detector.preset, DetectorPreset::kKeyframes);
+  EXPECT_EQ(options->detector.normalisation, keyframes.normalisation);
+  EXPECT_EQ(options->detector.consistency_max_island_gap, keyframes.consistency_max_island_gap);
+  EXPECT_EQ(options->detector.min_spread, keyframes.min_spread);
+  EXPECT_EQ(options->detector.recent_frames, 6u);
+  EXPECT_EQ(options->detector.keyframe_confirmations, 1u);
+
+  settings.set_preset("sideways");
+  EXPECT_EQ(OfflineDetectorOptions(settings).status().code(), StatusCode::kInvalidArgument);
+}
+
 TEST_F(LoadGeneratorTest, ClientFeaturesVerifyTheFirstPassAndKeptMapsHoldEveryFrame) {
   LoadOptions options = CorridorLoad(1, 7);  // the sequence and three frames of a second pass
   options.features_on_client = true;

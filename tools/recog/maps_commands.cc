@@ -12,9 +12,11 @@
 #include <nlohmann/json.hpp>
 
 #include "client/cpp/recognition_client.h"
+#include "core/place/detector_settings.h"
 #include "tools/common/remote_support.h"
 #include "tools/common/server_flags.h"
 #include "tools/recog/commands.h"
+#include "wire/map_settings_text.h"
 
 namespace recog::cli {
 namespace {
@@ -34,25 +36,63 @@ void PrintFields(const json& fields) {
   }
 }
 
+// A map's detector settings (the settings table's names and kinds), then its group and thumbnails.
+json SettingsJson(const pb::MapSettings& settings) {
+  json out = json::object();
+  for (const auto& [name, text] : MapSettingsAsText(settings, MapDetectorSettingNames())) {
+    const SettingKind kind = FindDetectorSetting(name)->kind;
+    if (kind == SettingKind::kNumber) {
+      out[name] = std::stod(text);
+    } else if (kind == SettingKind::kCount) {
+      out[name] = std::stoull(text);
+    } else {
+      out[name] = text;
+    }
+  }
+  out["group"] = settings.group();
+  out["keep_thumbnails"] = settings.keep_thumbnails();
+  return out;
+}
+
 json MapJson(const pb::MapInfo& map) {
-  const pb::MapSettings& s = map.settings();
   return {{"name", map.name()},
           {"id", map.id()},
           {"frames", map.frames()},
           {"next_frame_id", map.next_frame_id()},
           {"created", UtcTime(map.created_unix_ms())},
           {"vocabulary_checksum", map.vocabulary_checksum()},
-          {"settings",
-           {{"preset", s.preset()},
-            {"alpha", s.alpha()},
-            {"temporal_matches", s.temporal_matches()},
-            {"min_inliers", s.min_inliers()},
-            {"geometry", EnumLabel(pb::GeometryCheck_Name(s.geometry()), "GEOMETRY_CHECK_")},
-            {"recent_seconds", s.recent_seconds()},
-            {"recent_frames", s.recent_frames()},
-            {"group", s.group()},
-            {"keep_thumbnails", s.keep_thumbnails()},
-            {"keyframe_confirmations", s.keyframe_confirmations()}}}};
+          {"settings", SettingsJson(map.settings())}};
+}
+
+// One flag per setting a map keeps (the settings table: --name-with-dashes, its doc, its choices
+// and the default preset's value), setting the field of the same name in *settings.
+void AddMapSettingFlags(CLI::App* create, pb::MapSettings* settings) {
+  const LoopDetectorParams defaults;
+  for (const std::string_view name : MapDetectorSettingNames()) {
+    const DetectorSetting& setting = *FindDetectorSetting(name);
+    std::string flag = "--" + std::string(name);
+    std::replace(flag.begin(), flag.end(), '_', '-');
+    std::string doc = std::string(setting.doc);
+    doc[0] = char(std::toupper(static_cast<unsigned char>(doc[0])));
+    doc += " (default preset: " + FormatDetectorSetting(setting, defaults) + ")";
+    CLI::Option* option = create->add_option_function<std::string>(
+        flag,
+        [settings, name, flag](const std::string& text) {
+          const std::string error = SetMapSettingFromText(settings, name, text);
+          if (!error.empty()) throw CLI::ValidationError(flag, error);
+        },
+        doc);
+    if (!setting.choices.empty()) {
+      std::vector<std::string> choices;
+      std::string_view rest = setting.choices;
+      while (!rest.empty()) {
+        const size_t comma = rest.find(", ");
+        choices.emplace_back(rest.substr(0, comma));
+        rest = comma == std::string_view::npos ? std::string_view() : rest.substr(comma + 2);
+      }
+      option->check(CLI::IsMember(choices));
+    }
+  }
 }
 
 int RunMapsList(const ServerFlags& flags, RecognitionClient& client) {
@@ -102,34 +142,7 @@ void AddMapsCommands(CLI::App& app, int* exit_code) {
   create->add_option("name", create_args->name, "Map name (1-128 of A-Z a-z 0-9 . _ -)")
       ->required();
   pb::MapSettings* settings = &create_args->settings;
-  create->add_option_function<double>(
-      "--alpha", [settings](const double& v) { settings->set_alpha(v); },
-      "Minimum normalised score (server default 0.3)");
-  create->add_option_function<uint32_t>(
-      "--temporal-matches", [settings](const uint32_t& v) { settings->set_temporal_matches(v); },
-      "Consistent previous queries required (3)");
-  create->add_option_function<uint32_t>(
-      "--min-inliers", [settings](const uint32_t& v) { settings->set_min_inliers(v); },
-      "RANSAC inliers of a loop, >= 8 (12)");
-  create
-      ->add_option_function<std::string>(
-          "--geometry",
-          [settings](const std::string& v) {
-            pb::GeometryCheck geometry = pb::GEOMETRY_CHECK_UNSPECIFIED;
-            std::string name = "GEOMETRY_CHECK_" + v;
-            std::transform(name.begin(), name.end(), name.begin(),
-                           [](unsigned char c) { return char(std::toupper(c)); });
-            pb::GeometryCheck_Parse(name, &geometry);
-            settings->set_geometry(geometry);
-          },
-          "How loops are verified (direct_index)")
-      ->check(CLI::IsMember({"direct_index", "exhaustive", "none"}));
-  create
-      ->add_option_function<std::string>(
-          "--preset", [settings](const std::string& v) { settings->set_preset(v); },
-          "Detector preset the other settings apply over: default, thesis, or keyframes for a "
-          "SLAM's keyframes (the server's settings)")
-      ->check(CLI::IsMember({"default", "thesis", "keyframes"}));
+  AddMapSettingFlags(create, settings);
   create->add_option_function<std::string>(
       "--group", [settings](const std::string& v) { settings->set_group(v); },
       "Map group (a fleet's maps, a robot's sessions) that queries search together "
@@ -137,17 +150,6 @@ void AddMapsCommands(CLI::App& app, int* exit_code) {
   create->add_flag_callback(
       "--keep-thumbnails", [settings] { settings->set_keep_thumbnails(true); },
       "Keep a small JPEG of each frame for the web console (6-11 KB a frame)");
-  create->add_option_function<double>(
-      "--recent-seconds", [settings](const double& v) { settings->set_recent_seconds(v); },
-      "Recent frames left out of queries, in seconds, for timestamped frames (20)");
-  create->add_option_function<uint32_t>(
-      "--recent-frames", [settings](const uint32_t& v) { settings->set_recent_frames(v); },
-      "Recent frames left out of queries, for frames without timestamps (20)");
-  create->add_option_function<uint32_t>(
-      "--keyframe-confirmations",
-      [settings](const uint32_t& v) { settings->set_keyframe_confirmations(v); },
-      "Keyframes that must confirm a verified loop before it is accepted; until then it is "
-      "answered as a candidate (0: at once)");
   ConnectCommand(create, &create_args->server, exit_code, [create_args](RecognitionClient& client) {
     auto map = client.CreateMap(create_args->name, create_args->settings);
     if (!map.ok()) return Fail("maps create", map.status());
