@@ -8,6 +8,15 @@ checks=0
 
 pass() { checks=$((checks + 1)); }
 fail() { checks=$((checks + 1)); failures=$((failures + 1)); echo "FAIL: $*"; }
+# skip_shared WHAT: a part of the test whose shared data is missing is skipped, saying so; with
+# RECOG_REQUIRE_SHARED_DATA=1 (CI, with the shared data beside the clone) it fails instead.
+skip_shared() {
+  if [ "${RECOG_REQUIRE_SHARED_DATA:-}" = 1 ]; then
+    fail "$* (RECOG_REQUIRE_SHARED_DATA=1)"
+  else
+    echo "skipping $*"
+  fi
+}
 
 # expect_ok DESCRIPTION CMD...: the command exits 0.
 expect_ok() {

@@ -23,14 +23,21 @@ int main(int argc, char** argv) {
   });
   app.set_version_flag("--version", recog::build_info::VersionLine("recog"));
   int exit_code = 0;
+  // Every subcommand is registered here, in the order --help lists them (commands.h); `eval` is
+  // only a group, whose subcommands each have a file.
   recog::cli::AddVocabCommands(app, &exit_code);
   recog::cli::AddBowCommand(app, &exit_code);
   recog::cli::AddDemoCommand(app, &exit_code);
   recog::cli::AddSeqgenCommand(app, &exit_code);
-  recog::cli::AddEvalCommand(app, &exit_code);
-  recog::cli::AddObjectCommands(app, &exit_code);
-  recog::cli::AddModelExportCommand(app, &exit_code);
+  CLI::App* eval = app.add_subcommand("eval", "Evaluate recognition against ground truth");
+  eval->require_subcommand(1);
+  recog::cli::AddEvalPlaceCommand(*eval, &exit_code);
+  recog::cli::AddEvalObjectsCommand(*eval, &exit_code);
+  recog::cli::AddEvalSequenceCommand(*eval, &exit_code);
+  recog::cli::AddModelCommands(app, &exit_code);
+  recog::cli::AddRecognizeCommand(app, &exit_code);
   recog::cli::AddStreamCommands(app, &exit_code);
+  recog::cli::AddQueryCommands(app, &exit_code);
   recog::cli::AddMapsCommands(app, &exit_code);
   recog::cli::AddModelsCommands(app, &exit_code);
   recog::cli::AddAdminCommands(app, &exit_code);

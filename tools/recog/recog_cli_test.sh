@@ -283,7 +283,7 @@ for k in ['frames','query_frames_with_truth','detections','correct','precision',
 for s in ['features','conversion','query','islands','insertion','verification','total']:
     assert set(d['timing_ms'][s]) == {'mean','median','max'}, s
 assert d['frames'] == 4 and d['query_frames_with_truth'] == 2, d
-assert d['parameters']['mode'] == 'default' and d['parameters']['strong_acceptance'], d['parameters']
+assert d['parameters']['preset'] == 'default' and d['parameters']['strong_acceptance'], d['parameters']
 for l in d['loops']: assert l['acceptance'] in ('none', 'temporal_consistency', 'strong_evidence'), l" \
   && pass || fail "eval place --json has the documented keys"
 /usr/bin/python3 -c "
@@ -294,13 +294,17 @@ for r, s in zip(rows[1:], d['sweep']):
     assert r[0] == 'geometry: ' + s['geometry'], (r, s)
     assert abs(float(r[1]) - s['recall']) < 1e-9 and abs(float(r[2]) - s['precision']) < 1e-9, (r, s)" \
   && pass || fail "eval place writes the PR curve's points beside the plot (pr.csv)"
-expect_ok "eval place in thesis mode" "$recog" eval place --images "$images" \
+expect_ok "eval place with the old --mode" "$recog" eval place --images "$images" \
   --ground-truth "$tmp/gt4.txt" --vocab "$tmp/v.rvoc" --json -q --mode thesis
+grep -q "^recog eval place: --mode is deprecated, use --preset thesis$" "$tmp/err" && pass \
+  || fail "eval place --mode says it is deprecated: $(cat "$tmp/err")"
+expect_ok "eval place with the thesis preset" "$recog" eval place --images "$images" \
+  --ground-truth "$tmp/gt4.txt" --vocab "$tmp/v.rvoc" --json -q --preset thesis
 /usr/bin/python3 -c "
 import json; d=json.load(open('$tmp/out'))
-assert d['parameters']['mode'] == 'thesis' and not d['parameters']['strong_acceptance'], d['parameters']
+assert d['parameters']['preset'] == 'thesis' and not d['parameters']['strong_acceptance'], d['parameters']
 assert all(l['acceptance'] != 'strong_evidence' for l in d['loops']), d['loops']" \
-  && pass || fail "eval place --mode thesis turns strong acceptance off"
+  && pass || fail "eval place --preset thesis turns strong acceptance off"
 [ -s "$tmp/pr.png" ] && [ -d "$tmp/draw" ] && pass || fail "eval place writes the PR plot and the draw folder"
 expect_ok "eval place --split (two robots)" "$recog" eval place --images "$images" \
   --ground-truth "$tmp/gt4.txt" --split 2 --json -q
@@ -343,15 +347,20 @@ printf '0 0 0\n1 0\n' >"$tmp/gtbad.txt"
 expect_error "eval place with a malformed ground truth" "DATA_LOSS" "$recog" eval place \
   --images "$images" --ground-truth "$tmp/gtbad.txt" -q
 printf 'alpha: 0.3\nalpah: 0.2\n' >"$tmp/params.yaml"
-expect_error "eval place with an unknown parameter" "unknown key 'alpah'" "$recog" eval place \
+expect_error "eval place with an unknown parameter" "unknown setting 'alpah'" "$recog" eval place \
   --images "$images" --ground-truth "$tmp/gt4.txt" --params "$tmp/params.yaml" -q
 printf 'geometry: homography\n' >"$tmp/params2.yaml"
 expect_error "eval place with an unknown geometry check" "INVALID_ARGUMENT" "$recog" eval place \
   --images "$images" --ground-truth "$tmp/gt4.txt" --params "$tmp/params2.yaml" -q
 expect_error "eval place with an unsupported sweep" "only supports" "$recog" eval place \
   --images "$images" --ground-truth "$tmp/gt4.txt" --sweep k -q
-expect_error "eval place with an unknown mode" "unknown loop detector mode 'dloop'" "$recog" eval place \
-  --images "$images" --ground-truth "$tmp/gt4.txt" --mode dloop -q
+expect_error "eval place with an unknown preset" "setting preset = 'dloop'" "$recog" eval place \
+  --images "$images" --ground-truth "$tmp/gt4.txt" --preset dloop -q
+printf 'ratio: nan\n' >"$tmp/params3.yaml"
+expect_error "eval place with a NaN ratio" "setting ratio = 'nan'" "$recog" eval place \
+  --images "$images" --ground-truth "$tmp/gt4.txt" --params "$tmp/params3.yaml" -q
+expect_usage_error "eval place with --mode and --preset" "excludes" "$recog" eval place \
+  --images "$images" --ground-truth "$tmp/gt4.txt" --mode thesis --preset thesis -q
 
 # A TUM RGB-D folder (the 4 bundled frames, 30 s apart), without a ground truth.
 mkdir -p "$tmp/tum/rgb" && t=0
@@ -495,7 +504,7 @@ if [ -d "$shared/objects/roboearth/models/box" ]; then
   expect_error "model export into a non-empty folder" "ALREADY_EXISTS" "$recog" model export \
     "$tmp/box.robj" --roboearth "$tmp/export/box"
 else
-  echo "skipping the RoboEarth box checks: $shared/objects/roboearth/models/box not found (set RECOG_SHARED_DATA)"
+  skip_shared "the RoboEarth box checks: $shared/objects/roboearth/models/box not found (set RECOG_SHARED_DATA)"
 fi
 
 # The --json of recog eval objects (both methods) and recog eval sequence, on small subsets: two
@@ -589,7 +598,7 @@ assert d['detections'] == sum('visp-cube' in x['objects'] for x in f if not x.ge
     eval sequence --models "$tmp/cube-rec.robj" --images "$tmp/cube" --camera 547,547,338,234 \
     --expect visp-cube --exclude image9999 -q
 else
-  echo "skipping the eval --json checks: bio or the visp-cube not found under $shared (set RECOG_SHARED_DATA)"
+  skip_shared "the eval --json checks: bio or the visp-cube not found under $shared (set RECOG_SHARED_DATA)"
 fi
 
 # recog load refuses bad options before it connects (its runs: load/load_generator_test).

@@ -325,7 +325,7 @@ evaluated = [(l['query'] - 1, l['match'] - 1, os.path.basename(l['query_file']),
 assert events[-1]['frames'] == 84 and evaluated and streamed == evaluated, (streamed, evaluated)" \
     && pass || fail "stream finds exactly the loops of eval place"
 else
-  echo "skipping the shared corridor: $shared/places/corridor/images not found (set RECOG_SHARED_DATA)"
+  skip_shared "the shared corridor: $shared/places/corridor/images not found (set RECOG_SHARED_DATA)"
 fi
 
 # Operation: health, and an online checkpoint restored into a second server.

@@ -1,12 +1,7 @@
-// recog stream, recog query and recog relocalize: frames into (or looked up in) maps of recogd,
-// over the C++ client library. All take the ServerFlags; a failed call prints one line
-// "recog <cmd>: CODE: message" and exits 1.
-//
-//   stream      a recorded sequence (folder, list or video; or a multi-camera rig sequence)
-//               through one StreamFrames call, printing every loop closure as it is answered
-//   query       one QueryPlace: relocalisation, or the loop detector's step with --add (one
-//               image, or one per camera of a rig)
-//   relocalize  one Relocalize: a few images looked up in maps or a group, nothing added
+// recog stream: a recorded sequence (folder, list or video; or a multi-camera rig sequence)
+// through one StreamFrames call of recogd, printing every loop closure as it is answered, over
+// the C++ client library. It takes the ServerFlags; a failed call prints one line
+// "recog stream: CODE: message" and exits 1.
 #include <chrono>
 #include <csignal>
 #include <cstdio>
@@ -37,6 +32,7 @@
 #include "tools/evaluation/rig_dataset.h"
 #include "tools/evaluation/rig_file.h"
 #include "tools/recog/commands.h"
+#include "tools/recog/loop_json.h"
 #include "wire/grpc_code_names.h"
 
 namespace recog::cli {
@@ -45,130 +41,6 @@ namespace {
 namespace fs = std::filesystem;
 using client::RecognitionClient;
 using json = nlohmann::ordered_json;
-
-std::string StatusLabel(pb::LoopStatus status) {
-  return EnumLabel(pb::LoopStatus_Name(status), "LOOP_STATUS_");
-}
-
-// The correspondences as [{query_index, query: [x, y], match_index, match: [x, y]}].
-json CorrespondencesJson(const google::protobuf::RepeatedPtrField<pb::Correspondence>& in) {
-  json pairs = json::array();
-  for (const pb::Correspondence& c : in) {
-    pairs.push_back({{"query_index", c.query_index()},
-                     {"query", {c.query_x(), c.query_y()}},
-                     {"match_index", c.match_index()},
-                     {"match", {c.match_x(), c.match_y()}}});
-  }
-  return pairs;
-}
-
-json LoopJson(const pb::LoopResult& r) {
-  json out = {{"status", StatusLabel(r.status())}, {"score", r.score()}};
-  if (!r.has_rig()) {  // a rig map's scores are pooled over cameras, without islands
-    out.update({{"normalized_score", r.normalized_score()},
-                {"previous_score", r.previous_score()},
-                {"island", {{"first", r.island_first()}, {"last", r.island_last()}}},
-                {"island_score", r.island_score()},
-                {"consistent_queries", r.consistent_queries()}});
-  }
-  out["correspondences"] = r.correspondences();
-  out["inliers"] = r.inliers();
-  if (r.has_evidence()) {
-    const pb::LoopEvidence& e = r.evidence();
-    out["evidence"] = {{"inliers", e.inliers()},
-                       {"spread", e.spread()},
-                       {"calibrated", e.calibrated()},
-                       {"in_front", e.in_front()},
-                       {"parallax_deg", e.parallax_deg()},
-                       {"rotation_deg", e.rotation_deg()},
-                       {"pure_rotation", e.pure_rotation()},
-                       {"confirmations", e.confirmations()}};
-  }
-  if (r.has_frame_id()) out["frame"] = r.frame_id();
-  if (r.has_match_frame_id()) {
-    out["match"] = r.match_frame_id();
-    out["match_client_frame_id"] = r.match_client_frame_id();
-  }
-  if (r.candidates_size() > 0) {
-    json candidates = json::array();
-    for (const pb::Candidate& c : r.candidates()) {
-      json candidate = {{"frame", c.frame_id()},
-                        {"client_frame_id", c.client_frame_id()},
-                        {"score", c.score()},
-                        {"normalized_score", c.normalized_score()}};
-      if (c.has_inliers()) candidate["inliers"] = c.inliers();
-      candidates.push_back(std::move(candidate));
-    }
-    out["candidates"] = std::move(candidates);
-  }
-  if (r.inlier_correspondences_size() > 0) {
-    out["inlier_correspondences"] = CorrespondencesJson(r.inlier_correspondences());
-  }
-  if (r.has_relative_pose()) {
-    const pb::Pose& pose = r.relative_pose();
-    out["relative_pose"] = {
-        {"rotation", std::vector<double>(pose.rotation().begin(), pose.rotation().end())},
-        {"translation", std::vector<double>(pose.translation().begin(), pose.translation().end())}};
-  }
-  if (r.has_rig()) {
-    const pb::RigLoop& rig = r.rig();
-    json pairs = json::array();
-    for (const pb::RigCameraMatch& pair : rig.pairs()) {
-      pairs.push_back({{"query_camera", pair.query_camera()},
-                       {"match_camera", pair.match_camera()},
-                       {"correspondences", pair.correspondences()},
-                       {"inliers", pair.inliers()},
-                       {"posed", pair.posed()},
-                       {"metric", pair.metric()},
-                       {"consistent_ratio", pair.consistent_ratio()}});
-      if (pair.inlier_correspondences_size() > 0) {
-        pairs.back()["inlier_correspondences"] = CorrespondencesJson(pair.inlier_correspondences());
-      }
-    }
-    json rig_json = {{"pairs", std::move(pairs)},
-                     {"rotation_disagreement_deg", rig.rotation_disagreement_deg()},
-                     {"posed", rig.posed()},
-                     {"metric", rig.metric()}};
-    if (rig.posed()) {
-      // X_body_query = R X_body_match + t; t in metres when metric, else zero
-      const pb::Pose& body = rig.body_pose();
-      rig_json["body_pose"] = {
-          {"rotation", std::vector<double>(body.rotation().begin(), body.rotation().end())},
-          {"translation",
-           std::vector<double>(body.translation().begin(), body.translation().end())}};
-    }
-    if (rig.metric()) {
-      rig_json["covariance"] =
-          std::vector<double>(rig.covariance().begin(), rig.covariance().end());
-    }
-    out["rig"] = std::move(rig_json);
-  }
-  if (r.has_metric()) {
-    const pb::MetricLoop& m = r.metric();
-    json metric = {{"checked", m.checked()},
-                   {"verified", m.verified()},
-                   {"correspondences", m.correspondences()},
-                   {"inliers", m.inliers()},
-                   {"rms_error_px", m.rms_error_px()}};
-    if (m.verified()) {
-      metric["pose"] = {
-          // X_query = R X_match + t, metres
-          {"rotation", std::vector<double>(m.pose().rotation().begin(), m.pose().rotation().end())},
-          {"translation",
-           std::vector<double>(m.pose().translation().begin(), m.pose().translation().end())}};
-      metric["covariance"] = std::vector<double>(m.covariance().begin(), m.covariance().end());
-    }
-    out["metric"] = std::move(metric);
-  }
-  return out;
-}
-
-json TimingJson(const pb::Timing& t) {
-  return {{"decode", t.decode_ms()},
-          {"features", t.features_ms()},
-          {"recognition", t.recognition_ms()},
-          {"queue", t.queue_ms()}};
-}
 
 // ---- recog stream ----
 
@@ -369,21 +241,27 @@ Status DrawLoop(const std::string& dir, const SentFrames& sent,
   return Status::Ok();
 }
 
-int RunStream(const StreamArgs& args, RecognitionClient& client) {
-  if (!(args.rate >= 0)) return Fail("stream", Status::InvalidArgument("--rate must be >= 0"));
+// --rate and the sequence: what the command line cannot check by itself.
+Status CheckStreamFlags(const StreamArgs& args) {
+  if (!(args.rate >= 0)) return Status::InvalidArgument("--rate must be >= 0");
   if (args.images.empty() == args.rig.empty()) {
-    return Fail("stream", Status::InvalidArgument("give --images or --rig"));
+    return Status::InvalidArgument("give --images or --rig");
   }
-  auto source = StreamSequence::Open(args);
-  if (!source.ok()) return Fail("stream", source.status());
-  if (!args.draw.empty()) {
-    std::error_code ec;
-    fs::create_directories(args.draw, ec);
-    if (ec) {
-      return Fail("stream",
-                  Status::InvalidArgument("cannot create '" + args.draw + "': " + ec.message()));
-    }
-  }
+  return Status::Ok();
+}
+
+// --draw: its folder, created when missing.
+Status CreateDrawFolder(const std::string& dir) {
+  if (dir.empty()) return Status::Ok();
+  std::error_code ec;
+  fs::create_directories(dir, ec);
+  if (ec) return Status::InvalidArgument("cannot create '" + dir + "': " + ec.message());
+  return Status::Ok();
+}
+
+// The map the frames go into (made with --create and its settings), the maps also searched, and
+// what the answers hold.
+pb::StreamConfig StreamConfigOf(const StreamArgs& args, const StreamSequence& source) {
   pb::StreamConfig config;
   config.set_map(args.map);
   config.set_create_if_missing(args.create);
@@ -392,414 +270,280 @@ int RunStream(const StreamArgs& args, RecognitionClient& client) {
   if (args.keep_thumbnails) config.mutable_settings()->set_keep_thumbnails(true);
   for (const std::string& name : args.search_maps) config.add_search_maps(name);
   config.set_search_group(args.search_group);
-  if (args.create) source->AddRig(config.mutable_settings());
+  if (args.create) source.AddRig(config.mutable_settings());
   // Drawn loops show their inliers.
   config.mutable_options()->set_include_correspondences(!args.draw.empty());
-  auto stream = client::FrameStream::Open(client, config);
-  if (!stream.ok()) return Fail("stream", stream.status());
+  return config;
+}
 
-  ProgressBar progress(!args.quiet);
-  SentFrames sent;
-  size_t answered = 0, loops = 0, inter_map_loops = 0, errors = 0;
-  grpc::Status failure;  // the stream's, once it failed
-  // Reports one answer, in order; false once the stream has failed.
-  const auto handle = [&](client::FrameStream::Answer answer) {
+// What recog stream prints of the answers, taken in the order of their frames (a line per loop,
+// inter-map loop, candidate loop or failed frame; with --json an object per line), the loops it
+// draws, and its counts for the summary.
+class StreamReport {
+ public:
+  StreamReport(const StreamArgs& args, const StreamSequence& source, ProgressBar* progress)
+      : args_(args), source_(source), progress_(progress) {}
+
+  // Keeps what the report needs of a frame about to be sent: its name, its images with --draw.
+  void FrameSent(const std::string& name, std::vector<cv::Mat> images) {
+    sent_.names.push_back(fs::path(name).filename().string());
+    if (!args_.draw.empty()) sent_.images.push_back(std::move(images));
+  }
+  size_t frames_sent() const { return sent_.names.size(); }
+
+  // Reports the answer of the next frame; false once the stream has failed (see failure()).
+  bool ReportAnswer(client::FrameStream::Answer answer) {
     if (!answer.ok()) {
-      failure = answer.status();
+      failure_ = answer.status();
       return false;
     }
-    const size_t sequence = answered++;
-    progress.Update("frames", answered, source->size());
+    const size_t sequence = answered_++;
+    progress_->Update("frames", answered_, source_.size());
     if (answer->has_error()) {
-      ++errors;
-      progress.Finish();
-      const pb::FrameError& e = answer->error();
-      std::fprintf(stderr, "recog stream: frame %s: %s: %s\n", sent.names[sequence].c_str(),
-                   std::string(GrpcCodeName(grpc::StatusCode(e.code()))).c_str(),
-                   e.message().c_str());
+      FrameFailed(sequence, answer->error());
       return true;
     }
     const pb::LoopResult& r = answer->result();
-    if (r.has_frame_id()) sent.sequence_of_id[r.frame_id()] = sequence;
-    for (const pb::InterMapMatch& found : answer->inter_map()) {
-      ++inter_map_loops;
-      const pb::LoopResult& m = found.result();
-      if (args.server.json) {
-        json loop = {{"event", "inter_map_loop"}, {"map", found.map()}};
-        loop.update(LoopJson(m));
-        loop["frame_file"] = sent.names[sequence];
-        std::printf("%s\n", loop.dump().c_str());
-      } else {
-        progress.Finish();
-        std::printf("frame %s was seen in map '%s' as frame %llu%s: %u inliers\n",
-                    sent.names[sequence].c_str(), found.map().c_str(),
-                    static_cast<unsigned long long>(m.match_frame_id()),
-                    m.match_client_frame_id().empty()
-                        ? ""
-                        : (" (" + m.match_client_frame_id() + ")").c_str(),
-                    m.inliers());
-      }
-    }
+    if (r.has_frame_id()) sent_.sequence_of_id[r.frame_id()] = sequence;
+    for (const pb::InterMapMatch& found : answer->inter_map()) InterMapLoop(sequence, found);
     if (r.status() == pb::LOOP_STATUS_CANDIDATE && r.has_match_frame_id()) {
-      // Awaiting the next keyframes' confirmation (MapSettings.keyframe_confirmations): shown,
-      // not counted as a loop.
-      if (args.server.json) {
-        json candidate = {{"event", "candidate"}};
-        candidate.update(LoopJson(r));
-        std::printf("%s\n", candidate.dump().c_str());
-      } else {
-        progress.Finish();
-        std::printf("frame %s: candidate loop with frame %s, %u inliers, awaiting confirmation\n",
-                    sent.Describe(r.frame_id()).c_str(), sent.Describe(r.match_frame_id()).c_str(),
-                    r.inliers());
-      }
-      std::fflush(stdout);
-      return true;
+      Candidate(r);
+    } else if (r.status() == pb::LOOP_STATUS_LOOP_DETECTED && r.has_match_frame_id()) {
+      Loop(sequence, r);
     }
-    if (r.status() != pb::LOOP_STATUS_LOOP_DETECTED || !r.has_match_frame_id()) return true;
-    ++loops;
-    if (args.server.json) {
+    return true;
+  }
+
+  // A frame that could not be read or sent: reported, and the stream goes on.
+  void ReportSkipped(const Status& status) {
+    ++errors_;
+    progress_->Finish();
+    Fail("stream", status);
+  }
+
+  // How the stream failed (OK while it has not).
+  const grpc::Status& failure() const { return failure_; }
+
+  // The last line: the counts, the time since `start` and the rate.
+  void PrintSummary(std::chrono::steady_clock::time_point start) const {
+    const double seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    const double rate = seconds > 0 ? double(answered_) / seconds : 0.0;
+    if (args_.server.json) {
+      std::printf("%s\n", json({{"event", "summary"},
+                                {"map", args_.map},
+                                {"frames", answered_},
+                                {"loops", loops_},
+                                {"inter_map_loops", inter_map_loops_},
+                                {"errors", errors_},
+                                {"seconds", seconds},
+                                {"frames_per_second", rate}})
+                              .dump()
+                              .c_str());
+      return;
+    }
+    const bool searching = !args_.search_maps.empty() || !args_.search_group.empty();
+    std::printf("%zu frames, %zu loops, %s%zu errors in %.2f s (%.1f frames/s)\n", answered_,
+                loops_,
+                searching ? (std::to_string(inter_map_loops_) + " inter-map loops, ").c_str() : "",
+                errors_, seconds, rate);
+  }
+
+  // The exit status: 1 when any frame failed.
+  int ExitCode() const { return errors_ == 0 ? 0 : 1; }
+
+ private:
+  void FrameFailed(size_t sequence, const pb::FrameError& e) {
+    ++errors_;
+    progress_->Finish();
+    std::fprintf(stderr, "recog stream: frame %s: %s: %s\n", sent_.names[sequence].c_str(),
+                 std::string(GrpcCodeName(grpc::StatusCode(e.code()))).c_str(),
+                 e.message().c_str());
+  }
+
+  // The frame was also seen in one of the maps searched (--search-maps, --search-group).
+  void InterMapLoop(size_t sequence, const pb::InterMapMatch& found) {
+    ++inter_map_loops_;
+    const pb::LoopResult& m = found.result();
+    if (args_.server.json) {
+      json loop = {{"event", "inter_map_loop"}, {"map", found.map()}};
+      loop.update(LoopJson(m));
+      loop["frame_file"] = sent_.names[sequence];
+      std::printf("%s\n", loop.dump().c_str());
+      return;
+    }
+    progress_->Finish();
+    std::printf(
+        "frame %s was seen in map '%s' as frame %llu%s: %u inliers\n",
+        sent_.names[sequence].c_str(), found.map().c_str(),
+        static_cast<unsigned long long>(m.match_frame_id()),
+        m.match_client_frame_id().empty() ? "" : (" (" + m.match_client_frame_id() + ")").c_str(),
+        m.inliers());
+  }
+
+  // A loop awaiting the next keyframes' confirmation (MapSettings.keyframe_confirmations): shown,
+  // not counted as a loop.
+  void Candidate(const pb::LoopResult& r) {
+    if (args_.server.json) {
+      json candidate = {{"event", "candidate"}};
+      candidate.update(LoopJson(r));
+      std::printf("%s\n", candidate.dump().c_str());
+    } else {
+      progress_->Finish();
+      std::printf("frame %s: candidate loop with frame %s, %u inliers, awaiting confirmation\n",
+                  sent_.Describe(r.frame_id()).c_str(), sent_.Describe(r.match_frame_id()).c_str(),
+                  r.inliers());
+    }
+    std::fflush(stdout);
+  }
+
+  // A loop closure: printed, and drawn with --draw when both frames are of this session.
+  void Loop(size_t sequence, const pb::LoopResult& r) {
+    ++loops_;
+    if (args_.server.json) {
       json loop = {{"event", "loop"}};
       loop.update(LoopJson(r));
-      loop["frame_file"] = sent.names[sequence];
-      const auto match = sent.sequence_of_id.find(r.match_frame_id());
-      if (match != sent.sequence_of_id.end()) loop["match_file"] = sent.names[match->second];
+      loop["frame_file"] = sent_.names[sequence];
+      const auto match = sent_.sequence_of_id.find(r.match_frame_id());
+      if (match != sent_.sequence_of_id.end()) loop["match_file"] = sent_.names[match->second];
       std::printf("%s\n", loop.dump().c_str());
     } else {
-      progress.Finish();
+      progress_->Finish();
       const std::string pairs = CameraPairs(r);
       std::printf("frame %s closes a loop with frame %s: %u inliers%s\n",
-                  sent.Describe(r.frame_id()).c_str(), sent.Describe(r.match_frame_id()).c_str(),
+                  sent_.Describe(r.frame_id()).c_str(), sent_.Describe(r.match_frame_id()).c_str(),
                   r.inliers(), pairs.empty() ? "" : (" (" + pairs + ")").c_str());
     }
     std::fflush(stdout);
-    if (!args.draw.empty() && r.has_frame_id() &&
-        sent.sequence_of_id.contains(r.match_frame_id())) {
-      if (Status s = DrawLoop(args.draw, sent, source->cameras(), r); !s.ok()) {
-        ++errors;
+    if (!args_.draw.empty() && r.has_frame_id() &&
+        sent_.sequence_of_id.contains(r.match_frame_id())) {
+      if (Status s = DrawLoop(args_.draw, sent_, source_.cameras(), r); !s.ok()) {
+        ++errors_;
         Fail("stream", s);
       }
     }
-    return true;
-  };
+  }
 
-  const auto start = std::chrono::steady_clock::now();
-  std::deque<std::future<client::FrameStream::Answer>> pending;
-  bool streaming = true;
-  // Waits for the oldest answer and reports it.
-  const auto take_oldest = [&] {
-    streaming = handle(pending.front().get());
-    pending.pop_front();
-  };
+  const StreamArgs& args_;
+  const StreamSequence& source_;
+  ProgressBar* const progress_;
+  SentFrames sent_;
+  size_t answered_ = 0, loops_ = 0, inter_map_loops_ = 0, errors_ = 0;
+  grpc::Status failure_;
+};
+
+// The answers of the frames sent, in their order, each reported as soon as it is taken; the
+// reporting stops once the stream has failed.
+class PendingAnswers {
+ public:
+  explicit PendingAnswers(StreamReport* report) : report_(report) {}
+
+  void Add(std::future<client::FrameStream::Answer> answer) {
+    pending_.push_back(std::move(answer));
+  }
+  // False once the stream has failed.
+  bool streaming() const { return streaming_; }
+
   // Reports the answers that come before `until`, in order.
-  const auto answers_until = [&](std::chrono::steady_clock::time_point until) {
-    while (streaming && !pending.empty() &&
-           pending.front().wait_until(until) == std::future_status::ready) {
-      take_oldest();
+  void TakeUntil(std::chrono::steady_clock::time_point until) {
+    while (streaming_ && !pending_.empty() &&
+           pending_.front().wait_until(until) == std::future_status::ready) {
+      TakeOldest();
     }
-  };
-  // A frame that cannot be read or sent is reported, and the stream goes on.
-  const auto skip = [&](const auto& status) {
-    ++errors;
-    progress.Finish();
-    Fail("stream", status);
-  };
-  stop_streaming = 0;
-  const auto previous_int = std::signal(SIGINT, StopStreaming);
-  const auto previous_term = std::signal(SIGTERM, StopStreaming);
-  while (streaming && !stop_streaming && (args.frames == 0 || sent.names.size() < args.frames)) {
+  }
+  // Waits for answers (oldest first) until at most `in_flight` frames are unanswered.
+  void TakeAllBut(size_t in_flight) {
+    while (streaming_ && pending_.size() > in_flight) TakeOldest();
+  }
+
+ private:
+  void TakeOldest() {
+    streaming_ = report_->ReportAnswer(pending_.front().get());
+    pending_.pop_front();
+  }
+
+  StreamReport* const report_;
+  std::deque<std::future<client::FrameStream::Answer>> pending_;
+  bool streaming_ = true;
+};
+
+// While it lives, SIGINT and SIGTERM set stop_streaming (cleared first) instead of ending the
+// process.
+class StopStreamingOnSignals {
+ public:
+  StopStreamingOnSignals() {
+    stop_streaming = 0;
+    previous_int_ = std::signal(SIGINT, StopStreaming);
+    previous_term_ = std::signal(SIGTERM, StopStreaming);
+  }
+  ~StopStreamingOnSignals() {
+    std::signal(SIGINT, previous_int_);
+    std::signal(SIGTERM, previous_term_);
+  }
+  StopStreamingOnSignals(const StopStreamingOnSignals&) = delete;
+  StopStreamingOnSignals& operator=(const StopStreamingOnSignals&) = delete;
+
+ private:
+  void (*previous_int_)(int);
+  void (*previous_term_)(int);
+};
+
+// With --rate: when the frame numbered `sent` (from 0) is due, `start` being the first's time.
+std::chrono::steady_clock::time_point DueTime(std::chrono::steady_clock::time_point start,
+                                              size_t sent, double rate) {
+  return start + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                     std::chrono::duration<double>(double(sent) / rate));
+}
+
+// Sends the frames of `source` (--frames of them, or all) at --rate, or a few ahead of their
+// answers, reporting each answer as it comes; until the end of the sequence, a failed stream or
+// SIGINT/SIGTERM. The answers of the last frames are left in *answers.
+void SendFrames(const StreamArgs& args, std::chrono::steady_clock::time_point start,
+                StreamSequence* source, client::FrameStream* stream, StreamReport* report,
+                PendingAnswers* answers) {
+  const StopStreamingOnSignals stop_on_signals;
+  while (answers->streaming() && !stop_streaming &&
+         (args.frames == 0 || report->frames_sent() < args.frames)) {
     pb::Frame frame;
     std::string name;
     std::vector<cv::Mat> images;
     StatusOr<bool> more = source->Next(args, &frame, &name, &images);
     if (!more.ok()) {
-      skip(more.status());
+      report->ReportSkipped(more.status());
       continue;
     }
     if (!*more) break;
     if (args.rate > 0) {
-      const auto due =
-          start + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
-                      std::chrono::duration<double>(double(sent.names.size()) / args.rate));
-      answers_until(due);
+      const auto due = DueTime(start, report->frames_sent(), args.rate);
+      answers->TakeUntil(due);
       std::this_thread::sleep_until(due);
     }
-    sent.names.push_back(fs::path(name).filename().string());
-    if (!args.draw.empty()) sent.images.push_back(std::move(images));
-    pending.push_back((*stream)->Send(std::move(frame)));
-    answers_until(std::chrono::steady_clock::now());  // those that have come
-    while (streaming && pending.size() > kFramesInFlight) take_oldest();
+    report->FrameSent(name, std::move(images));
+    answers->Add(stream->Send(std::move(frame)));
+    answers->TakeUntil(std::chrono::steady_clock::now());  // those that have come
+    answers->TakeAllBut(kFramesInFlight);
   }
-  std::signal(SIGINT, previous_int);
-  std::signal(SIGTERM, previous_term);
-  while (streaming && !pending.empty()) take_oldest();
+}
+
+int RunStream(const StreamArgs& args, RecognitionClient& client) {
+  if (Status s = CheckStreamFlags(args); !s.ok()) return Fail("stream", s);
+  auto source = StreamSequence::Open(args);
+  if (!source.ok()) return Fail("stream", source.status());
+  if (Status s = CreateDrawFolder(args.draw); !s.ok()) return Fail("stream", s);
+  auto stream = client::FrameStream::Open(client, StreamConfigOf(args, *source));
+  if (!stream.ok()) return Fail("stream", stream.status());
+  ProgressBar progress(!args.quiet);
+  StreamReport report(args, *source, &progress);
+  const auto start = std::chrono::steady_clock::now();
+  PendingAnswers answers(&report);
+  SendFrames(args, start, &*source, stream->get(), &report, &answers);
+  answers.TakeAllBut(0);  // the answers still due
   const grpc::Status end = (*stream)->Close();
   progress.Finish();
-  if (!failure.ok()) return Fail("stream", failure);
+  if (!report.failure().ok()) return Fail("stream", report.failure());
   if (!end.ok()) return Fail("stream", end);
-  const double seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  const double rate = seconds > 0 ? double(answered) / seconds : 0.0;
-  if (args.server.json) {
-    std::printf("%s\n", json({{"event", "summary"},
-                              {"map", args.map},
-                              {"frames", answered},
-                              {"loops", loops},
-                              {"inter_map_loops", inter_map_loops},
-                              {"errors", errors},
-                              {"seconds", seconds},
-                              {"frames_per_second", rate}})
-                            .dump()
-                            .c_str());
-  } else {
-    const bool searching = !args.search_maps.empty() || !args.search_group.empty();
-    std::printf("%zu frames, %zu loops, %s%zu errors in %.2f s (%.1f frames/s)\n", answered, loops,
-                searching ? (std::to_string(inter_map_loops) + " inter-map loops, ").c_str() : "",
-                errors, seconds, rate);
-  }
-  return errors == 0 ? 0 : 1;
-}
-
-// ---- recog query ----
-
-struct QueryArgs {
-  ServerFlags server;
-  std::vector<std::string> images;  // one, or one per camera of --rig in its order
-  std::string map, rig, camera, client_frame_id, depth, right;
-  double depth_scale = 1000, baseline = 0;
-  bool add = false, correspondences = false;
-  uint32_t top_k = 0;
-};
-
-// Attaches the depth image in `depth` or the right image in `right` (whichever is not empty) to
-// the frame, for metric loops; the server checks the rest (intrinsics, sizes, the baseline).
-// NOT_FOUND for a missing file, INVALID_ARGUMENT for one that does not decode.
-Status AttachStructure(const std::string& depth, double depth_scale, const std::string& right,
-                       double baseline, pb::Frame* frame) {
-  if (depth.empty() && right.empty()) return Status::Ok();
-  const std::string& file = depth.empty() ? right : depth;
-  std::error_code error;
-  if (!fs::exists(file, error)) return Status::NotFound("image file '" + file + "' does not exist");
-  const cv::Mat image =
-      cv::imread(file, depth.empty() ? cv::IMREAD_GRAYSCALE : cv::IMREAD_ANYDEPTH);
-  if (image.empty()) return Status::InvalidArgument("cannot read '" + file + "'");
-  const grpc::Status attached = depth.empty() ? client::AttachStereoRight(image, baseline, frame)
-                                              : client::AttachDepth(image, depth_scale, frame);
-  if (!attached.ok()) return Status::InvalidArgument(file + ": " + attached.error_message());
-  return Status::Ok();
-}
-
-// The frame of `path` (FrameFromImageFile of its grey pixels).
-StatusOr<pb::Frame> ReadFrame(const std::string& path) {
-  RECOG_ASSIGN_OR_RETURN(const cv::Mat gray, ReadGrayImage(path));
-  client::Result<pb::Frame> frame = FrameFromImageFile(path, gray);
-  if (!frame.ok()) return Status::InvalidArgument(frame.status().error_message());
-  return std::move(frame).value();
-}
-
-// recog query's frame: its one image, or with --rig a rig frame of one view per camera.
-StatusOr<pb::Frame> QueryFrame(const QueryArgs& args) {
-  if (args.rig.empty()) {
-    if (args.images.size() != 1) {
-      return Status::InvalidArgument("give one image (or --rig and one image per camera)");
-    }
-    return ReadFrame(args.images.front());
-  }
-  if (!args.camera.empty() || !args.depth.empty() || !args.right.empty()) {
-    return Status::InvalidArgument(
-        "--camera, --depth and --right are for single-camera maps (a rig map has its cameras)");
-  }
-  RECOG_ASSIGN_OR_RETURN(const std::vector<RigCamera> rig, ReadRigFile(args.rig));
-  if (args.images.size() != rig.size()) {
-    return Status::InvalidArgument("the rig has " + std::to_string(rig.size()) +
-                                   " cameras: give one image per camera, in its order, not " +
-                                   std::to_string(args.images.size()));
-  }
-  pb::Frame frame;
-  for (size_t c = 0; c < rig.size(); ++c) {
-    RECOG_ASSIGN_OR_RETURN(pb::Frame view, ReadFrame(args.images[c]));
-    const grpc::Status added = client::AddRigView(rig[c].name, std::move(view), &frame);
-    if (!added.ok()) return Status::InvalidArgument(added.error_message());
-  }
-  return frame;
-}
-
-int RunQuery(const QueryArgs& args, RecognitionClient& client) {
-  auto frame = QueryFrame(args);
-  if (!frame.ok()) return Fail("query", frame.status());
-  frame->set_client_frame_id(args.client_frame_id);
-  pb::ResultOptions options;
-  options.set_top_k(args.top_k);
-  options.set_include_correspondences(args.correspondences);
-  if (!args.camera.empty()) {
-    auto camera = ParseCamera(args.camera);
-    if (!camera.ok()) return Fail("query", camera.status());
-    SetIntrinsics(*camera, &*frame);
-    options.set_include_relative_pose(true);
-  }
-  if (Status s = AttachStructure(args.depth, args.depth_scale, args.right, args.baseline, &*frame);
-      !s.ok()) {
-    return Fail("query", s);
-  }
-  auto answer = client.QueryPlace(
-      args.map, *frame, args.add ? client::QueryMode::kAddFrame : client::QueryMode::kRelocalise,
-      options);
-  if (!answer.ok()) return Fail("query", answer.status());
-  const pb::LoopResult& r = answer->result();
-  if (args.server.json) {
-    json out = LoopJson(r);
-    out["timing_ms"] = TimingJson(answer->timing());
-    std::printf("%s\n", out.dump(2).c_str());
-    return 0;
-  }
-  std::printf("status     %s\n", StatusLabel(r.status()).c_str());
-  if (r.has_frame_id()) std::printf("added as   frame %llu\n", (unsigned long long)r.frame_id());
-  if (r.has_match_frame_id()) {
-    if (r.has_rig()) {  // a rig frame's score is pooled over its cameras: nothing to normalise
-      std::printf("match      rig frame %llu (score %.3f over the cameras)\n",
-                  (unsigned long long)r.match_frame_id(), r.score());
-    } else {
-      std::printf("match      frame %llu (score %.3f, normalised %.3f)\n",
-                  (unsigned long long)r.match_frame_id(), r.score(), r.normalized_score());
-    }
-    if (!r.match_client_frame_id().empty()) {
-      std::printf("match id   %s\n", r.match_client_frame_id().c_str());
-    }
-    std::printf("inliers    %u of %u correspondences\n", r.inliers(), r.correspondences());
-  }
-  for (const pb::RigCameraMatch& pair : r.rig().pairs()) {
-    std::printf("cameras    %s saw what %s saw: %u inliers%s\n", pair.query_camera().c_str(),
-                pair.match_camera().c_str(), pair.inliers(),
-                pair.metric() ? ", metric" : (pair.posed() ? ", posed" : ""));
-    for (const pb::Correspondence& c : pair.inlier_correspondences()) {
-      std::printf("inlier     %s %u (%.1f, %.1f) <-> %s %u (%.1f, %.1f)\n",
-                  pair.query_camera().c_str(), c.query_index(), c.query_x(), c.query_y(),
-                  pair.match_camera().c_str(), c.match_index(), c.match_x(), c.match_y());
-    }
-  }
-  if (r.rig().posed()) {
-    const pb::Pose& p = r.rig().body_pose();
-    std::printf(
-        "body pose  R = [%.4f %.4f %.4f; %.4f %.4f %.4f; %.4f %.4f %.4f], t = [%.4f %.4f %.4f]%s "
-        "(X_body_query = R X_body_match + t; rotations disagree by %.2f deg)\n",
-        p.rotation(0), p.rotation(1), p.rotation(2), p.rotation(3), p.rotation(4), p.rotation(5),
-        p.rotation(6), p.rotation(7), p.rotation(8), p.translation(0), p.translation(1),
-        p.translation(2), r.rig().metric() ? " m" : " (no scale)",
-        r.rig().rotation_disagreement_deg());
-  }
-  for (const pb::Candidate& c : r.candidates()) {
-    std::printf("candidate  frame %llu%s%s (score %.3f, normalised %.3f)",
-                (unsigned long long)c.frame_id(), c.client_frame_id().empty() ? "" : " ",
-                c.client_frame_id().c_str(), c.score(), c.normalized_score());
-    if (c.has_inliers()) std::printf(", %u inliers", c.inliers());
-    std::printf("\n");
-  }
-  for (const pb::Correspondence& c : r.inlier_correspondences()) {
-    std::printf("inlier     %u (%.1f, %.1f) <-> %u (%.1f, %.1f)\n", c.query_index(), c.query_x(),
-                c.query_y(), c.match_index(), c.match_x(), c.match_y());
-  }
-  const pb::Pose& pose = r.relative_pose();
-  if (pose.rotation_size() == 9 && pose.translation_size() == 3) {
-    std::printf(
-        "pose       R = [%.4f %.4f %.4f; %.4f %.4f %.4f; %.4f %.4f %.4f], "
-        "t = [%.4f %.4f %.4f] (unit length)\n",
-        pose.rotation(0), pose.rotation(1), pose.rotation(2), pose.rotation(3), pose.rotation(4),
-        pose.rotation(5), pose.rotation(6), pose.rotation(7), pose.rotation(8), pose.translation(0),
-        pose.translation(1), pose.translation(2));
-  }
-  if (r.has_metric()) {
-    const pb::MetricLoop& m = r.metric();
-    std::printf("metric     %s: %u of %u 3D correspondences, rms %.2f px\n",
-                m.verified() ? "verified" : "failed", m.inliers(), m.correspondences(),
-                m.rms_error_px());
-    if (m.verified()) {
-      const pb::Pose& p = m.pose();
-      std::printf(
-          "metric pose R = [%.4f %.4f %.4f; %.4f %.4f %.4f; %.4f %.4f %.4f], "
-          "t = [%.4f %.4f %.4f] m (X_query = R X_match + t)\n",
-          p.rotation(0), p.rotation(1), p.rotation(2), p.rotation(3), p.rotation(4), p.rotation(5),
-          p.rotation(6), p.rotation(7), p.rotation(8), p.translation(0), p.translation(1),
-          p.translation(2));
-    }
-  }
-  return 0;
-}
-
-// ---- recog relocalize ----
-
-struct RelocalizeArgs {
-  ServerFlags server;
-  std::vector<std::string> images, maps, depths;
-  std::string group, camera;
-  double depth_scale = 1000;
-  uint32_t max_results = 0;
-};
-
-int RunRelocalize(const RelocalizeArgs& args, RecognitionClient& client) {
-  if (!args.depths.empty() && args.depths.size() != args.images.size()) {
-    return Fail("relocalize",
-                Status::InvalidArgument("--depth needs one depth image per image: " +
-                                        std::to_string(args.depths.size()) + " for " +
-                                        std::to_string(args.images.size()) + " images"));
-  }
-  std::optional<CameraIntrinsics> camera;
-  pb::ResultOptions options;
-  if (!args.camera.empty()) {
-    auto parsed = ParseCamera(args.camera);
-    if (!parsed.ok()) return Fail("relocalize", parsed.status());
-    camera = *parsed;
-    options.set_include_relative_pose(true);
-  }
-  std::vector<pb::Frame> frames;
-  for (size_t i = 0; i < args.images.size(); ++i) {
-    const std::string& image = args.images[i];
-    auto gray = ReadGrayImage(image);
-    if (!gray.ok()) return Fail("relocalize", gray.status());
-    auto frame = FrameFromImageFile(image, *gray);
-    if (!frame.ok()) return Fail("relocalize", frame.status());
-    frame->set_client_frame_id(fs::path(image).filename().string());
-    if (camera.has_value()) SetIntrinsics(*camera, &*frame);
-    const std::string no_depth;
-    if (Status s = AttachStructure(args.depths.empty() ? no_depth : args.depths[i],
-                                   args.depth_scale, {}, 0, &*frame);
-        !s.ok()) {
-      return Fail("relocalize", s);
-    }
-    frames.push_back(std::move(frame).value());
-  }
-  auto answer = client.Relocalize(frames, {.maps = args.maps, .group = args.group}, options,
-                                  args.max_results);
-  if (!answer.ok()) return Fail("relocalize", answer.status());
-  if (args.server.json) {
-    json places = json::array();
-    for (const pb::Relocalization& place : answer->places()) {
-      places.push_back({{"map", place.map()},
-                        {"image", args.images[place.frame_index()]},
-                        {"frame_index", place.frame_index()},
-                        {"frames_recognised", place.frames_recognised()},
-                        {"result", LoopJson(place.result())}});
-    }
-    std::printf("%s\n", json({{"frames", frames.size()},
-                              {"places", std::move(places)},
-                              {"timing_ms", TimingJson(answer->timing())}})
-                            .dump(2)
-                            .c_str());
-    return 0;
-  }
-  if (answer->places_size() == 0) {
-    std::printf("no map recognised %s\n", frames.size() == 1 ? "the image" : "any of the images");
-  }
-  for (const pb::Relocalization& place : answer->places()) {
-    const pb::LoopResult& r = place.result();
-    std::printf(
-        "map '%s': %s is frame %llu%s%s%s, %u inliers (score %.3f); %u of %zu images "
-        "recognised\n",
-        place.map().c_str(), place.client_frame_id().c_str(),
-        (unsigned long long)r.match_frame_id(), r.match_client_frame_id().empty() ? "" : " (",
-        r.match_client_frame_id().c_str(), r.match_client_frame_id().empty() ? "" : ")",
-        r.inliers(), r.score(), place.frames_recognised(), frames.size());
-  }
-  return 0;
+  report.PrintSummary(start);
+  return report.ExitCode();
 }
 
 }  // namespace
@@ -875,83 +619,6 @@ void AddStreamCommands(CLI::App& app, int* exit_code) {
   ConnectCommand(stream, &stream_args->server, exit_code, [stream_args](RecognitionClient& client) {
     return RunStream(*stream_args, client);
   });
-
-  auto query_args = std::make_shared<QueryArgs>();
-  CLI::App* query = app.add_subcommand(
-      "query", "Look one image up in a map of recogd (relocalisation, unless --add)");
-  query->add_option("--map", query_args->map, "Map name")->required();
-  query
-      ->add_option("images", query_args->images,
-                   "Image file; with --rig, one per camera in the rig file's order")
-      ->required();
-  query->add_option("--rig", query_args->rig,
-                    "Rig file (YAML) of the map's cameras: the images form one rig frame");
-  query->add_flag("--add", query_args->add,
-                  "Run the map's loop detector and keep the frame, as a streamed frame");
-  query->add_option("--camera", query_args->camera,
-                    "fx,fy,cx,cy[,k1,k2,p1,p2[,k3]]: also report the relative pose of a loop");
-  query->add_option("--client-frame-id", query_args->client_frame_id,
-                    "Your own id of the frame (at most 128 bytes); with --add the map keeps it "
-                    "and returns it whenever the frame is a match");
-  query
-      ->add_option("--top-k", query_args->top_k,
-                   "Also list the best N candidates of the query with their scores (0 to 50)")
-      ->check(CLI::Range(0, 50));
-  CLI::Option* depth =
-      query->add_option("--depth", query_args->depth,
-                        "Aligned depth image of the frame (16-bit PNG; needs --camera): the loop's "
-                        "pose is then metric (\"metric\" in --json)");
-  query->add_option("--depth-scale", query_args->depth_scale, "Depth units per metre")
-      ->capture_default_str();
-  query
-      ->add_option("--right", query_args->right,
-                   "Right image of a rectified stereo pair whose left image is the frame "
-                   "(needs --camera and --baseline)")
-      ->excludes(depth);
-  query->add_option("--baseline", query_args->baseline, "Stereo baseline in metres");
-  query->add_flag("--correspondences", query_args->correspondences,
-                  "Also list the inliers of a verified loop: keypoint index and pixel in both "
-                  "frames");
-  ConnectCommand(query, &query_args->server, exit_code,
-                 [query_args](RecognitionClient& client) { return RunQuery(*query_args, client); });
-
-  auto relocalize_args = std::make_shared<RelocalizeArgs>();
-  CLI::App* relocalize = app.add_subcommand(
-      "relocalize",
-      "Find where one image, or a few consecutive ones, was seen: in maps or a map group of "
-      "recogd (nothing is added)");
-  relocalize->footer(
-      "Each image is looked up in every map with no temporal consistency to wait for (as "
-      "`recog query` without --add). One line per map that recognised any image, best first: a "
-      "map that recognised more of the images first, each with its best image's match. Finding "
-      "nothing is not an error (exit status 0). --json prints {\"places\": [...]} with each "
-      "map's loop result.");
-  relocalize->add_option("images", relocalize_args->images, "1 to 10 image files")->required();
-  relocalize
-      ->add_option("--maps", relocalize_args->maps, "Maps to search, by name (A,B or repeated)")
-      ->delimiter(',')
-      ->allow_extra_args(false);
-  relocalize->add_option("--group", relocalize_args->group, "Search every map of this group");
-  relocalize
-      ->add_option("--max-results", relocalize_args->max_results,
-                   "Report the best N maps only (0: every map that recognised an image)")
-      ->capture_default_str();
-  CLI::Option* relocalize_camera =
-      relocalize->add_option("--camera", relocalize_args->camera,
-                             "fx,fy,cx,cy[,k1,k2,p1,p2[,k3]]: also report the relative pose");
-  relocalize
-      ->add_option("--depth", relocalize_args->depths,
-                   "Depth images aligned with the images, one per image (A,B or repeated; "
-                   "needs --camera without distortion): metric poses in maps built with or "
-                   "without depth")
-      ->delimiter(',')
-      ->needs(relocalize_camera);
-  relocalize->add_option("--depth-scale", relocalize_args->depth_scale, "Depth units per metre")
-      ->capture_default_str();
-  ConnectCommand(relocalize, &relocalize_args->server, exit_code,
-                 [relocalize_args](RecognitionClient& client) {
-                   return RunRelocalize(*relocalize_args, client);
-                 });
 }
 
 }  // namespace recog::cli
