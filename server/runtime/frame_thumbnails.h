@@ -2,11 +2,11 @@
 // console (MapSettings.keep_thumbnails).
 //
 // A map opts in at creation (Enable); from then on every frame it keeps that arrived as an image
-// is stored as a grey JPEG whose longest side is at most kMaxSide pixels (quality kQuality,
-// 6-11 KB a frame) in the store's blobs, under "thumb/<map id>/<frame id>", beside the marker
-// "thumb/<map id>/on"; a blob is the frame's full size (two little-endian uint32, width and
-// height) followed by the JPEG. Map ids are never reused, so a recreated map starts without
-// thumbnails. Removing a frame or a map removes its thumbnails.
+// is stored as a grey JPEG whose longest side is at most kMaxSide pixels (quality kQuality: a
+// few KB a frame, docs/console.md) in the store's blobs, under "thumb/<map id>/<frame id>",
+// beside the marker "thumb/<map id>/on"; a blob is the frame's full size (two little-endian
+// uint32, width and height) followed by the JPEG. Map ids are never reused, so a recreated map
+// starts without thumbnails. Removing a frame or a map removes its thumbnails.
 //
 // Keep only copies the image on the caller's thread (a frame's answer does not wait for the
 // JPEG or the store): a background thread shrinks, encodes and writes, at most `queue_capacity`

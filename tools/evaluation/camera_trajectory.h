@@ -7,8 +7,9 @@
 // epipolar geometry of the two cameras (its Sampson distance to the fundamental matrix the poses
 // give), and the loop holds when at least 30 % of them agree (kMinAgreeingShare): ORB keypoints
 // of coarse pyramid levels sit a few pixels off, and a right loop's essential matrix takes some
-// of those in; on the Strecha walks of shared/data, ORB pairs of different places put under 20 %
-// of their inliers on the true geometry, and pairs of one place mostly over 30 %.
+// of those in; on the Strecha walks of shared/data, the share separates ORB pairs of different
+// places from pairs of one place (the shares are in docs/places.md, "Evaluation against camera
+// poses").
 //
 // The pose file is Strecha's, as shared/data/places/strecha-keyframes has it: '#' starts a
 // comment, blank lines are skipped, and line k (k-th frame, from 1) is
