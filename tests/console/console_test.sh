@@ -17,6 +17,7 @@ project=$3
 data=${RECOG_SHARED_DATA:-$project/../shared/data}
 if [ ! -d "$data/places/corridor" ] || [ ! -d "$data/objects/roboearth" ]; then
   echo "skip: the corridor or RoboEarth data is not under $data (set RECOG_SHARED_DATA)"
+  [ "${RECOG_REQUIRE_SHARED_DATA:-}" = 1 ] && { echo "FAIL: RECOG_REQUIRE_SHARED_DATA=1"; exit 1; }
   exit 77
 fi
 for tool in /usr/bin/chromium /usr/bin/chromedriver; do

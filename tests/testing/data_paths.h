@@ -31,4 +31,11 @@ inline bool HasSharedData(const std::string& relative) {
   return std::filesystem::exists(SharedData(relative));
 }
 
+// RECOG_REQUIRE_SHARED_DATA=1: the shared data must be there (CI sets it when it is), so a test
+// that needs a missing file fails rather than skips.
+inline bool SharedDataRequired() {
+  const char* env = std::getenv("RECOG_REQUIRE_SHARED_DATA");
+  return env != nullptr && std::string(env) == "1";
+}
+
 }  // namespace recog::testing
