@@ -1,14 +1,139 @@
-"""Streams a folder of numbered images into a new place map and prints each loop as `query match`
-file names. Optional KEY=VALUE arguments are the map's settings (MapSettings fields, integers or
-floats), as `recog eval place --params` takes them; without any, the server's defaults."""
+"""Streams a folder of images into a new place map of recogd and prints each loop it finds.
+
+Each loop is one line `QUERY revisits MATCH` (file names), as the frame is answered; the last
+line sums up. From the repository's root, with recogd running (`bash scripts/run.sh`) and the
+package installed (client/python/README.md; or PYTHONPATH=build/python /usr/bin/python3)::
+
+    $ .venv/bin/python client/python/examples/stream_corridor.py tests/data/corridor temporal_matches=0 recent_frames=1
+    41.jpg revisits 1.jpg
+    60.jpg revisits 20.jpg
+    4 frames, 2 loops
+
+KEY=VALUE arguments after the folder are the new map's settings (the MapSettings fields,
+as `recog eval place --params` takes them); without any, the server's defaults, which find no
+loop in a folder of recent_frames (20) frames or fewer: a frame's match must be more than that
+many frames older. The images (.jpg, .jpeg, .png) go in natural order of their names (2.jpg
+before 10.jpg). The server is --server, else RECOG_SERVER, else 127.0.0.1:50051. Exit status:
+0 when the folder was streamed, 1 on an error (one line on stderr), 2 on a bad command line.
+"""
+
+import argparse
+import re
 import sys
 from pathlib import Path
 
-from recog_client import RecognitionClient, place_pb2
+try:
+    from google.protobuf import json_format
+    from recog_client import AlreadyExists, RecogError, RecognitionClient, Unavailable, place_pb2
+except ModuleNotFoundError as missing:  # not the interpreter of the client's environment
+    sys.exit(f"stream_corridor: {sys.executable} has no module {missing.name}: run this with "
+             ".venv/bin/python (client/python/README.md, Installing) or, without installing, "
+             "PYTHONPATH=build/python /usr/bin/python3")
 
-images = sorted(Path(sys.argv[1]).glob("*.jpg"), key=lambda path: int(path.stem))
-settings = {k: float(v) if "." in v else int(v) for k, v in (a.split("=") for a in sys.argv[2:])}
-with RecognitionClient() as client:  # the server: RECOG_SERVER, else 127.0.0.1:50051
-    for answer in client.stream_frames("corridor", images, settings=settings):
-        if answer.result.status == place_pb2.LOOP_STATUS_LOOP_DETECTED:
-            print(images[answer.sequence].name, images[answer.result.match_frame_id].name)
+PROGRAM = "stream_corridor"
+IMAGE_SUFFIXES = {".jpg", ".jpeg", ".png"}
+
+
+def natural_key(path: Path) -> list:
+    """Sort key comparing the digit runs of a file name as numbers: "2.jpg" < "10.jpg"."""
+    return [int(part) if part.isdigit() else part.lower()
+            for part in re.split(r"(\d+)", path.name)]
+
+
+def setting(text: str) -> tuple[str, object]:
+    """One KEY=VALUE argument, checked against MapSettings (an argparse type)."""
+    key, equals, value = text.partition("=")
+    field = {key: {"true": True, "false": False}.get(value, value)}
+    try:
+        if not equals:
+            raise ValueError("expected KEY=VALUE")
+        json_format.ParseDict(field, place_pb2.MapSettings())
+    except (ValueError, json_format.Error) as error:
+        raise argparse.ArgumentTypeError(f"{text}: {str(error).splitlines()[0]}") from error
+    return next(iter(field.items()))
+
+
+def parse_arguments() -> argparse.Namespace:
+    """Reads the command line; prints the usage and exits with 2 when it is wrong."""
+    parser = argparse.ArgumentParser(
+        description=__doc__.split("\n", 1)[0],
+        epilog="example: %(prog)s tests/data/corridor temporal_matches=0 recent_frames=1")
+    parser.add_argument("--server", help="recogd's address (default: RECOG_SERVER, else "
+                        "127.0.0.1:50051)")
+    parser.add_argument("--map", default="corridor",
+                        help="name of the new map (default: %(default)s; it must not exist)")
+    parser.add_argument("folder", type=Path, help="folder of the images")
+    parser.add_argument("settings", nargs="*", type=setting, default=[], metavar="KEY=VALUE",
+                        help="the new map's settings, e.g. temporal_matches=0 recent_frames=1 "
+                        "(default: the server's)")
+    return parser.parse_intermixed_args()  # options may come after the settings too
+
+
+def fail(message: str) -> int:
+    """Prints ``message`` as the program's one line on stderr; the exit status 1."""
+    print(f"{PROGRAM}: {message}", file=sys.stderr)
+    return 1
+
+
+def plural(count: int, noun: str) -> str:
+    """``count`` and ``noun``, with an s unless it is one."""
+    return f"{count} {noun}{'' if count == 1 else 's'}"
+
+
+def main() -> int:
+    """Streams the folder; returns the exit status."""
+    arguments = parse_arguments()
+    folder = arguments.folder
+    if not folder.is_dir():
+        return fail(f"{folder}: no such folder")
+    images = sorted((path for path in folder.iterdir()
+                     if path.is_file() and path.suffix.lower() in IMAGE_SUFFIXES), key=natural_key)
+    if not images:
+        return fail(f"{folder}: no .jpg, .jpeg or .png image in it")
+    settings = json_format.ParseDict(dict(arguments.settings), place_pb2.MapSettings())
+
+    names = {}  # frame id in the map -> file name
+    loops = failed = 0
+    client = None
+    try:
+        client = RecognitionClient(arguments.server)
+        settings = client.create_map(arguments.map, settings).settings  # every field: effective
+        for answer in client.stream_frames(arguments.map, images, create_if_missing=False):
+            name = images[answer.sequence].name
+            if answer.HasField("error"):  # this frame only (e.g. not an image); the rest go on
+                failed += 1
+                print(f"{name}: not added: {answer.error.message}", file=sys.stderr)
+                continue
+            names[answer.result.frame_id] = name
+            if answer.result.status == place_pb2.LOOP_STATUS_LOOP_DETECTED:
+                loops += 1
+                match = answer.result.match_frame_id
+                print(f"{name} revisits {names.get(match, f'frame {match}')}", flush=True)
+    except AlreadyExists:
+        return fail(f"map '{arguments.map}' already exists on {client.target} (an earlier run?): "
+                    "name a new one with --map, or delete it: "
+                    f"build/bin/recog maps delete {arguments.map} --server {client.target}")
+    except Unavailable as error:
+        return fail(f"cannot reach recogd at {client.target} ({error.details}): start it with "
+                    "`bash scripts/run.sh` from the repository's root, or give the address of "
+                    "a running one with --server or RECOG_SERVER")
+    except RecogError as error:
+        return fail(str(error))
+    except OSError as error:  # an image that cannot be read
+        return fail(str(error))
+    finally:
+        if client is not None:
+            client.close()
+
+    summary = f"{plural(len(images), 'frame')}, {plural(loops, 'loop')}"
+    print(summary + (f" ({failed} not added)" if failed else ""))
+    if not loops and len(images) <= settings.recent_frames:
+        print(f"{PROGRAM}: no loop can be found in {len(images)} frames with recent_frames="
+              f"{settings.recent_frames} (a frame's match must be more than "
+              f"{settings.recent_frames} frames older); try temporal_matches=0 recent_frames=1",
+              file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,11 +1,15 @@
 """Streams a folder of images into a place map and prints each loop closure as it happens.
 
 The images (.jpg, .jpeg, .png) are sent in natural order of their names (2.jpg before 10.jpg);
-the map is created with the server's default settings when it does not exist. Example::
+the map is created with the server's default settings when it does not exist, and a map that
+exists gets the frames after its own. The last line sums up, e.g.
+`4 frames streamed into map 'lab', 0 loops`. Example::
 
     .venv/bin/python client/python/examples/stream_folder.py --map corridor tests/data/corridor
 
-(with the package installed, see client/python/README.md; or PYTHONPATH=build/python).
+(with the package installed, see client/python/README.md; or PYTHONPATH=build/python). Exit
+status: 0 when the folder was streamed, 1 on an error (one line on stderr), 2 on a bad command
+line.
 """
 
 import argparse
@@ -13,7 +17,12 @@ import re
 import sys
 from pathlib import Path
 
-from recog_client import RecogError, RecognitionClient, place_pb2
+try:
+    from recog_client import RecogError, RecognitionClient, Unavailable, place_pb2
+except ModuleNotFoundError as missing:  # not the interpreter of the client's environment
+    sys.exit(f"stream_folder: {sys.executable} has no module {missing.name}: run this with "
+             ".venv/bin/python (client/python/README.md, Installing) or, without installing, "
+             "PYTHONPATH=build/python /usr/bin/python3")
 
 IMAGE_SUFFIXES = {".jpg", ".jpeg", ".png"}
 
@@ -42,37 +51,66 @@ def parse_arguments() -> argparse.Namespace:
     return parser.parse_args()
 
 
+def fail(message: str) -> int:
+    """Prints ``message`` as the program's one line on stderr; the exit status 1."""
+    print(f"stream_folder: {message}", file=sys.stderr)
+    return 1
+
+
+def plural(count: int, noun: str) -> str:
+    """``count`` and ``noun``, with an s unless it is one."""
+    return f"{count} {noun}{'' if count == 1 else 's'}"
+
+
 def main() -> int:
     """Streams the folder; returns the exit status (1 when the stream failed)."""
     arguments = parse_arguments()
+    if not arguments.images.is_dir():
+        return fail(f"{arguments.images}: no such folder")
     images = list_images(arguments.images)
     if not images:
-        print(f"stream_folder: no images in {arguments.images}", file=sys.stderr)
-        return 1
-    loops = 0
-    with RecognitionClient(arguments.server, token_file=arguments.token_file) as client:
-        try:
-            for response in client.stream_frames(arguments.map, images):
-                if response.HasField("error"):
-                    print(f"{images[response.sequence].name}: error {response.error.code}: "
-                          f"{response.error.message}", file=sys.stderr)
-                elif response.result.status == place_pb2.LOOP_STATUS_LOOP_DETECTED:
-                    result = response.result
-                    evidence = result.evidence
-                    loops += 1
-                    print(f"frame {result.frame_id} closes a loop with frame "
-                          f"{result.match_frame_id} (inliers {result.inliers}, spread "
-                          f"{evidence.spread:.2f}, confirmations {evidence.confirmations})",
-                          flush=True)
-                elif response.result.status == place_pb2.LOOP_STATUS_CANDIDATE:
-                    # A loop awaiting the next keyframes' confirmation: shown, not acted on.
-                    result = response.result
-                    print(f"frame {result.frame_id}: candidate loop with frame "
-                          f"{result.match_frame_id}, awaiting confirmation", flush=True)
-        except RecogError as error:
-            print(f"stream_folder: {error}", file=sys.stderr)
-            return 1
-    print(f"streamed {len(images)} images into map {arguments.map!r}: {loops} loop closures")
+        return fail(f"{arguments.images}: no .jpg, .jpeg or .png image in it")
+    names = {}  # frame id in the map -> "id (file name)", for this run's frames
+    loops = candidates = failed = 0
+    client = None
+    try:
+        client = RecognitionClient(arguments.server, token_file=arguments.token_file)
+        for response in client.stream_frames(arguments.map, images):
+            if response.HasField("error"):  # this frame only; the stream goes on
+                failed += 1
+                print(f"{images[response.sequence].name}: error {response.error.code}: "
+                      f"{response.error.message}", file=sys.stderr)
+                continue
+            result, name = response.result, images[response.sequence].name
+            frame = names[result.frame_id] = f"{result.frame_id} ({name})"
+            match = names.get(result.match_frame_id, str(result.match_frame_id))
+            if result.status == place_pb2.LOOP_STATUS_LOOP_DETECTED:
+                evidence = result.evidence
+                loops += 1
+                print(f"frame {frame} closes a loop with frame {match}: {result.inliers} "
+                      f"inliers, spread {evidence.spread:.2f}, confirmations "
+                      f"{evidence.confirmations}", flush=True)
+            elif result.status == place_pb2.LOOP_STATUS_CANDIDATE:
+                # A loop awaiting the next keyframes' confirmation: shown, not acted on.
+                candidates += 1
+                print(f"frame {frame}: candidate loop with frame {match}, awaiting "
+                      "confirmation", flush=True)
+    except Unavailable as error:
+        return fail(f"cannot reach recogd at {client.target} ({error.details}): start it with "
+                    "`bash scripts/run.sh` from the repository's root, or give the address of "
+                    "a running one with --server or RECOG_SERVER")
+    except RecogError as error:
+        return fail(str(error))
+    except OSError as error:  # an image that cannot be read
+        return fail(str(error))
+    finally:
+        if client is not None:
+            client.close()
+    summary = (f"{plural(len(images), 'frame')} streamed into map {arguments.map!r}, "
+               f"{plural(loops, 'loop')}")
+    if candidates:
+        summary += f", {plural(candidates, 'candidate')}"
+    print(summary + (f" ({failed} not added)" if failed else ""))
     return 0
 
 

@@ -606,7 +606,8 @@ class RecognitionClientTest(unittest.TestCase):
                               "--map", "example", str(CORRIDOR)],
                              capture_output=True, text=True, timeout=120, check=False)
         self.assertEqual(run.returncode, 0, run.stderr)
-        self.assertIn("streamed 4 images into map 'example'", run.stdout)
+        self.assertEqual(run.stdout.splitlines()[-1],
+                         "4 frames streamed into map 'example', 0 loops")
         self.assertEqual(self.client.get_map("example").frames, 4)
 
 

@@ -5,7 +5,7 @@ temporary checkout, runs there the install command of client/python/README.md ve
 virtual environment that sees Debian's python3-grpcio, pip offline), checks what was installed
 (version, .pyi types, py.typed), then runs examples/stream_corridor.py with the environment's
 interpreter against a recogd on tests/data/corridor, and checks that it prints exactly the loops
-`recog eval place` finds on the same frames with the same detector settings.
+`recog eval place` finds on the same frames with the same detector settings, then its summary.
 
 Environment (ctest sets it): RECOGD, RECOG, RECOG_SOURCE_DIR, RECOG_VERSION, and PYTHONPATH with
 the built package (for this harness only: the example runs without it). Exits with 77 (skipped)
@@ -97,7 +97,7 @@ class VenvInstallTest(unittest.TestCase):
         evaluation = subprocess.run([os.environ["RECOG"], "eval", "place", "--images",
                                      str(corridor), "--params", str(params), "--json", "-q"],
                                     capture_output=True, text=True, timeout=120, check=True)
-        evaluated = [f"{Path(loop['query_file']).name} {Path(loop['match_file']).name}"
+        evaluated = [f"{Path(loop['query_file']).name} revisits {Path(loop['match_file']).name}"
                      for loop in json.loads(evaluation.stdout)["loops"]
                      if loop["status"] == "loop_detected"]
         self.assertTrue(evaluated)  # the settings make the fixture's revisits loops
@@ -111,7 +111,8 @@ class VenvInstallTest(unittest.TestCase):
                                         env={**self.environment, "RECOG_SERVER": server.target})
         finally:
             server.stop()
-        self.assertEqual(streamed.splitlines(), evaluated)
+        loops = f"{len(evaluated)} loop" + ("" if len(evaluated) == 1 else "s")
+        self.assertEqual(streamed.splitlines(), evaluated + [f"4 frames, {loops}"])
 
 
 if __name__ == "__main__":
