@@ -23,7 +23,7 @@ constexpr int kOrbFastThreshold = 20;
 constexpr int kMinShortSide = 352;  // smaller frames are enlarged to it before ORB
 constexpr int kDescriptorBytes = 32;
 
-grpc::Status Invalid(const std::string& message) {
+grpc::Status InvalidFrame(const std::string& message) {
   return {grpc::StatusCode::INVALID_ARGUMENT, message};
 }
 
@@ -35,10 +35,10 @@ bool IsJpegOrPng(const std::string& bytes) {
 }
 
 grpc::Status CheckPixels(const cv::Mat& image) {
-  if (image.empty()) return Invalid("the image is empty");
+  if (image.empty()) return InvalidFrame("the image is empty");
   if (image.dims != 2 || (image.type() != CV_8UC1 && image.type() != CV_8UC3)) {
-    return Invalid("the image has pixel type " + cv::typeToString(image.type()) +
-                   "; expected 8-bit grey (CV_8UC1) or 8-bit BGR (CV_8UC3)");
+    return InvalidFrame("the image has pixel type " + cv::typeToString(image.type()) +
+                        "; expected 8-bit grey (CV_8UC1) or 8-bit BGR (CV_8UC3)");
   }
   return grpc::Status::OK;
 }
@@ -105,8 +105,8 @@ Result<pb::Frame> FrameFromEncodedFile(const std::string& path) {
   std::ostringstream bytes;
   bytes << in.rdbuf();
   std::string content = std::move(bytes).str();
-  if (content.empty()) return Invalid("'" + path + "' is empty");
-  if (!IsJpegOrPng(content)) return Invalid("'" + path + "' is neither a JPEG nor a PNG file");
+  if (content.empty()) return InvalidFrame("'" + path + "' is empty");
+  if (!IsJpegOrPng(content)) return InvalidFrame("'" + path + "' is neither a JPEG nor a PNG file");
   pb::Frame frame;
   frame.set_encoded_image(std::move(content));
   return frame;
@@ -124,13 +124,14 @@ Result<pb::Frame> FrameFromImage(const cv::Mat& image) {
 }
 
 grpc::Status AttachDepth(const cv::Mat& depth, double units_per_metre, pb::Frame* frame) {
-  if (depth.empty() || depth.dims != 2) return Invalid("the depth image is empty");
+  if (depth.empty() || depth.dims != 2) return InvalidFrame("the depth image is empty");
   if (depth.type() != CV_16UC1 && depth.type() != CV_32FC1) {
-    return Invalid("the depth image has pixel type " + cv::typeToString(depth.type()) +
-                   "; expected CV_16UC1 (units of 1/units_per_metre metres) or CV_32FC1 (metres)");
+    return InvalidFrame(
+        "the depth image has pixel type " + cv::typeToString(depth.type()) +
+        "; expected CV_16UC1 (units of 1/units_per_metre metres) or CV_32FC1 (metres)");
   }
   if (!(units_per_metre > 0) || !std::isfinite(units_per_metre)) {
-    return Invalid("units_per_metre must be > 0 (1000 for millimetres)");
+    return InvalidFrame("units_per_metre must be > 0 (1000 for millimetres)");
   }
   pb::DepthImage* out = frame->mutable_depth();
   pb::RawDepth* raw = out->mutable_raw();
@@ -147,7 +148,7 @@ grpc::Status AttachDepth(const cv::Mat& depth, double units_per_metre, pb::Frame
 grpc::Status AttachStereoRight(const cv::Mat& right, double baseline_m, pb::Frame* frame) {
   if (grpc::Status status = CheckPixels(right); !status.ok()) return status;
   if (!(baseline_m > 0) || !std::isfinite(baseline_m)) {
-    return Invalid("the stereo baseline must be > 0 metres");
+    return InvalidFrame("the stereo baseline must be > 0 metres");
   }
   pb::StereoRight* out = frame->mutable_right();
   pb::RawImage* raw = out->mutable_raw_image();
@@ -162,18 +163,20 @@ grpc::Status AttachStereoRight(const cv::Mat& right, double baseline_m, pb::Fram
 }
 
 grpc::Status AddRigView(const std::string& camera, pb::Frame view, pb::Frame* rig_frame) {
-  if (camera.empty()) return Invalid("a rig view needs its camera's name");
+  if (camera.empty()) return InvalidFrame("a rig view needs its camera's name");
   if (view.content_case() == pb::Frame::CONTENT_NOT_SET) {
-    return Invalid("the view of camera '" + camera + "' has no image or features");
+    return InvalidFrame("the view of camera '" + camera + "' has no image or features");
   }
   if (view.has_timestamp() || !view.client_frame_id().empty() || view.has_intrinsics() ||
       view.exclude_frame_ids_size() > 0 || view.views_size() > 0) {
-    return Invalid("the view of camera '" + camera + "' carries more than its image and its " +
-                   "depth or right image (set timestamps and ids on the rig frame; the map's " +
-                   "rig has the intrinsics)");
+    return InvalidFrame(
+        "the view of camera '" + camera + "' carries more than its image and its " +
+        "depth or right image (set timestamps and ids on the rig frame; the map's " +
+        "rig has the intrinsics)");
   }
   for (const pb::Frame& other : rig_frame->views()) {
-    if (other.camera_id() == camera) return Invalid("camera '" + camera + "' has a view already");
+    if (other.camera_id() == camera)
+      return InvalidFrame("camera '" + camera + "' has a view already");
   }
   view.set_camera_id(camera);
   *rig_frame->add_views() = std::move(view);
@@ -236,14 +239,14 @@ Result<OrbFeatures> ExtractOrbFeatures(const cv::Mat& image) {
 Result<pb::Frame> FrameFromFeatures(const std::vector<cv::KeyPoint>& keypoints,
                                     const cv::Mat& descriptors, cv::Size image_size) {
   if (descriptors.rows != int(keypoints.size())) {
-    return Invalid(std::to_string(descriptors.rows) + " descriptor rows for " +
-                   std::to_string(keypoints.size()) + " keypoints");
+    return InvalidFrame(std::to_string(descriptors.rows) + " descriptor rows for " +
+                        std::to_string(keypoints.size()) + " keypoints");
   }
   if (!keypoints.empty() &&
       (descriptors.type() != CV_8UC1 || descriptors.cols != kDescriptorBytes)) {
-    return Invalid("descriptors must be 32-byte binary rows (CV_8UC1, 32 columns), got " +
-                   cv::typeToString(descriptors.type()) + " with " +
-                   std::to_string(descriptors.cols) + " columns");
+    return InvalidFrame("descriptors must be 32-byte binary rows (CV_8UC1, 32 columns), got " +
+                        cv::typeToString(descriptors.type()) + " with " +
+                        std::to_string(descriptors.cols) + " columns");
   }
   pb::Frame frame;
   pb::Features* out = frame.mutable_features();

@@ -12,7 +12,7 @@
 namespace recog {
 namespace {
 
-cv::Matx33d Yaw(double degrees) {
+cv::Matx33d YawDegrees(double degrees) {
   const double a = degrees * CV_PI / 180.0;
   return {std::cos(a), 0, std::sin(a), 0, 1, 0, -std::sin(a), 0, std::cos(a)};
 }
@@ -59,8 +59,8 @@ class RigMotionTest : public ::testing::Test {
   // The way back of a front + rear rig: turned 183° and 0.2 m away; the query's front camera
   // sees what the match's rear camera saw, and the other way round.
   const Camera front_{cv::Matx33d::eye(), {0, 0, 0.4}};
-  const Camera rear_{Yaw(180), {0, 0, -0.4}};
-  const cv::Matx33d R_ = Yaw(183);
+  const Camera rear_{YawDegrees(180), {0, 0, -0.4}};
+  const cv::Matx33d R_ = YawDegrees(183);
   const cv::Vec3d t_{0.15, 0.02, -0.12};
 
   std::vector<RigPairRays> Pairs(const Camera& rear_as_calibrated, double noise_px) const {
@@ -78,7 +78,7 @@ TEST_F(RigMotionTest, TheTrueMotionPutsEveryRayOnItsEpipolarLine) {
     RigPairEpipolarErrors(pair, R_, t_, &errors);
     ASSERT_EQ(errors.size(), 150u);
     for (double e : errors) EXPECT_LT(std::abs(e), 1e-6);
-    RigPairEpipolarErrors(pair, Yaw(1) * R_, t_, &errors);
+    RigPairEpipolarErrors(pair, YawDegrees(1) * R_, t_, &errors);
     double sum = 0;
     for (double e : errors) sum += std::abs(e);
     EXPECT_GT(sum / errors.size(), 1.0) << "1° off moves rays off their lines";
@@ -87,7 +87,7 @@ TEST_F(RigMotionTest, TheTrueMotionPutsEveryRayOnItsEpipolarLine) {
 
 TEST_F(RigMotionTest, BothCamerasTogetherRecoverTheRotationFromAStartThreeDegreesOff) {
   const std::vector<RigPairRays> pairs = Pairs(rear_, 0.5);
-  const cv::Matx33d start = Yaw(3) * R_;
+  const cv::Matx33d start = YawDegrees(3) * R_;
   const cv::Vec3d direction = cv::normalize(front_.R.t() * (t_ + R_ * rear_.t - front_.t));
   cv::Vec3d t = InitialRigTranslation(pairs, 0, direction, start, 2.0);
   cv::Matx33d R = start;
@@ -105,7 +105,7 @@ TEST_F(RigMotionTest, BothCamerasTogetherRecoverTheRotationFromAStartThreeDegree
 }
 
 TEST_F(RigMotionTest, ExtrinsicsTenDegreesOffLeaveNoMotionThatFitsBothPairs) {
-  const Camera miscalibrated{Yaw(10) * rear_.R, rear_.t};
+  const Camera miscalibrated{YawDegrees(10) * rear_.R, rear_.t};
   const std::vector<RigPairRays> pairs = Pairs(miscalibrated, 0.5);
   cv::Matx33d R = R_;
   const cv::Vec3d direction = cv::normalize(front_.R.t() * (t_ + R_ * rear_.t - front_.t));

@@ -19,7 +19,9 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-cv::Matx33d Skew(const cv::Vec3d& v) { return {0, -v[2], v[1], v[2], 0, -v[0], -v[1], v[0], 0}; }
+cv::Matx33d SkewMatrix(const cv::Vec3d& v) {
+  return {0, -v[2], v[1], v[2], 0, -v[0], -v[1], v[0], 0};
+}
 
 // The covariance of a camera pair's pose (rotation vector with a left perturbation, then t) as the
 // covariance of the body pose it implies: R_body = A R B, t_body = A t + c - R_body d, so a
@@ -27,7 +29,7 @@ cv::Matx33d Skew(const cv::Vec3d& v) { return {0, -v[2], v[1], v[2], 0, -v[0], -
 PoseCovariance6 BodyCovariance(const PoseCovariance6& pair, const cv::Matx33d& A,
                                const cv::Matx33d& body_R, const cv::Vec3d& d) {
   cv::Matx<double, 6, 6> J = cv::Matx<double, 6, 6>::zeros();
-  const cv::Matx33d coupling = Skew(body_R * d) * A;
+  const cv::Matx33d coupling = SkewMatrix(body_R * d) * A;
   for (int r = 0; r < 3; ++r) {
     for (int c = 0; c < 3; ++c) {
       J(r, c) = A(r, c);

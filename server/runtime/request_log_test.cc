@@ -15,53 +15,54 @@ using std::chrono::minutes;
 using Kind = RequestLog::Claim::Kind;
 using Clock = RequestLog::Clock;
 
-const Clock::time_point kStart{};
+const Clock::time_point kLogStart{};
 
 TEST(RequestLogTest, ASuccessfulAnswerIsRepeatedForTheSameKeyOnly) {
   RequestLog log(10);
-  EXPECT_EQ(log.Begin("a", kStart, kStart).kind, Kind::kRun);
-  log.End("a", "answer a", kStart);
-  const RequestLog::Claim repeat = log.Begin("a", kStart + minutes(1), kStart);
+  EXPECT_EQ(log.Begin("a", kLogStart, kLogStart).kind, Kind::kRun);
+  log.End("a", "answer a", kLogStart);
+  const RequestLog::Claim repeat = log.Begin("a", kLogStart + minutes(1), kLogStart);
   EXPECT_EQ(repeat.kind, Kind::kRepeat);
   EXPECT_EQ(repeat.answer, "answer a");
-  EXPECT_EQ(log.Begin("b", kStart, kStart).kind, Kind::kRun);
+  EXPECT_EQ(log.Begin("b", kLogStart, kLogStart).kind, Kind::kRun);
   EXPECT_EQ(log.size(), 1u);
 }
 
 TEST(RequestLogTest, AFailedCallIsForgottenSoItsRepeatRunsAgain) {
   RequestLog log(10);
-  ASSERT_EQ(log.Begin("a", kStart, kStart).kind, Kind::kRun);
-  log.End("a", std::nullopt, kStart);
-  EXPECT_EQ(log.Begin("a", kStart, kStart).kind, Kind::kRun);
+  ASSERT_EQ(log.Begin("a", kLogStart, kLogStart).kind, Kind::kRun);
+  log.End("a", std::nullopt, kLogStart);
+  EXPECT_EQ(log.Begin("a", kLogStart, kLogStart).kind, Kind::kRun);
   EXPECT_EQ(log.size(), 0u);
 }
 
 TEST(RequestLogTest, AnswersExpireAfterTheWindow) {
   RequestLog log(10, minutes(10));
-  ASSERT_EQ(log.Begin("a", kStart, kStart).kind, Kind::kRun);
-  log.End("a", "x", kStart);
-  EXPECT_EQ(log.Begin("a", kStart + minutes(10) - milliseconds(1), kStart).kind, Kind::kRepeat);
-  EXPECT_EQ(log.Begin("a", kStart + minutes(10), kStart).kind, Kind::kRun);
+  ASSERT_EQ(log.Begin("a", kLogStart, kLogStart).kind, Kind::kRun);
+  log.End("a", "x", kLogStart);
+  EXPECT_EQ(log.Begin("a", kLogStart + minutes(10) - milliseconds(1), kLogStart).kind,
+            Kind::kRepeat);
+  EXPECT_EQ(log.Begin("a", kLogStart + minutes(10), kLogStart).kind, Kind::kRun);
   EXPECT_EQ(log.size(), 0u);
 }
 
 TEST(RequestLogTest, TheOldestAnswersAreForgottenBeyondTheCapacity) {
   RequestLog log(2);
   for (const char* key : {"a", "b", "c"}) {
-    ASSERT_EQ(log.Begin(key, kStart, kStart).kind, Kind::kRun);
-    log.End(key, key, kStart);
+    ASSERT_EQ(log.Begin(key, kLogStart, kLogStart).kind, Kind::kRun);
+    log.End(key, key, kLogStart);
   }
   EXPECT_EQ(log.size(), 2u);
-  EXPECT_EQ(log.Begin("b", kStart, kStart).kind, Kind::kRepeat);
-  EXPECT_EQ(log.Begin("c", kStart, kStart).kind, Kind::kRepeat);
-  EXPECT_EQ(log.Begin("a", kStart, kStart).kind, Kind::kRun);  // forgotten
+  EXPECT_EQ(log.Begin("b", kLogStart, kLogStart).kind, Kind::kRepeat);
+  EXPECT_EQ(log.Begin("c", kLogStart, kLogStart).kind, Kind::kRepeat);
+  EXPECT_EQ(log.Begin("a", kLogStart, kLogStart).kind, Kind::kRun);  // forgotten
 }
 
 TEST(RequestLogTest, CapacityZeroRemembersNothing) {
   RequestLog log(0);
-  ASSERT_EQ(log.Begin("a", kStart, kStart).kind, Kind::kRun);
-  log.End("a", "x", kStart);
-  EXPECT_EQ(log.Begin("a", kStart, kStart).kind, Kind::kRun);
+  ASSERT_EQ(log.Begin("a", kLogStart, kLogStart).kind, Kind::kRun);
+  log.End("a", "x", kLogStart);
+  EXPECT_EQ(log.Begin("a", kLogStart, kLogStart).kind, Kind::kRun);
   EXPECT_EQ(log.size(), 0u);
 }
 

@@ -18,7 +18,7 @@ namespace fs = std::filesystem;
 namespace pb = ::recognition::v1;
 
 constexpr char kMethod[] = "/recognition.v1.Admin/Checkpoint";
-constexpr size_t kDefaultChunkBytes = 1u << 20, kMaxChunkBytes = 2u << 20;
+constexpr size_t kDefaultBackupChunkBytes = 1u << 20, kMaxBackupChunkBytes = 2u << 20;
 
 // Checkpoint: on a worker, the store's copy and its manifest; then the files, a chunk per write.
 class CheckpointDownload final : public grpc::ServerWriteReactor<pb::CheckpointResponse> {
@@ -27,8 +27,8 @@ class CheckpointDownload final : public grpc::ServerWriteReactor<pb::CheckpointR
                      const pb::CheckpointRequest& request)
       : state_(state), context_(context) {
     chunk_bytes_ = request.chunk_bytes() == 0
-                       ? kDefaultChunkBytes
-                       : std::min<size_t>(request.chunk_bytes(), kMaxChunkBytes);
+                       ? kDefaultBackupChunkBytes
+                       : std::min<size_t>(request.chunk_bytes(), kMaxBackupChunkBytes);
     grpc::Status status = BeginCall(state_, context_, kMethod, Right::kWrite, &call_);
     if (status.ok()) {
       status =
@@ -139,7 +139,7 @@ class CheckpointDownload final : public grpc::ServerWriteReactor<pb::CheckpointR
   ServerState& state_;
   grpc::CallbackServerContext* const context_;
   CallInfo call_;
-  size_t chunk_bytes_ = kDefaultChunkBytes;
+  size_t chunk_bytes_ = kDefaultBackupChunkBytes;
   fs::path directory_;  // the store's copy; deleted when the call ends
   std::vector<fs::path> files_;
   size_t next_file_ = 0;

@@ -12,8 +12,8 @@
 namespace recog::server {
 namespace {
 
-constexpr char kService[] = "/recognition.v1.ObjectRecognition/";
-std::string Method(const char* name) { return std::string(kService) + name; }
+constexpr char kObjectService[] = "/recognition.v1.ObjectRecognition/";
+std::string ObjectMethod(const char* name) { return std::string(kObjectService) + name; }
 
 // Decodes one frame, recognises the filter's objects with this worker's recogniser (through the
 // stream's tracker when there is one) and encodes the detections (core gives them best first)
@@ -68,7 +68,8 @@ class ObjectFrameStream final
     : public FrameStream<pb::StreamRecognizeObjectsRequest, pb::StreamRecognizeObjectsResponse> {
  public:
   ObjectFrameStream(ServerState& state, grpc::CallbackServerContext* context)
-      : FrameStream(state, context, Method("StreamRecognizeObjects"), "StreamRecognizeObjects") {}
+      : FrameStream(state, context, ObjectMethod("StreamRecognizeObjects"),
+                    "StreamRecognizeObjects") {}
 
  private:
   grpc::Status Configure(const pb::StreamRecognizeObjectsRequest& first) override {
@@ -103,7 +104,7 @@ grpc::ServerUnaryReactor* ObjectService::RecognizeObjects(
     grpc::CallbackServerContext* context, const pb::RecognizeObjectsRequest* request,
     pb::RecognizeObjectsResponse* response) {
   return RunUnary(
-      state_, context, Method("RecognizeObjects"), Right::kRead,
+      state_, context, ObjectMethod("RecognizeObjects"), Right::kRead,
       [=, this](CallInfo& call, WorkerContext& worker) {
         RECOG_RETURN_IF_ERROR_AS_GRPC(
             RunRecognition(state_, worker, request->frame(), FromProto(request->filter()),

@@ -17,14 +17,14 @@
 namespace recog::server {
 namespace {
 
-constexpr char kService[] = "/recognition.v1.PlaceRecognition/";
+constexpr char kPlaceService[] = "/recognition.v1.PlaceRecognition/";
 constexpr size_t kDefaultPageSize = 100, kMaxPageSize = 1000;
 constexpr size_t kMaxSearchMaps = 100;    // maps a query may search besides its own
 constexpr int kMaxRelocalizeFrames = 10;  // frames of one Relocalize
 
 using SearchSet = std::vector<std::shared_ptr<PlaceMap>>;
 
-std::string Method(const char* name) { return std::string(kService) + name; }
+std::string PlaceMethod(const char* name) { return std::string(kPlaceService) + name; }
 
 // What a frame does to its map.
 enum class FrameMode {
@@ -300,7 +300,7 @@ class PlaceFrameStream final
     : public FrameStream<pb::StreamFramesRequest, pb::StreamFramesResponse> {
  public:
   PlaceFrameStream(ServerState& state, grpc::CallbackServerContext* context)
-      : FrameStream(state, context, Method("StreamFrames"), "StreamFrames") {}
+      : FrameStream(state, context, PlaceMethod("StreamFrames"), "StreamFrames") {}
 
  private:
   grpc::Status Configure(const pb::StreamFramesRequest& first) override {
@@ -407,7 +407,7 @@ Status RunRelocalize(ServerState& state, WorkerContext& worker, const Caller& ca
 grpc::ServerUnaryReactor* PlaceService::CreateMap(grpc::CallbackServerContext* context,
                                                   const pb::CreateMapRequest* request,
                                                   pb::CreateMapResponse* response) {
-  return RunUnary(state_, context, Method("CreateMap"), Right::kWrite, request->request_id(),
+  return RunUnary(state_, context, PlaceMethod("CreateMap"), Right::kWrite, request->request_id(),
                   response, [=, this](CallInfo& call, WorkerContext&) {
                     RECOG_RETURN_IF_ERROR_AS_GRPC(
                         CheckCreation(state_, call, request->name(), GroupOf(request->settings())),
@@ -430,7 +430,7 @@ grpc::ServerUnaryReactor* PlaceService::CreateMap(grpc::CallbackServerContext* c
 grpc::ServerUnaryReactor* PlaceService::GetMap(grpc::CallbackServerContext* context,
                                                const pb::GetMapRequest* request,
                                                pb::GetMapResponse* response) {
-  return RunUnary(state_, context, Method("GetMap"), Right::kRead,
+  return RunUnary(state_, context, PlaceMethod("GetMap"), Right::kRead,
                   [=, this](CallInfo& call, WorkerContext&) {
                     StatusOr<std::shared_ptr<PlaceMap>> map =
                         CallMap(state_, call, request->name(), Right::kRead);
@@ -443,30 +443,31 @@ grpc::ServerUnaryReactor* PlaceService::GetMap(grpc::CallbackServerContext* cont
 grpc::ServerUnaryReactor* PlaceService::ListMaps(grpc::CallbackServerContext* context,
                                                  const pb::ListMapsRequest* request,
                                                  pb::ListMapsResponse* response) {
-  return RunUnary(
-      state_, context, Method("ListMaps"), Right::kRead, [=, this](CallInfo& call, WorkerContext&) {
-        size_t page_size = request->page_size() == 0 ? kDefaultPageSize : request->page_size();
-        page_size = std::min(page_size, kMaxPageSize);
-        const std::string& after = request->page_token();  // last name of the page
-        size_t added = 0;
-        for (const std::shared_ptr<PlaceMap>& map : state_.maps->List()) {
-          if (!after.empty() && map->name() <= after) continue;
-          if (!call.caller.readable_maps.Covers(map->name(), map->group())) continue;
-          if (added == page_size) {
-            response->set_next_page_token(response->maps(int(added) - 1).name());
-            break;
-          }
-          FillMapInfo(state_, *map, response->add_maps());
-          ++added;
-        }
-        return grpc::Status::OK;
-      });
+  return RunUnary(state_, context, PlaceMethod("ListMaps"), Right::kRead,
+                  [=, this](CallInfo& call, WorkerContext&) {
+                    size_t page_size =
+                        request->page_size() == 0 ? kDefaultPageSize : request->page_size();
+                    page_size = std::min(page_size, kMaxPageSize);
+                    const std::string& after = request->page_token();  // last name of the page
+                    size_t added = 0;
+                    for (const std::shared_ptr<PlaceMap>& map : state_.maps->List()) {
+                      if (!after.empty() && map->name() <= after) continue;
+                      if (!call.caller.readable_maps.Covers(map->name(), map->group())) continue;
+                      if (added == page_size) {
+                        response->set_next_page_token(response->maps(int(added) - 1).name());
+                        break;
+                      }
+                      FillMapInfo(state_, *map, response->add_maps());
+                      ++added;
+                    }
+                    return grpc::Status::OK;
+                  });
 }
 
 grpc::ServerUnaryReactor* PlaceService::DeleteMap(grpc::CallbackServerContext* context,
                                                   const pb::DeleteMapRequest* request,
                                                   pb::DeleteMapResponse* response) {
-  return RunUnary(state_, context, Method("DeleteMap"), Right::kWrite, request->request_id(),
+  return RunUnary(state_, context, PlaceMethod("DeleteMap"), Right::kWrite, request->request_id(),
                   response, [=, this](CallInfo& call, WorkerContext&) {
                     StatusOr<std::shared_ptr<PlaceMap>> map =
                         CallMap(state_, call, request->name(), Right::kWrite);
@@ -485,7 +486,7 @@ grpc::ServerUnaryReactor* PlaceService::AddFrame(grpc::CallbackServerContext* co
                                                  const pb::AddFrameRequest* request,
                                                  pb::AddFrameResponse* response) {
   return RunUnary(
-      state_, context, Method("AddFrame"), Right::kWrite, request->request_id(), response,
+      state_, context, PlaceMethod("AddFrame"), Right::kWrite, request->request_id(), response,
       [=, this](CallInfo& call, WorkerContext& worker) {
         StatusOr<std::shared_ptr<PlaceMap>> map =
             CallMap(state_, call, request->map(), Right::kWrite);
@@ -509,7 +510,7 @@ grpc::ServerUnaryReactor* PlaceService::QueryPlace(grpc::CallbackServerContext* 
                                                    pb::QueryPlaceResponse* response) {
   const Right right = request->add_frame() ? Right::kWrite : Right::kRead;
   return RunUnary(
-      state_, context, Method("QueryPlace"), right,
+      state_, context, PlaceMethod("QueryPlace"), right,
       // Only a query that adds its frame changes the map: a relocalisation query just runs again.
       request->add_frame() ? request->request_id() : std::string(), response,
       [=, this](CallInfo& call, WorkerContext& worker) {
@@ -534,7 +535,7 @@ grpc::ServerUnaryReactor* PlaceService::RemoveFrame(grpc::CallbackServerContext*
                                                     const pb::RemoveFrameRequest* request,
                                                     pb::RemoveFrameResponse* response) {
   return RunUnary(
-      state_, context, Method("RemoveFrame"), Right::kWrite, request->request_id(), response,
+      state_, context, PlaceMethod("RemoveFrame"), Right::kWrite, request->request_id(), response,
       [=, this](CallInfo& call, WorkerContext&) {
         StatusOr<std::shared_ptr<PlaceMap>> map =
             CallMap(state_, call, request->map(), Right::kWrite);
@@ -576,7 +577,7 @@ grpc::ServerUnaryReactor* PlaceService::RemoveFrame(grpc::CallbackServerContext*
 grpc::ServerUnaryReactor* PlaceService::Relocalize(grpc::CallbackServerContext* context,
                                                    const pb::RelocalizeRequest* request,
                                                    pb::RelocalizeResponse* response) {
-  return RunUnary(state_, context, Method("Relocalize"), Right::kRead,
+  return RunUnary(state_, context, PlaceMethod("Relocalize"), Right::kRead,
                   [=, this](CallInfo& call, WorkerContext& worker) {
                     RECOG_RETURN_IF_ERROR_AS_GRPC(
                         RunRelocalize(state_, worker, call.caller, *request, response),

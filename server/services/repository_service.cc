@@ -11,9 +11,9 @@
 namespace recog::server {
 namespace {
 
-constexpr char kService[] = "/recognition.v1.ObjectRepository/";
+constexpr char kRepositoryService[] = "/recognition.v1.ObjectRepository/";
 constexpr size_t kDefaultChunkBytes = 1u << 20, kMaxChunkBytes = 2u << 20;
-std::string Method(const char* name) { return std::string(kService) + name; }
+std::string RepositoryMethod(const char* name) { return std::string(kRepositoryService) + name; }
 
 // A replica's repository follows its primary (RepositoryFollower) and takes no writes of its own.
 grpc::Status RefuseOnReplica(const ServerState& state) {
@@ -37,7 +37,8 @@ class ModelUpload final : public grpc::ServerReadReactor<pb::PutModelRequest> {
   ModelUpload(ServerState& state, PartialUploads& partial_uploads,
               grpc::CallbackServerContext* context, pb::PutModelResponse* response)
       : state_(state), partial_uploads_(partial_uploads), context_(context), response_(response) {
-    grpc::Status status = BeginCall(state_, context_, Method("PutModel"), Right::kWrite, &call_);
+    grpc::Status status =
+        BeginCall(state_, context_, RepositoryMethod("PutModel"), Right::kWrite, &call_);
     if (status.ok()) status = RefuseOnReplica(state_);
     if (!status.ok()) {
       End(status);
@@ -180,7 +181,8 @@ class ModelDownload final : public grpc::ServerWriteReactor<pb::GetModelResponse
   ModelDownload(ServerState& state, grpc::CallbackServerContext* context,
                 const pb::GetModelRequest& request)
       : state_(state), context_(context), offset_(request.offset()) {
-    grpc::Status status = BeginCall(state_, context_, Method("GetModel"), Right::kRead, &call_);
+    grpc::Status status =
+        BeginCall(state_, context_, RepositoryMethod("GetModel"), Right::kRead, &call_);
     call_.map = request.name();
     chunk_bytes_ = request.chunk_bytes() == 0
                        ? kDefaultChunkBytes
@@ -259,7 +261,7 @@ class ModelWatch final : public grpc::ServerWriteReactor<pb::WatchModelsResponse
         synced_to_send_(request.include_existing()) {
     state_.metrics.StreamOpened("WatchModels");
     const grpc::Status status =
-        BeginCall(state_, context, Method("WatchModels"), Right::kRead, &call_);
+        BeginCall(state_, context, RepositoryMethod("WatchModels"), Right::kRead, &call_);
     std::lock_guard lock(mutex_);
     if (!status.ok()) {
       FinishLocked(status);
@@ -390,7 +392,7 @@ grpc::ServerUnaryReactor* RepositoryService::GetUploadStatus(
     grpc::CallbackServerContext* context, const pb::GetUploadStatusRequest* request,
     pb::GetUploadStatusResponse* response) {
   return RunUnary(
-      state_, context, Method("GetUploadStatus"), Right::kWrite,
+      state_, context, RepositoryMethod("GetUploadStatus"), Right::kWrite,
       [=, this](CallInfo&, WorkerContext&) {
         if (grpc::Status refused = RefuseOnReplica(state_); !refused.ok()) return refused;
         if (!IsSha256Hex(request->sha256())) {
@@ -420,7 +422,7 @@ grpc::ServerUnaryReactor* RepositoryService::ListModels(grpc::CallbackServerCont
                                                         const pb::ListModelsRequest* request,
                                                         pb::ListModelsResponse* response) {
   return RunUnary(
-      state_, context, Method("ListModels"), Right::kRead,
+      state_, context, RepositoryMethod("ListModels"), Right::kRead,
       [=, this](CallInfo& call, WorkerContext&) {
         const ModelFilter filter{request->name_prefix(), request->object_class(), request->tag()};
         StatusOr<ModelPage> page =
@@ -436,8 +438,8 @@ grpc::ServerUnaryReactor* RepositoryService::ListModels(grpc::CallbackServerCont
 grpc::ServerUnaryReactor* RepositoryService::DeleteModel(grpc::CallbackServerContext* context,
                                                          const pb::DeleteModelRequest* request,
                                                          pb::DeleteModelResponse* response) {
-  return RunUnary(state_, context, Method("DeleteModel"), Right::kWrite, request->request_id(),
-                  response, [=, this](CallInfo& call, WorkerContext&) {
+  return RunUnary(state_, context, RepositoryMethod("DeleteModel"), Right::kWrite,
+                  request->request_id(), response, [=, this](CallInfo& call, WorkerContext&) {
                     call.map = request->name();
                     if (grpc::Status refused = RefuseOnReplica(state_); !refused.ok())
                       return refused;

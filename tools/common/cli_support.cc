@@ -87,6 +87,11 @@ StatusOr<std::vector<std::string>> ListImages(const std::string& dir) {
   return files;
 }
 
+int Fail(const char* command, const Status& status) {
+  std::fprintf(stderr, "recog %s: %s\n", command, status.ToString().c_str());
+  return 1;
+}
+
 std::string DemoImageDir() { return RECOG_DEMO_DATA_DIR; }
 
 double PeakRssMiB() {

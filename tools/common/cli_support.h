@@ -14,6 +14,10 @@
 
 namespace recog::cli {
 
+// Prints "recog <command>: CODE: message" on stderr and returns 1, the exit status (the overload
+// for calls to recogd, grpc::Status, is in remote_support.h).
+int Fail(const char* command, const Status& status);
+
 // Comma-separated numbers ("0.1,0.2,0.3"); INVALID_ARGUMENT naming `flag` for a field that is not
 // a finite number.
 StatusOr<std::vector<double>> ParseNumbers(const std::string& flag, const std::string& text);

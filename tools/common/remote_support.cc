@@ -56,11 +56,6 @@ std::string UtcTime(int64_t unix_ms) {
   return text;
 }
 
-int Fail(const char* command, const Status& status) {
-  std::fprintf(stderr, "recog %s: %s\n", command, status.ToString().c_str());
-  return 1;
-}
-
 int Fail(const char* command, const grpc::Status& status) {
   std::fprintf(stderr, "recog %s: %s\n", command, DescribeStatus(status).c_str());
   return 1;

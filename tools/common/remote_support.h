@@ -22,6 +22,7 @@
 #include "client/cpp/result.h"
 #include "core/common/status.h"
 #include "core/object/model/object_model.h"
+#include "tools/common/cli_support.h"
 
 namespace recog::cli {
 
@@ -49,9 +50,7 @@ std::string EnumLabel(std::string name, std::string_view prefix);
 // "2024-05-01T12:00:00Z".
 std::string UtcTime(int64_t unix_ms);
 
-// Print "recog <command>: CODE: message" on stderr and return 1, the exit status: for errors of
-// this process (core's Status) and of calls to recogd (grpc::Status).
-int Fail(const char* command, const Status& status);
+// Fail (cli_support.h) for a call to recogd: "recog <command>: CODE: message" on stderr, returns 1.
 int Fail(const char* command, const grpc::Status& status);
 
 }  // namespace recog::cli

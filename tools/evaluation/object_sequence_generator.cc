@@ -23,7 +23,7 @@ namespace {
 namespace fs = std::filesystem;
 
 // Independent random streams derived from the one seed.
-enum Stream : uint64_t { kPhotoStream = 11, kTrajectoryStream = 12, kShotStream = 13 };
+enum ObjectStream : uint64_t { kPhotoStream = 11, kTrajectoryStream = 12, kShotStream = 13 };
 
 constexpr double kDeg = std::numbers::pi / 180;
 constexpr double kWallGap = 1.0;                 // metres between the object's back and the wall

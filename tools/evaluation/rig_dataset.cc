@@ -25,7 +25,7 @@ namespace {
 namespace fs = std::filesystem;
 
 // 'path' (GCC 12 warns, wrongly, about "'" + path.string()).
-std::string Quoted(const fs::path& path) {
+std::string QuotedPath(const fs::path& path) {
   std::string quoted = "'";
   quoted += path.string();
   quoted += "'";
@@ -46,7 +46,8 @@ struct CameraFrames {
 // A camera folder of the plain layout: a TUM RGB-D folder or a plain folder of images.
 StatusOr<CameraFrames> ReadPlainCamera(const fs::path& dir) {
   std::error_code ec;
-  if (!fs::is_directory(dir, ec)) return Status::NotFound("folder " + Quoted(dir) + " not found");
+  if (!fs::is_directory(dir, ec))
+    return Status::NotFound("folder " + QuotedPath(dir) + " not found");
   CameraFrames frames;
   const DatasetLayout layout = DetectDatasetLayout(dir.string());
   if (layout == DatasetLayout::kTum) {
@@ -63,7 +64,8 @@ StatusOr<CameraFrames> ReadPlainCamera(const fs::path& dir) {
     frames.depths.assign(frames.images.size(), "");
   } else {
     // ListImages would mix a stereo dataset's two cameras into one.
-    return Status::InvalidArgument(Quoted(dir) + " is a " + std::string(DatasetLayoutName(layout)) +
+    return Status::InvalidArgument(QuotedPath(dir) + " is a " +
+                                   std::string(DatasetLayoutName(layout)) +
                                    " dataset; a rig camera's folder is a TUM RGB-D folder or a "
                                    "folder of images");
   }
@@ -81,7 +83,7 @@ StatusOr<RigDataset> ReadPlain(const fs::path& path) {
     const size_t count = frames->images.size(),
                  first = per_camera.empty() ? count : per_camera[0].images.size();
     if (count != first) {
-      return Status::InvalidArgument("rig camera '" + camera.name + "' of " + Quoted(file) +
+      return Status::InvalidArgument("rig camera '" + camera.name + "' of " + QuotedPath(file) +
                                      " has " + std::to_string(count) + " frames, camera '" +
                                      cameras[0].name + "' has " + std::to_string(first));
     }
@@ -122,7 +124,7 @@ cv::Matx33d NearestRotation(const cv::Matx33d& R) {
 // A EuRoC camera's sensor.yaml, as the rig camera `name`.
 StatusOr<RigCamera> ReadEurocSensor(const fs::path& file, const std::string& name) {
   std::ifstream in(file);
-  if (!in) return Status::NotFound("cannot open " + Quoted(file));
+  if (!in) return Status::NotFound("cannot open " + QuotedPath(file));
   std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   // EuRoC's files come from OpenCV's FileStorage and start with "%YAML:1.0", a directive
   // yaml-cpp refuses; the document itself is plain YAML.
@@ -137,26 +139,29 @@ StatusOr<RigCamera> ReadEurocSensor(const fs::path& file, const std::string& nam
     for (const auto& [key, value] : {std::pair<const char*, const char*>{"camera_model", "pinhole"},
                                      {"distortion_model", "radial-tangential"}}) {
       if (root[key] && root[key].as<std::string>() != value) {
-        return Status::InvalidArgument(Quoted(file) + ": " + key + " '" +
+        return Status::InvalidArgument(QuotedPath(file) + ": " + key + " '" +
                                        root[key].as<std::string>() + "' is not supported (" +
                                        value + ")");
       }
     }
     const YAML::Node pose = root["T_BS"];
     if (!pose || !pose.IsMap()) {
-      return Status::InvalidArgument(Quoted(file) + ": needs T_BS, a 4x4 matrix with its 'data'");
+      return Status::InvalidArgument(QuotedPath(file) +
+                                     ": needs T_BS, a 4x4 matrix with its 'data'");
     }
     const std::vector<double> T = Numbers(pose, "data", 16, "T_BS data");
     const YAML::Node resolution = root["resolution"];
     if (!resolution || !resolution.IsSequence() || resolution.size() != 2) {
-      return Status::InvalidArgument(Quoted(file) + ": resolution must be a list [width, height]");
+      return Status::InvalidArgument(QuotedPath(file) +
+                                     ": resolution must be a list [width, height]");
     }
     camera.size = {resolution[0].as<int>(), resolution[1].as<int>()};
     const std::vector<double> k = Numbers(root, "intrinsics", 4, "intrinsics [fu, fv, cu, cv]");
     camera.K = {k[0], 0, k[2], 0, k[1], k[3], 0, 0, 1};
     camera.distortion = Numbers(root, "distortion_coefficients", 4, "distortion_coefficients");
     if (T[12] != 0 || T[13] != 0 || T[14] != 0 || T[15] != 1) {
-      return Status::InvalidArgument(Quoted(file) + ": the last row of T_BS must be [0, 0, 0, 1]");
+      return Status::InvalidArgument(QuotedPath(file) +
+                                     ": the last row of T_BS must be [0, 0, 0, 1]");
     }
     // X_body = R X_camera + t with R the top-left 3x3 and t the last column. The rotations are
     // printed to ~9 digits and orthonormal to 1e-7..1e-9 only, too close to ValidateRig's 1e-6
@@ -168,9 +173,9 @@ StatusOr<RigCamera> ReadEurocSensor(const fs::path& file, const std::string& nam
     camera.body_R_camera = NearestRotation(R);
     camera.body_t_camera = {T[3], T[7], T[11]};
   } catch (const YAML::Exception& e) {
-    return Status::InvalidArgument(Quoted(file) + ": " + e.what());
+    return Status::InvalidArgument(QuotedPath(file) + ": " + e.what());
   }
-  if (Status s = ValidateRig({&camera, 1}); !s.ok()) return s.WithContext(Quoted(file));
+  if (Status s = ValidateRig({&camera, 1}); !s.ok()) return s.WithContext(QuotedPath(file));
   return camera;
 }
 
@@ -180,7 +185,7 @@ fs::path EurocRoot(const fs::path& path) {
   return fs::exists(path / "mav0" / "cam0" / "sensor.yaml", ec) ? path / "mav0" : path;
 }
 
-StatusOr<RigDataset> ReadEuroc(const fs::path& path) {
+StatusOr<RigDataset> ReadEurocRig(const fs::path& path) {
   const fs::path root = EurocRoot(path);
   RigDataset rig;
   rig.layout = RigLayout::kEuroc;
@@ -195,7 +200,7 @@ StatusOr<RigDataset> ReadEuroc(const fs::path& path) {
     lists.emplace_back(list->begin(), list->end());
   }
   if (rig.cameras.empty()) {
-    return Status::NotFound(Quoted(root / "cam0" / "sensor.yaml") + " does not exist");
+    return Status::NotFound(QuotedPath(root / "cam0" / "sensor.yaml") + " does not exist");
   }
   // The cameras are triggered together but drop frames on their own: a rig frame is a timestamp
   // every camera has.
@@ -212,7 +217,7 @@ StatusOr<RigDataset> ReadEuroc(const fs::path& path) {
     rig.depths.emplace_back(rig.cameras.size(), "");
   }
   if (rig.images.empty()) {
-    return Status::InvalidArgument("the EuRoC cameras in " + Quoted(root) +
+    return Status::InvalidArgument("the EuRoC cameras in " + QuotedPath(root) +
                                    " have no timestamp in common (data.csv)");
   }
   return rig;
@@ -222,7 +227,7 @@ StatusOr<RigDataset> ReadEuroc(const fs::path& path) {
 // such as "Tr:", are skipped).
 StatusOr<std::map<int, cv::Matx34d>> ReadKittiCalib(const fs::path& file) {
   std::ifstream in(file);
-  if (!in) return Status::NotFound("cannot open " + Quoted(file));
+  if (!in) return Status::NotFound("cannot open " + QuotedPath(file));
   std::map<int, cv::Matx34d> projections;
   std::string line;
   for (int number = 1; std::getline(in, line); ++number) {
@@ -239,7 +244,7 @@ StatusOr<std::map<int, cv::Matx34d>> ReadKittiCalib(const fs::path& file) {
     std::string extra;
     const int camera = std::stoi(key.substr(1));
     if (!ok || (fields >> extra) || !projections.emplace(camera, P).second) {
-      return Status::InvalidArgument(Quoted(file) + " line " + std::to_string(number) +
+      return Status::InvalidArgument(QuotedPath(file) + " line " + std::to_string(number) +
                                      ": expected one line 'P" + std::to_string(camera) +
                                      ": 12 numbers'");
     }
@@ -254,11 +259,12 @@ fs::path KittiImage(const fs::path& dir, const std::string& camera, size_t frame
   return dir / camera / name;
 }
 
-StatusOr<RigDataset> ReadKitti(const fs::path& dir) {
+StatusOr<RigDataset> ReadKittiRig(const fs::path& dir) {
   const fs::path calib = dir / "calib.txt";
   RECOG_ASSIGN_OR_RETURN(const auto projections, ReadKittiCalib(calib));
   RECOG_ASSIGN_OR_RETURN(const std::vector<double> times, ReadKittiTimes(dir.string()));
-  if (times.empty()) return Status::InvalidArgument(Quoted(dir / "times.txt") + " lists no frames");
+  if (times.empty())
+    return Status::InvalidArgument(QuotedPath(dir / "times.txt") + " lists no frames");
   RigDataset rig;
   rig.layout = RigLayout::kKitti;
   std::vector<size_t> counts;
@@ -276,7 +282,7 @@ StatusOr<RigDataset> ReadKitti(const fs::path& dir) {
         count == 0 ? cv::Mat() : cv::imread(KittiImage(dir, camera.name, 0), cv::IMREAD_UNCHANGED);
     if (count > 0 && first.empty()) {
       return Status::InvalidArgument("cannot read image " +
-                                     Quoted(KittiImage(dir, camera.name, 0)));
+                                     QuotedPath(KittiImage(dir, camera.name, 0)));
     }
     camera.size = first.size();
     camera.K = P.get_minor<3, 3>(0, 0);
@@ -284,19 +290,19 @@ StatusOr<RigDataset> ReadKitti(const fs::path& dir) {
     // shifted by -K^-1 * (column 4 of P) (P = K [I | -t] in camera 0's frame).
     if (camera.K(0, 1) != 0 || camera.K(1, 0) != 0 || camera.K(2, 0) != 0 || camera.K(2, 1) != 0 ||
         camera.K(2, 2) != 1) {
-      return Status::InvalidArgument(Quoted(calib) + ": the left 3x3 of P" + std::to_string(n) +
+      return Status::InvalidArgument(QuotedPath(calib) + ": the left 3x3 of P" + std::to_string(n) +
                                      " is not a pinhole [fx 0 cx; 0 fy cy; 0 0 1]");
     }
     camera.body_t_camera = -(camera.K.inv() * cv::Vec3d(P(0, 3), P(1, 3), P(2, 3)));
     // A camera without images has no size yet; the frame counts below report it.
     if (count > 0) {
-      if (Status s = ValidateRig({&camera, 1}); !s.ok()) return s.WithContext(Quoted(calib));
+      if (Status s = ValidateRig({&camera, 1}); !s.ok()) return s.WithContext(QuotedPath(calib));
     }
     rig.cameras.push_back(std::move(camera));
     counts.push_back(count);
   }
   if (rig.cameras.empty()) {
-    return Status::InvalidArgument(Quoted(calib) +
+    return Status::InvalidArgument(QuotedPath(calib) +
                                    " has no line PN with a folder image_N beside it");
   }
   for (size_t c = 0; c < rig.cameras.size(); ++c) {
@@ -304,14 +310,14 @@ StatusOr<RigDataset> ReadKitti(const fs::path& dir) {
     const size_t shorter = counts[c] < counts[0] ? c : 0;
     return Status::InvalidArgument(
         "KITTI camera '" + rig.cameras[shorter].name + "' has " + std::to_string(counts[shorter]) +
-        " frames (no " + Quoted(KittiImage(dir, rig.cameras[shorter].name, counts[shorter])) +
+        " frames (no " + QuotedPath(KittiImage(dir, rig.cameras[shorter].name, counts[shorter])) +
         "), camera '" + rig.cameras[c == shorter ? 0 : c].name + "' has " +
         std::to_string(std::max(counts[c], counts[0])));
   }
   if (counts[0] < times.size()) {
-    return Status::NotFound(Quoted(KittiImage(dir, rig.cameras[0].name, counts[0])) + ", frame " +
-                            std::to_string(counts[0]) + " of " + Quoted(dir / "times.txt") +
-                            ", does not exist");
+    return Status::NotFound(QuotedPath(KittiImage(dir, rig.cameras[0].name, counts[0])) +
+                            ", frame " + std::to_string(counts[0]) + " of " +
+                            QuotedPath(dir / "times.txt") + ", does not exist");
   }
   for (size_t i = 0; i < times.size(); ++i) {
     rig.timestamps.push_back(times[i]);
@@ -341,7 +347,8 @@ std::string_view RigLayoutName(RigLayout layout) {
 StatusOr<RigLayout> DetectRigLayout(const std::string& path) {
   const fs::path root(path);
   std::error_code ec;
-  if (!fs::exists(root, ec)) return Status::NotFound("rig sequence " + Quoted(root) + " not found");
+  if (!fs::exists(root, ec))
+    return Status::NotFound("rig sequence " + QuotedPath(root) + " not found");
   if (fs::is_regular_file(root, ec) || fs::exists(root / "rig.yaml", ec)) return RigLayout::kPlain;
   switch (DetectDatasetLayout(path)) {
     case DatasetLayout::kEuroc:
@@ -352,7 +359,7 @@ StatusOr<RigLayout> DetectRigLayout(const std::string& path) {
     case DatasetLayout::kFolder:
       break;
   }
-  return Status::InvalidArgument(Quoted(root) +
+  return Status::InvalidArgument(QuotedPath(root) +
                                  " is not a rig sequence: expected a rig file or a folder with "
                                  "rig.yaml (plain), mav0/cam0/data.csv or cam0/data.csv (EuRoC), "
                                  "or times.txt and image_N/ (KITTI)");
@@ -364,9 +371,9 @@ StatusOr<RigDataset> ReadRigDataset(const std::string& path) {
     case RigLayout::kPlain:
       return ReadPlain(path);
     case RigLayout::kEuroc:
-      return ReadEuroc(path);
+      return ReadEurocRig(path);
     case RigLayout::kKitti:
-      return ReadKitti(path);
+      return ReadKittiRig(path);
   }
   return Status::Internal("unknown rig layout");
 }

@@ -11,7 +11,7 @@ namespace {
 
 // The numbers of a file, comments ('#' to the end of the line) and ViSP's key=value attributes
 // of a face or line (name=floor, useLod=true, ...) removed.
-StatusOr<std::vector<std::string>> Tokens(const std::string& path) {
+StatusOr<std::vector<std::string>> FileTokens(const std::string& path) {
   std::ifstream in(path);
   if (!in) return Status::NotFound("cannot open '" + path + "'");
   std::vector<std::string> tokens;
@@ -61,7 +61,7 @@ class NumberReader {
 }  // namespace
 
 StatusOr<std::vector<FacePolygon>> ReadCaoFaces(const std::string& path) {
-  RECOG_ASSIGN_OR_RETURN(std::vector<std::string> tokens, Tokens(path));
+  RECOG_ASSIGN_OR_RETURN(std::vector<std::string> tokens, FileTokens(path));
   if (tokens.empty() || tokens[0] != "V1") {
     return Status::InvalidArgument(path + ": not a ViSP V1 .cao file");
   }
@@ -110,7 +110,7 @@ StatusOr<std::vector<FacePolygon>> ReadCaoFaces(const std::string& path) {
 }
 
 StatusOr<RigidTransform> ReadVispPose(const std::string& path) {
-  RECOG_ASSIGN_OR_RETURN(std::vector<std::string> tokens, Tokens(path));
+  RECOG_ASSIGN_OR_RETURN(std::vector<std::string> tokens, FileTokens(path));
   if (tokens.size() != 6) {
     return Status::InvalidArgument(path +
                                    ": a pose is 6 numbers (tx ty tz thetaux thetauy thetauz)");

@@ -22,14 +22,14 @@ namespace {
 
 namespace fs = std::filesystem;
 using client::RecognitionClient;
-using json = nlohmann::ordered_json;
+using Json = nlohmann::ordered_json;
 
 int RunHealth(const ServerFlags& flags, RecognitionClient& client) {
   auto status = client.CheckHealth();
   if (!status.ok()) return Fail("admin health", status.status());
   const std::string name = grpc::health::v1::HealthCheckResponse::ServingStatus_Name(*status);
   if (flags.json) {
-    std::printf("%s\n", json({{"status", name}}).dump().c_str());
+    std::printf("%s\n", Json({{"status", name}}).dump().c_str());
   } else {
     std::printf("%s\n", name.c_str());
   }
@@ -56,7 +56,7 @@ int RunCheckpoint(const CheckpointArgs& args, RecognitionClient& client) {
                                         "' is damaged (kept for inspection; do not restore it)"));
   }
   if (args.server.json) {
-    std::printf("%s\n", json({{"directory", args.to},
+    std::printf("%s\n", Json({{"directory", args.to},
                               {"files", manifest->files_size()},
                               {"bytes", manifest->total_bytes()},
                               {"maps", manifest->maps()},
@@ -86,7 +86,7 @@ int RunVerify(const VerifyArgs& args, RecognitionClient& client) {
   const double mib = double(report->bytes()) / (1 << 20);
   const double rate = mib / std::max(report->seconds(), 1e-9);
   if (args.server.json) {
-    std::printf("%s\n", json({{"files", report->files()},
+    std::printf("%s\n", Json({{"files", report->files()},
                               {"bytes", report->bytes()},
                               {"seconds", report->seconds()},
                               {"mib_per_second", rate}})
@@ -125,7 +125,7 @@ int RunStatus(const ServerFlags& flags, RecognitionClient& client) {
   const client::pb::StoreCheck& check = status->last_check();
   const bool checked = status->has_last_check();
   if (flags.json) {
-    json maps = json::array();
+    Json maps = Json::array();
     for (const StoreRecovery::MapLoss& loss : recovery.maps) {
       maps.push_back({{"name", loss.name},
                       {"frames_before", loss.entries_before},
@@ -133,7 +133,7 @@ int RunStatus(const ServerFlags& flags, RecognitionClient& client) {
                       {"missing_frame_ids", loss.missing},
                       {"map_lost", loss.map_lost}});
     }
-    json out = {{"recovered", recovery.recovered()}};
+    Json out = {{"recovered", recovery.recovered()}};
     if (recovery.recovered()) {
       out["recovery"] = {{"damage", recovery.damage},
                          {"damaged_copy", recovery.damaged_copy},

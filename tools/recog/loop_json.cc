@@ -5,11 +5,11 @@
 namespace recog::cli {
 namespace {
 
-using json = nlohmann::ordered_json;
+using Json = nlohmann::ordered_json;
 
 // The correspondences as [{query_index, query: [x, y], match_index, match: [x, y]}].
-json CorrespondencesJson(const google::protobuf::RepeatedPtrField<pb::Correspondence>& in) {
-  json pairs = json::array();
+Json CorrespondencesJson(const google::protobuf::RepeatedPtrField<pb::Correspondence>& in) {
+  Json pairs = Json::array();
   for (const pb::Correspondence& c : in) {
     pairs.push_back({{"query_index", c.query_index()},
                      {"query", {c.query_x(), c.query_y()}},
@@ -25,8 +25,8 @@ std::string StatusLabel(pb::LoopStatus status) {
   return EnumLabel(pb::LoopStatus_Name(status), "LOOP_STATUS_");
 }
 
-json LoopJson(const pb::LoopResult& r) {
-  json out = {{"status", StatusLabel(r.status())}, {"score", r.score()}};
+Json LoopJson(const pb::LoopResult& r) {
+  Json out = {{"status", StatusLabel(r.status())}, {"score", r.score()}};
   if (!r.has_rig()) {  // a rig map's scores are pooled over cameras, without islands
     out.update({{"normalized_score", r.normalized_score()},
                 {"previous_score", r.previous_score()},
@@ -53,9 +53,9 @@ json LoopJson(const pb::LoopResult& r) {
     out["match_client_frame_id"] = r.match_client_frame_id();
   }
   if (r.candidates_size() > 0) {
-    json candidates = json::array();
+    Json candidates = Json::array();
     for (const pb::Candidate& c : r.candidates()) {
-      json candidate = {{"frame", c.frame_id()},
+      Json candidate = {{"frame", c.frame_id()},
                         {"client_frame_id", c.client_frame_id()},
                         {"score", c.score()},
                         {"normalized_score", c.normalized_score()}};
@@ -75,7 +75,7 @@ json LoopJson(const pb::LoopResult& r) {
   }
   if (r.has_rig()) {
     const pb::RigLoop& rig = r.rig();
-    json pairs = json::array();
+    Json pairs = Json::array();
     for (const pb::RigCameraMatch& pair : rig.pairs()) {
       pairs.push_back({{"query_camera", pair.query_camera()},
                        {"match_camera", pair.match_camera()},
@@ -88,7 +88,7 @@ json LoopJson(const pb::LoopResult& r) {
         pairs.back()["inlier_correspondences"] = CorrespondencesJson(pair.inlier_correspondences());
       }
     }
-    json rig_json = {{"pairs", std::move(pairs)},
+    Json rig_json = {{"pairs", std::move(pairs)},
                      {"rotation_disagreement_deg", rig.rotation_disagreement_deg()},
                      {"posed", rig.posed()},
                      {"metric", rig.metric()}};
@@ -108,7 +108,7 @@ json LoopJson(const pb::LoopResult& r) {
   }
   if (r.has_metric()) {
     const pb::MetricLoop& m = r.metric();
-    json metric = {{"checked", m.checked()},
+    Json metric = {{"checked", m.checked()},
                    {"verified", m.verified()},
                    {"correspondences", m.correspondences()},
                    {"inliers", m.inliers()},
@@ -126,7 +126,7 @@ json LoopJson(const pb::LoopResult& r) {
   return out;
 }
 
-json TimingJson(const pb::Timing& t) {
+Json TimingJson(const pb::Timing& t) {
   return {{"decode", t.decode_ms()},
           {"features", t.features_ms()},
           {"recognition", t.recognition_ms()},

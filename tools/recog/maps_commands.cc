@@ -22,10 +22,10 @@ namespace recog::cli {
 namespace {
 
 using client::RecognitionClient;
-using json = nlohmann::ordered_json;
+using Json = nlohmann::ordered_json;
 
 // Prints an object's fields one per line ("key  value"), nested objects flattened.
-void PrintFields(const json& fields) {
+void PrintFields(const Json& fields) {
   for (const auto& [key, value] : fields.items()) {
     if (value.is_object()) {
       PrintFields(value);
@@ -37,8 +37,8 @@ void PrintFields(const json& fields) {
 }
 
 // A map's detector settings (the settings table's names and kinds), then its group and thumbnails.
-json SettingsJson(const pb::MapSettings& settings) {
-  json out = json::object();
+Json SettingsJson(const pb::MapSettings& settings) {
+  Json out = Json::object();
   for (const auto& [name, text] : MapSettingsAsText(settings, MapDetectorSettingNames())) {
     const SettingKind kind = FindDetectorSetting(name)->kind;
     if (kind == SettingKind::kNumber) {
@@ -54,7 +54,7 @@ json SettingsJson(const pb::MapSettings& settings) {
   return out;
 }
 
-json MapJson(const pb::MapInfo& map) {
+Json MapJson(const pb::MapInfo& map) {
   return {{"name", map.name()},
           {"id", map.id()},
           {"frames", map.frames()},
@@ -99,7 +99,7 @@ int RunMapsList(const ServerFlags& flags, RecognitionClient& client) {
   auto maps = client.ListMaps();
   if (!maps.ok()) return Fail("maps list", maps.status());
   if (flags.json) {
-    json out = json::array();
+    Json out = Json::array();
     for (const pb::MapInfo& map : *maps) out.push_back(MapJson(map));
     std::printf("%s\n", out.dump(2).c_str());
     return 0;
@@ -171,7 +171,7 @@ void AddMapsCommands(CLI::App& app, int* exit_code) {
         if (delete_args->server.json) {
           std::printf(
               "%s\n",
-              json({{"name", delete_args->name}, {"frames_deleted", *frames}}).dump(2).c_str());
+              Json({{"name", delete_args->name}, {"frames_deleted", *frames}}).dump(2).c_str());
         } else {
           std::printf("deleted map %s (%llu frame%s)\n", delete_args->name.c_str(),
                       (unsigned long long)*frames, *frames == 1 ? "" : "s");
@@ -208,7 +208,7 @@ void AddMapsCommands(CLI::App& app, int* exit_code) {
         if (remove_args->server.json) {
           std::printf(
               "%s\n",
-              json({{"name", remove_args->name}, {"removed_frames", *removed}}).dump(2).c_str());
+              Json({{"name", remove_args->name}, {"removed_frames", *removed}}).dump(2).c_str());
         } else {
           std::printf("removed from map %s:", remove_args->name.c_str());
           for (uint64_t id : *removed) std::printf(" frame %llu", (unsigned long long)id);

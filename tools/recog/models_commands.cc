@@ -23,13 +23,13 @@ namespace recog::cli {
 namespace {
 
 using client::RecognitionClient;
-using json = nlohmann::ordered_json;
+using Json = nlohmann::ordered_json;
 
 std::string TypeLabel(pb::ObjectType type) {
   return type == pb::OBJECT_TYPE_3D ? "3D" : EnumLabel(pb::ObjectType_Name(type), "OBJECT_TYPE_");
 }
 
-json ModelJson(const pb::ModelInfo& model) {
+Json ModelJson(const pb::ModelInfo& model) {
   return {{"name", model.name()},
           {"version", model.version()},
           {"class", model.object_class()},
@@ -71,7 +71,7 @@ int RunModelsPush(const PushArgs& args, RecognitionClient& client) {
                                         std::to_string(sources.size())));
   }
   std::unique_ptr<ModelBuilder> builder;  // made for the first RoboEarth folder
-  json pushed = json::array();
+  Json pushed = Json::array();
   for (const ModelSource& source : sources) {
     client::Result<pb::ModelInfo> info = grpc::Status(grpc::StatusCode::INTERNAL, "unset");
     if (source.roboearth) {
@@ -109,7 +109,7 @@ int RunModelsPull(const PullArgs& args, RecognitionClient& client) {
   auto info = client.DownloadModel(args.name, args.version, args.output);
   if (!info.ok()) return Fail("models pull", info.status());
   if (args.server.json) {
-    json out = ModelJson(*info);
+    Json out = ModelJson(*info);
     out["file"] = args.output;
     std::printf("%s\n", out.dump(2).c_str());
   } else {
@@ -127,7 +127,7 @@ int RunModelsList(const ListModelsArgs& args, RecognitionClient& client) {
   auto models = client.ListModels(args.filter);
   if (!models.ok()) return Fail("models list", models.status());
   if (args.server.json) {
-    json out = json::array();
+    Json out = Json::array();
     for (const pb::ModelInfo& model : *models) out.push_back(ModelJson(model));
     std::printf("%s\n", out.dump(2).c_str());
     return 0;
@@ -162,7 +162,7 @@ int RunModelsWatch(const WatchArgs& args, RecognitionClient& client) {
     if (args.count > 0 && seen >= args.count) return;
     const std::string change = EnumLabel(pb::ModelChange_Name(event.change()), "MODEL_CHANGE_");
     if (args.server.json) {
-      std::printf("%s\n", json({{"change", change},
+      std::printf("%s\n", Json({{"change", change},
                                 {"sequence", event.sequence()},
                                 {"model", ModelJson(event.model())}})
                               .dump()
@@ -247,7 +247,7 @@ void AddModelsCommands(CLI::App& app, int* exit_code) {
         if (!versions.ok()) return Fail("models delete", versions.status());
         if (delete_model_args->server.json) {
           std::printf("%s\n",
-                      json({{"name", delete_model_args->name}, {"versions_deleted", *versions}})
+                      Json({{"name", delete_model_args->name}, {"versions_deleted", *versions}})
                           .dump(2)
                           .c_str());
         } else {

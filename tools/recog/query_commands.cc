@@ -43,7 +43,7 @@ namespace {
 
 namespace fs = std::filesystem;
 using client::RecognitionClient;
-using json = nlohmann::ordered_json;
+using Json = nlohmann::ordered_json;
 
 // ---- recog query ----
 
@@ -132,7 +132,7 @@ int RunQuery(const QueryArgs& args, RecognitionClient& client) {
   if (!answer.ok()) return Fail("query", answer.status());
   const pb::LoopResult& r = answer->result();
   if (args.server.json) {
-    json out = LoopJson(r);
+    Json out = LoopJson(r);
     out["timing_ms"] = TimingJson(answer->timing());
     std::printf("%s\n", out.dump(2).c_str());
     return 0;
@@ -256,7 +256,7 @@ int RunRelocalize(const RelocalizeArgs& args, RecognitionClient& client) {
                                   args.max_results);
   if (!answer.ok()) return Fail("relocalize", answer.status());
   if (args.server.json) {
-    json places = json::array();
+    Json places = Json::array();
     for (const pb::Relocalization& place : answer->places()) {
       places.push_back({{"map", place.map()},
                         {"image", args.images[place.frame_index()]},
@@ -264,7 +264,7 @@ int RunRelocalize(const RelocalizeArgs& args, RecognitionClient& client) {
                         {"frames_recognised", place.frames_recognised()},
                         {"result", LoopJson(place.result())}});
     }
-    std::printf("%s\n", json({{"frames", frames.size()},
+    std::printf("%s\n", Json({{"frames", frames.size()},
                               {"places", std::move(places)},
                               {"timing_ms", TimingJson(answer->timing())}})
                             .dump(2)

@@ -21,7 +21,7 @@ namespace {
 
 using nlohmann::json;
 
-json TimingJson(const RecognitionTiming& t) {
+json RecognitionTimingJson(const RecognitionTiming& t) {
   return {{"orb", t.orb},
           {"clustering", t.clustering},
           {"conversion", t.conversion},
@@ -55,7 +55,7 @@ Status RecognizeOffline(const RecognizeArgs& args, const cv::Mat& image,
   RecognitionTiming stages;
   RECOG_RETURN_IF_ERROR(recognizer.Recognize(image, camera, detections, &stages, {}, args.extras,
                                              args.explain ? explanation : nullptr));
-  *timing = TimingJson(stages);
+  *timing = RecognitionTimingJson(stages);
   return Status::Ok();
 }
 

@@ -32,11 +32,6 @@ void AddCameraEffectOptions(CLI::App* cmd, double* blur_sigma_max, double* noise
       ->capture_default_str();
 }
 
-int Fail(const Status& status) {
-  std::fprintf(stderr, "recog seqgen: %s\n", status.ToString().c_str());
-  return 1;
-}
-
 struct SeqgenArgs {
   std::string images;
   std::string output;
@@ -50,20 +45,20 @@ struct SeqgenArgs {
 
 int RunSeqgen(const SeqgenArgs& args) {
   if (args.images.empty() || args.output.empty()) {
-    return Fail(Status::InvalidArgument("--images and --output are required"));
+    return Fail("seqgen", Status::InvalidArgument("--images and --output are required"));
   }
   const auto start = std::chrono::steady_clock::now();
   auto format = ParseSequenceImageFormat(args.format);
-  if (!format.ok()) return Fail(format.status());
+  if (!format.ok()) return Fail("seqgen", format.status());
   SequenceOptions options = args.options;
   options.distinct_places = !args.allow_duplicate_places;
-  if (Status s = options.Validate(); !s.ok()) return Fail(s);
+  if (Status s = options.Validate(); !s.ok()) return Fail("seqgen", s);
   auto photos = ListImages(args.images);
-  if (!photos.ok()) return Fail(photos.status());
+  if (!photos.ok()) return Fail("seqgen", photos.status());
   const size_t num_photos = photos->size();
   const auto choose_start = std::chrono::steady_clock::now();
   auto generator = SequenceGenerator::Create(std::move(photos).value(), options);
-  if (!generator.ok()) return Fail(generator.status());
+  if (!generator.ok()) return Fail("seqgen", generator.status());
   // Time spent choosing the place photos (the distinct-places check).
   const double choose_seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - choose_start).count();
@@ -73,7 +68,7 @@ int RunSeqgen(const SeqgenArgs& args) {
       WriteSequence(*generator, args.output, args.sparse_truth, *format,
                     [&](uint64_t done, uint64_t total) { progress.Update("frames", done, total); });
   progress.Finish();
-  if (!written.ok()) return Fail(written.status());
+  if (!written.ok()) return Fail("seqgen", written.status());
   const double seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   const int used_photos = int(generator->photos().size());

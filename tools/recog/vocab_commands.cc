@@ -25,11 +25,6 @@ double SecondsSince(Clock::time_point t) {
   return std::chrono::duration<double>(Clock::now() - t).count();
 }
 
-int Fail(const char* command, const Status& status) {
-  std::fprintf(stderr, "recog %s: %s\n", command, status.ToString().c_str());
-  return 1;
-}
-
 struct TrainArgs {
   std::string images;
   std::string output;

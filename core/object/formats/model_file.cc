@@ -22,10 +22,10 @@ namespace {
 static_assert(std::endian::native == std::endian::little,
               "model_file writes little-endian values with memcpy");
 
-constexpr char kMagic[8] = {'R', 'E', 'C', 'O', 'G', 'O', 'B', 'J'};
-constexpr uint32_t kVersion = 1;
-constexpr size_t kHeaderSize = 40;
-constexpr size_t kHeaderChecksumSpan = 32;  // header bytes covered by the header checksum
+constexpr char kModelMagic[8] = {'R', 'E', 'C', 'O', 'G', 'O', 'B', 'J'};
+constexpr uint32_t kModelVersion = 1;
+constexpr size_t kModelHeaderSize = 40;
+constexpr size_t kModelHeaderChecksumSpan = 32;  // header bytes covered by the header checksum
 
 // A tag is stored as a little-endian u32 whose bytes spell the name, so a hex dump reads "META".
 constexpr uint32_t Tag(const char (&name)[5]) {
@@ -160,7 +160,7 @@ std::string EndOfSection(const Reader& r) {
   return "";
 }
 
-std::string ParseMeta(std::string_view payload, ObjectMetadata* meta) {
+std::string ParseMetaRecord(std::string_view payload, ObjectMetadata* meta) {
   Reader r(payload);
   meta->name = r.GetString();
   meta->object_class = r.GetString();
@@ -211,7 +211,7 @@ std::string ParsePnts(std::string_view payload, std::vector<cv::Point3f>* points
 
 // The face indices carry no count of their own: there is one per point (num_indices) for planar
 // models and none for 3D ones.
-std::string ParseFace(std::string_view payload, size_t num_indices, ObjectModel* model) {
+std::string ParseFaceRecord(std::string_view payload, size_t num_indices, ObjectModel* model) {
   Reader r(payload);
   model->faces.resize(r.GetCount(kFaceBytes));
   for (PlanarFace& face : model->faces) {
@@ -260,34 +260,35 @@ StatusOr<std::string> EncodeObjectModel(const ObjectModel& model) {
   // one, so check it here rather than write a file that cannot be read back.
   RECOG_RETURN_IF_ERROR(model.descriptor.Validate());
   Writer w;
-  w.bytes().resize(kHeaderSize);
+  w.bytes().resize(kModelHeaderSize);
   WriteSections(model, &w);
 
   std::string& out = w.bytes();
-  const uint64_t body_size = out.size() - kHeaderSize;
-  const uint64_t body_checksum = XXH3_64bits(out.data() + kHeaderSize, body_size);
+  const uint64_t body_size = out.size() - kModelHeaderSize;
+  const uint64_t body_checksum = XXH3_64bits(out.data() + kModelHeaderSize, body_size);
   const uint32_t num_sections = w.num_sections();
-  std::memcpy(out.data(), kMagic, sizeof(kMagic));
-  std::memcpy(out.data() + 8, &kVersion, 4);
+  std::memcpy(out.data(), kModelMagic, sizeof(kModelMagic));
+  std::memcpy(out.data() + 8, &kModelVersion, 4);
   std::memcpy(out.data() + 12, &num_sections, 4);
   std::memcpy(out.data() + 16, &body_size, 8);
   std::memcpy(out.data() + 24, &body_checksum, 8);
-  const uint64_t header_checksum = XXH3_64bits(out.data(), kHeaderChecksumSpan);
+  const uint64_t header_checksum = XXH3_64bits(out.data(), kModelHeaderChecksumSpan);
   std::memcpy(out.data() + 32, &header_checksum, 8);
   return std::move(out);
 }
 
 StatusOr<ObjectModel> DecodeObjectModel(std::string_view bytes, const std::string& where) {
-  if (bytes.size() >= sizeof(kMagic) && std::memcmp(bytes.data(), kMagic, sizeof(kMagic)) != 0) {
+  if (bytes.size() >= sizeof(kModelMagic) &&
+      std::memcmp(bytes.data(), kModelMagic, sizeof(kModelMagic)) != 0) {
     return Status::DataLoss(where + " is not an object model file (bad magic)");
   }
-  if (bytes.size() < kHeaderSize) {
+  if (bytes.size() < kModelHeaderSize) {
     return Corrupt(where, "truncated: " + std::to_string(bytes.size()) +
-                              " bytes, shorter than the " + std::to_string(kHeaderSize) +
+                              " bytes, shorter than the " + std::to_string(kModelHeaderSize) +
                               "-byte header");
   }
-  Reader header(bytes.substr(0, kHeaderSize));
-  header.Take(sizeof(kMagic));
+  Reader header(bytes.substr(0, kModelHeaderSize));
+  header.Take(sizeof(kModelMagic));
   const uint32_t version = header.Get<uint32_t>();
   const uint32_t num_sections = header.Get<uint32_t>();
   const uint64_t body_size = header.Get<uint64_t>();
@@ -295,16 +296,16 @@ StatusOr<ObjectModel> DecodeObjectModel(std::string_view bytes, const std::strin
   const uint64_t header_checksum = header.Get<uint64_t>();
   // The checksum comes before the version so that a damaged version field reads as corruption,
   // not as a file from the future.
-  if (header_checksum != XXH3_64bits(bytes.data(), kHeaderChecksumSpan)) {
+  if (header_checksum != XXH3_64bits(bytes.data(), kModelHeaderChecksumSpan)) {
     return Corrupt(where, "header checksum mismatch");
   }
-  if (version > kVersion) {
+  if (version > kModelVersion) {
     return Status::FailedPrecondition(where + " was written by a newer version (format version " +
                                       std::to_string(version) + "; this build reads up to " +
-                                      std::to_string(kVersion) + ")");
+                                      std::to_string(kModelVersion) + ")");
   }
   if (version == 0) return Corrupt(where, "format version 0");
-  const std::string_view body = bytes.substr(kHeaderSize);
+  const std::string_view body = bytes.substr(kModelHeaderSize);
   if (body_size != body.size()) {
     return Corrupt(where, "the header announces " + std::to_string(body_size) +
                               " body bytes, the file has " + std::to_string(body.size()) +
@@ -356,12 +357,12 @@ StatusOr<ObjectModel> DecodeObjectModel(std::string_view bytes, const std::strin
     return why.empty() ? Status::Ok() : Corrupt(where, TagName(tag) + " section: " + why);
   };
   const auto& [meta, desc, pnts, face, view] = known;
-  RECOG_RETURN_IF_ERROR(check(kMetaTag, ParseMeta(meta.payload, &model.metadata)));
+  RECOG_RETURN_IF_ERROR(check(kMetaTag, ParseMetaRecord(meta.payload, &model.metadata)));
   RECOG_RETURN_IF_ERROR(check(kDescTag, ParseDesc(desc.payload, &model)));
   RECOG_RETURN_IF_ERROR(check(kPntsTag, ParsePnts(pnts.payload, &model.points)));
   if (face.seen) {
     const size_t num_indices = model.metadata.type == ObjectType::kPlanar ? model.points.size() : 0;
-    RECOG_RETURN_IF_ERROR(check(kFaceTag, ParseFace(face.payload, num_indices, &model)));
+    RECOG_RETURN_IF_ERROR(check(kFaceTag, ParseFaceRecord(face.payload, num_indices, &model)));
   }
   if (view.seen) {
     RECOG_RETURN_IF_ERROR(check(kViewTag, ParseView(view.payload, &model.views)));

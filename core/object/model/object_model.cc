@@ -8,7 +8,7 @@
 namespace recog {
 namespace {
 
-bool Finite(const cv::Point3f& p) {
+bool FinitePoint(const cv::Point3f& p) {
   return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z);
 }
 
@@ -111,7 +111,7 @@ Status ObjectModel::Validate() const {
     if (p >= points.size()) return Status::InvalidArgument(where + "feature of a missing point");
   }
   for (const cv::Point3f& p : points) {
-    if (!Finite(p)) return Status::InvalidArgument(where + "a point is not finite");
+    if (!FinitePoint(p)) return Status::InvalidArgument(where + "a point is not finite");
   }
   if (metadata.type == ObjectType::kPlanar) {
     if (faces.empty()) return Status::InvalidArgument(where + "a planar model needs faces");

@@ -13,7 +13,7 @@
 namespace recog {
 namespace {
 
-constexpr uint32_t kNone = std::numeric_limits<uint32_t>::max();
+constexpr uint32_t kNoMatch = std::numeric_limits<uint32_t>::max();
 
 }  // namespace
 
@@ -144,8 +144,8 @@ void GuidedMatcher::MatchInWindows(const IndexedObject& object, const cv::Rect& 
   }
 
   // Each visible model feature against the keypoints in its window; one feature per keypoint.
-  best_distance_.assign(m, kNone);
-  best_feature_.assign(m, kNone);
+  best_distance_.assign(m, kNoMatch);
+  best_feature_.assign(m, kNoMatch);
   const cv::Mat& model = object.descriptors;
   const cv::Mat& frame = frame_features_->descriptors;
   const size_t bytes = size_t(model.cols);
@@ -158,7 +158,7 @@ void GuidedMatcher::MatchInWindows(const IndexedObject& object, const cv::Rect& 
     const int y0 = std::max(0, int(std::floor((p.y - window - float(box.y)) / cell)));
     const int y1 = std::min(rows - 1, int(std::floor((p.y + window - float(box.y)) / cell)));
     const uint8_t* descriptor = model.ptr<uint8_t>(int(f));
-    uint32_t best = kNone, second = kNone, best_k = kNone;
+    uint32_t best = kNoMatch, second = kNoMatch, best_k = kNoMatch;
     for (int cy = y0; cy <= y1; ++cy) {
       for (int cx = x0; cx <= x1; ++cx) {
         const size_t c = size_t(cy * cols + cx);
@@ -180,7 +180,7 @@ void GuidedMatcher::MatchInWindows(const IndexedObject& object, const cv::Rect& 
       }
     }
     if (best > options_.max_distance) continue;
-    if (second != kNone && double(best) >= options_.ratio * double(second)) continue;
+    if (second != kNoMatch && double(best) >= options_.ratio * double(second)) continue;
     if (best < best_distance_[best_k]) {
       best_distance_[best_k] = best;
       best_feature_[best_k] = f;
@@ -188,7 +188,7 @@ void GuidedMatcher::MatchInWindows(const IndexedObject& object, const cv::Rect& 
   }
   pairs->clear();
   for (size_t k = 0; k < m; ++k) {
-    if (best_feature_[k] != kNone) pairs->emplace_back(best_feature_[k], uint32_t(k));
+    if (best_feature_[k] != kNoMatch) pairs->emplace_back(best_feature_[k], uint32_t(k));
   }
 }
 

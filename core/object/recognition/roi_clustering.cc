@@ -11,7 +11,7 @@
 namespace recog {
 namespace {
 
-constexpr uint32_t kNone = std::numeric_limits<uint32_t>::max();
+constexpr uint32_t kNoCluster = std::numeric_limits<uint32_t>::max();
 
 // Medoidshifts modes closer than this many bandwidths are joined (see FindModes).
 constexpr double kJoinBandwidths = 0.5;
@@ -236,12 +236,12 @@ void RoiClusterer::FindModes() {
   // Follow the medoid pointers to their fixed points. With exact arithmetic there is no cycle: a
   // shift raises the density strictly unless it is a tie, and ties go to smaller indices. A cycle
   // from rounding is cut at its smallest index so that the result stays deterministic.
-  visited_.assign(m, kNone);
+  visited_.assign(m, kNoCluster);
   for (size_t i = 0; i < m; ++i) {
-    if (visited_[i] != kNone) continue;
+    if (visited_[i] != kNoCluster) continue;
     path_.clear();
     uint32_t v = uint32_t(i);
-    while (visited_[v] == kNone) {
+    while (visited_[v] == kNoCluster) {
       visited_[v] = uint32_t(i);
       path_.push_back(v);
       v = mode_[v];
@@ -285,7 +285,7 @@ void RoiClusterer::BuildRegions(const std::vector<cv::Point2f>& points,
   const size_t n = points.size();
   const size_t m = centre_x_.size();
   size_.assign(m, 0);
-  first_.assign(m, kNone);
+  first_.assign(m, kNoCluster);
   for (size_t p = 0; p < n; ++p) {
     const uint32_t mode = mode_[assignment_[p]];
     ++size_[mode];
@@ -298,7 +298,7 @@ void RoiClusterer::BuildRegions(const std::vector<cv::Point2f>& points,
   std::sort(order_.begin(), order_.end(), [this](uint32_t a, uint32_t b) {
     return size_[a] != size_[b] ? size_[a] > size_[b] : first_[a] < first_[b];
   });
-  slot_.assign(m, kNone);
+  slot_.assign(m, kNoCluster);
   for (size_t r = 0; r < order_.size(); ++r) slot_[order_[r]] = uint32_t(r);
 
   // A single cluster holding every feature already is the whole image: no duplicate query.
@@ -309,7 +309,7 @@ void RoiClusterer::BuildRegions(const std::vector<cv::Point2f>& points,
   for (size_t r = 0; r < order_.size(); ++r) (*regions)[r].features.clear();
   for (size_t p = 0; p < n; ++p) {
     const uint32_t s = slot_[mode_[assignment_[p]]];
-    if (s != kNone) (*regions)[s].features.push_back(uint32_t(p));
+    if (s != kNoCluster) (*regions)[s].features.push_back(uint32_t(p));
   }
   for (size_t r = 0; r < order_.size(); ++r) {
     RegionOfInterest& region = (*regions)[r];
