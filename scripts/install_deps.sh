@@ -17,6 +17,7 @@ packages=(
   libcpp-httplib-dev libjs-three libjs-chart.js chromium chromium-driver python3-selenium
   clang-format
   mkdocs mkdocs-material
+  librosbag-storage-dev libsensor-msgs-dev python3-rosbag python3-sensor-msgs
 )
 
 missing=()

@@ -92,7 +92,24 @@ StatusOr<FrameSource> FrameSource::Open(const std::string& spec,
   return source;
 }
 
+StatusOr<FrameSource> FrameSource::OpenBag(const std::string& path, const BagTopics& topics,
+                                           const BagReadOptions& options) {
+  RECOG_ASSIGN_OR_RETURN(RosBagReader reader, RosBagReader::Open(path, topics, options));
+  FrameSource source;
+  source.bag_ = std::make_shared<RosBagReader>(std::move(reader));
+  source.video_name_ = fs::path(path).filename().string();
+  return source;
+}
+
 StatusOr<bool> FrameSource::Next(cv::Mat* gray, std::string* name) {
+  if (bag_) {
+    bag_frame_ = BagFrame();
+    RECOG_ASSIGN_OR_RETURN(const bool more, bag_->Next(&bag_frame_));
+    if (!more) return false;
+    *gray = bag_frame_.gray;
+    *name = video_name_ + "#" + std::to_string(++next_);
+    return true;
+  }
   if (video_) {
     cv::Mat frame;
     if (!video_->read(frame) || frame.empty()) return false;
@@ -111,6 +128,7 @@ StatusOr<bool> FrameSource::Next(cv::Mat* gray, std::string* name) {
 }
 
 std::optional<double> FrameSource::timestamp() const {
+  if (bag_) return next_ > 0 ? std::optional<double>(bag_frame_.stamp) : std::nullopt;
   if (next_ > 0 && next_ <= timestamps_.size()) return timestamps_[next_ - 1];
   return std::nullopt;
 }
@@ -123,7 +141,24 @@ std::string FrameSource::right_path() const {
   return next_ > 0 && next_ <= rights_.size() ? rights_[next_ - 1] : std::string();
 }
 
+StatusOr<cv::Mat> FrameSource::depth() const {
+  if (bag_) return bag_frame_.depth;
+  const std::string path = depth_path();
+  if (path.empty()) return cv::Mat();
+  cv::Mat depth = cv::imread(path, cv::IMREAD_ANYDEPTH);
+  if (depth.empty()) return Status::InvalidArgument("cannot read depth image '" + path + "'");
+  return depth;
+}
+
+StatusOr<cv::Mat> FrameSource::right() const {
+  if (bag_) return bag_frame_.right;
+  const std::string path = right_path();
+  if (path.empty()) return cv::Mat();
+  return ReadGrayImage(path);
+}
+
 size_t FrameSource::size() const {
+  if (bag_) return bag_->size();
   if (!video_) return files_.size();
   if (live_) return 0;
   const double count = video_->get(cv::CAP_PROP_FRAME_COUNT);
@@ -139,15 +174,13 @@ Status FramePoints(const FrameSource& source, const cv::Mat& image, const Featur
                    FrameGeometry* geometry) {
   geometry->K = options.K;
   geometry->points.clear();
-  if (const std::string depth_path = source.depth_path(); !depth_path.empty()) {
-    const cv::Mat depth = cv::imread(depth_path, cv::IMREAD_ANYDEPTH);
-    if (depth.empty())
-      return Status::InvalidArgument("cannot read depth image '" + depth_path + "'");
+  RECOG_ASSIGN_OR_RETURN(const cv::Mat depth, source.depth());
+  if (!depth.empty()) {
     return PointsFromDepth(features.keypoints, image.size(), options.K, depth, options.depth_scale,
                            &geometry->points);
   }
-  if (const std::string right_path = source.right_path(); !right_path.empty()) {
-    RECOG_ASSIGN_OR_RETURN(const cv::Mat right, ReadGrayImage(right_path));
+  RECOG_ASSIGN_OR_RETURN(const cv::Mat right, source.right());
+  if (!right.empty()) {
     FeatureSet right_features;
     RECOG_RETURN_IF_ERROR(extractor.Extract(right, &right_features));
     return PointsFromStereo(features, image, right_features, right, options.K, options.baseline_m,

@@ -17,35 +17,51 @@
 #include "tools/evaluation/dataset_layouts.h"
 #include "tools/evaluation/ground_truth.h"
 #include "tools/evaluation/loop_tally.h"
+#include "tools/evaluation/ros_bag.h"
 
 namespace recog::cli {
 
 // The frames of a sequence: a folder of images (natural order of names), a dataset folder in a
 // public layout with timestamps (TUM RGB-D, EuRoC, KITTI: dataset_layouts.h), a text file listing
-// one image path per line (relative paths are relative to the list), a video file, or a live
-// camera, "camera:N" (the Video4Linux device /dev/videoN, read until the caller stops).
+// one image path per line (relative paths are relative to the list), a video file, a live
+// camera, "camera:N" (the Video4Linux device /dev/videoN, read until the caller stops), or the
+// image topic of a ROS 1 bag with its depth or right images (OpenBag, ros_bag.h).
 class FrameSource {
  public:
   // A folder is read in `layout`; without one, in the layout DetectDatasetLayout finds. A layout
   // for anything but a folder is INVALID_ARGUMENT; errors of ReadDatasetFrames as they are.
   static StatusOr<FrameSource> Open(const std::string& spec,
                                     std::optional<DatasetLayout> layout = std::nullopt);
+  // The frames of a ROS 1 bag's `topics.image`, in stamp order, with their stamps as timestamps
+  // and their depth and right images; every error of RosBagReader::Open, before any frame.
+  static StatusOr<FrameSource> OpenBag(const std::string& path, const BagTopics& topics,
+                                       const BagReadOptions& options = {});
   // The next frame as 8-bit grey; false at the end. Undecodable images are INVALID_ARGUMENT
   // (the next call goes on with the following image). `name` is the image's path, or
-  // "<video file name>#<frame number from 1>" ("camera:N#<frame number>" for a camera).
+  // "<video file name>#<frame number from 1>" ("camera:N#<frame number>" for a camera,
+  // "<bag file name>#<frame number from 1>" for a bag).
   StatusOr<bool> Next(cv::Mat* gray, std::string* name);
   // Timestamp (seconds) of the frame Next() returned last; none when the source has none.
   std::optional<double> timestamp() const;
-  // The depth image (TUM) and the right image (EuRoC, KITTI) of the frame Next() returned last;
-  // empty when it has none.
+  // The depth image (TUM, a bag's depth topic) and the right image (EuRoC, KITTI, a bag's right
+  // topic) files of the frame Next() returned last; empty when it has none, and for a bag.
   std::string depth_path() const;
   std::string right_path() const;
-  // The dataset layout read (kFolder for anything without timestamps).
+  // Those images of the frame Next() returned last; empty when it has none. A depth image is
+  // CV_16UC1 (TUM: 1/5000 m; a bag's 16UC1: millimetres) or CV_32FC1 (metres); a right image
+  // 8-bit grey. A file that cannot be read is INVALID_ARGUMENT (depth) or ReadGrayImage's error.
+  StatusOr<cv::Mat> depth() const;
+  StatusOr<cv::Mat> right() const;
+  // The dataset layout read (kFolder for anything without timestamps, and for a bag).
   DatasetLayout layout() const { return layout_; }
   // True for a video or a camera, whose frames have no file of their own.
   bool is_video() const { return video_ != nullptr; }
-  // Frames in the sequence: exact for images, the container's count for a video (0: unknown, and
-  // for a camera).
+  // True for a bag (whose frames have no file of their own either); bag() is then its reader
+  // (its cameras), else null.
+  bool is_bag() const { return bag_ != nullptr; }
+  const RosBagReader* bag() const { return bag_.get(); }
+  // Frames in the sequence: exact for images and bags, the container's count for a video (0:
+  // unknown, and for a camera).
   size_t size() const;
 
  private:
@@ -57,6 +73,8 @@ class FrameSource {
   std::shared_ptr<cv::VideoCapture> video_;  // a video file or a camera
   std::string video_name_;
   bool live_ = false;  // a camera
+  std::shared_ptr<RosBagReader> bag_;
+  BagFrame bag_frame_;  // the frame Next() returned last, of a bag
 };
 
 // 3D points for the frames of a dataset that has depth images (TUM) or right images (EuRoC,

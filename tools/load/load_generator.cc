@@ -65,11 +65,13 @@ std::string ImagesFolder(const std::string& dir) {
   return fs::is_directory(images, error) ? images.string() : dir;
 }
 
-// The frame a robot sends for the image file `path`: its bytes, or its ORB features.
-StatusOr<pb::Frame> PrepareFrame(const std::string& path, bool features_on_client) {
-  RECOG_ASSIGN_OR_RETURN(cv::Mat gray, ReadGrayImage(path));
+// The frame a robot sends for the grey image `gray`: the bytes of its image file `path` (raw
+// pixels without a file), or its ORB features.
+StatusOr<pb::Frame> PrepareGrayFrame(const std::string& path, const cv::Mat& gray,
+                                     bool features_on_client) {
   if (!features_on_client) {
-    client::Result<pb::Frame> frame = FrameFromImageFile(path, gray);
+    client::Result<pb::Frame> frame =
+        path.empty() ? client::FrameFromImage(gray) : FrameFromImageFile(path, gray);
     if (!frame.ok()) return FromClient(frame.status());
     return std::move(frame).value();
   }
@@ -81,7 +83,67 @@ StatusOr<pb::Frame> PrepareFrame(const std::string& path, bool features_on_clien
   return std::move(frame).value();
 }
 
+// The frame a robot sends for the image file `path`: its bytes, or its ORB features.
+StatusOr<pb::Frame> PrepareFrame(const std::string& path, bool features_on_client) {
+  RECOG_ASSIGN_OR_RETURN(const cv::Mat gray, ReadGrayImage(path));
+  return PrepareGrayFrame(path, gray, features_on_client);
+}
+
 using Sequence = LoadGenerator::Sequence;
+
+// The frames of a bag, ready to send, with their offsets in time (LoadOptions::bag_speed).
+StatusOr<Sequence> PrepareBag(const LoadBag& bag, bool features_on_client) {
+  RECOG_ASSIGN_OR_RETURN(FrameSource source,
+                         FrameSource::OpenBag(bag.path, bag.topics, bag.options));
+  const std::optional<CameraIntrinsics> camera = source.bag()->FrameCamera();
+  RECOG_ASSIGN_OR_RETURN(const std::optional<double> baseline, source.bag()->StereoBaseline());
+  Sequence sequence;
+  sequence.folder = bag.path;
+  sequence.bag = true;
+  cv::Mat gray;
+  std::string name;
+  for (;;) {
+    RECOG_ASSIGN_OR_RETURN(const bool more, source.Next(&gray, &name));
+    if (!more) break;
+    RECOG_ASSIGN_OR_RETURN(pb::Frame frame, PrepareGrayFrame("", gray, features_on_client));
+    RECOG_ASSIGN_OR_RETURN(const cv::Mat depth, source.depth());
+    RECOG_ASSIGN_OR_RETURN(const cv::Mat right, source.right());
+    RECOG_RETURN_IF_ERROR(
+        AttachBagGeometry(camera, baseline, depth, right, &frame).WithContext("frame " + name));
+    sequence.files.push_back(name);
+    sequence.frames.push_back(client::FrameStream::Prepare(std::move(frame)));
+    sequence.offsets_s.push_back(*source.timestamp() - source.bag()->stamps().front());
+  }
+  const size_t n = sequence.offsets_s.size();
+  const double last = sequence.offsets_s.back();
+  sequence.pass_s = last + (n > 1 ? last / double(n - 1) : 1.0);
+  return sequence;
+}
+
+// What --verify runs offline for a robot's sequence: the features of the folder's images, or of
+// the bag's frames with the 3D points of their depth or right images when the robot sent them.
+// The robots send no timestamps: tau_c counts frames offline too.
+StatusOr<SequenceFeatures> OfflineFeatures(const std::string& folder,
+                                           const std::optional<LoadBag>& bag, bool is_bag) {
+  if (!is_bag) {
+    RECOG_ASSIGN_OR_RETURN(FrameSource source, FrameSource::Open(folder));
+    return ExtractSequence(source, PlaceFeatureOptions(), false);
+  }
+  RECOG_ASSIGN_OR_RETURN(FrameSource source,
+                         FrameSource::OpenBag(bag->path, bag->topics, bag->options));
+  std::optional<SequenceGeometryOptions> geometry;
+  if (const std::optional<CameraIntrinsics> camera = source.bag()->FrameCamera()) {
+    geometry.emplace();
+    geometry->K = camera->K();
+    geometry->depth_scale = 1.0 / 1000;  // 16UC1: millimetres
+    RECOG_ASSIGN_OR_RETURN(const std::optional<double> baseline, source.bag()->StereoBaseline());
+    geometry->baseline_m = baseline.value_or(0);
+  }
+  RECOG_ASSIGN_OR_RETURN(SequenceFeatures features,
+                         ExtractSequence(source, PlaceFeatureOptions(), false, nullptr, geometry));
+  features.timestamps.clear();
+  return features;
+}
 
 // The run's clock: sample times are taken relative to `origin` (when the robots start setting
 // up) and moved to the run's start once it is known.
@@ -116,6 +178,7 @@ class Robot {
         clock_(clock) {
     report_.map = std::move(map);
     report_.sequence = sequence.folder;
+    paced_ = options.rate_hz > 0 || (options.bag_speed > 0 && sequence.bag);
     size_t first_pass = sequence.frames.size();
     if (options.frames > 0) first_pass = std::min<size_t>(first_pass, options.frames);
     first_pass_.resize(first_pass);
@@ -255,6 +318,7 @@ class Robot {
   }
 
   const std::optional<pb::MapInfo>& map() const { return map_; }
+  bool is_bag() const { return sequence_.bag; }
   const RobotReport& report() const { return report_; }
   Clock::time_point finished_at() const { return finished_at_; }
   const RpcStats& stats(const std::string& rpc) const {
@@ -267,6 +331,12 @@ class Robot {
  private:
   // When frame k is due.
   Clock::time_point Scheduled(uint64_t k) const {
+    if (options_.bag_speed > 0 && sequence_.bag) {
+      const size_t n = sequence_.offsets_s.size();
+      const double at = double(k / n) * sequence_.pass_s + sequence_.offsets_s[size_t(k % n)];
+      return start_ + std::chrono::duration_cast<Clock::duration>(
+                          std::chrono::duration<double>(at / options_.bag_speed));
+    }
     if (options_.rate_hz <= 0) return start_;
     return start_ + std::chrono::duration_cast<Clock::duration>(
                         std::chrono::duration<double>(double(k) / options_.rate_hz));
@@ -343,7 +413,7 @@ class Robot {
       std::lock_guard lock(mutex_);
       // The robot's thread waits for this answer when sending is over, or at a rate when the
       // slot frees up for a frame not yet due (at rate 0, Pump below sends it right away).
-      wake_robot = over_ || (options_.rate_hz > 0 && in_flight_ == options_.in_flight);
+      wake_robot = over_ || (paced_ && in_flight_ == options_.in_flight);
       --in_flight_;
       last_answer_ = now;
       FirstPassAnswer* first = k < first_pass_.size() ? &first_pass_[size_t(k)] : nullptr;
@@ -408,6 +478,7 @@ class Robot {
   const Sequence& sequence_;
   const pb::Frame* const object_frame_;  // null: the robot's current frame
   const RunClock& clock_;
+  bool paced_ = false;              // frames go at their times (rate or bag), not at once
   std::optional<pb::MapInfo> map_;  // once created
   std::unique_ptr<client::FrameStream> stream_;
   std::atomic<uint64_t>* answers_ = nullptr;          // every robot's answers, for progress
@@ -436,7 +507,9 @@ class Robot {
 }  // namespace
 
 Status LoadOptions::Validate() const {
-  if (sequences.empty()) return Status::InvalidArgument("--sequences: name at least one folder");
+  if (sequences.empty() && !bag.has_value()) {
+    return Status::InvalidArgument("--sequences: name at least one folder (or a --bag)");
+  }
   if (robots < 1 || robots > kMaxRobots) {
     return Status::InvalidArgument("--robots must be between 1 and " + std::to_string(kMaxRobots) +
                                    ", not " + std::to_string(robots));
@@ -451,9 +524,17 @@ Status LoadOptions::Validate() const {
   if (!(std::isfinite(rate_hz) && rate_hz >= 0)) {
     return Status::InvalidArgument("--rate must be 0 (as fast as possible) or a positive rate");
   }
+  if (!(std::isfinite(bag_speed) && bag_speed >= 0)) {
+    return Status::InvalidArgument("--bag-speed must be 0 or a positive factor");
+  }
+  if (bag_speed > 0 && (!bag.has_value() || rate_hz > 0)) {
+    return Status::InvalidArgument("--bag-speed goes with --bag, without --rate");
+  }
   if (in_flight < 1) return Status::InvalidArgument("--in-flight must be at least 1");
-  if (objects_every > 0 && !camera.has_value()) {
-    return Status::InvalidArgument("--objects-every needs --camera fx,fy,cx,cy");
+  const bool bag_camera = bag.has_value() && !bag->topics.camera_info.empty();
+  if (objects_every > 0 && !camera.has_value() && !bag_camera) {
+    return Status::InvalidArgument(
+        "--objects-every needs --camera fx,fy,cx,cy (or a bag's --camera-info-topic)");
   }
   if (objects_every == 0 && (camera.has_value() || !object_image.empty())) {
     return Status::InvalidArgument("--camera and --object-image go with --objects-every");
@@ -535,6 +616,16 @@ StatusOr<LoadGenerator> LoadGenerator::Prepare(const LoadOptions& options) {
     for (const std::string& file : sequence.files) {
       RECOG_ASSIGN_OR_RETURN(pb::Frame frame, PrepareFrame(file, options.features_on_client));
       sequence.frames.push_back(client::FrameStream::Prepare(std::move(frame)));
+    }
+  }
+  if (options.bag.has_value()) {
+    RECOG_ASSIGN_OR_RETURN(Sequence bag, PrepareBag(*options.bag, options.features_on_client));
+    load.sequences_.push_back(std::move(bag));
+    if (options.objects_every > 0 && !options.camera.has_value()) {
+      RECOG_ASSIGN_OR_RETURN(
+          RosBagReader reader,
+          RosBagReader::Open(options.bag->path, options.bag->topics, options.bag->options));
+      load.options_.camera = reader.FrameCamera();
     }
   }
   if (!options.object_image.empty()) {
@@ -631,7 +722,7 @@ StatusOr<LoadReport> LoadGenerator::Run(
     RECOG_ASSIGN_OR_RETURN(Vocabulary vocabulary, LoadAnyVocabulary(DefaultPlaceVocabularyPath()));
     const std::string checksum = HexChecksum(vocabulary.checksum());
     const auto shared = std::make_shared<const Vocabulary>(std::move(vocabulary));
-    std::map<std::string, SequenceFeatures> features;  // by folder
+    std::map<std::string, SequenceFeatures> features;  // by folder (or bag)
     std::map<std::pair<std::string, std::string>, std::vector<LoopResult>> offline;
     const std::vector<LoopResult> none;  // for robots without a map, which Verify refuses
     for (size_t i = 0; i < robots.size(); ++i) {
@@ -640,9 +731,8 @@ StatusOr<LoadReport> LoadGenerator::Run(
       const std::vector<LoopResult>* results = &none;
       if (robot.map().has_value()) {
         if (!features.contains(folder)) {
-          RECOG_ASSIGN_OR_RETURN(FrameSource source, FrameSource::Open(folder));
           RECOG_ASSIGN_OR_RETURN(features[folder],
-                                 ExtractSequence(source, PlaceFeatureOptions(), false));
+                                 OfflineFeatures(folder, options_.bag, robot.is_bag()));
         }
         const pb::MapSettings& settings = robot.map()->settings();
         const auto key = std::make_pair(folder, settings.SerializeAsString());
@@ -658,6 +748,31 @@ StatusOr<LoadReport> LoadGenerator::Run(
     }
   }
   return report;
+}
+
+Status AttachBagGeometry(const std::optional<CameraIntrinsics>& camera,
+                         std::optional<double> baseline, const cv::Mat& depth, const cv::Mat& right,
+                         pb::Frame* frame) {
+  if (!camera.has_value()) {
+    if (depth.empty() && right.empty()) return Status::Ok();
+    return Status::InvalidArgument(
+        "a depth or right image needs the camera's intrinsics (--camera-info-topic)");
+  }
+  CameraIntrinsics intrinsics = *camera;
+  if (!depth.empty() || !right.empty()) intrinsics.distortion.clear();
+  SetIntrinsics(intrinsics, frame);
+  grpc::Status attached;
+  if (!depth.empty()) {
+    attached = client::AttachDepth(depth, 1000.0, frame);  // 16UC1: millimetres (REP 118)
+  } else if (!right.empty()) {
+    if (!baseline.has_value()) {
+      return Status::InvalidArgument(
+          "a right image needs the stereo baseline (--right-camera-info-topic)");
+    }
+    attached = client::AttachStereoRight(right, *baseline, frame);
+  }
+  if (!attached.ok()) return FromClient(attached);
+  return Status::Ok();
 }
 
 StatusOr<PlaceEvaluationOptions> OfflineDetectorOptions(const pb::MapSettings& settings) {

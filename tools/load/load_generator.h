@@ -3,15 +3,19 @@
 // measured.
 //
 // Robot i replays sequence i % (number of sequences): the images of a folder in natural order
-// (ListImages), or of OUT/images for a folder written by `recog seqgen`. Frames are prepared
-// before the run, so that reading and encoding cost nothing while it lasts: the files' own bytes
-// when they are JPEG or PNG (other formats as raw grey pixels), or, with features_on_client, the
-// ORB features client::ExtractOrbFeatures computes from them (the server's defaults, so the map
-// answers alike). A robot loops over its sequence when it needs more frames, and sends frame k at
-// start + k / rate (as soon as possible when rate is 0), but never more than `in_flight` frames
-// ahead of their answers. For every objects_every-th frame (frames 0, K, 2K, ...) the robot also
-// calls RecognizeObjects with the camera's intrinsics, on that frame or on object_image, one call
-// at a time on a thread of its own, while its stream goes on.
+// (ListImages), or of OUT/images for a folder written by `recog seqgen`, the folders first, then
+// the ROS 1 bag when there is one (its image topic in stamp order, ros_bag.h). Frames are
+// prepared before the run, so that reading and encoding cost nothing while it lasts: the files'
+// own bytes when they are JPEG or PNG (other formats, and a bag's frames, as raw grey pixels), or,
+// with features_on_client, the ORB features client::ExtractOrbFeatures computes from them (the
+// server's defaults, so the map answers alike); a bag's frames carry the intrinsics of its camera
+// info, with its depth or right images (AttachBagGeometry). A robot loops over its sequence when
+// it needs more frames, and sends frame k at start + k / rate (as soon as possible when rate is
+// 0), or, with bag_speed, at the bag's own pace (the frames' stamps from the first, divided by
+// bag_speed; each pass over the bag one mean frame interval after the last frame), but never more
+// than `in_flight` frames ahead of their answers. For every objects_every-th frame (frames 0, K,
+// 2K, ...) the robot also calls RecognizeObjects with the camera's intrinsics, on that frame or on
+// object_image, one call at a time on a thread of its own, while its stream goes on.
 //
 // Phases: every robot creates its map `<map_prefix>-<run id>-<i>` (CreateMap with the server's
 // default settings) and opens its stream; then all start together (the run: its wall time, the
@@ -55,14 +59,24 @@
 #include "core/object/model/object_model.h"
 #include "recognition/v1/common.pb.h"
 #include "tools/evaluation/place_evaluation.h"
+#include "tools/evaluation/ros_bag.h"
 
 namespace recog::cli {
 
 namespace pb = ::recognition::v1;
 
+// A ROS 1 bag replayed by the robots (`recog load --bag`).
+struct LoadBag {
+  std::string path;
+  BagTopics topics;
+  BagReadOptions options;
+};
+
 struct LoadOptions {
-  // Folders of images (or `recog seqgen` output folders); at least one.
+  // Folders of images (or `recog seqgen` output folders); at least one, or a bag.
   std::vector<std::string> sequences;
+  // Default none: a bag replayed as one more sequence.
+  std::optional<LoadBag> bag;
   // Simulated robots, 1 to 1024.
   int robots = 1;
   // Exactly one of these bounds each robot's run: frames to send (> 0), or seconds (> 0).
@@ -70,6 +84,9 @@ struct LoadOptions {
   double duration_s = 0;
   // Frames per second per robot; default 0: as fast as the in_flight bound allows.
   double rate_hz = 0;
+  // Default 0: frames go at rate_hz. > 0 (with a bag, without rate_hz): a robot replaying the bag
+  // sends its frames at bag_speed times the pace of their stamps (1: as recorded).
+  double bag_speed = 0;
   // Default 4: frames a robot may have sent and not yet had answered, 1 to the client's
   // max_frames_in_flight.
   uint32_t in_flight = 4;
@@ -189,9 +206,14 @@ class LoadGenerator {
 
   // One sequence, ready to send.
   struct Sequence {
-    std::string folder;                                      // of the images
-    std::vector<std::string> files;                          // in natural order
+    std::string folder;                                      // of the images, or the bag
+    std::vector<std::string> files;                          // in natural order; a bag's names
     std::vector<client::FrameStream::PreparedFrame> frames;  // one per file
+    bool bag = false;
+    // A bag's frames: seconds from the first frame's stamp, and one pass over the bag (the last
+    // offset and a mean frame interval).
+    std::vector<double> offsets_s;
+    double pass_s = 0;
   };
 
  private:
@@ -199,6 +221,15 @@ class LoadGenerator {
   std::vector<Sequence> sequences_;
   std::optional<pb::Frame> object_frame_;  // with the intrinsics
 };
+
+// A bag frame's 3D structure for recogd: with `camera`, the frame's intrinsics (without
+// distortion when a depth or right image goes with them), and `depth` (16UC1 millimetres or
+// 32FC1 metres, AttachDepth) or else `right` (a rectified pair `baseline` metres wide,
+// AttachStereoRight); empty images are none. INVALID_ARGUMENT for a depth or right image without
+// a camera, a right image without a baseline, or what the client refuses.
+Status AttachBagGeometry(const std::optional<CameraIntrinsics>& camera,
+                         std::optional<double> baseline, const cv::Mat& depth, const cv::Mat& right,
+                         pb::Frame* frame);
 
 // The offline detector that --verify compares a robot's answers with, for a map with `settings`
 // (every field set, as MapInfo has them): its preset, with the settings the map keeps over it

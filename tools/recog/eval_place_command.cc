@@ -1,5 +1,6 @@
 // recog eval place: runs the loop detector over a sequence (a folder, a TUM RGB-D / EuRoC / KITTI
-// dataset folder with timestamps, a list or a video; or with --rig a multi-camera rig sequence)
+// dataset folder with timestamps, a list, a video or a ROS 1 bag; or with --rig a multi-camera rig
+// sequence)
 // and reports the detections and per-stage timings, with a ground truth also precision and
 // recall; --sweep alpha draws the PR curve.
 #include <cstdio>
@@ -22,6 +23,7 @@
 #include "tools/evaluation/place_evaluation.h"
 #include "tools/evaluation/plot.h"
 #include "tools/evaluation/rig_evaluation.h"
+#include "tools/recog/bag_flags.h"
 #include "tools/recog/commands.h"
 
 namespace recog::cli {
@@ -50,6 +52,7 @@ struct EvalPlaceArgs {
   std::string body_poses;  // with --rig: the body's poses, for the loops' pose errors
   std::vector<std::string> rig_cameras;  // with --rig: only these cameras
   bool no_depth = false;                 // with --rig: ignore the cameras' depth images
+  BagFlags bag;                          // --bag and its topics, instead of --images
   bool json = false;
   bool quiet = false;
 
@@ -64,13 +67,11 @@ const std::string& PresetFlag(const EvalPlaceArgs& args) {
   return args.deprecated_mode.empty() ? args.preset : args.deprecated_mode;
 }
 
-int Fail(const Status& s) {
-  std::fprintf(stderr, "recog eval place: %s\n", s.ToString().c_str());
-  return 1;
-}
-
-// The name of a sequence for a title: its folder, or the folder above an "images" folder.
-std::string SequenceTitle(const std::string& images) {
+// The name of a sequence for a title: its folder, or the folder above an "images" folder; a
+// bag's file name.
+std::string SequenceTitle(const EvalPlaceArgs& args) {
+  if (args.bag.given()) return fs::path(args.bag.bag).filename().string();
+  const std::string& images = args.images;
   fs::path shown = fs::path(images).lexically_normal();
   if (shown.filename().empty()) shown = shown.parent_path();      // a trailing slash
   if (shown.filename() == "images") shown = shown.parent_path();  // name the data set
@@ -199,7 +200,7 @@ int ReportAcrossMaps(const EvalPlaceArgs& args, int split, const SequenceFeature
                      const GroundTruth& truth, std::shared_ptr<const Vocabulary> vocabulary,
                      const PlaceEvaluationOptions& options, nlohmann::json parameters) {
   auto evaluation = EvaluateAcrossMaps(sequence, truth, split, std::move(vocabulary), options);
-  if (!evaluation.ok()) return Fail(evaluation.status());
+  if (!evaluation.ok()) return Fail("eval place", evaluation.status());
   const int frames = int(sequence.features.size());
   if (args.json) {
     const nlohmann::json out = {{"robot_a_frames", {1, split}},
@@ -378,18 +379,18 @@ void PrintRigEvaluation(const EvalPlaceArgs& args, const RigPlaceEvaluation& e, 
 int RunEvalRig(const EvalPlaceArgs& args, const PlaceEvaluationOptions& options, int features,
                std::shared_ptr<const Vocabulary> vocabulary, const std::string& vocabulary_path) {
   auto dataset = ReadRigDataset(args.rig);
-  if (!dataset.ok()) return Fail(dataset.status());
+  if (!dataset.ok()) return Fail("eval place", dataset.status());
   auto sequence = ExtractRigFeatures(args, *dataset, features);
-  if (!sequence.ok()) return Fail(sequence.status());
+  if (!sequence.ok()) return Fail("eval place", sequence.status());
   StatusOr<GroundTruth> truth = NoTrueMatches(sequence->frames.size());
   if (args.has_truth()) {
     truth = ReadGroundTruth(args.ground_truth);
-    if (!truth.ok()) return Fail(truth.status());
+    if (!truth.ok()) return Fail("eval place", truth.status());
   }
   std::optional<std::vector<CameraPose>> poses;
   if (!args.body_poses.empty()) {
     auto read = ReadTrajectory(args.body_poses);
-    if (!read.ok()) return Fail(read.status());
+    if (!read.ok()) return Fail("eval place", read.status());
     poses = std::move(read).value();
   }
   RigPlaceOptions rig_options;
@@ -398,7 +399,7 @@ int RunEvalRig(const EvalPlaceArgs& args, const PlaceEvaluationOptions& options,
   rig_options.direct_index_levels_up = options.direct_index_levels_up;
   auto e = EvaluateRigPlace(*sequence, *truth, std::move(vocabulary), rig_options,
                             poses ? &*poses : nullptr);
-  if (!e.ok()) return Fail(e.status());
+  if (!e.ok()) return Fail("eval place", e.status());
   std::vector<std::string> cameras;
   for (const RigCamera& c : sequence->cameras) cameras.push_back(c.name);
   if (args.json) {
@@ -420,8 +421,14 @@ struct PlaceSequence {
   GroundTruth truth;                              // NoTrueMatches without --ground-truth
   std::optional<CameraTrajectory> trajectory;     // --poses
   DatasetLayout layout = DatasetLayout::kFolder;  // --images' own (detected unless --layout)
+  bool bag = false;                               // read from --bag
   int split = 0;  // > 0: frames 1..split are robot A's map, the rest robot B's
 };
+
+// The layout a report names: the dataset layout of --images, or "bag".
+std::string LayoutName(const PlaceSequence& sequence) {
+  return sequence.bag ? "bag" : std::string(DatasetLayoutName(sequence.layout));
+}
 
 // --ground-truth, with the pairs of --ambiguous; an empty truth without --ground-truth.
 StatusOr<GroundTruth> ReadTruth(const EvalPlaceArgs& args) {
@@ -436,33 +443,61 @@ StatusOr<GroundTruth> ReadTruth(const EvalPlaceArgs& args) {
   return truth;
 }
 
-// --poses (with --camera): every frame's pose, which the loops are judged by; none without it.
-StatusOr<std::optional<CameraTrajectory>> ReadTrajectoryFlags(const EvalPlaceArgs& args) {
-  if (args.poses.empty()) return std::optional<CameraTrajectory>();
-  if (args.camera.empty()) return Status::InvalidArgument("--poses needs --camera");
-  RECOG_ASSIGN_OR_RETURN(std::vector<CameraPose> poses, ReadCameraPoses(args.poses));
-  return std::optional<CameraTrajectory>(
-      CameraTrajectory{std::move(poses), ParseCamera(args.camera)->K()});
+// The frames' camera: --camera, or a bag's camera info (--camera-info-topic); none without
+// either.
+StatusOr<std::optional<CameraIntrinsics>> FramesCamera(const EvalPlaceArgs& args,
+                                                       const FrameSource& source) {
+  if (!args.camera.empty()) {
+    RECOG_ASSIGN_OR_RETURN(const CameraIntrinsics camera, ParseCamera(args.camera));
+    return std::optional<CameraIntrinsics>(camera);
+  }
+  if (source.bag() != nullptr) return source.bag()->FrameCamera();
+  return std::optional<CameraIntrinsics>();
 }
 
-// --camera, --depth-scale and --baseline: the frames' camera matrix, and how 3D points come from
-// the depth or right images of a dataset in `layout`; none without --camera.
-StatusOr<std::optional<SequenceGeometryOptions>> ReadGeometryFlags(const EvalPlaceArgs& args,
-                                                                   DatasetLayout layout) {
-  if (args.camera.empty()) {
+// --poses (with the frames' camera): every frame's pose, which the loops are judged by; none
+// without it.
+StatusOr<std::optional<CameraTrajectory>> ReadTrajectoryFlags(
+    const EvalPlaceArgs& args, const std::optional<CameraIntrinsics>& camera) {
+  if (args.poses.empty()) return std::optional<CameraTrajectory>();
+  if (!camera.has_value()) {
+    return Status::InvalidArgument("--poses needs --camera (or a bag's --camera-info-topic)");
+  }
+  RECOG_ASSIGN_OR_RETURN(std::vector<CameraPose> poses, ReadCameraPoses(args.poses));
+  return std::optional<CameraTrajectory>(CameraTrajectory{std::move(poses), camera->K()});
+}
+
+// The frames' camera, --depth-scale and --baseline: the camera matrix, and how 3D points come
+// from the depth or right images of `source` (a dataset or a bag); none without a camera. A bag's
+// stereo baseline comes from its right camera info unless --baseline gives one; its 16UC1 depth
+// is in millimetres.
+StatusOr<std::optional<SequenceGeometryOptions>> ReadGeometryFlags(
+    const EvalPlaceArgs& args, const FrameSource& source,
+    const std::optional<CameraIntrinsics>& camera) {
+  if (!camera.has_value()) {
     if (args.depth_scale > 0 || args.baseline > 0) {
-      return Status::InvalidArgument("--depth-scale and --baseline need --camera");
+      return Status::InvalidArgument(
+          "--depth-scale and --baseline need --camera (or a bag's --camera-info-topic)");
+    }
+    if (!args.bag.topics.depth.empty() || !args.bag.topics.right.empty()) {
+      return Status::InvalidArgument(
+          "--depth-topic and --right-topic need the frames' camera: --camera-info-topic or "
+          "--camera");
     }
     return std::optional<SequenceGeometryOptions>();
   }
-  RECOG_ASSIGN_OR_RETURN(const CameraIntrinsics camera, ParseCamera(args.camera));
   SequenceGeometryOptions geometry;
-  geometry.K = camera.K();
+  geometry.K = camera->K();
   // --depth-scale is in units per metre, as in recog query and the model builder's views.
-  const double units_per_metre =
-      args.depth_scale > 0 ? args.depth_scale : (layout == DatasetLayout::kTum ? 5000.0 : 1000.0);
+  const double units_per_metre = args.depth_scale > 0
+                                     ? args.depth_scale
+                                     : (source.layout() == DatasetLayout::kTum ? 5000.0 : 1000.0);
   geometry.depth_scale = 1.0 / units_per_metre;
   geometry.baseline_m = args.baseline;
+  if (geometry.baseline_m <= 0 && source.bag() != nullptr) {
+    RECOG_ASSIGN_OR_RETURN(const std::optional<double> baseline, source.bag()->StereoBaseline());
+    if (baseline.has_value()) geometry.baseline_m = *baseline;
+  }
   return std::optional<SequenceGeometryOptions>(geometry);
 }
 
@@ -483,17 +518,21 @@ Status AppendRobotB(const EvalPlaceArgs& args, std::optional<DatasetLayout> layo
   return Status::Ok();
 }
 
-// Reads --images (in `layout`, detected when none) and what goes with it, and extracts the
-// frames' features.
+// Reads --images (in `layout`, detected when none) or --bag and what goes with it, and extracts
+// the frames' features.
 StatusOr<PlaceSequence> ReadPlaceSequence(const EvalPlaceArgs& args,
                                           std::optional<DatasetLayout> layout, int features) {
-  RECOG_ASSIGN_OR_RETURN(FrameSource source, FrameSource::Open(args.images, layout));
+  RECOG_ASSIGN_OR_RETURN(FrameSource source, args.bag.given()
+                                                 ? args.bag.Open()
+                                                 : FrameSource::Open(args.images, layout));
   PlaceSequence sequence;
   sequence.layout = source.layout();
+  sequence.bag = source.is_bag();
   RECOG_ASSIGN_OR_RETURN(sequence.truth, ReadTruth(args));
-  RECOG_ASSIGN_OR_RETURN(sequence.trajectory, ReadTrajectoryFlags(args));
+  RECOG_ASSIGN_OR_RETURN(const std::optional<CameraIntrinsics> camera, FramesCamera(args, source));
+  RECOG_ASSIGN_OR_RETURN(sequence.trajectory, ReadTrajectoryFlags(args, camera));
   RECOG_ASSIGN_OR_RETURN(const std::optional<SequenceGeometryOptions> geometry,
-                         ReadGeometryFlags(args, source.layout()));
+                         ReadGeometryFlags(args, source, camera));
   const FeatureOptions orb = OrbFeatureOptions(args, features);
   const uint64_t frames = args.has_truth() ? uint64_t(sequence.truth.frames) : source.size();
   ProgressBar progress(!args.quiet);
@@ -530,7 +569,7 @@ nlohmann::json EvaluationJson(const EvalPlaceArgs& args, const PlaceEvaluation& 
                               const PlaceSequence& sequence, nlohmann::json parameters) {
   nlohmann::json out = ToJson(evaluation, sequence.features);
   out["parameters"] = std::move(parameters);
-  out["layout"] = std::string(DatasetLayoutName(sequence.layout));
+  out["layout"] = LayoutName(sequence);
   out["ground_truth"] =
       args.has_truth() ? nlohmann::json(args.ground_truth) : nlohmann::json(nullptr);
   if (!args.has_truth()) {
@@ -587,8 +626,8 @@ Status SweepAlpha(const EvalPlaceArgs& args, const PlaceSequence& sequence,
   }
   (*out)["sweep"] = sweep;
   PlotOptions plot;
-  plot.title = "Loop detection on " + SequenceTitle(args.images) +
-               ": precision vs recall, alpha from 0 to 1";
+  plot.title =
+      "Loop detection on " + SequenceTitle(args) + ": precision vs recall, alpha from 0 to 1";
   plot.x_label = "recall";
   plot.y_label = "precision";
   RECOG_RETURN_IF_ERROR(WritePlot(args.plot, plot, curves));
@@ -610,7 +649,7 @@ Status PlotLoopsOverTrajectory(const EvalPlaceArgs& args, const CameraTrajectory
   }
   char title[160];
   std::snprintf(title, sizeof(title), "%s, --preset %s: %d loops, %d correct, %d ambiguous",
-                SequenceTitle(args.images).c_str(), PresetFlag(args).c_str(), evaluation.detections,
+                SequenceTitle(args).c_str(), PresetFlag(args).c_str(), evaluation.detections,
                 evaluation.correct, evaluation.ambiguous);
   RECOG_RETURN_IF_ERROR(WriteTrajectoryPlot(trajectory.poses, drawn, title, args.trajectory_plot));
   (*out)["trajectory_plot"] = args.trajectory_plot;
@@ -656,7 +695,7 @@ void PrintPlaceEvaluation(const EvalPlaceArgs& args, const PlaceEvaluation& e,
                 100 * e.precision, 100 * e.recall);
   } else {
     std::printf("frames %d (layout %s), detections %d (no ground truth)\n", e.frames,
-                std::string(DatasetLayoutName(sequence.layout)).c_str(), e.detections);
+                LayoutName(sequence).c_str(), e.detections);
   }
   std::printf("%-13s %8s %8s %8s  (ms per frame)\n", "stage", "mean", "median", "max");
   for (const char* stage : {"features", "points", "conversion", "query", "islands", "insertion",
@@ -679,20 +718,21 @@ int ReportOneMap(const EvalPlaceArgs& args, const PlaceSequence& sequence,
   std::vector<LoopResult> results;
   auto evaluation = EvaluatePlace(sequence.features, sequence.truth, vocabulary, options, &results,
                                   sequence.trajectory ? &*sequence.trajectory : nullptr);
-  if (!evaluation.ok()) return Fail(evaluation.status());
+  if (!evaluation.ok()) return Fail("eval place", evaluation.status());
   nlohmann::json out = EvaluationJson(args, *evaluation, sequence, std::move(parameters));
   if (!args.sweep.empty()) {
-    if (Status s = SweepAlpha(args, sequence, vocabulary, options, &out); !s.ok()) return Fail(s);
+    if (Status s = SweepAlpha(args, sequence, vocabulary, options, &out); !s.ok())
+      return Fail("eval place", s);
   }
   if (!args.draw_dir.empty()) {
     if (Status s = DrawDetections(args.draw_dir, sequence.features, results); !s.ok()) {
-      return Fail(s);
+      return Fail("eval place", s);
     }
   }
   if (sequence.trajectory.has_value()) {
     if (Status s = PlotLoopsOverTrajectory(args, *sequence.trajectory, *evaluation, &out);
         !s.ok()) {
-      return Fail(s);
+      return Fail("eval place", s);
     }
   }
   if (args.json) {
@@ -742,10 +782,17 @@ StatusOr<std::optional<DatasetLayout>> ParseLayoutFlag(const std::string& text) 
   return std::optional<DatasetLayout>(layout);
 }
 
-// The sequence: --images or --rig, each without the flags of the other.
+// The sequence: --images, --bag or --rig, each without the flags of the others.
 Status CheckSequenceFlags(const EvalPlaceArgs& args) {
-  if (args.rig.empty() == args.images.empty()) {
-    return Status::InvalidArgument("give the sequence with either --images or --rig");
+  if (int(!args.rig.empty()) + int(!args.images.empty()) + int(args.bag.given()) != 1) {
+    return Status::InvalidArgument("give the sequence with either --images or --rig (or --bag)");
+  }
+  if (args.bag.given() && args.layout != "auto") {
+    return Status::InvalidArgument("--layout goes with --images, not --bag");
+  }
+  if (!args.camera.empty() && !args.bag.topics.camera_info.empty()) {
+    return Status::InvalidArgument(
+        "give the camera with --camera or --camera-info-topic, not both");
   }
   if (!args.rig.empty() && (args.two_robots() || !args.sweep.empty() || !args.draw_dir.empty() ||
                             !args.camera.empty() || args.baseline > 0)) {
@@ -763,20 +810,21 @@ Status CheckSequenceFlags(const EvalPlaceArgs& args) {
 int RunEvalPlace(const EvalPlaceArgs& args) {
   PlaceEvaluationOptions options;
   int features = 0;
-  if (Status s = ReadDetectorSettings(args, &options, &features); !s.ok()) return Fail(s);
-  if (Status s = CheckReportFlags(args); !s.ok()) return Fail(s);
+  if (Status s = ReadDetectorSettings(args, &options, &features); !s.ok())
+    return Fail("eval place", s);
+  if (Status s = CheckReportFlags(args); !s.ok()) return Fail("eval place", s);
   auto layout = ParseLayoutFlag(args.layout);
-  if (!layout.ok()) return Fail(layout.status());
-  if (Status s = CheckSequenceFlags(args); !s.ok()) return Fail(s);
+  if (!layout.ok()) return Fail("eval place", layout.status());
+  if (Status s = CheckSequenceFlags(args); !s.ok()) return Fail("eval place", s);
   const std::string vocabulary_path =
       args.vocabulary.empty() ? DefaultPlaceVocabularyPath() : args.vocabulary;
   auto vocabulary = LoadAnyVocabulary(vocabulary_path);
-  if (!vocabulary.ok()) return Fail(vocabulary.status());
+  if (!vocabulary.ok()) return Fail("eval place", vocabulary.status());
   auto shared = std::make_shared<const Vocabulary>(std::move(vocabulary).value());
   if (!args.rig.empty()) return RunEvalRig(args, options, features, shared, vocabulary_path);
 
   auto sequence = ReadPlaceSequence(args, *layout, features);
-  if (!sequence.ok()) return Fail(sequence.status());
+  if (!sequence.ok()) return Fail("eval place", sequence.status());
   nlohmann::json parameters = ParametersJson(options, features, vocabulary_path);
   if (sequence->split > 0) {
     return ReportAcrossMaps(args, sequence->split, sequence->features, sequence->truth, shared,
@@ -791,9 +839,11 @@ void AddEvalPlaceCommand(CLI::App& eval, int* exit_code) {
   auto args = std::make_shared<EvalPlaceArgs>();
   CLI::App* place = eval.add_subcommand(
       "place", "Run the loop detector over a sequence (scored when a ground truth is given)");
-  place->add_option("--images", args->images,
-                    "Folder of frames (or a TUM RGB-D, EuRoC or KITTI dataset folder), a list "
-                    "file, or a video");
+  CLI::Option* images =
+      place->add_option("--images", args->images,
+                        "Folder of frames (or a TUM RGB-D, EuRoC or KITTI dataset folder), a list "
+                        "file, or a video");
+  args->bag.AddTo(place, images);
   place->add_option("--rig", args->rig,
                     "A multi-camera rig sequence instead of --images: a rig file with one folder "
                     "per camera beside it (what recog seqgen rig writes), or a EuRoC (camN/"
@@ -843,7 +893,8 @@ void AddEvalPlaceCommand(CLI::App& eval, int* exit_code) {
                     "With --camera: 16-bit depth units per metre (default: TUM's 5000, else "
                     "1000)");
   place->add_option("--baseline", args->baseline,
-                    "With --camera: stereo baseline in metres (needed for right images)");
+                    "With --camera: stereo baseline in metres (needed for right images; a bag's "
+                    "--right-camera-info-topic gives it)");
   place->add_option("--vocab", args->vocabulary, "Vocabulary (default: the bundled place one)");
   place
       ->add_option("--preset", args->preset,

@@ -1,7 +1,8 @@
-// recog load: simulated robots replaying image sequences into recogd, each through its own frame
-// stream into its own fresh map. Reports per RPC the count, throughput, latency percentiles and
-// errors, the loops detected, and what the generator itself cost (its CPU time per frame, against
-// the server's throughput); --verify checks every robot's loops against the offline detector,
+// recog load: simulated robots replaying image sequences (or a ROS 1 bag) into recogd, each
+// through its own frame stream into its own fresh map. Reports per RPC the count, throughput,
+// latency percentiles and errors, the loops detected, and what the generator itself cost (its CPU
+// time per frame, against the server's throughput); --verify checks every robot's loops against the
+// offline detector,
 // --plot draws the latency over the run. The work is in load_generator.h.
 #include <cstdio>
 #include <fstream>
@@ -15,6 +16,7 @@
 #include "tools/common/server_flags.h"
 #include "tools/evaluation/object_evaluation.h"
 #include "tools/load/load_generator.h"
+#include "tools/recog/bag_flags.h"
 #include "tools/recog/commands.h"
 #include "wire/grpc_code_names.h"
 
@@ -24,17 +26,13 @@ namespace {
 struct LoadArgs {
   LoadOptions options;
   std::string camera;     // --camera, parsed into options.camera
+  BagFlags bag;           // --bag and its topics, into options.bag
   bool json = false;      // --json given: JSON on stdout, or into json_file
   std::string json_file;  // --json FILE
   std::string plot;
   bool quiet = false;
   ServerFlags server;
 };
-
-int Fail(const Status& status) {
-  std::fprintf(stderr, "recog load: %s\n", status.ToString().c_str());
-  return 1;
-}
 
 // "-" for latencies of calls that were never answered.
 std::string Ms(const RpcStats& stats, double percentile) {
@@ -53,13 +51,17 @@ void PrintReport(const LoadArgs& args, const LoadReport& report) {
   } else {
     std::snprintf(bound, sizeof(bound), "%g s", o.duration_s);
   }
-  if (o.rate_hz > 0) {
+  if (o.bag_speed > 0) {
+    std::snprintf(pace, sizeof(pace), "the bag's pace x %g", o.bag_speed);
+  } else if (o.rate_hz > 0) {
     std::snprintf(pace, sizeof(pace), "%g frames/s each", o.rate_hz);
   } else {
     std::snprintf(pace, sizeof(pace), "as fast as %u frames in flight allow", o.in_flight);
   }
   std::printf("run %s: %d robots, %s, %s, %s\n", report.run_id.c_str(), o.robots, bound, pace,
-              o.features_on_client ? "ORB features extracted on the client" : "image files");
+              o.features_on_client ? "ORB features extracted on the client"
+              : o.bag.has_value()  ? "bag frames"
+                                   : "image files");
   std::printf("%-17s %8s %9s %8s %8s %8s %8s  %s\n", "rpc", "ok", "per_s", "p50_ms", "p90_ms",
               "p99_ms", "max_ms", "errors");
   for (const char* name : {kCreateMapRpc, kStreamFramesRpc, kRecognizeObjectsRpc, kDeleteMapRpc}) {
@@ -114,11 +116,16 @@ void PrintReport(const LoadArgs& args, const LoadReport& report) {
 int RunLoadCommand(LoadArgs& args) {
   if (!args.camera.empty()) {
     StatusOr<CameraIntrinsics> camera = ParseCamera(args.camera);
-    if (!camera.ok()) return Fail(camera.status());
+    if (!camera.ok()) return Fail("load", camera.status());
     args.options.camera = *camera;
   }
+  if (args.bag.given()) {
+    // Without --topic, the error lists the bag's image topics.
+    if (args.bag.topics.image.empty()) return Fail("load", args.bag.Open().status());
+    args.options.bag = LoadBag{args.bag.bag, args.bag.topics, args.bag.options};
+  }
   const StatusOr<LoadGenerator> load = LoadGenerator::Prepare(args.options);
-  if (!load.ok()) return Fail(load.status());
+  if (!load.ok()) return Fail("load", load.status());
   auto client = args.server.Connect();  // after preparing (see LoadGenerator)
   if (!client.ok()) {
     std::fprintf(stderr, "recog load: %s\n", DescribeStatus(client.status()).c_str());
@@ -129,12 +136,14 @@ int RunLoadCommand(LoadArgs& args) {
     progress.Update(args.options.frames > 0 ? "answers" : "run (ms)", done, total);
   });
   progress.Finish();
-  if (!report.ok()) return Fail(report.status());
+  if (!report.ok()) return Fail("load", report.status());
 
   nlohmann::json out = LoadReportJson(*report);
   const LoadOptions& o = args.options;
   out["options"] = {{"server", args.server.server},
                     {"sequences", o.sequences},
+                    {"bag", o.bag.has_value() ? nlohmann::json(o.bag->path) : nlohmann::json()},
+                    {"bag_speed", o.bag_speed},
                     {"robots", o.robots},
                     {"frames", o.frames},
                     {"duration_s", o.duration_s},
@@ -145,7 +154,7 @@ int RunLoadCommand(LoadArgs& args) {
                     {"object_image", o.object_image},
                     {"verify", o.verify}};
   if (!args.plot.empty()) {
-    if (Status s = WriteLatencyPlot(*report, args.plot); !s.ok()) return Fail(s);
+    if (Status s = WriteLatencyPlot(*report, args.plot); !s.ok()) return Fail("load", s);
     out["plot"] = args.plot;
   }
   if (args.json && args.json_file.empty()) {
@@ -157,7 +166,7 @@ int RunLoadCommand(LoadArgs& args) {
   if (!args.json_file.empty()) {
     std::ofstream file(args.json_file);
     file << out.dump(2) << "\n";
-    if (!file) return Fail(Status::Internal("cannot write '" + args.json_file + "'"));
+    if (!file) return Fail("load", Status::Internal("cannot write '" + args.json_file + "'"));
   }
 
   if (report->frames_answered == 0) {
@@ -197,18 +206,25 @@ void AddLoadCommand(CLI::App& app, int* exit_code) {
   LoadOptions& o = args->options;
   CLI::App* load = app.add_subcommand(
       "load", "Load-test recogd: simulated robots replay image sequences into maps of their own");
-  load->add_option("--sequences", o.sequences,
-                   "Folders of images (natural order) or recog seqgen outputs; robot i replays "
-                   "sequence i % count")
-      ->required();
+  CLI::Option* sequences =
+      load->add_option("--sequences", o.sequences,
+                       "Folders of images (natural order) or recog seqgen outputs; robot i replays "
+                       "sequence i % count");
+  args->bag.AddTo(load, sequences);
   load->add_option("--robots", o.robots, "Simulated robots, each with its own stream and map")
       ->required();
   CLI::Option* duration =
       load->add_option("--duration", o.duration_s, "Seconds each robot sends frames");
   load->add_option("--frames", o.frames, "Frames each robot sends (looping over its sequence)")
       ->excludes(duration);
-  load->add_option("--rate", o.rate_hz, "Frames per second per robot; 0 = as fast as possible")
-      ->capture_default_str();
+  CLI::Option* rate =
+      load->add_option("--rate", o.rate_hz, "Frames per second per robot; 0 = as fast as possible")
+          ->capture_default_str();
+  load->add_option("--bag-speed", o.bag_speed,
+                   "With --bag: replay at this many times the bag's own pace, its frames' stamps "
+                   "(1 = as recorded); without it, --rate applies")
+      ->needs("--bag")
+      ->excludes(rate);
   load->add_option("--in-flight", o.in_flight, "Frames a robot may have sent and not had answered")
       ->capture_default_str();
   load->add_flag("--features-on-client", o.features_on_client,
@@ -217,7 +233,8 @@ void AddLoadCommand(CLI::App& app, int* exit_code) {
                    "Also call RecognizeObjects on frames 0, K, 2K, ... of each robot (0 = never)")
       ->capture_default_str();
   load->add_option("--camera", args->camera,
-                   "Intrinsics fx,fy,cx,cy[,k1,k2,p1,p2[,k3]] of the RecognizeObjects frames");
+                   "Intrinsics fx,fy,cx,cy[,k1,k2,p1,p2[,k3]] of the RecognizeObjects frames "
+                   "(default with --bag: its --camera-info-topic)");
   load->add_option("--object-image", o.object_image,
                    "Recognise objects on this image instead of the robot's current frame");
   load->add_flag("--verify", o.verify,

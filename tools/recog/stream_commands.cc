@@ -1,4 +1,5 @@
-// recog stream: a recorded sequence (folder, list or video; or a multi-camera rig sequence)
+// recog stream: a recorded sequence (folder, list, video or ROS 1 bag; or a multi-camera rig
+// sequence)
 // through one StreamFrames call of recogd, printing every loop closure as it is answered, over
 // the C++ client library. It takes the ServerFlags; a failed call prints one line
 // "recog stream: CODE: message" and exits 1.
@@ -31,6 +32,8 @@
 #include "tools/evaluation/place_evaluation.h"
 #include "tools/evaluation/rig_dataset.h"
 #include "tools/evaluation/rig_file.h"
+#include "tools/load/load_generator.h"  // AttachBagGeometry
+#include "tools/recog/bag_flags.h"
 #include "tools/recog/commands.h"
 #include "tools/recog/loop_json.h"
 #include "wire/grpc_code_names.h"
@@ -40,7 +43,7 @@ namespace {
 
 namespace fs = std::filesystem;
 using client::RecognitionClient;
-using json = nlohmann::ordered_json;
+using Json = nlohmann::ordered_json;
 
 // ---- recog stream ----
 
@@ -56,6 +59,7 @@ struct StreamArgs {
   uint64_t frames = 0;  // 0: every frame of the sequence
   bool features_on_client = false, create = false, timestamps = false, quiet = false;
   bool keep_thumbnails = false;  // with create: the new map keeps a thumbnail of each frame
+  BagFlags bag;                  // --bag and its topics, instead of --images
 };
 
 // Set by SIGINT/SIGTERM while `recog stream` runs: stop reading frames, take the answers of those
@@ -89,8 +93,22 @@ class StreamSequence {
         sequence.cameras_.push_back(camera.name);
       }
     } else {
-      RECOG_ASSIGN_OR_RETURN(sequence.images_, FrameSource::Open(args.images));
+      RECOG_ASSIGN_OR_RETURN(sequence.images_,
+                             args.bag.given() ? args.bag.Open() : FrameSource::Open(args.images));
       sequence.cameras_ = {""};
+      if (const RosBagReader* bag = sequence.images_->bag()) {
+        sequence.bag_camera_ = bag->FrameCamera();
+        RECOG_ASSIGN_OR_RETURN(sequence.baseline_, bag->StereoBaseline());
+        if (!sequence.bag_camera_.has_value() &&
+            !(args.bag.topics.depth.empty() && args.bag.topics.right.empty())) {
+          return Status::InvalidArgument(
+              "--depth-topic and --right-topic need --camera-info-topic");
+        }
+        if (!args.bag.topics.right.empty() && !sequence.baseline_.has_value()) {
+          return Status::InvalidArgument(
+              "--right-topic needs --right-camera-info-topic (its P gives the baseline)");
+        }
+      }
     }
     return sequence;
   }
@@ -134,9 +152,16 @@ class StreamSequence {
       cv::Mat gray;
       RECOG_ASSIGN_OR_RETURN(const bool more, images_->Next(&gray, name));
       if (!more) return false;
-      client::Result<pb::Frame> built = StreamFrame(args, !images_->is_video(), *name, gray);
+      const bool from_file = !images_->is_video() && !images_->is_bag();
+      client::Result<pb::Frame> built = StreamFrame(args, from_file, *name, gray);
       if (!built.ok()) return Status::InvalidArgument(built.status().error_message());
       *frame = std::move(*built);
+      if (images_->is_bag()) {
+        RECOG_ASSIGN_OR_RETURN(const cv::Mat depth, images_->depth());
+        RECOG_ASSIGN_OR_RETURN(const cv::Mat right, images_->right());
+        RECOG_RETURN_IF_ERROR(AttachBagGeometry(bag_camera_, baseline_, depth, right, frame)
+                                  .WithContext("frame " + *name));
+      }
       images->push_back(std::move(gray));
       recorded = images_->timestamp();
     }
@@ -164,6 +189,8 @@ class StreamSequence {
   }
 
   std::optional<FrameSource> images_;
+  std::optional<CameraIntrinsics> bag_camera_;  // a bag's frames' camera (--camera-info-topic)
+  std::optional<double> baseline_;              // a bag's stereo baseline
   std::optional<RigDataset> rig_;
   std::vector<std::string> cameras_;
   size_t next_ = 0;
@@ -244,8 +271,8 @@ Status DrawLoop(const std::string& dir, const SentFrames& sent,
 // --rate and the sequence: what the command line cannot check by itself.
 Status CheckStreamFlags(const StreamArgs& args) {
   if (!(args.rate >= 0)) return Status::InvalidArgument("--rate must be >= 0");
-  if (args.images.empty() == args.rig.empty()) {
-    return Status::InvalidArgument("give --images or --rig");
+  if (int(!args.images.empty()) + int(!args.rig.empty()) + int(args.bag.given()) != 1) {
+    return Status::InvalidArgument("give --images or --rig (or --bag)");
   }
   return Status::Ok();
 }
@@ -330,7 +357,7 @@ class StreamReport {
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     const double rate = seconds > 0 ? double(answered_) / seconds : 0.0;
     if (args_.server.json) {
-      std::printf("%s\n", json({{"event", "summary"},
+      std::printf("%s\n", Json({{"event", "summary"},
                                 {"map", args_.map},
                                 {"frames", answered_},
                                 {"loops", loops_},
@@ -366,7 +393,7 @@ class StreamReport {
     ++inter_map_loops_;
     const pb::LoopResult& m = found.result();
     if (args_.server.json) {
-      json loop = {{"event", "inter_map_loop"}, {"map", found.map()}};
+      Json loop = {{"event", "inter_map_loop"}, {"map", found.map()}};
       loop.update(LoopJson(m));
       loop["frame_file"] = sent_.names[sequence];
       std::printf("%s\n", loop.dump().c_str());
@@ -385,7 +412,7 @@ class StreamReport {
   // not counted as a loop.
   void Candidate(const pb::LoopResult& r) {
     if (args_.server.json) {
-      json candidate = {{"event", "candidate"}};
+      Json candidate = {{"event", "candidate"}};
       candidate.update(LoopJson(r));
       std::printf("%s\n", candidate.dump().c_str());
     } else {
@@ -401,7 +428,7 @@ class StreamReport {
   void Loop(size_t sequence, const pb::LoopResult& r) {
     ++loops_;
     if (args_.server.json) {
-      json loop = {{"event", "loop"}};
+      Json loop = {{"event", "loop"}};
       loop.update(LoopJson(r));
       loop["frame_file"] = sent_.names[sequence];
       const auto match = sent_.sequence_of_id.find(r.match_frame_id());
@@ -554,8 +581,10 @@ void AddStreamCommands(CLI::App& app, int* exit_code) {
       "stream", "Stream a recorded sequence into a map of recogd and print every loop closure");
   stream->footer(
       "JPEG and PNG files are sent as they are: the server decodes them to the grey pixels that "
-      "`recog eval place` reads, so the loops are the same. Other images and video frames are sent "
-      "as raw grey pixels. Frames are numbered as the map numbers them, from 0. --json prints one "
+      "`recog eval place` reads, so the loops are the same. Other images, video frames and a "
+      "bag's frames are sent as raw grey pixels (a bag's with the intrinsics of "
+      "--camera-info-topic, and its depth or right images for metric loops). Frames are numbered "
+      "as the map numbers them, from 0. --json prints one "
       "object per line: {\"event\": \"loop\", ...} per loop, then {\"event\": \"summary\", ...}. "
       "A frame that fails on its own is reported and the stream goes on; the exit status is then "
       "1. Ctrl-C (SIGINT) or SIGTERM stops reading frames: the answers of those sent are taken, "
@@ -565,6 +594,7 @@ void AddStreamCommands(CLI::App& app, int* exit_code) {
       stream->add_option("--images", stream_args->images,
                          "Folder of frames, a list file, a video, or camera:N for the live camera "
                          "/dev/videoN");
+  stream_args->bag.AddTo(stream, images);
   stream
       ->add_option("--rig", stream_args->rig,
                    "Instead of --images, a multi-camera rig sequence (a folder with rig.yaml and "
@@ -611,10 +641,11 @@ void AddStreamCommands(CLI::App& app, int* exit_code) {
   stream->add_option("--draw", stream_args->draw,
                      "Folder for a PNG per loop (loop_<frame>_<match>.png): both frames side by "
                      "side with their inlier correspondences (a rig loop: its first camera pair)");
-  stream->add_flag("--timestamps", stream_args->timestamps,
-                   "Stamp each frame with its time in the dataset (TUM, EuRoC, KITTI; 0.0 is a "
-                   "time), or else this machine's clock when it is sent (the map's "
-                   "recent_seconds then applies instead of recent_frames)");
+  stream->add_flag(
+      "--timestamps", stream_args->timestamps,
+      "Stamp each frame with its time in the dataset (TUM, EuRoC, KITTI, a bag's "
+      "header stamps; 0.0 is a time), or else this machine's clock when it is sent (the map's "
+      "recent_seconds then applies instead of recent_frames)");
   stream->add_flag("-q,--quiet", stream_args->quiet, "No progress output");
   ConnectCommand(stream, &stream_args->server, exit_code, [stream_args](RecognitionClient& client) {
     return RunStream(*stream_args, client);
