@@ -3,10 +3,13 @@
 # scripts/test.sh (and so CI) and deploy/docker/Dockerfile. Expects the dependencies to be
 # installed (scripts/install_deps.sh).
 #
+# Usage: bash scripts/build.sh [TARGET ...]   (no target: everything)
+#
 # The README's two commands (run.sh, then test.sh) build the same configuration in the same
-# folder, so the second compiles nothing the first built: Release, warnings as errors, tests and
-# benchmarks included. RECOG_CMAKE_ARGS adds to it (a later -D wins over an earlier one), e.g.
-# the sanitizer builds of CI or the Dockerfile's build without tests.
+# folder: Release, warnings as errors, tests and benchmarks included. run.sh builds only what
+# serving needs (recogd and recog); test.sh builds the rest, so nothing is compiled twice.
+# RECOG_CMAKE_ARGS adds to the configuration (a later -D wins over an earlier one), e.g. the
+# sanitizer builds of CI or the Dockerfile's build without tests.
 #
 # Environment:
 #   RECOG_BUILD_DIR   build folder (default: build)
@@ -17,4 +20,6 @@ cd "$(dirname "$0")/.."
 build_dir=${RECOG_BUILD_DIR:-build}
 # shellcheck disable=SC2086
 cmake -S . -B "$build_dir" -G Ninja -DCMAKE_BUILD_TYPE=Release -DRECOG_WERROR=ON ${RECOG_CMAKE_ARGS:-}
-cmake --build "$build_dir" -j"${RECOG_JOBS:-$(nproc)}"
+targets=()
+[ $# -eq 0 ] || targets=(--target "$@")
+cmake --build "$build_dir" -j"${RECOG_JOBS:-$(nproc)}" "${targets[@]}"

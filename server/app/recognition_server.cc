@@ -153,7 +153,7 @@ StatusOr<std::unique_ptr<RecognitionServer>> RecognitionServer::Start(const Serv
   spdlog::info("recogd ready: {} place maps, {} objects, {} workers, metrics on {}, console on {}",
                state.maps->List().size(), state.objects->size(), state.pool->threads(),
                config.metrics_listen.empty() ? "(off)" : config.metrics_listen,
-               config.console.listen.empty() ? "(off)" : config.console.listen);
+               server->console_ ? server->console_->url() : "(off)");
   return server;
 }
 

@@ -158,8 +158,9 @@ StatusOr<std::unique_ptr<WebConsole>> WebConsole::Start(ServerState* state,
     http.listen_after_bind();
     console->stopped_ = true;
   });
-  spdlog::info("console on {}://{}:{}/ ({} files)", config.tls.cert.empty() ? "http" : "https",
-               host, console->port_, console->files_.size());
+  console->url_ = std::string(config.tls.cert.empty() ? "http" : "https") + "://" + host + ":" +
+                  std::to_string(console->port_) + "/";
+  spdlog::info("console on {} ({} files)", console->url_, console->files_.size());
   return console;
 }
 

@@ -22,6 +22,7 @@
 #include <atomic>
 #include <memory>
 #include <optional>
+#include <string>
 #include <thread>
 
 #include <grpcpp/grpcpp.h>
@@ -52,6 +53,8 @@ class WebConsole {
   WebConsole& operator=(const WebConsole&) = delete;
 
   int port() const { return port_; }
+  // Where a browser opens it: "http://HOST:PORT/" ("https://" with the server's TLS files).
+  const std::string& url() const { return url_; }
 
  private:
   WebConsole(ServerState* state, std::shared_ptr<grpc::Channel> channel);
@@ -66,6 +69,7 @@ class WebConsole {
   std::thread thread_;
   std::atomic<bool> stopped_{false};  // the thread has left listen_after_bind
   int port_ = 0;
+  std::string url_;
 };
 
 // Where the bundled pages are: the source tree's server/console/web, else the installed copy.
