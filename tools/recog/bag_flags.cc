@@ -36,8 +36,7 @@ void BagFlags::AddTo(CLI::App* command, CLI::Option* folder) {
       ->needs(bag_option);
 }
 
-CLI::Option* BagFlags::AddImageTo(CLI::App* command, CLI::Option* folder,
-                                  const std::string& help) {
+CLI::Option* BagFlags::AddImageTo(CLI::App* command, CLI::Option* folder, const std::string& help) {
   CLI::Option* bag_option = command->add_option("--bag", bag, help)->excludes(folder);
   command
       ->add_option("--topic", topics.image,
