@@ -8,13 +8,19 @@ very command and output; without the settings, the summary and the hint why ther
 stream_folder's loop and summary lines; and one line on stderr, exit 1 and no traceback for a
 folder that does not exist, a folder without images, a map that exists, a frame that is not an
 image (stream_corridor names it and goes on: exit 0) and a server that is not there (naming its
-address and `bash scripts/run.sh`); bad settings are a usage error (exit 2).
+address and `bash scripts/run.sh`); bad settings are a usage error (exit 2). stream_folder's
+--bag: bags of tests/data/corridor written by tests/testing/write_bag.py (JPEG bytes; mono8
+pixels recorded last frame first) give the folder's loops, their stamps are the frames' times,
+and a topic that is not there (the bag's topics listed), an unsupported encoding, a file that is
+not a bag and rosbag missing are each one line (skipped without Python's rosbag).
 
 Environment (ctest sets it): RECOGD, RECOG_SOURCE_DIR, PYTHONPATH. Exits with 77 (skipped) when
 Python's grpc or protobuf modules are missing.
 """
 
+import importlib.util
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -40,17 +46,42 @@ README = SOURCE / "client" / "python" / "README.md"
 CORRIDOR = SOURCE / "tests" / "data" / "corridor"
 #: The settings that make the fixture's 4 frames give loops, as the README gives them.
 SETTINGS = ["temporal_matches=0", "recent_frames=1"]
+#: Bags: written by this interpreter (it needs Debian's python3-rosbag), frames 1 s apart.
+WRITE_BAG = SOURCE / "tests" / "testing" / "write_bag.py"
+HAVE_ROSBAG = importlib.util.find_spec("rosbag") is not None
+TOPIC = "/camera/image_raw"
+#: SETTINGS for frames with timestamps 1 s apart: tau_c leaves out the frame before, as
+#: recent_frames=1 does for frames without.
+BAG_SETTINGS = {"temporal_matches": 0, "recent_frames": 1, "recent_seconds": 1.5}
 #: The command the README documents, from the repository's root.
 README_COMMAND = ("client/python/examples/stream_corridor.py tests/data/corridor "
                   "temporal_matches=0 recent_frames=1")
 
 
-def run(example: Path, *args: str, server: str = "") -> subprocess.CompletedProcess:
-    """Runs ``example`` with ``args`` from the repository's root, RECOG_SERVER = ``server``."""
+def run(example: Path, *args: str, server: str = "",
+        pythonpath: str = "") -> subprocess.CompletedProcess:
+    """Runs ``example`` with ``args`` from the repository's root, RECOG_SERVER = ``server``, with
+    ``pythonpath`` before PYTHONPATH."""
     environment = {**os.environ, "RECOG_SERVER": server}
+    if pythonpath:
+        environment["PYTHONPATH"] = os.pathsep.join(
+            filter(None, [pythonpath, environment.get("PYTHONPATH", "")]))
     return subprocess.run([sys.executable, str(example), *map(str, args)], cwd=SOURCE,
                           env=environment, capture_output=True, text=True, timeout=120,
                           check=False)
+
+
+def write_bag(path: Path, *args: str) -> Path:
+    """Writes a bag of tests/data/corridor's frames, 1 s apart, with write_bag.py's ``args``."""
+    subprocess.run([sys.executable, str(WRITE_BAG), str(path), "--images", str(CORRIDOR),
+                    "--topic", TOPIC, "--period", "1", *args], check=True, capture_output=True,
+                   timeout=120)
+    return path
+
+
+def without_names(lines: list[str]) -> list[str]:
+    """stream_folder's loop lines without the frames' names (file names, or a bag's stamps)."""
+    return [re.sub(r" \([^)]*\)", "", line) for line in lines]
 
 
 class ExamplesTest(unittest.TestCase):
@@ -163,6 +194,89 @@ class ExamplesTest(unittest.TestCase):
         self.assertRegex(lines[1], r"^frame 3 \(60\.jpg\) closes a loop with frame 1 "
                          r"\(20\.jpg\): ")
         self.assertEqual(lines[2], "4 frames streamed into map 'lab', 2 loops")
+
+    @unittest.skipUnless(HAVE_ROSBAG, "no Python rosbag (Debian: python3-rosbag)")
+    def test_stream_folder_streams_a_bag_with_the_loops_of_its_folder(self):
+        with RecognitionClient(self.server.target) as client:
+            for name in ("bag-folder", "bag-jpeg", "bag-mono8"):
+                client.create_map(name, BAG_SETTINGS)
+        folder = run(FOLDER_EXAMPLE, "--map", "bag-folder", CORRIDOR, server=self.server.target)
+        self.assertEqual(folder.returncode, 0, folder.stderr)
+        with tempfile.TemporaryDirectory(prefix="recog-examples-") as temporary:
+            for encoding, extra in (("jpeg", []), ("mono8", ["--reverse", "--compression", "lz4"])):
+                with self.subTest(encoding):
+                    bag = write_bag(Path(temporary, f"{encoding}.bag"), "--encoding", encoding,
+                                    *extra)
+                    answer = run(FOLDER_EXAMPLE, "--map", f"bag-{encoding}", "--bag", bag,
+                                 "--topic", TOPIC, server=self.server.target)
+                    self.assertEqual(answer.returncode, 0, answer.stderr)
+                    self.assertEqual(answer.stderr, "")
+                    lines = answer.stdout.splitlines()
+                    self.assertRegex(lines[0], r"^frame 2 \(stamp 1002\.000\) closes a loop with "
+                                     r"frame 0 \(stamp 1000\.000\): ")
+                    self.assertEqual(without_names(lines[:-1]),
+                                     without_names(folder.stdout.splitlines()[:-1]))
+                    self.assertEqual(len(lines), 3, answer.stdout)
+                    self.assertEqual(lines[-1], f"4 frames streamed into map 'bag-{encoding}', "
+                                     "2 loops")
+
+    @unittest.skipUnless(HAVE_ROSBAG, "no Python rosbag (Debian: python3-rosbag)")
+    def test_a_bags_stamps_are_its_frames_times(self):
+        # tau_c of 100 s leaves out every frame of a bag 3 s long, but not of the folder (no
+        # timestamps: recent_frames=1).
+        settings = {**BAG_SETTINGS, "recent_seconds": 100}
+        with RecognitionClient(self.server.target) as client:
+            client.create_map("stamps-folder", settings)
+            client.create_map("stamps-bag", settings)
+        folder = run(FOLDER_EXAMPLE, "--map", "stamps-folder", CORRIDOR, server=self.server.target)
+        self.assertEqual(folder.stdout.splitlines()[-1],
+                         "4 frames streamed into map 'stamps-folder', 2 loops")
+        with tempfile.TemporaryDirectory(prefix="recog-examples-") as temporary:
+            bag = write_bag(Path(temporary, "corridor.bag"), "--encoding", "jpeg")
+            answer = run(FOLDER_EXAMPLE, "--map", "stamps-bag", "--bag", bag, "--topic", TOPIC,
+                         server=self.server.target)
+        self.assertEqual(answer.returncode, 0, answer.stderr)
+        self.assertEqual(answer.stdout, "4 frames streamed into map 'stamps-bag', 0 loops\n")
+
+    @unittest.skipUnless(HAVE_ROSBAG, "no Python rosbag (Debian: python3-rosbag)")
+    def test_a_bag_that_cannot_be_streamed_is_one_line(self):
+        with tempfile.TemporaryDirectory(prefix="recog-examples-") as temporary:
+            bag = write_bag(Path(temporary, "corridor.bag"), "--encoding", "jpeg")
+            yuv = write_bag(Path(temporary, "yuv.bag"), "--encoding", "yuv422")
+            not_a_bag = Path(temporary, "notes.bag")
+            not_a_bag.write_text("not a bag", encoding="utf-8")
+            hidden = Path(temporary, "hidden")
+            hidden.mkdir()
+            Path(hidden, "rosbag.py").write_text(
+                "raise ModuleNotFoundError(\"No module named 'rosbag'\", name='rosbag')\n",
+                encoding="utf-8")
+            topics = f"its topics: {TOPIC} (sensor_msgs/CompressedImage, 4 messages)"
+            for args, fragments, pythonpath in (
+                    (["--bag", bag, "--topic", "/cam"], [f"{bag}: no image topic /cam; {topics}"],
+                     ""),
+                    (["--bag", bag], [f"{bag}: give --topic; {topics}"], ""),
+                    (["--bag", yuv, "--topic", TOPIC],
+                     [f"{yuv}: encoding 'yuv422' of the image at stamp 1000.000 is not mono8, "
+                      "rgb8 or bgr8"], ""),
+                    (["--bag", not_a_bag, "--topic", TOPIC], [f"{not_a_bag}: "], ""),
+                    (["--bag", Path(temporary, "none.bag"), "--topic", TOPIC],
+                     ["No such file or directory"], ""),
+                    (["--bag", bag, "--topic", TOPIC],
+                     ["--bag needs Python's rosbag module", "python3-rosbag"], str(hidden))):
+                with self.subTest(args=args, pythonpath=pythonpath):
+                    answer = run(FOLDER_EXAMPLE, "--map", "bad-bag", *args,
+                                 server=self.server.target, pythonpath=pythonpath)
+                    self.assert_one_line_error(answer, FOLDER_EXAMPLE, *fragments)
+            for args, message in (([CORRIDOR, "--bag", bag], "give either a folder of images "
+                                   "or --bag FILE --topic TOPIC"),
+                                  ([CORRIDOR, "--topic", TOPIC], "--topic goes with --bag")):
+                with self.subTest(args=args):
+                    answer = run(FOLDER_EXAMPLE, "--map", "bad-bag", *args,
+                                 server=self.server.target)
+                    self.assertEqual(answer.returncode, 2, answer.stderr)
+                    self.assertIn(f"stream_folder.py: error: {message}", answer.stderr)
+        with RecognitionClient(self.server.target) as client:
+            self.assertNotIn("bad-bag", [m.name for m in client.list_maps()])
 
     def test_a_folder_that_does_not_exist_is_one_line(self):
         missing = SOURCE / "tests" / "data" / "no-such-folder"
