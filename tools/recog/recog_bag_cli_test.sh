@@ -74,6 +74,13 @@ expect_usage_error "--topic without --bag" "requires --bag" "$recog" eval place 
   --topic "$topic"
 expect_usage_error "--bag-speed without --bag" "requires --bag" "$recog" load --sequences "$images" \
   --robots 1 --frames 1 --bag-speed 1
+expect_error "a depth offset that is not a number" \
+  "INVALID_ARGUMENT: BagReadOptions.max_depth_offset = nan: must be finite and >= 0" \
+  "$recog" eval place --bag "$tmp/small.bag" --topic "$topic" --max-depth-offset nan -q
+for speed in nan -1 inf; do
+  expect_error "--bag-speed $speed" "INVALID_ARGUMENT: --bag-speed must be 0 or a positive factor" \
+    "$recog" load --bag "$tmp/small.bag" --topic "$topic" --robots 1 --frames 1 --bag-speed "$speed"
+done
 
 # The bundled frames from the bag: depth and camera info give 3D points and metric loops.
 expect_ok "eval place --bag with depth and camera info" "$recog" eval place --bag "$tmp/small.bag" \
