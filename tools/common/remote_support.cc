@@ -56,6 +56,37 @@ std::string UtcTime(int64_t unix_ms) {
   return text;
 }
 
+Status FromClient(const grpc::Status& status) {
+  return status.error_code() == grpc::StatusCode::NOT_FOUND
+             ? Status::NotFound(status.error_message())
+             : Status::InvalidArgument(status.error_message());
+}
+
+Status AttachBagGeometry(const std::optional<CameraIntrinsics>& camera,
+                         std::optional<double> baseline, const cv::Mat& depth, const cv::Mat& right,
+                         pb::Frame* frame) {
+  if (!camera.has_value()) {
+    if (depth.empty() && right.empty()) return Status::Ok();
+    return Status::InvalidArgument(
+        "a depth or right image needs the camera's intrinsics (--camera-info-topic)");
+  }
+  CameraIntrinsics intrinsics = *camera;
+  if (!depth.empty() || !right.empty()) intrinsics.distortion.clear();
+  SetIntrinsics(intrinsics, frame);
+  grpc::Status attached;
+  if (!depth.empty()) {
+    attached = client::AttachDepth(depth, 1000.0, frame);  // 16UC1: millimetres (REP 118)
+  } else if (!right.empty()) {
+    if (!baseline.has_value()) {
+      return Status::InvalidArgument(
+          "a right image needs the stereo baseline (--right-camera-info-topic)");
+    }
+    attached = client::AttachStereoRight(right, *baseline, frame);
+  }
+  if (!attached.ok()) return FromClient(attached);
+  return Status::Ok();
+}
+
 int Fail(const char* command, const grpc::Status& status) {
   std::fprintf(stderr, "recog %s: %s\n", command, DescribeStatus(status).c_str());
   return 1;

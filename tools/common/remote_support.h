@@ -10,6 +10,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <optional>
 #include <string>
 #include <string_view>
 
@@ -42,6 +43,19 @@ client::Result<pb::Frame> FrameFromImageFile(const std::string& path, const cv::
 
 // Sets the frame's intrinsics (pinhole and distortion) to `camera`.
 void SetIntrinsics(const CameraIntrinsics& camera, pb::Frame* frame);
+
+// The error of a client frame-preparation helper (client/cpp/frames.h), which reports NOT_FOUND
+// or INVALID_ARGUMENT, as core's Status.
+Status FromClient(const grpc::Status& status);
+
+// A bag frame's 3D structure for recogd: with `camera`, the frame's intrinsics (without
+// distortion when a depth or right image goes with them), and `depth` (16UC1 millimetres or
+// 32FC1 metres, AttachDepth) or else `right` (a rectified pair `baseline` metres wide,
+// AttachStereoRight); empty images are none. INVALID_ARGUMENT for a depth or right image without
+// a camera, a right image without a baseline, or what the client refuses.
+Status AttachBagGeometry(const std::optional<CameraIntrinsics>& camera,
+                         std::optional<double> baseline, const cv::Mat& depth, const cv::Mat& right,
+                         pb::Frame* frame);
 
 // A proto enum value's name without its prefix, in lower case: "loop_detected" for
 // LOOP_STATUS_LOOP_DETECTED (core's spelling, as `recog eval place` prints it).

@@ -9,13 +9,14 @@
 // own bytes when they are JPEG or PNG (other formats, and a bag's frames, as raw grey pixels), or,
 // with features_on_client, the ORB features client::ExtractOrbFeatures computes from them (the
 // server's defaults, so the map answers alike); a bag's frames carry the intrinsics of its camera
-// info, with its depth or right images (AttachBagGeometry). A robot loops over its sequence when
-// it needs more frames, and sends frame k at start + k / rate (as soon as possible when rate is
-// 0), or, with bag_speed, at the bag's own pace (the frames' stamps from the first, divided by
-// bag_speed; each pass over the bag one mean frame interval after the last frame), but never more
-// than `in_flight` frames ahead of their answers. For every objects_every-th frame (frames 0, K,
-// 2K, ...) the robot also calls RecognizeObjects with the camera's intrinsics, on that frame or on
-// object_image, one call at a time on a thread of its own, while its stream goes on.
+// info, with its depth or right images (AttachBagGeometry, remote_support.h). A robot loops over
+// its sequence when it needs more frames, and sends frame k at start + k / rate (as soon as
+// possible when rate is 0), or, with bag_speed, at the bag's own pace (the frames' stamps from the
+// first, divided by bag_speed; each pass over the bag one mean frame interval after the last
+// frame), but never more than `in_flight` frames ahead of their answers. For every objects_every-th
+// frame (frames 0, K, 2K, ...) the robot also calls RecognizeObjects with the camera's intrinsics,
+// on that frame or on object_image, one call at a time on a thread of its own, while its stream
+// goes on.
 //
 // Phases: every robot creates its map `<map_prefix>-<run id>-<i>` (CreateMap with the server's
 // default settings) and opens its stream; then all start together (the run: its wall time, the
@@ -221,15 +222,6 @@ class LoadGenerator {
   std::vector<Sequence> sequences_;
   std::optional<pb::Frame> object_frame_;  // with the intrinsics
 };
-
-// A bag frame's 3D structure for recogd: with `camera`, the frame's intrinsics (without
-// distortion when a depth or right image goes with them), and `depth` (16UC1 millimetres or
-// 32FC1 metres, AttachDepth) or else `right` (a rectified pair `baseline` metres wide,
-// AttachStereoRight); empty images are none. INVALID_ARGUMENT for a depth or right image without
-// a camera, a right image without a baseline, or what the client refuses.
-Status AttachBagGeometry(const std::optional<CameraIntrinsics>& camera,
-                         std::optional<double> baseline, const cv::Mat& depth, const cv::Mat& right,
-                         pb::Frame* frame);
 
 // The offline detector that --verify compares a robot's answers with, for a map with `settings`
 // (every field set, as MapInfo has them): its preset, with the settings the map keeps over it

@@ -32,7 +32,6 @@
 #include "tools/evaluation/place_evaluation.h"
 #include "tools/evaluation/rig_dataset.h"
 #include "tools/evaluation/rig_file.h"
-#include "tools/load/load_generator.h"  // AttachBagGeometry
 #include "tools/recog/bag_flags.h"
 #include "tools/recog/commands.h"
 #include "tools/recog/loop_json.h"
