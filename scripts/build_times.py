@@ -32,14 +32,23 @@ def main():
     parser.add_argument("build_dir", nargs="?", default="build")
     parser.add_argument("--top", type=int, default=15)
     args = parser.parse_args()
-    last = {}
+    # The last run of each output. A step with several outputs (a link and its gtest discovery
+    # files) has a line per output, all with the step's command hash: it counts once, under the
+    # output that says most of what it is (the binary rather than its discovery files).
+    runs = {}
     with open(os.path.join(args.build_dir, ".ninja_log")) as log:
         for line in log:
             fields = line.rstrip("\n").split("\t")
             if line.startswith("#") or len(fields) < 5:
                 continue
-            start, end, _, output, _ = fields
-            last[output] = (int(end) - int(start)) / 1000.0
+            start, end, _, output, command_hash = fields
+            runs[output] = (command_hash, (int(end) - int(start)) / 1000.0)
+    steps = {}
+    for output, (command_hash, seconds) in sorted(runs.items()):
+        named = steps.get(command_hash)
+        if named is None or (kind(named[0]) == "other steps" and kind(output) != "other steps"):
+            steps[command_hash] = (output, seconds)
+    last = dict(steps.values())
     totals = collections.Counter()
     for output, seconds in last.items():
         totals[kind(output)] += seconds
