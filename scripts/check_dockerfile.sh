@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # Checks deploy/docker/Dockerfile without Docker, against a built tree (CI runs it after the
 # build):
-#   a. the build stage is FROM debian:12, runs exactly `bash scripts/install_deps.sh` and one
-#      `RECOG_CMAKE_ARGS="..." bash scripts/build.sh` (no other cmake call), and every file it
+#   a. the build stage is FROM debian:12, runs exactly `bash scripts/install_deps.sh --serve` and
+#      one `RECOG_CMAKE_ARGS="..." bash scripts/build.sh` (no other cmake call), and every file it
 #      COPYs exists: from the build context (the repository), and from the build stage (mapped
 #      back to the repository and BUILD_DIR);
 #   b. the CMake arguments are exactly -DCMAKE_BUILD_TYPE=Release -DRECOG_BUILD_TESTS=OFF
@@ -57,8 +57,8 @@ runtime_stage=$(stage "$stages")
 # --- a. build stage: base image, install and build commands, copied files -----------------------
 read -r _ build_image _ build_name <<<"$(grep -m1 '^FROM ' <<<"$build_stage")"
 [ "$build_image" = debian:12 ] || fail "build stage: FROM must be debian:12, got '$build_image'"
-grep -qx 'RUN bash scripts/install_deps.sh' <<<"$build_stage" ||
-  fail "build stage: missing the line 'RUN bash scripts/install_deps.sh'"
+grep -qx 'RUN bash scripts/install_deps.sh --serve' <<<"$build_stage" ||
+  fail "build stage: missing the line 'RUN bash scripts/install_deps.sh --serve'"
 build_re='^RUN RECOG_CMAKE_ARGS="([^"]*)" bash scripts/build\.sh$'
 build_lines=$(grep -cE "$build_re" <<<"$build_stage" || true)
 [ "$build_lines" -eq 1 ] ||

@@ -1,24 +1,42 @@
 #!/usr/bin/env bash
-# Installs every build and test dependency of the project from Debian 12 packages.
-# Idempotent: packages already present are left alone. Run as root (or with sudo).
+# Installs the project's dependencies from Debian 12 packages. Idempotent: packages already
+# present are left alone. Run as root (or with sudo).
+#
+# Usage: bash scripts/install_deps.sh [--serve]
+#   --serve  only what building everything and serving needs (scripts/run.sh): compilers, the
+#            libraries, GoogleTest and Google Benchmark (the configuration includes the tests), and
+#            the console's scripts. Without it, also what the tests and checks use (scripts/test.sh,
+#            CI, the Dockerfile's build stage): Python and its packages, a headless browser, nginx,
+#            Prometheus, gnuplot, clang-format, mkdocs and ROS 1's Python bag writer. On a fresh
+#            machine the serving set is about a third of the download.
 set -euo pipefail
 
-packages=(
-  build-essential cmake ninja-build pkg-config git
+serve_packages=(
+  build-essential cmake ninja-build pkg-config git mold
   libopencv-dev libeigen3-dev libspdlog-dev libxxhash-dev zlib1g-dev libtinyxml2-dev
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler
   librocksdb-dev prometheus-cpp-dev libssl-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   libcli11-dev libyaml-cpp-dev nlohmann-json3-dev
+  libcpp-httplib-dev libjs-three libjs-chart.js
+  librosbag-storage-dev libsensor-msgs-dev gnuplot-nox
+)
+test_packages=(
   python3-grpcio python3-protobuf python3-venv python3-setuptools python3-wheel
   python3-numpy python3-opencv python3-yaml
   nginx openssl
-  prometheus gnuplot-nox
-  libcpp-httplib-dev libjs-three libjs-chart.js chromium chromium-driver python3-selenium
+  prometheus
+  chromium chromium-driver python3-selenium
   clang-format
   mkdocs mkdocs-material
-  librosbag-storage-dev libsensor-msgs-dev python3-rosbag python3-sensor-msgs
+  python3-rosbag python3-sensor-msgs
 )
+
+case "${1:-}" in
+  --serve) packages=("${serve_packages[@]}") ;;
+  "") packages=("${serve_packages[@]}" "${test_packages[@]}") ;;
+  *) echo "usage: bash scripts/install_deps.sh [--serve]" >&2; exit 2 ;;
+esac
 
 missing=()
 for p in "${packages[@]}"; do

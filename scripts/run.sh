@@ -8,7 +8,7 @@
 # them, the console is theirs to set (recogd's own default is no console).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-bash scripts/install_deps.sh
+bash scripts/install_deps.sh --serve
 bash scripts/build.sh recogd recog
 console=(--console-listen 127.0.0.1:8080)
 for arg in "$@"; do
