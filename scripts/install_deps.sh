@@ -3,12 +3,13 @@
 # present are left alone. Run as root (or with sudo).
 #
 # Usage: bash scripts/install_deps.sh [--serve]
-#   --serve  only what building everything and serving needs (scripts/run.sh): compilers, the
-#            libraries, GoogleTest and Google Benchmark (the configuration includes the tests), and
-#            the console's scripts. Without it, also what the tests and checks use (scripts/test.sh,
-#            CI, the Dockerfile's build stage): Python and its packages, a headless browser, nginx,
-#            Prometheus, gnuplot, clang-format, mkdocs and ROS 1's Python bag writer. On a fresh
-#            machine the serving set is about a third of the download.
+#   --serve  only what building everything and serving needs (scripts/run.sh, the Dockerfile's
+#            build stage): compilers, the libraries, GoogleTest and Google Benchmark (the
+#            configuration includes the tests), gnuplot and the console's scripts. Without it,
+#            also what the tests and checks use (scripts/test.sh, CI): Python and its packages, a
+#            headless browser, nginx, Prometheus, clang-format, mkdocs, ROS 1's Python bag writer
+#            and ccache (CI's two builds share the tests' objects through it). On a fresh machine
+#            the serving set is about a third of the download.
 set -euo pipefail
 
 serve_packages=(
@@ -30,6 +31,7 @@ test_packages=(
   clang-format
   mkdocs mkdocs-material
   python3-rosbag python3-sensor-msgs
+  ccache
 )
 
 case "${1:-}" in
