@@ -7,7 +7,9 @@
 #      back to the repository and BUILD_DIR);
 #   b. the CMake arguments are exactly -DCMAKE_BUILD_TYPE=Release -DRECOG_BUILD_TESTS=OFF
 #      -DRECOG_BUILD_BENCHMARKS=OFF, each RECOG_* an option() of the top-level CMakeLists.txt;
-#   c. every shared library that ldd resolves for BUILD_DIR/bin/recogd and BUILD_DIR/bin/recog
+#   c. every shared library that ldd resolves for BUILD_DIR/bin/recogd, BUILD_DIR/bin/recog and
+#      recog's video module (BUILD_DIR/lib/recog/librecog_video.so, copied where recog finds it:
+#      /usr/local/lib/recog/ beside /usr/local/bin/recog)
 #      belongs (dpkg -S) to a package the runtime stage (FROM debian:12-slim) installs or to one
 #      of their dependencies (apt-cache depends --recurse: local package lists, no network);
 #   d. the runtime stage runs as a USER other than root and has a HEALTHCHECK.
@@ -166,14 +168,14 @@ else
     sort -u >"$tmp/allowed"
 
   libs=()
-  for bin in recogd recog; do
-    if [ ! -x "$build_dir/bin/$bin" ]; then
-      fail "$build_dir/bin/$bin not found (build first)"
+  for file in bin/recogd bin/recog lib/recog/librecog_video.so; do
+    if [ ! -f "$build_dir/$file" ]; then
+      fail "$build_dir/$file not found (build first)"
       continue
     fi
-    while read -r name; do fail "$bin: library $name not found by ldd"; done < <(
-      ldd "$build_dir/bin/$bin" | awk '/not found/ { print $1 }')
-    mapfile -t -O ${#libs[@]} libs < <(ldd "$build_dir/bin/$bin" |
+    while read -r name; do fail "$file: library $name not found by ldd"; done < <(
+      ldd "$build_dir/$file" | awk '/not found/ { print $1 }')
+    mapfile -t -O ${#libs[@]} libs < <(ldd "$build_dir/$file" |
       awk '$2 == "=>" && $3 ~ /^\// { print $3 } $1 ~ /^\// && $2 ~ /^\(0x/ { print $1 }')
   done
   mapfile -t libs < <(printf '%s\n' "${libs[@]}" | grep -E '^/(usr/)?lib(64)?/' | sort -u)
@@ -223,6 +225,11 @@ else
     done <"$tmp/faults"
   fi
 fi
+
+# recog loads its video module from ../lib/recog/ beside its own folder (tools/evaluation).
+grep -qE '^COPY --from=[^ ]+ ([^ ]+ )*/src/build/lib/recog/librecog_video\.so( [^ ]+)* /usr/local/lib/recog/$' \
+  <<<"$runtime_stage" ||
+  fail "runtime stage: recog's video module is not copied to /usr/local/lib/recog/ (recog is in /usr/local/bin)"
 
 # --- d. runtime user and health check ------------------------------------------------------------
 user=$(grep '^USER ' <<<"$runtime_stage" | tail -1 | cut -d' ' -f2 | cut -d: -f1 || true)

@@ -35,7 +35,8 @@ images=$project/tests/data/corridor
 
 expect_ok "cmake --install" "$cmake" --install "$build" --prefix "$prefix"
 [ "$failures" -eq 0 ] || report_and_exit
-for file in bin/recog bin/recogd share/recog/vocabularies/place_orb_k10_l5.rvoc \
+for file in bin/recog bin/recogd lib/recog/librecog_video.so \
+  share/recog/vocabularies/place_orb_k10_l5.rvoc \
   share/recog/vocabularies/object_orb_t12_k10_l4.rvoc lib/cmake/recog/recogConfig.cmake \
   lib/cmake/recog/recogConfigVersion.cmake include/recog/client/cpp/frame_stream.h \
   include/recog/recognition/v1/place.grpc.pb.h include/recog/grpc/health/v1/health.pb.h \
@@ -55,8 +56,16 @@ for file in usr/local/bin/recogd usr/local/bin/recog \
   etc/systemd/system/recogd.service etc/sysusers.d/recogd.conf; do
   [ -s "$work/root/$file" ] && pass || fail "install.sh --root staged $file"
 done
-[ ! -e "$work/root/usr/local/include" ] && [ ! -e "$work/root/usr/local/lib" ] && pass \
-  || fail "install.sh installs no libraries or headers"
+staged_libraries=$(cd "$work/root/usr/local" && find lib -type f 2>/dev/null)
+[ ! -e "$work/root/usr/local/include" ] && [ "$staged_libraries" = lib/recog/librecog_video.so ] \
+  && pass || fail "install.sh installs no headers and no library but recog's video module: $staged_libraries"
+# Installed and staged, recog finds its video module (a file that is no video is then refused
+# as such, not for a missing module).
+echo "not a video" >"$work/garbage.avi"
+for installed_recog in "$prefix/bin/recog" "$work/root/usr/local/bin/recog"; do
+  expect_error "$installed_recog loads its video module" "neither a folder, an image list nor a video" \
+    "$installed_recog" eval place --images "$work/garbage.avi" -q
+done
 
 # The consumer, out of the source tree, against the prefix alone.
 mkdir -p "$work/consumer"

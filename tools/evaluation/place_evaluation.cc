@@ -6,10 +6,8 @@
 #include <fstream>
 #include <string_view>
 
-#include <opencv2/core/utils/logger.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
-#include <opencv2/videoio.hpp>
 
 #include "core/common/elapsed.h"
 #include "core/index/memory_index_store.h"
@@ -53,17 +51,9 @@ StatusOr<FrameSource> FrameSource::Open(const std::string& spec,
         index < 0) {
       return Status::InvalidArgument("'" + spec + "': a camera is camera:N, N >= 0 (/dev/videoN)");
     }
-    // A missing device is reported below, once, not also by OpenCV's own warning.
-    const auto log_level = cv::utils::logging::setLogLevel(cv::utils::logging::LOG_LEVEL_ERROR);
-    auto camera = std::make_shared<cv::VideoCapture>(index, cv::CAP_V4L2);
-    cv::utils::logging::setLogLevel(log_level);
-    if (!camera->isOpened()) {
-      return Status::NotFound("camera " + std::to_string(index) + " (/dev/video" +
-                              std::to_string(index) + ") cannot be opened: missing or busy");
-    }
+    RECOG_ASSIGN_OR_RETURN(std::unique_ptr<VideoInput> camera, OpenCamera(index));
     source.video_ = std::move(camera);
     source.video_name_ = spec;
-    source.live_ = true;
     return source;
   }
   if (!fs::exists(spec, ec)) return Status::NotFound("'" + spec + "' does not exist");
@@ -81,13 +71,12 @@ StatusOr<FrameSource> FrameSource::Open(const std::string& spec,
     if (source.files_.empty()) return Status::InvalidArgument("image list '" + spec + "' is empty");
     return source;
   }
-  // FFmpeg reads video files; letting OpenCV probe every capture backend would also start camera
-  // libraries (FireWire, USB) that have no business with a file.
-  auto video = std::make_shared<cv::VideoCapture>(spec, cv::CAP_FFMPEG);
-  if (!video->isOpened()) {
+  StatusOr<std::unique_ptr<VideoInput>> video = OpenVideoFile(spec);
+  if (video.status().code() == StatusCode::kInvalidArgument) {
     return Status::InvalidArgument("'" + spec + "' is neither a folder, an image list nor a video");
   }
-  source.video_ = std::move(video);
+  RECOG_RETURN_IF_ERROR(video.status());
+  source.video_ = std::move(*video);
   source.video_name_ = fs::path(spec).filename().string();
   return source;
 }
@@ -112,7 +101,7 @@ StatusOr<bool> FrameSource::Next(cv::Mat* gray, std::string* name) {
   }
   if (video_) {
     cv::Mat frame;
-    if (!video_->read(frame) || frame.empty()) return false;
+    if (!video_->Read(&frame)) return false;
     if (frame.channels() == 3) {
       cv::cvtColor(frame, *gray, cv::COLOR_BGR2GRAY);
     } else {
@@ -159,10 +148,7 @@ StatusOr<cv::Mat> FrameSource::right() const {
 
 size_t FrameSource::size() const {
   if (bag_) return bag_->size();
-  if (!video_) return files_.size();
-  if (live_) return 0;
-  const double count = video_->get(cv::CAP_PROP_FRAME_COUNT);
-  return count > 0 ? size_t(count) : 0;
+  return video_ ? video_->FrameCount() : files_.size();
 }
 
 namespace {

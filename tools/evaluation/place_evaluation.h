@@ -8,8 +8,6 @@
 #include <string>
 #include <vector>
 
-#include <opencv2/videoio.hpp>
-
 #include "core/features/feature_extractor.h"
 #include "core/geometry/frame_points.h"
 #include "core/place/loop_detector.h"
@@ -18,6 +16,7 @@
 #include "tools/evaluation/ground_truth.h"
 #include "tools/evaluation/loop_tally.h"
 #include "tools/evaluation/ros_bag.h"
+#include "tools/evaluation/video_input.h"
 
 namespace recog::cli {
 
@@ -70,9 +69,8 @@ class FrameSource {
   std::vector<std::string> depths_, rights_;  // per file, for a dataset layout; empty otherwise
   DatasetLayout layout_ = DatasetLayout::kFolder;
   size_t next_ = 0;
-  std::shared_ptr<cv::VideoCapture> video_;  // a video file or a camera
+  std::shared_ptr<VideoInput> video_;  // a video file or a camera
   std::string video_name_;
-  bool live_ = false;  // a camera
   std::shared_ptr<RosBagReader> bag_;
   BagFrame bag_frame_;  // the frame Next() returned last, of a bag
 };

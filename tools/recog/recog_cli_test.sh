@@ -119,6 +119,25 @@ expect_error "seqgen rig with one frame a leg" "frames_per_leg must be at least 
   --images "$tmp/tiles" -o "$tmp/rig2" --frames-per-leg 1
 [ ! -e "$tmp/rig2" ] && pass || fail "seqgen rig creates nothing on bad input"
 
+# Video files: recog reads them through its video module (librecog_video.so, next to it as built
+# and as installed), which it loads only for a video or a camera; OpenCV's videoio is not among
+# the libraries every run loads.
+if ldd "$recog" | grep -q libopencv_videoio; then fail "recog links OpenCV's videoio"; else pass; fi
+/usr/bin/python3 - "$tmp/corridor.avi" "$images" <<'PY' && pass || fail "write a video of three frames"
+import sys, cv2
+writer = cv2.VideoWriter(sys.argv[1], cv2.VideoWriter_fourcc(*"MJPG"), 5.0, (512, 384))
+for name in ("1.jpg", "20.jpg", "41.jpg"):
+    writer.write(cv2.imread(sys.argv[2] + "/" + name))
+writer.release()
+PY
+expect_ok "eval place on a video file" "$recog" eval place --images "$tmp/corridor.avi" --json -q
+json_check "eval place reads the video's three frames" "assert d['frames']==3, d"
+expect_error "a video without the video module" "video module .*missing.so" \
+  env RECOG_VIDEO_MODULE="$tmp/missing.so" "$recog" eval place --images "$tmp/corridor.avi" -q
+echo "not a video" >"$tmp/garbage.avi"
+expect_error "eval place on a file that is no video" "neither a folder, an image list nor a video" \
+  "$recog" eval place --images "$tmp/garbage.avi" -q
+
 # eval place --rig: the rig sequence just written (4 rig frames), the control, and bad input.
 expect_ok "eval place --rig" "$recog" eval place --rig "$tmp/rig" --ground-truth \
   "$tmp/rig/ground_truth.txt" --body-poses "$tmp/rig/body_poses.txt" --json -q
