@@ -134,6 +134,8 @@ expect_ok "eval place on a video file" "$recog" eval place --images "$tmp/corrid
 json_check "eval place reads the video's three frames" "assert d['frames']==3, d"
 expect_error "a video without the video module" "video module .*missing.so" \
   env RECOG_VIDEO_MODULE="$tmp/missing.so" "$recog" eval place --images "$tmp/corridor.avi" -q
+expect_error "a video module that is no shared library" "video module .*corridor.avi.*invalid ELF header" \
+  env RECOG_VIDEO_MODULE="$tmp/corridor.avi" "$recog" eval place --images "$tmp/corridor.avi" -q
 echo "not a video" >"$tmp/garbage.avi"
 expect_error "eval place on a file that is no video" "neither a folder, an image list nor a video" \
   "$recog" eval place --images "$tmp/garbage.avi" -q
