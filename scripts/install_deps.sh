@@ -55,3 +55,4 @@ sudo_cmd=()
 echo "install_deps: installing ${missing[*]}"
 "${sudo_cmd[@]}" apt-get update -q
 DEBIAN_FRONTEND=noninteractive "${sudo_cmd[@]}" apt-get install -y -q --no-install-recommends "${missing[@]}"
+echo "install_deps: installed ${#missing[@]} packages and what they need"
