@@ -217,6 +217,7 @@ LoopDetectorParams LoopDetectorParams::Keyframes() {
   params.recent_frames = 4;
   params.consistency_max_island_gap = 1;
   params.min_spread = 0.25;
+  params.strong_min_inliers = 20;
   return params;
 }
 

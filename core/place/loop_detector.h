@@ -258,8 +258,10 @@ struct LoopDetectorParams {
   static LoopDetectorParams Thesis();
   // For keyframe streams (a SLAM's keyframes, metres apart; chosen on the corridor's every 2nd,
   // 3rd and 4th frame and a seqgen tour of one frame per place, docs/places.md, "Keyframe
-  // streams"): the scores normalised by the best candidate, tau_c of 4 keyframes, and consecutive
-  // loops consistent only when their islands are at most 1 keyframe apart.
+  // streams"): the scores normalised by the best candidate, tau_c of 4 keyframes, consecutive
+  // loops consistent only when their islands are at most 1 keyframe apart, and strong evidence
+  // from 20 inliers (a short walk of keyframes rarely gives k consistent queries; every false loop
+  // seen on real keyframes had 12 to 18 inliers, docs/places.md, "Repeated architecture").
   static LoopDetectorParams Keyframes();
   // OK, or INVALID_ARGUMENT naming the first field out of its range with its value
   // ("LoopDetectorParams.alpha = inf: must be finite and >= 0"); `name` names the struct in the
