@@ -8,8 +8,12 @@
 //   Query_L1_Shipped_k10L5_26K  those 4,665 entries and, to reach 26,000, 21,335 more made from
 //                             random 60-100 % subsets of the same photos' features (seeded): not
 //                             26,000 distinct photos, of which the shared data has 4,872
-// The queries of both are the bags of words of 200 photos held out of the database (the first 200
-// of the seeded shuffle): no entry is made from them.
+//   Query_L1_Shipped_k10L5_Scale/<entries>  the same entries grown to 100K, 300K and 1M (the
+//                             first 26,000 are the 26K case's; 1M takes about 8 minutes and 5 GB):
+//                             the index's memory, 1,000 timed queries (p50 / p99) and the time of
+//                             each insertion into the index (p50 / p99; the store keeps nothing)
+// The queries of all three are the bags of words of 200 photos held out of the database (the
+// first 200 of the seeded shuffle): no entry is made from them.
 // The entries are indexed through a store that keeps nothing, so these figures are the in-memory
 // index alone; `index_MB_per_million_postings` reports its memory, `process_peak_rss_MB` the
 // benchmark process's peak.
@@ -18,6 +22,7 @@
 #include <sys/resource.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cstdio>
 #include <numeric>
 #include <random>
@@ -97,6 +102,9 @@ void ReportMemory(benchmark::State& state, const Database& db) {
   // Bytes per posting of the index equal its megabytes per million postings.
   state.counters["index_MB_per_million_postings"] =
       double(stats.index_bytes) / double(stats.postings);
+  // Bytes per entry, in thousands, equal gigabytes per million entries.
+  state.counters["index_GB_per_million_entries"] =
+      double(stats.index_bytes) / double(stats.entries) / 1000.0;
   rusage usage{};
   getrusage(RUSAGE_SELF, &usage);
   state.counters["process_peak_rss_MB"] = double(usage.ru_maxrss) / 1024.0;
@@ -154,49 +162,40 @@ BowVector Transform(const Vocabulary& vocabulary, const cv::Mat& descriptors) {
   return bow;
 }
 
-// A database of every non-query photo once and, up to `entries` in all, random 60-100 % subsets of
-// their features (none when `entries` is at most the number of those photos).
-std::unique_ptr<Database> BuildRealDatabase(IndexStore* store,
-                                            const std::shared_ptr<const Vocabulary>& vocabulary,
-                                            size_t entries) {
-  auto db = std::move(Database::Create(store, "m", vocabulary)).value();
+// Adds to `db` every non-query photo once (when it is empty) and then, until it holds `entries`,
+// random 60-100 % subsets of their features, the photos in turn (none when `entries` is at most
+// the number of those photos). `rng` carries on across calls; `insert_ms`, when not null,
+// receives the time of each AddConverted.
+void GrowRealDatabase(Database& db, size_t entries, std::mt19937_64& rng,
+                      std::vector<double>* insert_ms = nullptr) {
   const std::vector<cv::Mat>& photos = Photos();
-  for (size_t i = kQueryPhotos; i < photos.size(); ++i) {
-    AddEntry(*db, Transform(*vocabulary, photos[i]), 1000);
+  const size_t base = photos.size() - kQueryPhotos;
+  const auto add = [&](const cv::Mat& descriptors) {
+    const BowVector bow = Transform(db.vocabulary(), descriptors);
+    const auto start = std::chrono::steady_clock::now();
+    AddEntry(db, bow, 1000);
+    if (insert_ms != nullptr) {
+      insert_ms->push_back(
+          std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
+              .count());
+    }
+  };
+  if (db.size() == 0) {
+    for (size_t i = kQueryPhotos; i < photos.size(); ++i) add(photos[i]);
   }
-  std::mt19937_64 rng(5);
   std::uniform_real_distribution<double> keep(0.6, 1.0);
-  for (size_t i = 0; db->size() < entries; ++i) {
-    const cv::Mat& all = photos[kQueryPhotos + i % (photos.size() - kQueryPhotos)];
-    std::vector<int> rows(size_t(all.rows));
+  std::vector<int> rows;
+  cv::Mat subset;
+  for (size_t i = db.size() - base; db.size() < entries; ++i) {
+    const cv::Mat& all = photos[kQueryPhotos + i % base];
+    rows.resize(size_t(all.rows));
     std::iota(rows.begin(), rows.end(), 0);
     std::shuffle(rows.begin(), rows.end(), rng);
     rows.resize(size_t(all.rows * keep(rng)));
-    cv::Mat subset;
-    for (int r : rows) subset.push_back(all.row(r));
-    AddEntry(*db, Transform(*vocabulary, subset), 1000);
+    subset.create(int(rows.size()), all.cols, all.type());
+    for (size_t r = 0; r < rows.size(); ++r) all.row(rows[r]).copyTo(subset.row(int(r)));
+    add(subset);
   }
-  return db;
-}
-
-// Queries `db` with the held-out photos in turn.
-void QueryHeldOutPhotos(benchmark::State& state, const Vocabulary& vocabulary, const Database& db) {
-  static const std::vector<BowVector> queries = [&] {
-    std::vector<BowVector> bows;
-    for (size_t i = 0; i < kQueryPhotos; ++i) bows.push_back(Transform(vocabulary, Photos()[i]));
-    return bows;
-  }();
-  std::vector<QueryResult> results;
-  size_t i = 0;
-  double words = 0;
-  for (auto _ : state) {
-    const BowVector& q = queries[i++ % queries.size()];
-    words += double(q.size());
-    if (!db.Query(q, {.max_results = 10}, &results).ok()) std::abort();
-    benchmark::DoNotOptimize(results.data());
-  }
-  state.counters["query_words"] = words / double(state.iterations());
-  ReportMemory(state, db);
 }
 
 const std::shared_ptr<const Vocabulary>& ShippedVocabulary() {
@@ -204,10 +203,52 @@ const std::shared_ptr<const Vocabulary>& ShippedVocabulary() {
   return vocabulary;
 }
 
+std::unique_ptr<Database> NewShippedDatabase(IndexStore* store) {
+  return std::move(Database::Create(store, "m", ShippedVocabulary())).value();
+}
+
+// A new database of the shipped vocabulary grown to `entries` (GrowRealDatabase, seed 5).
+std::unique_ptr<Database> BuildRealDatabase(IndexStore* store, size_t entries) {
+  auto db = NewShippedDatabase(store);
+  std::mt19937_64 rng(5);
+  GrowRealDatabase(*db, entries, rng);
+  return db;
+}
+
+// The bags of words of the held-out photos (the shipped vocabulary).
+const std::vector<BowVector>& HeldOutQueries() {
+  static const std::vector<BowVector> queries = [] {
+    std::vector<BowVector> bows;
+    for (size_t i = 0; i < kQueryPhotos; ++i) {
+      bows.push_back(Transform(*ShippedVocabulary(), Photos()[i]));
+    }
+    return bows;
+  }();
+  return queries;
+}
+
+// Top-10 query of `db` with held-out photo `i` (modulo their number); returns its word count.
+size_t QueryOnce(const Database& db, size_t i) {
+  thread_local std::vector<QueryResult> results;
+  const BowVector& q = HeldOutQueries()[i % kQueryPhotos];
+  if (!db.Query(q, {.max_results = 10}, &results).ok()) std::abort();
+  benchmark::DoNotOptimize(results.data());
+  return q.size();
+}
+
+// Queries `db` with the held-out photos in turn.
+void QueryHeldOutPhotos(benchmark::State& state, const Database& db) {
+  size_t i = 0;
+  double words = 0;
+  for (auto _ : state) words += double(QueryOnce(db, i++));
+  state.counters["query_words"] = words / double(state.iterations());
+  ReportMemory(state, db);
+}
+
 void BM_Query_L1_Shipped_k10L5_Photos(benchmark::State& state) {
   static DiscardingStore store;
-  static const std::unique_ptr<Database> db = BuildRealDatabase(&store, ShippedVocabulary(), 0);
-  QueryHeldOutPhotos(state, *ShippedVocabulary(), *db);
+  static const std::unique_ptr<Database> db = BuildRealDatabase(&store, 0);
+  QueryHeldOutPhotos(state, *db);
 }
 BENCHMARK(BM_Query_L1_Shipped_k10L5_Photos)
     ->Unit(benchmark::kMillisecond)
@@ -216,13 +257,45 @@ BENCHMARK(BM_Query_L1_Shipped_k10L5_Photos)
 
 void BM_Query_L1_Shipped_k10L5_26K(benchmark::State& state) {
   static DiscardingStore store;
-  static const std::unique_ptr<Database> db = BuildRealDatabase(&store, ShippedVocabulary(), 26000);
-  QueryHeldOutPhotos(state, *ShippedVocabulary(), *db);
+  static const std::unique_ptr<Database> db = BuildRealDatabase(&store, 26000);
+  QueryHeldOutPhotos(state, *db);
 }
 BENCHMARK(BM_Query_L1_Shipped_k10L5_26K)
     ->Unit(benchmark::kMillisecond)
     ->Repetitions(3)
     ->ReportAggregatesOnly(true);
+
+// The map a fleet fills over months: one database grown across the arguments. Each size reports
+// the insertion of the entries that brought it there and 1,000 timed queries (the 200 held-out
+// photos five times).
+void BM_Query_L1_Shipped_k10L5_Scale(benchmark::State& state) {
+  static DiscardingStore store;
+  static const std::unique_ptr<Database> db = NewShippedDatabase(&store);
+  static std::mt19937_64 rng(5);
+  std::vector<double> insert_ms;
+  GrowRealDatabase(*db, size_t(state.range(0)), rng, &insert_ms);
+  std::sort(insert_ms.begin(), insert_ms.end());
+  std::vector<double> query_ms;
+  for (auto _ : state) {
+    const auto start = std::chrono::steady_clock::now();
+    QueryOnce(*db, query_ms.size());
+    query_ms.push_back(
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
+            .count());
+  }
+  std::sort(query_ms.begin(), query_ms.end());
+  state.counters["query_p50_ms"] = Percentile(query_ms, 50);
+  state.counters["query_p99_ms"] = Percentile(query_ms, 99);
+  state.counters["insert_p50_ms"] = Percentile(insert_ms, 50);
+  state.counters["insert_p99_ms"] = Percentile(insert_ms, 99);
+  ReportMemory(state, *db);
+}
+BENCHMARK(BM_Query_L1_Shipped_k10L5_Scale)
+    ->Arg(100000)
+    ->Arg(300000)
+    ->Arg(1000000)
+    ->Unit(benchmark::kMillisecond)
+    ->Iterations(1000);
 
 }  // namespace
 }  // namespace recog::bench
