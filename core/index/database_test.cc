@@ -120,6 +120,46 @@ INSTANTIATE_TEST_SUITE_P(AllScores, DatabaseScoringTest,
                                            ScoringType::kBhattacharyya, ScoringType::kDotProduct),
                          [](const auto& info) { return std::string(ScoringName(info.param)); });
 
+TEST(DatabaseQueryTest, MapsQueriedInTurnOnOneThreadEachGiveTheirOwnAnswer) {
+  // A thread's query scratch serves every map it queries: a large map and a small one, queried in
+  // turn, give the answers they give alone (the small map's entries are the large one's first).
+  // Between two queries of the large map run 250 to 260 of the small one, so that the scratch's
+  // one-byte stamps wrap, and the large map's entries come back to the stamp of their last touch.
+  auto vocabulary = SmallVocabulary();
+  MemoryIndexStore store;
+  auto large = Database::Create(&store, "large", vocabulary);
+  auto small = Database::Create(&store, "small", vocabulary);
+  ASSERT_TRUE(large.ok() && small.ok());
+  for (int i = 0; i < 80; ++i) {
+    const FeatureSet f = SyntheticFeatures(60, 700 + i);
+    ASSERT_TRUE((*large)->Add(f).ok());
+    if (i < 7) {
+      ASSERT_TRUE((*small)->Add(f).ok());
+    }
+  }
+  BowVector query;
+  ASSERT_TRUE(
+      vocabulary->Transform(SyntheticFeatures(60, 703).descriptors, &query, nullptr, 0).ok());
+  std::vector<QueryResult> large_alone, small_alone, results;
+  ASSERT_TRUE((*large)->Query(query, {.max_results = 100}, &large_alone).ok());
+  ASSERT_TRUE((*small)->Query(query, {.max_results = 100}, &small_alone).ok());
+  ASSERT_EQ(small_alone.size(), 7u);
+  ASSERT_GT(large_alone.size(), 7u);
+  EXPECT_EQ(large_alone[0].id, 3u);
+  EXPECT_EQ(small_alone[0].id, 3u);
+  const auto answers_as_alone = [&](const Database& db, const std::vector<QueryResult>& alone) {
+    if (!db.Query(query, {.max_results = 100}, &results).ok()) return false;
+    return results.size() == alone.size() &&
+           std::equal(results.begin(), results.end(), alone.begin(),
+                      [](auto& a, auto& b) { return a.id == b.id && a.score == b.score; });
+  };
+  for (int between = 250; between <= 260; ++between) {
+    ASSERT_TRUE(answers_as_alone(**large, large_alone)) << "before " << between << " small ones";
+    for (int i = 0; i < between; ++i) ASSERT_TRUE(answers_as_alone(**small, small_alone));
+  }
+  EXPECT_TRUE(answers_as_alone(**large, large_alone));
+}
+
 TEST_F(DatabaseTest, EntriesAtOrAboveTheBoundAreNotScored) {
   const FeatureSet f = SyntheticFeatures(100, 7);
   for (int i = 0; i < 10; ++i) ASSERT_TRUE(db_->Add(f).ok());
