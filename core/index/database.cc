@@ -19,6 +19,11 @@ void AppendCompact(std::vector<T>& v, const T& item) {
   v.push_back(item);
 }
 
+// Orders postings by entry id for std::lower_bound.
+constexpr auto kEntryBelow = [](const auto& posting, EntryId entry) {
+  return posting.entry < entry;
+};
+
 // Per-thread accumulators of a query: a score and a one-byte stamp per entry id. An entry whose
 // stamp is not the current query's generation has not been touched yet, so nothing is cleared
 // between queries but once every 255 (when the generation wraps). One byte rather than four keeps
@@ -29,6 +34,11 @@ struct QueryScratch {
   std::vector<double> second_score;  // BC matching's chi-square sums
   std::vector<uint8_t> stamp;
   uint8_t generation = 0;
+  // A bounded query's words: those whose lists are read in full, and the others.
+  std::vector<BowEntry> scanned_words, completed_words;
+  std::vector<std::pair<size_t, uint32_t>> list_lengths;  // postings, index in the query
+  std::vector<QueryResult> candidates;   // a bounded query's best entries on its rarer words
+  std::vector<size_t> candidate_blocks;  // where each candidate is in one completed word's list
 
   void Prepare(size_t entries) {
     if (score.size() < entries) {
@@ -41,9 +51,127 @@ struct QueryScratch {
       generation = 1;
     }
   }
+
+  // Splits the query's words: the shortest lists up to `budget` postings in all (and at least
+  // the first non-empty one) are scanned, in the query's word order; the rest completed. False
+  // when every list is scanned.
+  template <class Lists>
+  bool SplitByListLength(const BowVector& query, const Lists& lists, size_t budget) {
+    const std::span<const BowEntry> words = query.entries();
+    list_lengths.clear();
+    size_t total = 0;
+    constexpr size_t kAhead = 8;  // each list's size is a cache miss away
+    for (size_t i = 0; i < words.size(); ++i) {
+      if (i + kAhead < words.size()) __builtin_prefetch(&lists[words[i + kAhead].word]);
+      list_lengths.push_back({lists[words[i].word].postings.size(), uint32_t(i)});
+      total += list_lengths.back().first;
+    }
+    if (total <= budget) return false;
+    std::sort(list_lengths.begin(), list_lengths.end());
+    size_t read = 0, scanned = 0;
+    while (scanned < list_lengths.size() &&
+           (read == 0 || read + list_lengths[scanned].first <= budget)) {
+      read += list_lengths[scanned++].first;
+    }
+    if (scanned == list_lengths.size()) return false;
+    // Back to word order, which the scan's prefetching follows.
+    std::sort(list_lengths.begin(), list_lengths.begin() + long(scanned),
+              [](const auto& a, const auto& b) { return a.second < b.second; });
+    scanned_words.clear();
+    completed_words.clear();
+    for (size_t k = 0; k < list_lengths.size(); ++k) {
+      (k < scanned ? scanned_words : completed_words).push_back(words[list_lengths[k].second]);
+    }
+    return true;
+  }
 };
 
+// Adds CommonTerm(v, w) of every posting below `bound` in the lists of `words` to the scratch's
+// sums; `touched`, when not null, receives each entry the first time it is touched.
+template <ScoringType kType, class Lists>
+void ScanLists(const Lists& lists, std::span<const BowEntry> words, EntryId bound,
+               QueryScratch& scratch, std::vector<QueryResult>* touched) {
+  const uint8_t generation = scratch.generation;
+  double* const score = scratch.score.data();
+  uint8_t* const stamp = scratch.stamp.data();
+  // Each word's posting list is a cache miss away (its vector, then its first postings), which
+  // costs more than scoring a short list: the lists of the words a few steps ahead are fetched
+  // meanwhile. (Measured by bench_place Relocalize_Group10x2600_vs_One26K, whose small maps have
+  // short lists.)
+  constexpr size_t kListsAhead = 4, kVectorsAhead = 8;
+  for (size_t i = 0; i < words.size(); ++i) {
+    if (i + kVectorsAhead < words.size()) __builtin_prefetch(&lists[words[i + kVectorsAhead].word]);
+    if (i + kListsAhead < words.size()) {
+      __builtin_prefetch(lists[words[i + kListsAhead].word].postings.data());
+    }
+    const BowEntry& q = words[i];
+    if (q.value <= 0.f) continue;
+    const double v = q.value;
+    for (const auto& p : lists[q.word].postings) {
+      if (p.entry >= bound) break;  // postings are sorted by entry id
+      const double term = CommonTerm(kType, v, p.value);
+      if (stamp[p.entry] != generation) {
+        stamp[p.entry] = generation;
+        score[p.entry] = term;
+        if (touched != nullptr) touched->push_back({p.entry, 0.0});
+      } else {
+        score[p.entry] += term;
+      }
+    }
+  }
+}
+
+// Orders query results best first; equal scores by increasing id.
+auto BetterResult(bool higher_is_better) {
+  return [higher_is_better](const QueryResult& a, const QueryResult& b) {
+    if (a.score != b.score) return higher_is_better ? a.score > b.score : a.score < b.score;
+    return a.id < b.id;
+  };
+}
+
 }  // namespace
+
+void Database::PostingList::Append(const Posting& posting) {
+  if (postings.size() % kBlock == 0) AppendCompact(block_first, posting.entry);
+  AppendCompact(postings, posting);
+}
+
+bool Database::PostingList::Erase(EntryId entry) {
+  const auto it = std::lower_bound(postings.begin(), postings.end(), entry, kEntryBelow);
+  if (it == postings.end() || it->entry != entry) return false;
+  const size_t first_block = size_t(it - postings.begin()) / kBlock;
+  postings.erase(it);
+  block_first.resize(first_block);
+  for (size_t i = first_block * kBlock; i < postings.size(); i += kBlock) {
+    block_first.push_back(postings[i].entry);
+  }
+  return true;
+}
+
+void Database::PostingList::IndexBlocks() {
+  block_first.clear();
+  block_first.reserve((postings.size() + kBlock - 1) / kBlock);
+  for (size_t i = 0; i < postings.size(); i += kBlock) block_first.push_back(postings[i].entry);
+}
+
+size_t Database::PostingList::BlockOf(EntryId entry, size_t from) const {
+  if (block_first.empty() || entry < block_first[0]) return kNoBlock;
+  size_t block = from == kNoBlock ? 0 : from;
+  while (block + 1 < block_first.size() && block_first[block + 1] <= entry) ++block;
+  return block;
+}
+
+const Database::Posting* Database::PostingList::FindInBlock(size_t block, EntryId entry) const {
+  const Posting* first = postings.data() + block * kBlock;
+  const size_t size = std::min(kBlock, postings.size() - block * kBlock);
+  size_t below = 0;  // counted rather than searched: no branch to mispredict
+  for (size_t i = 0; i < size; ++i) below += first[i].entry < entry;
+  return below < size && first[below].entry == entry ? first + below : nullptr;
+}
+
+size_t Database::PostingList::capacity_bytes() const {
+  return postings.capacity() * sizeof(Posting) + block_first.capacity() * sizeof(EntryId);
+}
 
 Database::Database(IndexStore* store, MapInfo info, std::shared_ptr<const Vocabulary> vocabulary)
     : store_(store),
@@ -126,9 +254,12 @@ StatusOr<std::unique_ptr<Database>> Database::Open(IndexStore* store, const std:
   auto fill = [&](size_t first_bucket) {
     for (size_t b = first_bucket; b < buckets.size(); b += 2) {
       const size_t end_word = std::min(words, (b + 1) << shift);
-      for (size_t w = b << shift; w < end_word; ++w) db->postings_[w].reserve(count[w]);
-      for (const PendingPosting& p : buckets[b]) db->postings_[p.word].push_back(p.posting);
+      for (size_t w = b << shift; w < end_word; ++w) db->postings_[w].postings.reserve(count[w]);
+      for (const PendingPosting& p : buckets[b]) {
+        db->postings_[p.word].postings.push_back(p.posting);
+      }
       std::vector<PendingPosting>().swap(buckets[b]);  // release as we go
+      for (size_t w = b << shift; w < end_word; ++w) db->postings_[w].IndexBlocks();
     }
   };
   std::thread helper(fill, 1);
@@ -177,7 +308,7 @@ std::string Database::CheckParts(const BowVector& bow, const FeatureVector& dire
 }
 
 void Database::IndexEntry(EntryId id, const BowVector& bow) {
-  for (const BowEntry& e : bow.entries()) AppendCompact(postings_[e.word], Posting{id, e.value});
+  for (const BowEntry& e : bow.entries()) postings_[e.word].Append(Posting{id, e.value});
   if (present_.size() <= id) present_.resize(size_t(id) + 1, 0);
   present_[id] = 1;
   ++num_entries_;
@@ -247,40 +378,71 @@ StatusOr<EntryId> Database::AddConverted(const BowVector& bow, const FeatureVect
 }
 
 template <ScoringType kType>
-void Database::ScoreEntries(const BowVector& query, EntryId bound,
+void Database::ScoreEntries(const BowVector& query, const QueryOptions& options, EntryId bound,
                             std::vector<QueryResult>* touched) const {
   thread_local QueryScratch scratch;
   scratch.Prepare(next_id_);
-  const uint8_t generation = scratch.generation;
+  const double constant = QueryConstant(kType, query);
+  if (options.full_scan_postings == 0 || num_postings_ <= options.full_scan_postings ||
+      !scratch.SplitByListLength(query, postings_, options.full_scan_postings)) {
+    ScanLists<kType>(postings_, query.entries(), bound, scratch, touched);
+    for (QueryResult& r : *touched) r.score = FinishScore(kType, scratch.score[r.id], constant);
+    return;
+  }
+  // Bounded query: the rarest words' lists are read in full; the entries that score best on them
+  // get the commoner words' terms as well.
+  ScanLists<kType>(postings_, scratch.scanned_words, bound, scratch, touched);
+  const size_t keep = std::max(options.rescored_candidates, options.max_results);
+  const double sign = TraitsOf(kType).higher_is_better ? 1.0 : -1.0;
+  const auto better = BetterResult(true);
+  std::vector<QueryResult>& best = scratch.candidates;  // a heap, the worst on top
+  best.clear();
+  for (const QueryResult& r : *touched) {
+    const QueryResult candidate{r.id, sign * scratch.score[r.id]};
+    if (best.size() == keep) {
+      if (!better(candidate, best.front())) continue;  // most entries: a predictable branch
+      std::pop_heap(best.begin(), best.end(), better);
+      best.pop_back();
+    }
+    best.push_back(candidate);
+    std::push_heap(best.begin(), best.end(), better);
+  }
+  touched->assign(best.begin(), best.end());
   double* const score = scratch.score.data();
-  uint8_t* const stamp = scratch.stamp.data();
-  // Each word's posting list is a cache miss away (its vector, then its first postings), which
-  // costs more than scoring a short list: the lists of the words a few steps ahead are fetched
-  // meanwhile. (Measured by bench_place Relocalize_Group10x2600_vs_One26K, whose small maps have
-  // short lists.)
-  const std::span<const BowEntry> words = query.entries();
-  constexpr size_t kListsAhead = 4, kVectorsAhead = 8;
-  for (size_t i = 0; i < words.size(); ++i) {
-    if (i + kVectorsAhead < words.size())
-      __builtin_prefetch(&postings_[words[i + kVectorsAhead].word]);
-    if (i + kListsAhead < words.size())
-      __builtin_prefetch(postings_[words[i + kListsAhead].word].data());
-    const BowEntry& q = words[i];
-    if (q.value <= 0.f) continue;
-    const double v = q.value;
-    for (const Posting& p : postings_[q.word]) {
-      if (p.entry >= bound) break;  // postings are sorted by entry id
-      const double term = CommonTerm(kType, v, p.value);
-      if (stamp[p.entry] != generation) {
-        stamp[p.entry] = generation;
-        score[p.entry] = term;
-        touched->push_back({p.entry, 0.0});
-      } else {
-        score[p.entry] += term;
+  const std::span<const BowEntry> completed = scratch.completed_words;
+  std::sort(touched->begin(), touched->end(),
+            [](const QueryResult& a, const QueryResult& b) { return a.id < b.id; });
+  std::vector<size_t>& blocks = scratch.candidate_blocks;
+  blocks.resize(touched->size());
+  constexpr size_t kBlocksAhead = 8;
+  for (size_t w = 0; w < completed.size(); ++w) {
+    if (w + 2 < completed.size()) __builtin_prefetch(&postings_[completed[w + 2].word]);
+    if (w + 1 < completed.size()) {
+      __builtin_prefetch(postings_[completed[w + 1].word].block_first.data());
+    }
+    const BowEntry& q = completed[w];
+    const PostingList& list = postings_[q.word];
+    if (q.value <= 0.f || list.postings.empty()) continue;
+    // Where each candidate's posting would be (the candidates in increasing id order), from the
+    // small array of block starts; then the blocks, fetched a few candidates ahead.
+    size_t block = PostingList::kNoBlock;
+    for (size_t i = 0; i < blocks.size(); ++i) {
+      block = blocks[i] = list.BlockOf((*touched)[i].id, block);
+    }
+    for (size_t i = 0; i < blocks.size(); ++i) {
+      if (i + kBlocksAhead < blocks.size() && blocks[i + kBlocksAhead] != PostingList::kNoBlock) {
+        const Posting* ahead =
+            list.postings.data() + blocks[i + kBlocksAhead] * PostingList::kBlock;
+        __builtin_prefetch(ahead);
+        __builtin_prefetch(ahead + PostingList::kBlock - 1);
+      }
+      if (blocks[i] == PostingList::kNoBlock) continue;
+      const EntryId id = (*touched)[i].id;
+      if (const Posting* p = list.FindInBlock(blocks[i], id)) {
+        score[id] += CommonTerm(kType, q.value, p->value);
       }
     }
   }
-  const double constant = QueryConstant(kType, query);
   for (QueryResult& r : *touched) r.score = FinishScore(kType, score[r.id], constant);
 }
 
@@ -317,7 +479,7 @@ Status Database::QueryBcMatching(const BowVector& query, double beta, size_t max
     for (const BowEntry& q : query.entries()) {
       if (q.value <= 0.f) continue;
       const double v = q.value;
-      for (const Posting& p : postings_[q.word]) {
+      for (const Posting& p : postings_[q.word].postings) {
         const double w = p.value;
         if (stamp[p.entry] != generation) {
           stamp[p.entry] = generation;
@@ -359,32 +521,28 @@ Status Database::Query(const BowVector& query, const QueryOptions& options,
     const EntryId bound = std::min(options.max_entry_id, next_id_);
     switch (type) {
       case ScoringType::kL1:
-        ScoreEntries<ScoringType::kL1>(query, bound, results);
+        ScoreEntries<ScoringType::kL1>(query, options, bound, results);
         break;
       case ScoringType::kL2:
-        ScoreEntries<ScoringType::kL2>(query, bound, results);
+        ScoreEntries<ScoringType::kL2>(query, options, bound, results);
         break;
       case ScoringType::kChiSquare:
-        ScoreEntries<ScoringType::kChiSquare>(query, bound, results);
+        ScoreEntries<ScoringType::kChiSquare>(query, options, bound, results);
         break;
       case ScoringType::kKL:
-        ScoreEntries<ScoringType::kKL>(query, bound, results);
+        ScoreEntries<ScoringType::kKL>(query, options, bound, results);
         break;
       case ScoringType::kBhattacharyya:
-        ScoreEntries<ScoringType::kBhattacharyya>(query, bound, results);
+        ScoreEntries<ScoringType::kBhattacharyya>(query, options, bound, results);
         break;
       case ScoringType::kDotProduct:
-        ScoreEntries<ScoringType::kDotProduct>(query, bound, results);
+        ScoreEntries<ScoringType::kDotProduct>(query, options, bound, results);
         break;
     }
   }
-  const bool higher_is_better = TraitsOf(type).higher_is_better;
-  const auto better = [higher_is_better](const QueryResult& a, const QueryResult& b) {
-    if (a.score != b.score) return higher_is_better ? a.score > b.score : a.score < b.score;
-    return a.id < b.id;
-  };
   const size_t keep = std::min(options.max_results, results->size());
-  std::partial_sort(results->begin(), results->begin() + long(keep), results->end(), better);
+  std::partial_sort(results->begin(), results->begin() + long(keep), results->end(),
+                    BetterResult(TraitsOf(type).higher_is_better));
   results->resize(keep);
   return Status::Ok();
 }
@@ -417,15 +575,7 @@ Status Database::Remove(EntryId id) {
   RECOG_RETURN_IF_ERROR(store_->ReadEntry(info_.id, id, kEntryBow, &record));
   RECOG_RETURN_IF_ERROR(store_->RemoveEntry(info_.id, id));
   std::unique_lock index_lock(index_mutex_);
-  for (const BowEntry& e : record.bow.entries()) {
-    std::vector<Posting>& list = postings_[e.word];
-    auto it = std::lower_bound(list.begin(), list.end(), id,
-                               [](const Posting& p, EntryId value) { return p.entry < value; });
-    if (it != list.end() && it->entry == id) {
-      list.erase(it);
-      --num_postings_;
-    }
-  }
+  for (const BowEntry& e : record.bow.entries()) num_postings_ -= postings_[e.word].Erase(id);
   present_[id] = 0;
   --num_entries_;
   return Status::Ok();
@@ -459,10 +609,10 @@ DatabaseStats Database::Stats() const {
   stats.entries = num_entries_;
   stats.postings = num_postings_;
   stats.next_entry_id = next_id_;
-  stats.index_bytes = postings_.capacity() * sizeof(std::vector<Posting>) + present_.capacity();
-  for (const auto& list : postings_) {
-    stats.words_in_use += !list.empty();
-    stats.index_bytes += list.capacity() * sizeof(Posting);
+  stats.index_bytes = postings_.capacity() * sizeof(PostingList) + present_.capacity();
+  for (const PostingList& list : postings_) {
+    stats.words_in_use += !list.postings.empty();
+    stats.index_bytes += list.capacity_bytes();
   }
   return stats;
 }

@@ -3,9 +3,11 @@
 //
 // The inverted index keeps, for every word, the list of <entry, value> pairs of the entries that
 // contain it (8 bytes a posting, sorted by entry id), so a query scores every stored entry that
-// shares a word with it while touching nothing else (thesis Algorithm 1). The direct index and the
-// features of each entry stay in the store and are read on demand (Get) when a candidate has to
-// be verified geometrically.
+// shares a word with it while touching nothing else (thesis Algorithm 1). In a large map, where
+// that would mean millions of postings, a query reads its rarest words' lists in full and looks up
+// only its best candidates in the others (QueryOptions::full_scan_postings). The direct index and
+// the features of each entry stay in the store and are read on demand (Get) when a candidate has
+// to be verified geometrically.
 //
 // Writes go to the store first, then to memory: Add() returns only after the entry is committed
 // (atomically, every part), and a query sees an entry only once it is fully indexed. Opening a
@@ -25,6 +27,7 @@
 #include <memory>
 #include <mutex>
 #include <shared_mutex>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -40,6 +43,16 @@ struct QueryOptions {
   size_t max_results = 10;
   // Only entries with an id below this bound are scored (leave out the most recent frames).
   EntryId max_entry_id = kInvalidEntryId;
+  // The postings a query reads in full; 0 for no bound. A query whose words' lists hold more (in
+  // a map of hundreds of thousands of entries) reads its rarest words' lists in full up to this
+  // many postings (at least one list), keeps the `rescored_candidates` (at least `max_results`)
+  // entries that score best on them, and completes the scores of those alone with its commoner
+  // words' lists (a search per candidate, not a scan). The scores returned are exact; what the
+  // bound may change is which entries are scored: one that shares mostly common words with the
+  // query may be missed. Below it (most queries of maps of up to 100,000 real frames) a query is
+  // exhaustive.
+  size_t full_scan_postings = 500'000;
+  size_t rescored_candidates = 50;
 };
 
 struct QueryResult {
@@ -126,6 +139,26 @@ class Database {
     float value;
   };
   static_assert(sizeof(Posting) == 8);
+  // A word's postings, sorted by entry id, and the entry id of every kBlock-th of them: a search
+  // of this small array and of one block of kBlock postings (two cache lines) finds one entry's
+  // posting in a long list, which is how a bounded query completes its candidates' scores.
+  struct PostingList {
+    static constexpr size_t kBlock = 16;
+    static constexpr size_t kNoBlock = SIZE_MAX;
+    std::vector<Posting> postings;
+    std::vector<EntryId> block_first;
+
+    void Append(const Posting& posting);
+    bool Erase(EntryId entry);  // false when absent
+    void IndexBlocks();         // recomputes block_first after a bulk fill
+    // The block that holds `entry` if any posting does: the last one starting at or before it,
+    // walked to from block `from` (the previous answer, for entries in increasing order; kNoBlock
+    // to start at the first); kNoBlock when `entry` precedes every posting.
+    size_t BlockOf(EntryId entry, size_t from) const;
+    // The posting of `entry` in `block`, or null.
+    const Posting* FindInBlock(size_t block, EntryId entry) const;
+    size_t capacity_bytes() const;
+  };
   struct PendingPosting {  // a posting on its way to its list, while the index is rebuilt
     WordId word;
     Posting posting;
@@ -140,17 +173,20 @@ class Database {
 
   // Checks that every word of `query` is in the vocabulary.
   Status CheckQueryWords(const BowVector& query) const;
+  // Adds to `touched` every entry below `bound` that shares a word with the query, with its score;
+  // with a bounded query (see QueryOptions) only the best candidates, exactly scored.
   template <ScoringType kType>
-  void ScoreEntries(const BowVector& query, EntryId bound, std::vector<QueryResult>* touched) const;
+  void ScoreEntries(const BowVector& query, const QueryOptions& options, EntryId bound,
+                    std::vector<QueryResult>* touched) const;
 
   IndexStore* store_;
   MapInfo info_;
   std::shared_ptr<const Vocabulary> vocabulary_;
 
-  std::mutex write_mutex_;                      // serialises Add/Remove/Clear
-  mutable std::shared_mutex index_mutex_;       // guards everything below
-  std::vector<std::vector<Posting>> postings_;  // by word
-  std::vector<uint8_t> present_;                // by entry id: 1 when indexed
+  std::mutex write_mutex_;                 // serialises Add/Remove/Clear
+  mutable std::shared_mutex index_mutex_;  // guards everything below
+  std::vector<PostingList> postings_;      // by word
+  std::vector<uint8_t> present_;           // by entry id: 1 when indexed
   size_t num_entries_ = 0;
   size_t num_postings_ = 0;
   EntryId next_id_ = 0;

@@ -114,6 +114,79 @@ TEST_P(DatabaseScoringTest, QueryEqualsScoringEveryEntryByBruteForce) {
   }
 }
 
+TEST_P(DatabaseScoringTest, BoundedQueryScoresItsCandidatesExactly) {
+  // A map whose lists are long enough to be searched by block, some entries removed (their lists
+  // re-indexed) and the map reopened (its lists indexed anew). A query allowed to read only its
+  // rarest word's list in full returns exactly the entries of that list (no entry sharing only
+  // commoner words), each with its exact score over all the query's words.
+  const ScoringType type = GetParam();
+  MemoryIndexStore store;
+  auto vocabulary = SmallVocabulary();
+  auto created = Database::Create(&store, "m", vocabulary, type);
+  ASSERT_TRUE(created.ok());
+  const BowNormalization norm = TraitsOf(type).normalization;
+  std::vector<BowVector> bows;
+  for (int i = 0; i < 240; ++i) {
+    const FeatureSet f = SyntheticFeatures(30 + i % 40, 2000 + i);
+    ASSERT_TRUE((*created)->Add(f).ok());
+    BowVector bow;
+    ASSERT_TRUE(vocabulary->Transform(f.descriptors, &bow, nullptr, 0, norm).ok());
+    bows.push_back(bow);
+  }
+  const auto removed = [](EntryId id) { return id % 9 == 4; };
+  for (EntryId id = 0; id < bows.size(); ++id) {
+    if (removed(id)) {
+      ASSERT_TRUE((*created)->Remove(id).ok());
+    }
+  }
+  const auto database = [&](bool reopened) -> std::unique_ptr<Database> {
+    if (!reopened) return std::move(created).value();
+    auto opened = Database::Open(&store, "m", vocabulary);
+    EXPECT_TRUE(opened.ok()) << opened.status().ToString();
+    return std::move(opened).value();
+  };
+  for (bool reopened : {false, true}) {
+    const std::unique_ptr<Database> db = database(reopened);
+    for (int q = 0; q < 8; ++q) {
+      BowVector query;
+      ASSERT_TRUE(
+          vocabulary
+              ->Transform(SyntheticFeatures(70, 3000 + q).descriptors, &query, nullptr, 0, norm)
+              .ok());
+      // The entries holding each query word; the rarest word is the one held by the fewest.
+      std::vector<std::vector<EntryId>> holders(query.size());
+      for (EntryId id = 0; id < bows.size(); ++id) {
+        for (size_t w = 0; w < query.size(); ++w) {
+          if (!removed(id) && bows[id].ValueOf(query.entries()[w].word) > 0) {
+            holders[w].push_back(id);
+          }
+        }
+      }
+      std::erase_if(holders, [](const auto& h) { return h.empty(); });
+      const auto rarest = std::min_element(holders.begin(), holders.end(),
+                                           [](auto& a, auto& b) { return a.size() < b.size(); });
+      ASSERT_GT(db->Stats().postings, rarest->size());
+      const QueryOptions options{
+          .max_results = 300, .full_scan_postings = 1, .rescored_candidates = 300};
+      std::vector<QueryResult> results;
+      ASSERT_TRUE(db->Query(query, options, &results).ok());
+      std::vector<EntryId> ids;
+      for (const QueryResult& r : results) {
+        ids.push_back(r.id);
+        EXPECT_NEAR(r.score, Score(type, query, bows[r.id]),
+                    1e-6 * std::max(1.0, std::fabs(r.score)))
+            << ScoringName(type) << " entry " << r.id << (reopened ? " reopened" : "");
+      }
+      std::sort(ids.begin(), ids.end());
+      EXPECT_EQ(ids, *rarest) << ScoringName(type) << " query " << q;
+      std::vector<QueryResult> exhaustive;
+      ASSERT_TRUE(
+          db->Query(query, {.max_results = 300, .full_scan_postings = 0}, &exhaustive).ok());
+      EXPECT_GT(exhaustive.size(), results.size()) << "the bound left no entry out";
+    }
+  }
+}
+
 INSTANTIATE_TEST_SUITE_P(AllScores, DatabaseScoringTest,
                          ::testing::Values(ScoringType::kL1, ScoringType::kL2,
                                            ScoringType::kChiSquare, ScoringType::kKL,

@@ -235,6 +235,7 @@ Status LoopDetectorParams::Validate(std::string_view name) const {
   check.InRange("min_score_with_previous", min_score_with_previous, RealRange::AtLeast(0));
   check.InRange("recent_seconds", recent_seconds, RealRange::AtLeast(0));
   check.AtLeast("max_query_results", max_query_results, 1);
+  check.AtLeast("query_rescored_candidates", query_rescored_candidates, 1);
   check.AtLeast("island_min_size", island_min_size, 1);
   check.Member("matching", matching);
   // RANSAC of F needs 8 correspondences; PnP of the metric check 6.
@@ -373,7 +374,9 @@ Status LoopDetector::QueryDatabase(const BowVector& bow, RecencyBound bound,
   RECOG_RETURN_IF_ERROR(
       database_->Query(bow,
                        {.max_results = params_.max_query_results + excluded.size(),
-                        .max_entry_id = bound.first_recent},
+                        .max_entry_id = bound.first_recent,
+                        .full_scan_postings = params_.query_full_scan_postings,
+                        .rescored_candidates = params_.query_rescored_candidates},
                        results));
   if (!excluded.empty()) {
     std::erase_if(*results, [&](const QueryResult& r) {

@@ -186,7 +186,11 @@ struct LoopDetectorParams {
   // 4.4: 20 s).
   uint32_t recent_frames = 20;
   double recent_seconds = 20.0;
-  uint32_t max_query_results = 50;          // database results considered per query
+  uint32_t max_query_results = 50;  // database results considered per query
+  // How a query of a large map is bounded (QueryOptions): postings read in full (0: every list),
+  // and the best entries on those whose scores are completed.
+  size_t query_full_scan_postings = QueryOptions{}.full_scan_postings;
+  size_t query_rescored_candidates = QueryOptions{}.rescored_candidates;
   uint32_t island_max_gap = 3;              // entries at most this far apart (ids) join one island
   uint32_t island_min_size = 1;             // smaller islands are dropped
   uint32_t temporal_matches = 3;            // k: consistent previous queries required (Table 4.4)

@@ -923,6 +923,7 @@ TEST(LoopDetectorParamsTest, EachFieldOutOfRangeIsRefusedWithItsNameAndValue) {
       {"min_score_with_previous = nan", [&](P& p) { p.min_score_with_previous = nan; }},
       {"recent_seconds = inf", [&](P& p) { p.recent_seconds = inf; }},
       {"max_query_results = 0", [](P& p) { p.max_query_results = 0; }},
+      {"query_rescored_candidates = 0", [](P& p) { p.query_rescored_candidates = 0; }},
       {"island_min_size = 0", [](P& p) { p.island_min_size = 0; }},
       {"matching.ratio = nan", [&](P& p) { p.matching.ratio = nan; }},
       {"matching.ratio = 0", [](P& p) { p.matching.ratio = 0; }},
