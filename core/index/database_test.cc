@@ -71,40 +71,57 @@ TEST_F(DatabaseTest, AnEntryIsItsOwnBestMatch) {
   }
 }
 
-class DatabaseScoringTest : public ::testing::TestWithParam<ScoringType> {};
+// A map scored with the test's scoring type, and the bag of words of every entry it was given.
+class DatabaseScoringTest : public ::testing::TestWithParam<ScoringType> {
+ protected:
+  void SetUp() override {
+    auto db = Database::Create(&store_, "m", vocabulary_, GetParam());
+    ASSERT_TRUE(db.ok()) << db.status().ToString();
+    db_ = std::move(db).value();
+  }
+
+  // The bag of words of synthetic features, normalised as the scoring type needs.
+  BowVector BowOf(int features, uint64_t seed) const {
+    BowVector bow;
+    EXPECT_TRUE(vocabulary_
+                    ->Transform(SyntheticFeatures(features, seed).descriptors, &bow, nullptr, 0,
+                                TraitsOf(GetParam()).normalization)
+                    .ok());
+    return bow;
+  }
+
+  // Adds `count` entries of `min_features` + i % `spread` features (seeds from `seed`).
+  void AddEntries(int count, int min_features, int spread, uint64_t seed) {
+    for (int i = 0; i < count; ++i) {
+      const FeatureSet f = SyntheticFeatures(min_features + i % spread, seed + uint64_t(i));
+      ASSERT_TRUE(db_->Add(f).ok());
+      bows_.push_back(BowOf(min_features + i % spread, seed + uint64_t(i)));
+    }
+  }
+
+  MemoryIndexStore store_;
+  std::shared_ptr<const Vocabulary> vocabulary_ = SmallVocabulary();
+  std::unique_ptr<Database> db_;
+  std::vector<BowVector> bows_;
+};
 
 TEST_P(DatabaseScoringTest, QueryEqualsScoringEveryEntryByBruteForce) {
   const ScoringType type = GetParam();
-  MemoryIndexStore store;
-  auto vocabulary = SmallVocabulary();
-  auto db = Database::Create(&store, "m", vocabulary, type);
-  ASSERT_TRUE(db.ok());
-  const BowNormalization norm = TraitsOf(type).normalization;
-  std::vector<BowVector> bows;
-  for (int i = 0; i < 60; ++i) {
-    const FeatureSet f = SyntheticFeatures(40 + i % 50, 500 + i);
-    ASSERT_TRUE((*db)->Add(f).ok());
-    BowVector bow;
-    ASSERT_TRUE(vocabulary->Transform(f.descriptors, &bow, nullptr, 0, norm).ok());
-    bows.push_back(bow);
-  }
+  AddEntries(60, 40, 50, 500);
   for (int q = 0; q < 10; ++q) {
-    BowVector query;
-    ASSERT_TRUE(
-        vocabulary->Transform(SyntheticFeatures(80, 900 + q).descriptors, &query, nullptr, 0, norm)
-            .ok());
+    const BowVector query = BowOf(80, 900 + uint64_t(q));
     std::vector<QueryResult> expected;
-    for (EntryId id = 0; id < bows.size(); ++id) {
+    for (EntryId id = 0; id < bows_.size(); ++id) {
       bool shares_a_word = false;
-      for (const BowEntry& e : query.entries()) shares_a_word |= bows[id].ValueOf(e.word) > 0;
-      if (shares_a_word) expected.push_back({id, Score(type, query, bows[id])});
+      for (const BowEntry& e : query.entries()) shares_a_word |= bows_[id].ValueOf(e.word) > 0;
+      if (shares_a_word) expected.push_back({id, Score(type, query, bows_[id])});
     }
     const bool higher = TraitsOf(type).higher_is_better;
     std::stable_sort(expected.begin(), expected.end(), [&](const auto& a, const auto& b) {
       return higher ? a.score > b.score : a.score < b.score;
     });
     std::vector<QueryResult> results;
-    ASSERT_TRUE((*db)->Query(query, {.max_results = 15}, &results).ok());
+    ASSERT_TRUE(db_->Query(query, {.max_results = 15}, &results).ok());
     ASSERT_EQ(results.size(), std::min<size_t>(15, expected.size()));
     for (size_t i = 0; i < results.size(); ++i) {
       EXPECT_NEAR(results[i].score, expected[i].score,
@@ -120,44 +137,26 @@ TEST_P(DatabaseScoringTest, BoundedQueryScoresItsCandidatesExactly) {
   // rarest word's list in full returns exactly the entries of that list (no entry sharing only
   // commoner words), each with its exact score over all the query's words.
   const ScoringType type = GetParam();
-  MemoryIndexStore store;
-  auto vocabulary = SmallVocabulary();
-  auto created = Database::Create(&store, "m", vocabulary, type);
-  ASSERT_TRUE(created.ok());
-  const BowNormalization norm = TraitsOf(type).normalization;
-  std::vector<BowVector> bows;
-  for (int i = 0; i < 240; ++i) {
-    const FeatureSet f = SyntheticFeatures(30 + i % 40, 2000 + i);
-    ASSERT_TRUE((*created)->Add(f).ok());
-    BowVector bow;
-    ASSERT_TRUE(vocabulary->Transform(f.descriptors, &bow, nullptr, 0, norm).ok());
-    bows.push_back(bow);
-  }
+  AddEntries(240, 30, 40, 2000);
   const auto removed = [](EntryId id) { return id % 9 == 4; };
-  for (EntryId id = 0; id < bows.size(); ++id) {
+  for (EntryId id = 0; id < bows_.size(); ++id) {
     if (removed(id)) {
-      ASSERT_TRUE((*created)->Remove(id).ok());
+      ASSERT_TRUE(db_->Remove(id).ok());
     }
   }
-  const auto database = [&](bool reopened) -> std::unique_ptr<Database> {
-    if (!reopened) return std::move(created).value();
-    auto opened = Database::Open(&store, "m", vocabulary);
-    EXPECT_TRUE(opened.ok()) << opened.status().ToString();
-    return std::move(opened).value();
-  };
   for (bool reopened : {false, true}) {
-    const std::unique_ptr<Database> db = database(reopened);
+    if (reopened) {
+      auto opened = Database::Open(&store_, "m", vocabulary_);
+      ASSERT_TRUE(opened.ok()) << opened.status().ToString();
+      db_ = std::move(opened).value();
+    }
     for (int q = 0; q < 8; ++q) {
-      BowVector query;
-      ASSERT_TRUE(
-          vocabulary
-              ->Transform(SyntheticFeatures(70, 3000 + q).descriptors, &query, nullptr, 0, norm)
-              .ok());
+      const BowVector query = BowOf(70, 3000 + uint64_t(q));
       // The entries holding each query word; the rarest word is the one held by the fewest.
       std::vector<std::vector<EntryId>> holders(query.size());
-      for (EntryId id = 0; id < bows.size(); ++id) {
+      for (EntryId id = 0; id < bows_.size(); ++id) {
         for (size_t w = 0; w < query.size(); ++w) {
-          if (!removed(id) && bows[id].ValueOf(query.entries()[w].word) > 0) {
+          if (!removed(id) && bows_[id].ValueOf(query.entries()[w].word) > 0) {
             holders[w].push_back(id);
           }
         }
@@ -165,15 +164,15 @@ TEST_P(DatabaseScoringTest, BoundedQueryScoresItsCandidatesExactly) {
       std::erase_if(holders, [](const auto& h) { return h.empty(); });
       const auto rarest = std::min_element(holders.begin(), holders.end(),
                                            [](auto& a, auto& b) { return a.size() < b.size(); });
-      ASSERT_GT(db->Stats().postings, rarest->size());
+      ASSERT_GT(db_->Stats().postings, rarest->size());
       const QueryOptions options{
           .max_results = 300, .full_scan_postings = 1, .rescored_candidates = 300};
       std::vector<QueryResult> results;
-      ASSERT_TRUE(db->Query(query, options, &results).ok());
+      ASSERT_TRUE(db_->Query(query, options, &results).ok());
       std::vector<EntryId> ids;
       for (const QueryResult& r : results) {
         ids.push_back(r.id);
-        EXPECT_NEAR(r.score, Score(type, query, bows[r.id]),
+        EXPECT_NEAR(r.score, Score(type, query, bows_[r.id]),
                     1e-6 * std::max(1.0, std::fabs(r.score)))
             << ScoringName(type) << " entry " << r.id << (reopened ? " reopened" : "");
       }
@@ -181,7 +180,7 @@ TEST_P(DatabaseScoringTest, BoundedQueryScoresItsCandidatesExactly) {
       EXPECT_EQ(ids, *rarest) << ScoringName(type) << " query " << q;
       std::vector<QueryResult> exhaustive;
       ASSERT_TRUE(
-          db->Query(query, {.max_results = 300, .full_scan_postings = 0}, &exhaustive).ok());
+          db_->Query(query, {.max_results = 300, .full_scan_postings = 0}, &exhaustive).ok());
       EXPECT_GT(exhaustive.size(), results.size()) << "the bound left no entry out";
     }
   }
