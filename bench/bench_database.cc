@@ -166,6 +166,18 @@ BowVector Transform(const Vocabulary& vocabulary, const cv::Mat& descriptors) {
   return bow;
 }
 
+// A random 60-100 % of the rows of `all` into `subset` (`rows` is scratch).
+void RandomSubset(const cv::Mat& all, std::mt19937_64& rng, std::vector<int>* rows,
+                  cv::Mat* subset) {
+  std::uniform_real_distribution<double> keep(0.6, 1.0);
+  rows->resize(size_t(all.rows));
+  std::iota(rows->begin(), rows->end(), 0);
+  std::shuffle(rows->begin(), rows->end(), rng);
+  rows->resize(size_t(all.rows * keep(rng)));
+  subset->create(int(rows->size()), all.cols, all.type());
+  for (size_t r = 0; r < rows->size(); ++r) all.row((*rows)[r]).copyTo(subset->row(int(r)));
+}
+
 // Adds to `db` every non-query photo once (when it is empty) and then, until it holds `entries`,
 // random 60-100 % subsets of their features, the photos in turn (none when `entries` is at most
 // the number of those photos). `rng` carries on across calls; `insert_ms`, when not null,
@@ -187,17 +199,10 @@ void GrowRealDatabase(Database& db, size_t entries, std::mt19937_64& rng,
   if (db.size() == 0) {
     for (size_t i = kQueryPhotos; i < photos.size(); ++i) add(photos[i]);
   }
-  std::uniform_real_distribution<double> keep(0.6, 1.0);
   std::vector<int> rows;
   cv::Mat subset;
   for (size_t i = db.size() - base; db.size() < entries; ++i) {
-    const cv::Mat& all = photos[kQueryPhotos + i % base];
-    rows.resize(size_t(all.rows));
-    std::iota(rows.begin(), rows.end(), 0);
-    std::shuffle(rows.begin(), rows.end(), rng);
-    rows.resize(size_t(all.rows * keep(rng)));
-    subset.create(int(rows.size()), all.cols, all.type());
-    for (size_t r = 0; r < rows.size(); ++r) all.row(rows[r]).copyTo(subset.row(int(r)));
+    RandomSubset(photos[kQueryPhotos + i % base], rng, &rows, &subset);
     add(subset);
   }
 }
@@ -274,16 +279,11 @@ BENCHMARK(BM_Query_L1_Shipped_k10L5_26K)
 const std::vector<BowVector>& RevisitQueries() {
   static const std::vector<BowVector> queries = [] {
     std::mt19937_64 rng(17);
-    std::uniform_real_distribution<double> keep(0.6, 1.0);
+    std::vector<int> rows;
+    cv::Mat subset;
     std::vector<BowVector> bows;
     for (size_t i = 0; i < kQueryPhotos; ++i) {
-      const cv::Mat& all = Photos()[kQueryPhotos + i];
-      std::vector<int> rows(size_t(all.rows));
-      std::iota(rows.begin(), rows.end(), 0);
-      std::shuffle(rows.begin(), rows.end(), rng);
-      rows.resize(size_t(all.rows * keep(rng)));
-      cv::Mat subset(int(rows.size()), all.cols, all.type());
-      for (size_t r = 0; r < rows.size(); ++r) all.row(rows[r]).copyTo(subset.row(int(r)));
+      RandomSubset(Photos()[kQueryPhotos + i], rng, &rows, &subset);
       bows.push_back(Transform(*ShippedVocabulary(), subset));
     }
     return bows;
