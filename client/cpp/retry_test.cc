@@ -1,9 +1,6 @@
 // Tests of the client's retries (gRPC's own, by proto/service_config.json; client_options.h), its
 // request ids and its resumed downloads: RecognitionClient against small scripted gRPC servers
 // that refuse, fail or break calls on purpose and record what reaches them.
-#include <arpa/inet.h>
-#include <netinet/in.h>
-#include <sys/socket.h>
 #include <unistd.h>
 
 #include <chrono>
@@ -20,7 +17,7 @@
 #include "client/cpp/recognition_client.h"
 #include "client/cpp/service_config.h"
 #include "client/cpp/sha256.h"
-#include "tests/testing/free_port.h"
+#include "tests/testing/unix_socket.h"
 #include "wire/sha256.h"
 
 namespace recog::client {
@@ -195,7 +192,8 @@ TEST_F(ScriptedClientTest, NoRetryStartsAfterTheDeadline) {
 }
 
 TEST_F(ScriptedClientTest, AServerThatNeverComesUpIsReportedUnavailable) {
-  auto client = Connect("127.0.0.1:" + std::to_string(recog::testing::FreePort()));
+  auto client = Connect(recog::testing::UnixSocketAddress(
+      std::filesystem::temp_directory_path(), "recog_nobody_" + std::to_string(getpid())));
   ASSERT_NE(client, nullptr);
   EXPECT_EQ(client->AddFrame("m", pb::Frame()).status().error_code(),
             grpc::StatusCode::UNAVAILABLE);

@@ -406,6 +406,12 @@ class GuardedServer final : public Base {
     this->new_task_queue = [threads = limits.max_connections] {
       return new CappedTaskQueue(threads);
     };
+    // cpp-httplib's default also sets SO_REUSEPORT, which lets a second server bind the same port
+    // and take half its connections: only SO_REUSEADDR (a restart need not wait for TIME_WAIT).
+    this->set_socket_options([](socket_t socket) {
+      const int yes = 1;
+      setsockopt(socket, SOL_SOCKET, SO_REUSEADDR, &yes, sizeof(yes));
+    });
   }
 
  private:

@@ -14,8 +14,8 @@
 
 #include "client/cpp/recognition_client.h"
 #include "tests/server/server_fixture.h"
-#include "tests/testing/free_port.h"
 #include "tests/testing/model_files.h"
+#include "tests/testing/unix_socket.h"
 
 namespace recog::server::testing {
 namespace {
@@ -42,12 +42,12 @@ std::unique_ptr<client::RecognitionClient> ClientOf(const std::string& target) {
   return connected.ok() ? std::move(*connected) : nullptr;
 }
 
-// The primary is the fixture's server, on a fixed port so that it can restart where the replica
-// looks for it.
+// The primary is the fixture's server, on a fixed address (a unix socket) so that it can restart
+// where the replica looks for it.
 class ReplicationTest : public ServerFixture {
  protected:
-  ReplicationTest() : replica_dir_("replica"), downloads_("downloads") {
-    config().listen = "127.0.0.1:" + std::to_string(recog::testing::FreePort());
+  ReplicationTest() : sockets_("sockets"), replica_dir_("replica"), downloads_("downloads") {
+    config().listen = recog::testing::UnixSocketAddress(sockets_.path(), "primary");
   }
 
   void SetUp() override {
@@ -142,6 +142,7 @@ class ReplicationTest : public ServerFixture {
     return names;
   }
 
+  recog::testing::TempDir sockets_;
   recog::testing::TempDir replica_dir_;
   recog::testing::TempDir downloads_;
   std::unique_ptr<client::RecognitionClient> primary_;
@@ -243,7 +244,7 @@ TEST_F(ReplicationTest, AReplicaWhosePrimaryTokenFileCannotBeReadDoesNotStartAnd
 
 TEST_F(ReplicationTest, AReplicaWhosePrimaryIsUnreachableStartsServesAndStillRefusesWrites) {
   ServerConfig replica_config = ReplicaConfig();
-  replica_config.repository.primary = "127.0.0.1:" + std::to_string(recog::testing::FreePort());
+  replica_config.repository.primary = recog::testing::UnixSocketAddress(sockets_.path(), "nobody");
   StartReplica(replica_config);
   ASSERT_NE(replica_, nullptr);
   EXPECT_TRUE(Latest(*replica_).empty());

@@ -77,8 +77,10 @@ class ServerFixture : public ::testing::Test {
     auto server = RecognitionServer::Start(config_);
     ASSERT_TRUE(server.ok()) << server.status().ToString();
     server_ = std::move(server).value();
-    channel_ = grpc::CreateChannel("127.0.0.1:" + std::to_string(server_->port()),
-                                   grpc::InsecureChannelCredentials());
+    const bool on_unix_socket = config_.listen.starts_with("unix:");
+    channel_ = grpc::CreateChannel(
+        on_unix_socket ? config_.listen : "127.0.0.1:" + std::to_string(server_->port()),
+        grpc::InsecureChannelCredentials());
     places_ = pb::PlaceRecognition::NewStub(channel_);
     objects_ = pb::ObjectRecognition::NewStub(channel_);
     models_ = pb::ObjectRepository::NewStub(channel_);

@@ -24,9 +24,9 @@
 #include "core/vocabulary/vocabulary_io.h"
 #include "server/api/converters.h"
 #include "tests/server/server_fixture.h"
-#include "tests/testing/free_port.h"
 #include "tests/testing/metrics_scrape.h"
 #include "tests/testing/test_data.h"
+#include "tests/testing/unix_socket.h"
 #include "tools/evaluation/ground_truth.h"
 #include "tools/evaluation/place_evaluation.h"
 
@@ -132,6 +132,36 @@ TEST_F(ServerLifecycleTest, HealthReportsServingAndTheMetricsEndpointCountsCalls
   EXPECT_NE(metrics.find("recog_map_entries{map=\"m\"} 1"), std::string::npos);
 }
 
+// A second recogd given a port of a running one must not share it (the kernel would hand each new
+// connection to either server, whatever their data): it refuses to start and says why. Its gRPC
+// port, its metrics port and its console's are each checked.
+TEST_F(ServerLifecycleTest, ASecondServerOnAPortInUseRefusesToStart) {
+  StopServer();
+  config().metrics_listen = "127.0.0.1:0";
+  config().console.listen = "127.0.0.1:0";
+  StartServer();
+  const auto on_port = [](int port) { return "127.0.0.1:" + std::to_string(port); };
+  const auto refused = [&](const std::string& what, ServerConfig second) {
+    recog::testing::TempDir second_dir("second");
+    second.data_dir = second_dir.path().string();
+    auto started = RecognitionServer::Start(second);
+    ASSERT_FALSE(started.ok()) << what;
+    EXPECT_EQ(started.status().code(), StatusCode::kUnavailable) << what;
+    EXPECT_NE(started.status().message().find("in use"), std::string::npos)
+        << what << ": " << started.status().ToString();
+  };
+  ServerConfig second = config();
+  second.listen = on_port(server_->port());
+  refused("gRPC", second);
+  second = config();
+  second.metrics_listen = on_port(server_->metrics_port());
+  refused("metrics", second);
+  second = config();
+  second.console.listen = on_port(server_->console_port());
+  refused("console", second);
+  EXPECT_EQ(HealthStatus(channel_), 1);  // the first one still serves
+}
+
 // The store's CURRENT file (the name of its manifest, read by every RocksDB open) is replaced by a
 // FIFO: opening the store blocks on it until the test writes the saved content, so the server is
 // seen listening before its store is open.
@@ -143,7 +173,8 @@ TEST_F(ServerLifecycleTest, HealthIsNotServingUntilTheStoreIsOpen) {
   ASSERT_FALSE(manifest.empty());
   ASSERT_EQ(std::remove(current.c_str()), 0);
   ASSERT_EQ(mkfifo(current.c_str(), 0600), 0);
-  const std::string listen = "127.0.0.1:" + std::to_string(recog::testing::FreePort());
+  const recog::testing::TempDir socket_dir("socket");
+  const std::string listen = recog::testing::UnixSocketAddress(socket_dir.path());
   config().listen = listen;
   std::atomic<bool> started = false;
   auto start = std::async(std::launch::async, [&] {
@@ -402,8 +433,8 @@ TEST_F(ServerLifecycleTest, ShutdownDrainsAStreamWithoutLosingAnsweredFrames) {
 
 TEST_F(ServerLifecycleTest, KillNineDuringAStreamLosesNoAcknowledgedFrame) {
   StopServer();  // the store is the child's now
-  const int port = recog::testing::FreePort();
-  const std::string listen = "127.0.0.1:" + std::to_string(port);
+  const recog::testing::TempDir socket_dir("socket");
+  const std::string listen = recog::testing::UnixSocketAddress(socket_dir.path());
   const std::string dir = data_dir_.path().string();
   std::vector<std::string> args = {RECOGD_PATH,        "--listen", listen,        "--data-dir", dir,
                                    "--metrics-listen", "",         "--log-level", "warn"};

@@ -19,8 +19,8 @@
 
 #include "server/app/server_tls.h"
 #include "tests/server/server_fixture.h"
-#include "tests/testing/free_port.h"
 #include "tests/testing/metrics_scrape.h"
+#include "tests/testing/unix_socket.h"
 
 extern char** environ;
 
@@ -223,7 +223,7 @@ TEST_F(ServerReloadTest, RecogdNotifiesSystemdAndReloadsTokensOnSighup) {
   NotifySocket notify(socket_path);
   ASSERT_TRUE(notify.bound()) << socket_path;
 
-  const std::string listen = "127.0.0.1:" + std::to_string(recog::testing::FreePort());
+  const std::string listen = recog::testing::UnixSocketAddress(files_.path());
   std::vector<std::string> args = {RECOGD_PATH,
                                    "--listen",
                                    listen,
