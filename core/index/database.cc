@@ -39,6 +39,7 @@ struct QueryScratch {
   std::vector<std::pair<size_t, uint32_t>> list_lengths;  // postings, index in the query
   std::vector<QueryResult> candidates;   // a bounded query's best entries on its rarer words
   std::vector<size_t> candidate_blocks;  // where each candidate is in one completed word's list
+  std::vector<size_t> scan_positions;    // by query word: where a scan reads its list next
 
   void Prepare(size_t entries) {
     if (score.size() < entries) {
@@ -87,37 +88,57 @@ struct QueryScratch {
 };
 
 // Adds CommonTerm(v, w) of every posting below `bound` in the lists of `words` to the scratch's
-// sums; `touched`, when not null, receives each entry the first time it is touched.
-template <ScoringType kType, class Lists>
+// sums; `touched` receives each entry the first time it is touched. The entry ids are taken
+// kScanRange at a time: every list's postings in one range are added before the next range's, so
+// that the range's sums and stamps stay in the core's cache instead of each posting missing it
+// in a map of a million entries (the lists are sorted by entry id, so each is read once, in
+// order). After each range, `finish_range(first)` is called with the index in `touched` of the
+// first entry the range added; every entry from there on has its whole sum.
+constexpr EntryId kScanRange = 1 << 14;  // 16K entries: 144 KB of sums and stamps
+template <ScoringType kType, class Lists, class FinishRange>
 void ScanLists(const Lists& lists, std::span<const BowEntry> words, EntryId bound,
-               QueryScratch& scratch, std::vector<QueryResult>* touched) {
+               QueryScratch& scratch, std::vector<QueryResult>* touched,
+               FinishRange&& finish_range) {
   const uint8_t generation = scratch.generation;
   double* const score = scratch.score.data();
   uint8_t* const stamp = scratch.stamp.data();
-  // Each word's posting list is a cache miss away (its vector, then its first postings), which
-  // costs more than scoring a short list: the lists of the words a few steps ahead are fetched
+  // Each word's posting list is a cache miss away (its vector, then its postings), which costs
+  // more than scoring a short list: the lists of the words a few steps ahead are fetched
   // meanwhile. (Measured by bench_place Relocalize_Group10x2600_vs_One26K, whose small maps have
   // short lists.)
   constexpr size_t kListsAhead = 4, kVectorsAhead = 8;
-  for (size_t i = 0; i < words.size(); ++i) {
-    if (i + kVectorsAhead < words.size()) __builtin_prefetch(&lists[words[i + kVectorsAhead].word]);
-    if (i + kListsAhead < words.size()) {
-      __builtin_prefetch(lists[words[i + kListsAhead].word].postings.data());
-    }
-    const BowEntry& q = words[i];
-    if (q.value <= 0.f) continue;
-    const double v = q.value;
-    for (const auto& p : lists[q.word].postings) {
-      if (p.entry >= bound) break;  // postings are sorted by entry id
-      const double term = CommonTerm(kType, v, p.value);
-      if (stamp[p.entry] != generation) {
-        stamp[p.entry] = generation;
-        score[p.entry] = term;
-        if (touched != nullptr) touched->push_back({p.entry, 0.0});
-      } else {
-        score[p.entry] += term;
+  std::vector<size_t>& positions = scratch.scan_positions;
+  positions.assign(words.size(), 0);
+  for (uint64_t range_begin = 0; range_begin < bound; range_begin += kScanRange) {
+    const EntryId range_end = EntryId(std::min<uint64_t>(bound, range_begin + kScanRange));
+    const size_t first_new = touched->size();
+    for (size_t i = 0; i < words.size(); ++i) {
+      if (i + kVectorsAhead < words.size()) {
+        __builtin_prefetch(&lists[words[i + kVectorsAhead].word]);
       }
+      if (i + kListsAhead < words.size()) {
+        __builtin_prefetch(lists[words[i + kListsAhead].word].postings.data() +
+                           positions[i + kListsAhead]);
+      }
+      const BowEntry& q = words[i];
+      if (q.value <= 0.f) continue;
+      const double v = q.value;
+      const auto& postings = lists[q.word].postings;
+      const auto* p = postings.data() + positions[i];
+      for (const auto* const end = postings.data() + postings.size();
+           p != end && p->entry < range_end; ++p) {
+        const double term = CommonTerm(kType, v, p->value);
+        if (stamp[p->entry] != generation) {
+          stamp[p->entry] = generation;
+          score[p->entry] = term;
+          touched->push_back({p->entry, 0.0});
+        } else {
+          score[p->entry] += term;
+        }
+      }
+      positions[i] = size_t(p - postings.data());
     }
+    finish_range(first_new);
   }
 }
 
@@ -385,28 +406,34 @@ void Database::ScoreEntries(const BowVector& query, const QueryOptions& options,
   const double constant = QueryConstant(kType, query);
   if (options.full_scan_postings == 0 || num_postings_ <= options.full_scan_postings ||
       !scratch.SplitByListLength(query, postings_, options.full_scan_postings)) {
-    ScanLists<kType>(postings_, query.entries(), bound, scratch, touched);
-    for (QueryResult& r : *touched) r.score = FinishScore(kType, scratch.score[r.id], constant);
+    ScanLists<kType>(postings_, query.entries(), bound, scratch, touched, [&](size_t first) {
+      for (size_t i = first; i < touched->size(); ++i) {
+        QueryResult& r = (*touched)[i];
+        r.score = FinishScore(kType, scratch.score[r.id], constant);
+      }
+    });
     return;
   }
   // Bounded query: the rarest words' lists are read in full; the entries that score best on them
-  // get the commoner words' terms as well.
-  ScanLists<kType>(postings_, scratch.scanned_words, bound, scratch, touched);
+  // (kept range by range, while their sums are in the cache) get the commoner words' terms too.
   const size_t keep = std::max(options.rescored_candidates, options.max_results);
   const double sign = TraitsOf(kType).higher_is_better ? 1.0 : -1.0;
   const auto better = BetterResult(true);
   std::vector<QueryResult>& best = scratch.candidates;  // a heap, the worst on top
   best.clear();
-  for (const QueryResult& r : *touched) {
-    const QueryResult candidate{r.id, sign * scratch.score[r.id]};
-    if (best.size() == keep) {
-      if (!better(candidate, best.front())) continue;  // most entries: a predictable branch
-      std::pop_heap(best.begin(), best.end(), better);
-      best.pop_back();
+  ScanLists<kType>(postings_, scratch.scanned_words, bound, scratch, touched, [&](size_t first) {
+    for (size_t i = first; i < touched->size(); ++i) {
+      const QueryResult candidate{(*touched)[i].id, sign * scratch.score[(*touched)[i].id]};
+      if (best.size() == keep) {
+        if (!better(candidate, best.front())) continue;  // most entries: a predictable branch
+        std::pop_heap(best.begin(), best.end(), better);
+        best.pop_back();
+      }
+      best.push_back(candidate);
+      std::push_heap(best.begin(), best.end(), better);
     }
-    best.push_back(candidate);
-    std::push_heap(best.begin(), best.end(), better);
-  }
+    touched->resize(first);  // the range's entries are no longer needed
+  });
   touched->assign(best.begin(), best.end());
   double* const score = scratch.score.data();
   const std::span<const BowEntry> completed = scratch.completed_words;

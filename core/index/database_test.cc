@@ -192,6 +192,82 @@ INSTANTIATE_TEST_SUITE_P(AllScores, DatabaseScoringTest,
                                            ScoringType::kBhattacharyya, ScoringType::kDotProduct),
                          [](const auto& info) { return std::string(ScoringName(info.param)); });
 
+TEST(DatabaseQueryTest, AMapOfSeveralScanRangesScoresEveryEntryExactly) {
+  // A query adds up its lists' postings 16,384 entry ids at a time: 70,000 entries take five
+  // ranges. Whatever the range an entry falls in, and wherever a query's id bound cuts a range, it
+  // is returned with its brute-force score, by the exhaustive query and by the bounded one.
+  MemoryIndexStore store;
+  const auto vocabulary = SmallVocabulary();
+  auto created = Database::Create(&store, "m", vocabulary, ScoringType::kL1);
+  ASSERT_TRUE(created.ok()) << created.status().ToString();
+  Database& db = **created;
+  const auto bow_of = [&](int features, uint64_t seed) {
+    BowVector bow;
+    EXPECT_TRUE(vocabulary
+                    ->Transform(SyntheticFeatures(features, seed).descriptors, &bow, nullptr, 0,
+                                BowNormalization::kL1)
+                    .ok());
+    return bow;
+  };
+  std::vector<BowVector> bows;
+  for (uint64_t i = 0; i < 70000; ++i) {
+    ASSERT_TRUE(db.Add(SyntheticFeatures(2, 10000 + i)).ok());
+    bows.push_back(bow_of(2, 10000 + i));
+  }
+  const BowVector query = bow_of(12, 7);
+  // The entries of each query word's list below an id bound, and every entry sharing a word.
+  const auto expected_below = [&](EntryId bound, size_t* rarest_list) {
+    std::vector<QueryResult> expected;
+    std::vector<size_t> list_sizes(query.size(), 0);
+    for (EntryId id = 0; id < bound; ++id) {
+      bool shares_a_word = false;
+      for (size_t w = 0; w < query.size(); ++w) {
+        const bool holds = bows[id].ValueOf(query.entries()[w].word) > 0;
+        list_sizes[w] += holds;
+        shares_a_word |= holds;
+      }
+      if (shares_a_word) expected.push_back({id, Score(ScoringType::kL1, query, bows[id])});
+    }
+    std::erase(list_sizes, 0);
+    *rarest_list = *std::min_element(list_sizes.begin(), list_sizes.end());
+    return expected;
+  };
+  const auto by_id = [](std::vector<QueryResult> results) {
+    std::sort(results.begin(), results.end(),
+              [](const QueryResult& a, const QueryResult& b) { return a.id < b.id; });
+    return results;
+  };
+  for (const EntryId bound : {EntryId(70000), EntryId(40000)}) {
+    size_t rarest_list = 0;
+    const std::vector<QueryResult> expected = expected_below(bound, &rarest_list);
+    ASSERT_GT(expected.back().id, bound - 1000) << "the query's lists reach the bound's range";
+    std::vector<QueryResult> results;
+    ASSERT_TRUE(db.Query(query,
+                         {.max_results = 70000, .max_entry_id = bound, .full_scan_postings = 0},
+                         &results)
+                    .ok());
+    results = by_id(results);
+    ASSERT_EQ(results.size(), expected.size()) << "bound " << bound;
+    for (size_t i = 0; i < results.size(); ++i) {
+      ASSERT_EQ(results[i].id, expected[i].id) << "bound " << bound;
+      EXPECT_NEAR(results[i].score, expected[i].score, 1e-9) << "entry " << results[i].id;
+    }
+    // Bounded to its rarest list: exactly that list's entries, each with its whole score.
+    ASSERT_TRUE(db.Query(query,
+                         {.max_results = 70000,
+                          .max_entry_id = bound,
+                          .full_scan_postings = 1,
+                          .rescored_candidates = 70000},
+                         &results)
+                    .ok());
+    ASSERT_EQ(results.size(), rarest_list) << "bound " << bound;
+    for (const QueryResult& r : results) {
+      ASSERT_LT(r.id, bound);
+      EXPECT_NEAR(r.score, Score(ScoringType::kL1, query, bows[r.id]), 1e-9) << "entry " << r.id;
+    }
+  }
+}
+
 TEST(DatabaseQueryTest, MapsQueriedInTurnOnOneThreadEachGiveTheirOwnAnswer) {
   // A thread's query scratch serves every map it queries: a large map and a small one, queried in
   // turn, give the answers they give alone (the small map's entries are the large one's first).
