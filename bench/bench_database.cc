@@ -8,6 +8,13 @@
 //   Query_L1_Shipped_k10L5_26K  those 4,665 entries and, to reach 26,000, 21,335 more made from
 //                             random 60-100 % subsets of the same photos' features (seeded): not
 //                             26,000 distinct photos, of which the shared data has 4,872
+//   Restart_Shipped_k10L5/<entries>  a RocksDB store of that many of the Scale case's entries
+//                             (each with 50 placeholder features, to keep the store to a few GB):
+//                             the index snapshot's writing time and size, the store's disk per
+//                             entry (snapshot apart), and the time from opening the store to the
+//                             answer of a first query, loading the snapshot (evicted from the
+//                             page cache first, as after a reboot) and rebuilding without it;
+//                             both indexes must answer 20 queries as the built one did
 //   Query_L1_Shipped_k10L5_Scale/<entries>  the same entries grown to 100K, 300K and 1M (the
 //                             first 26,000 are the 26K case's; 1M takes about 8 minutes and 5 GB):
 //                             the index's memory, 1,000 timed queries with the default options
@@ -25,14 +32,18 @@
 #include <benchmark/benchmark.h>
 #include <sys/resource.h>
 
+#include <fcntl.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
+#include <filesystem>
 #include <numeric>
 #include <random>
 
 #include "bench/bench_support.h"
 #include "core/index/database.h"
+#include "storage/rocksdb_index_store.h"
 
 namespace recog::bench {
 namespace {
@@ -52,9 +63,17 @@ class DiscardingStore : public IndexStore {
   Status ReadEntry(MapId, EntryId, uint32_t, EntryRecord*) override {
     return Status::NotFound("discarded");
   }
-  Status ScanEntries(MapId, uint32_t, const std::function<Status(EntryRecord&)>&) override {
+  Status ScanEntries(MapId, EntryId, uint32_t,
+                     const std::function<Status(EntryRecord&)>&) override {
     return Status::Ok();
   }
+  StatusOr<std::unique_ptr<SnapshotWriter>> WriteSnapshot(MapId, EntryId) override {
+    return Status::FailedPrecondition("a discarding store keeps no snapshot");
+  }
+  StatusOr<std::unique_ptr<SnapshotReader>> ReadSnapshot(MapId) override {
+    return Status::NotFound("discarded");
+  }
+  Status DropSnapshot(MapId) override { return Status::Ok(); }
   StatusOr<EntryId> NextEntryId(MapId) override { return EntryId(0); }
   Status PutBlob(const std::string&, std::string_view) override { return Status::Ok(); }
   StatusOr<std::string> GetBlob(const std::string&) override {
@@ -181,15 +200,15 @@ void RandomSubset(const cv::Mat& all, std::mt19937_64& rng, std::vector<int>* ro
 // Adds to `db` every non-query photo once (when it is empty) and then, until it holds `entries`,
 // random 60-100 % subsets of their features, the photos in turn (none when `entries` is at most
 // the number of those photos). `rng` carries on across calls; `insert_ms`, when not null,
-// receives the time of each AddConverted.
+// receives the time of each AddConverted. Each entry has `features` placeholder features.
 void GrowRealDatabase(Database& db, size_t entries, std::mt19937_64& rng,
-                      std::vector<double>* insert_ms = nullptr) {
+                      std::vector<double>* insert_ms = nullptr, int features = 1000) {
   const std::vector<cv::Mat>& photos = Photos();
   const size_t base = photos.size() - kQueryPhotos;
   const auto add = [&](const cv::Mat& descriptors) {
     const BowVector bow = Transform(db.vocabulary(), descriptors);
     const auto start = std::chrono::steady_clock::now();
-    AddEntry(db, bow, 1000);
+    AddEntry(db, bow, features);
     if (insert_ms != nullptr) {
       insert_ms->push_back(
           std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
@@ -344,6 +363,115 @@ std::vector<double> TimeQueries(const Database& db, const QueryOptions& options,
   std::sort(ms.begin(), ms.end());
   return ms;
 }
+
+// The bytes of the files under `dir` (only those under `only_under` when given).
+uint64_t DirectoryBytes(const std::string& dir, const std::string& only_under = "") {
+  uint64_t bytes = 0;
+  for (const auto& f : std::filesystem::recursive_directory_iterator(dir)) {
+    if (!f.is_regular_file()) continue;
+    if (!only_under.empty() && f.path().string().rfind(only_under, 0) != 0) continue;
+    bytes += f.file_size();
+  }
+  return bytes;
+}
+
+// Tells the kernel to drop the cached pages of the files under `dir`, so that the next read of
+// them comes from the disk.
+void EvictFromPageCache(const std::string& dir) {
+  for (const auto& f : std::filesystem::recursive_directory_iterator(dir)) {
+    if (!f.is_regular_file()) continue;
+    const int fd = ::open(f.path().c_str(), O_RDONLY);
+    if (fd < 0) continue;
+    ::posix_fadvise(fd, 0, 0, POSIX_FADV_DONTNEED);
+    ::close(fd);
+  }
+}
+
+// Opens the store and the map and answers a first query; returns the seconds that took (in
+// *store_seconds those of opening the store alone), and the database (its store in *store).
+double TimedRestart(const std::string& dir, std::unique_ptr<IndexStore>* store,
+                    std::unique_ptr<Database>* db, double* store_seconds) {
+  const auto start = std::chrono::steady_clock::now();
+  auto opened = OpenRocksDbIndexStore(dir, RocksDbStoreOptions{});
+  if (!opened.ok()) std::abort();
+  *store = std::move(opened).value();
+  *store_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  auto database = Database::Open(store->get(), "m", ShippedVocabulary());
+  if (!database.ok()) {
+    std::fprintf(stderr, "bench_database: %s\n", database.status().ToString().c_str());
+    std::exit(2);
+  }
+  *db = std::move(database).value();
+  QueryOnce(**db, 0);
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+std::vector<std::vector<QueryResult>> FirstAnswers(const Database& db) {
+  std::vector<std::vector<QueryResult>> answers(20);
+  for (size_t i = 0; i < answers.size(); ++i) {
+    if (!db.Query(HeldOutQueries()[i], {.max_results = 10}, &answers[i]).ok()) std::abort();
+  }
+  return answers;
+}
+
+void BM_Restart_Shipped_k10L5(benchmark::State& state) {
+  const size_t entries = size_t(state.range(0));
+  const std::string dir = TempPath("restart_" + std::to_string(entries));
+  const std::string snapshots = dir + "/index-snapshots";
+  std::filesystem::remove_all(dir);
+  std::vector<std::vector<QueryResult>> expected;
+  {
+    auto store = OpenRocksDbIndexStore(dir, RocksDbStoreOptions{});
+    if (!store.ok()) std::abort();
+    auto db = NewShippedDatabase(store->get());
+    std::mt19937_64 rng(5);
+    for (size_t size = 100000; db->size() < entries; size += 100000) {
+      GrowRealDatabase(*db, std::min(size, entries), rng, nullptr, 50);
+      std::fprintf(stderr, "bench_database: %zu entries stored\n", db->size());
+    }
+    expected = FirstAnswers(*db);
+    ReportMemory(state, *db);
+    const auto start = std::chrono::steady_clock::now();
+    const StatusOr<uint64_t> written = db->SaveSnapshot();
+    if (!written.ok()) std::abort();
+    state.counters["snapshot_write_s"] =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    state.counters["snapshot_MB"] = double(*written) / 1e6;
+  }
+  const uint64_t store_bytes = DirectoryBytes(dir) - DirectoryBytes(dir, snapshots);
+  state.counters["store_MB"] = double(store_bytes) / 1e6;
+  state.counters["store_KB_per_entry"] = double(store_bytes) / double(entries) / 1e3;
+  for (auto _ : state) {
+    EvictFromPageCache(snapshots);
+    std::unique_ptr<IndexStore> store;
+    std::unique_ptr<Database> db;
+    double store_s = 0.0;
+    state.counters["restart_s"] = TimedRestart(dir, &store, &db, &store_s);
+    state.counters["restart_store_open_s"] = store_s;
+    if (!db->open_report().from_snapshot || FirstAnswers(*db) != expected) {
+      state.SkipWithError("the index loaded from the snapshot differs");
+    }
+    if (!store->DropSnapshot(db->info().id).ok()) std::abort();
+  }
+  {
+    std::unique_ptr<IndexStore> store;
+    std::unique_ptr<Database> db;
+    double store_s = 0.0;
+    state.counters["restart_rebuild_s"] = TimedRestart(dir, &store, &db, &store_s);
+    state.counters["restart_rebuild_store_open_s"] = store_s;
+    if (db->open_report().from_snapshot || FirstAnswers(*db) != expected) {
+      state.SkipWithError("the rebuilt index differs");
+    }
+  }
+  std::filesystem::remove_all(dir);
+}
+BENCHMARK(BM_Restart_Shipped_k10L5)
+    ->Arg(100000)
+    ->Arg(300000)
+    ->Arg(1000000)
+    ->Unit(benchmark::kSecond)
+    ->Iterations(1)
+    ->UseRealTime();
 
 // The map a fleet fills over months: one database grown across the arguments. Each size reports
 // the insertion of the entries that brought it there, 1,000 timed queries with the default

@@ -73,7 +73,7 @@ class IndexStoreContractTest : public ::testing::TestWithParam<StoreFactory> {
   // Every entry of `map` with the requested parts, in visiting order.
   std::vector<EntryRecord> ScanAll(MapId map, uint32_t parts = kEntryAllParts) {
     std::vector<EntryRecord> out;
-    const Status s = store_->ScanEntries(map, parts, [&](EntryRecord& e) {
+    const Status s = store_->ScanEntries(map, 0, parts, [&](EntryRecord& e) {
       out.push_back(std::move(e));
       return Status::Ok();
     });
@@ -306,7 +306,7 @@ TEST_P(IndexStoreContractTest, ScanStopsAtTheFirstVisitorError) {
   for (EntryId id = 0; id < 5; ++id)
     ASSERT_TRUE(store_->CommitEntry(map.id, MakeTestEntry(id)).ok());
   int visits = 0;
-  const Status s = store_->ScanEntries(map.id, kEntryMetadata, [&](EntryRecord& e) {
+  const Status s = store_->ScanEntries(map.id, 0, kEntryMetadata, [&](EntryRecord& e) {
     ++visits;
     return e.id == 2 ? Status::Internal("stop here") : Status::Ok();
   });
@@ -319,7 +319,7 @@ TEST_P(IndexStoreContractTest, ScanVisitorMayCallTheStore) {
   const MapInfo map = NewMap("office");
   for (EntryId id = 0; id < 3; ++id)
     ASSERT_TRUE(store_->CommitEntry(map.id, MakeTestEntry(id)).ok());
-  const Status s = store_->ScanEntries(map.id, kEntryMetadata, [&](EntryRecord& e) {
+  const Status s = store_->ScanEntries(map.id, 0, kEntryMetadata, [&](EntryRecord& e) {
     EntryRecord again;
     RECOG_RETURN_IF_ERROR(store_->ReadEntry(map.id, e.id, kEntryBow, &again));
     return store_->NextEntryId(map.id).status();
@@ -393,9 +393,9 @@ TEST_P(IndexStoreContractTest, UnknownOrDeletedMapIsNotFoundEverywhere) {
     EXPECT_EQ(store_->CommitEntry(map, MakeTestEntry(1)).code(), StatusCode::kNotFound);
     EXPECT_EQ(store_->RemoveEntry(map, 0).code(), StatusCode::kNotFound);
     EXPECT_EQ(store_->ReadEntry(map, 0, kEntryAllParts, &got).code(), StatusCode::kNotFound);
-    EXPECT_EQ(
-        store_->ScanEntries(map, kEntryAllParts, [](EntryRecord&) { return Status::Ok(); }).code(),
-        StatusCode::kNotFound);
+    EXPECT_EQ(store_->ScanEntries(map, 0, kEntryAllParts, [](EntryRecord&) { return Status::Ok(); })
+                  .code(),
+              StatusCode::kNotFound);
     EXPECT_EQ(store_->NextEntryId(map).status().code(), StatusCode::kNotFound);
   }
 }
@@ -552,6 +552,141 @@ TEST_P(IndexStoreContractTest, FlushSucceeds) {
   const MapInfo map = NewMap("office");
   ASSERT_TRUE(store_->CommitEntry(map.id, MakeTestEntry(0)).ok());
   EXPECT_TRUE(store_->Flush().ok());
+}
+
+// --- Index snapshots ---
+
+// Writes `bytes` as the snapshot of `map` covering the ids below `covers`; returns Commit's status.
+Status PutSnapshot(IndexStore& store, MapId map, EntryId covers, const std::string& bytes) {
+  RECOG_ASSIGN_OR_RETURN(std::unique_ptr<IndexStore::SnapshotWriter> writer,
+                         store.WriteSnapshot(map, covers));
+  // In two pieces, as a writer appends.
+  RECOG_RETURN_IF_ERROR(writer->Append(std::string_view(bytes).substr(0, bytes.size() / 2)));
+  RECOG_RETURN_IF_ERROR(writer->Append(std::string_view(bytes).substr(bytes.size() / 2)));
+  return writer->Commit();
+}
+
+// The snapshot of `map` as (covers, bytes); NOT_FOUND when it has none.
+StatusOr<std::pair<EntryId, std::string>> GetSnapshot(IndexStore& store, MapId map) {
+  RECOG_ASSIGN_OR_RETURN(std::unique_ptr<IndexStore::SnapshotReader> reader,
+                         store.ReadSnapshot(map));
+  std::string bytes(reader->size(), '\0');
+  RECOG_RETURN_IF_ERROR(reader->Read(bytes.data(), bytes.size()));
+  char past_the_end = 0;
+  if (reader->Read(&past_the_end, 1).code() != StatusCode::kDataLoss) {
+    return Status::Internal("the reader read past the snapshot's end");
+  }
+  return std::make_pair(reader->covers(), bytes);
+}
+
+TEST_P(IndexStoreContractTest, ScanEntriesStartsAtTheGivenId) {
+  const MapInfo map = NewMap("office");
+  for (EntryId id : {0u, 2u, 5u, 9u})
+    ASSERT_TRUE(store_->CommitEntry(map.id, MakeTestEntry(id)).ok());
+  for (const auto& [first, expected] : std::vector<std::pair<EntryId, std::vector<EntryId>>>{
+           {0, {0, 2, 5, 9}}, {2, {2, 5, 9}}, {3, {5, 9}}, {9, {9}}, {10, {}}}) {
+    std::vector<EntryId> ids;
+    ASSERT_TRUE(store_
+                    ->ScanEntries(map.id, first, kEntryMetadata,
+                                  [&](EntryRecord& e) {
+                                    ids.push_back(e.id);
+                                    return Status::Ok();
+                                  })
+                    .ok());
+    EXPECT_EQ(ids, expected) << "from " << first;
+  }
+}
+
+TEST_P(IndexStoreContractTest, ASnapshotIsReadBackWhole) {
+  const MapInfo map = NewMap("office");
+  EXPECT_EQ(store_->ReadSnapshot(map.id).status().code(), StatusCode::kNotFound);
+  for (EntryId id = 0; id < 3; ++id)
+    ASSERT_TRUE(store_->CommitEntry(map.id, MakeTestEntry(id)).ok());
+  // Larger than a reader's buffer, with every byte value.
+  std::string bytes(3 << 20, '\0');
+  for (size_t i = 0; i < bytes.size(); ++i) bytes[i] = char(i * 7 + i / 4096);
+  ASSERT_TRUE(PutSnapshot(*store_, map.id, 3, bytes).ok());
+  auto got = GetSnapshot(*store_, map.id);
+  ASSERT_TRUE(got.ok()) << got.status().ToString();
+  EXPECT_EQ(got->first, 3u);
+  EXPECT_TRUE(got->second == bytes);
+
+  // A second one replaces it; an abandoned writer changes nothing.
+  ASSERT_TRUE(PutSnapshot(*store_, map.id, 2, "smaller").ok());
+  {
+    auto abandoned = store_->WriteSnapshot(map.id, 3);
+    ASSERT_TRUE(abandoned.ok());
+    ASSERT_TRUE((*abandoned)->Append("never committed").ok());
+  }
+  got = GetSnapshot(*store_, map.id);
+  ASSERT_TRUE(got.ok()) << got.status().ToString();
+  EXPECT_EQ(got->first, 2u);
+  EXPECT_EQ(got->second, "smaller");
+}
+
+TEST_P(IndexStoreContractTest, EntriesAddedAfterASnapshotKeepIt) {
+  const MapInfo map = NewMap("office");
+  ASSERT_TRUE(store_->CommitEntry(map.id, MakeTestEntry(0)).ok());
+  ASSERT_TRUE(PutSnapshot(*store_, map.id, 1, "index").ok());
+  ASSERT_TRUE(store_->CommitEntry(map.id, MakeTestEntry(1)).ok());
+  ASSERT_TRUE(store_->CommitEntry(map.id, MakeTestEntry(7)).ok());
+  auto got = GetSnapshot(*store_, map.id);
+  ASSERT_TRUE(got.ok()) << got.status().ToString();
+  EXPECT_EQ(got->first, 1u);
+}
+
+TEST_P(IndexStoreContractTest, WritesThatMakeASnapshotStaleDropIt) {
+  const std::vector<std::pair<std::string, std::function<Status(IndexStore&, MapId)>>> writes = {
+      {"removing an entry", [](IndexStore& s, MapId m) { return s.RemoveEntry(m, 4); }},
+      {"committing an id below the bound",
+       [](IndexStore& s, MapId m) { return s.CommitEntry(m, MakeTestEntry(1)); }},
+      {"dropping it", [](IndexStore& s, MapId m) { return s.DropSnapshot(m); }},
+  };
+  for (const auto& [what, write] : writes) {
+    SCOPED_TRACE(what);
+    const MapInfo map = NewMap("map-" + std::to_string(&write - &writes[0].second));
+    for (EntryId id : {0u, 4u, 5u})
+      ASSERT_TRUE(store_->CommitEntry(map.id, MakeTestEntry(id)).ok());
+    ASSERT_TRUE(PutSnapshot(*store_, map.id, 6, "index").ok());
+    ASSERT_TRUE(write(*store_, map.id).ok());
+    EXPECT_EQ(store_->ReadSnapshot(map.id).status().code(), StatusCode::kNotFound);
+    // A write that fails drops nothing more, and a new snapshot can be written.
+    ASSERT_TRUE(PutSnapshot(*store_, map.id, 6, "again").ok());
+    EXPECT_EQ(store_->RemoveEntry(map.id, 99).code(), StatusCode::kNotFound);
+    EXPECT_TRUE(GetSnapshot(*store_, map.id).ok());
+  }
+}
+
+TEST_P(IndexStoreContractTest, ASnapshotWrittenAcrossAStaleningWriteIsRefused) {
+  const MapInfo map = NewMap("office");
+  for (EntryId id = 0; id < 3; ++id)
+    ASSERT_TRUE(store_->CommitEntry(map.id, MakeTestEntry(id)).ok());
+  ASSERT_TRUE(PutSnapshot(*store_, map.id, 3, "old").ok());
+  auto writer = store_->WriteSnapshot(map.id, 3);
+  ASSERT_TRUE(writer.ok());
+  ASSERT_TRUE((*writer)->Append("new, but entry 1 is removed meanwhile").ok());
+  ASSERT_TRUE(store_->RemoveEntry(map.id, 1).ok());
+  EXPECT_EQ((*writer)->Commit().code(), StatusCode::kFailedPrecondition);
+  EXPECT_EQ(store_->ReadSnapshot(map.id).status().code(), StatusCode::kNotFound);
+}
+
+TEST_P(IndexStoreContractTest, DeletingAMapDropsItsSnapshot) {
+  MapInfo map = NewMap("office");
+  ASSERT_TRUE(store_->CommitEntry(map.id, MakeTestEntry(0)).ok());
+  ASSERT_TRUE(PutSnapshot(*store_, map.id, 1, "index").ok());
+  ASSERT_TRUE(store_->DeleteMap("office").ok());
+  EXPECT_EQ(store_->ReadSnapshot(map.id).status().code(), StatusCode::kNotFound);
+  map = NewMap("office");
+  EXPECT_EQ(store_->ReadSnapshot(map.id).status().code(), StatusCode::kNotFound);
+}
+
+TEST_P(IndexStoreContractTest, SnapshotsOfUnknownMapsOrBeyondTheEntriesAreRefused) {
+  const MapInfo map = NewMap("office");
+  ASSERT_TRUE(store_->CommitEntry(map.id, MakeTestEntry(0)).ok());
+  EXPECT_EQ(store_->WriteSnapshot(map.id, 2).status().code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(store_->WriteSnapshot(map.id + 100, 0).status().code(), StatusCode::kNotFound);
+  EXPECT_EQ(store_->ReadSnapshot(map.id + 100).status().code(), StatusCode::kNotFound);
+  EXPECT_EQ(store_->DropSnapshot(map.id + 100).code(), StatusCode::kNotFound);
 }
 
 INSTANTIATE_TEST_SUITE_P(AllStores, IndexStoreContractTest, ::testing::ValuesIn(kFactories),

@@ -118,7 +118,7 @@ void CheckReopenedMap(IndexStore& store, MapId map, const std::set<EntryId>& ack
     ASSERT_TRUE(s.ok()) << "acknowledged entry " << ack << ": " << s.ToString();
   }
   std::vector<EntryId> present;
-  const Status scan = store.ScanEntries(map, kEntryAllParts, [&](EntryRecord& e) {
+  const Status scan = store.ScanEntries(map, 0, kEntryAllParts, [&](EntryRecord& e) {
     if (!present.empty()) {
       EXPECT_GT(e.id, present.back());
     }

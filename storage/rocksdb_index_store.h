@@ -34,6 +34,12 @@
 // Damage to a table file (*.sst) is found when its block is read (DATA_LOSS naming the file);
 // a missing CURRENT file beside the store's other files is DATA_LOSS, not a new empty store.
 //
+// Index snapshots (IndexStore::WriteSnapshot) are files in "<dir>/index-snapshots", one per map
+// (storage/snapshot_file.h), outside RocksDB. Installing one first syncs the write-ahead log, so
+// that every entry it covers is durable. Opening the store keeps the files of known maps whose
+// bound does not exceed the map's entries and removes the rest; a point-in-time recovery removes
+// them all. Checkpoints do not copy them: a store restored from one rebuilds its indexes once.
+//
 // Checkpoints. IndexStore::Checkpoint(dir) writes a consistent, openable copy of the whole store
 // (SST files hard-linked when on the same filesystem) while the store keeps serving; it holds
 // every write that returned before the call. RestoreRocksDbCheckpoint copies one back into place,
@@ -102,6 +108,10 @@ struct RocksDbStoreOptions {
   // A write-ahead log damaged anywhere but in its torn last write: refuse, or recover to the
   // damage and report the loss (see "Damage" above).
   DamagedLogPolicy damaged_log = DamagedLogPolicy::kRefuse;
+  // Closing writes the memtables out to table files, so that the next open has no log to replay
+  // (seconds for a large store). false leaves the writes in the log, as a crash does (tests of
+  // damaged logs).
+  bool write_memtables_at_close = true;
 
   // INVALID_ARGUMENT naming the bad field.
   Status Validate() const;

@@ -18,6 +18,7 @@
 #include <atomic>
 #include <chrono>
 #include <csignal>
+#include <filesystem>
 #include <fstream>
 #include <functional>
 #include <map>
@@ -28,6 +29,7 @@
 
 #include "core/index/memory_index_store.h"
 #include "storage/record_codec.h"
+#include "storage/snapshot_file.h"
 #include "storage/store_test_util.h"
 
 namespace recog {
@@ -128,7 +130,7 @@ class RocksDbStoreTest : public ::testing::Test {
 
   std::vector<EntryId> ScanIds(IndexStore& store, MapId map, uint32_t parts, Status* status) {
     std::vector<EntryId> ids;
-    *status = store.ScanEntries(map, parts, [&](EntryRecord& e) {
+    *status = store.ScanEntries(map, 0, parts, [&](EntryRecord& e) {
       ids.push_back(e.id);
       return Status::Ok();
     });
@@ -244,6 +246,66 @@ TEST_F(RocksDbStoreTest, BlobsSurviveReopenAndACheckpoint) {
     EXPECT_EQ(*store->ListBlobKeys(""), expected_keys);
     EXPECT_TRUE(*store->GetBlob("model/box/0000000001") == model);
   }
+}
+
+TEST_F(RocksDbStoreTest, SnapshotsSurviveReopenAndUnusableSnapshotFilesAreRemoved) {
+  namespace fs = std::filesystem;
+  const MapId m = MakeStore(3);
+  MapId n = 0;
+  const auto read_snapshot = [](IndexStore& store, MapId map) -> StatusOr<std::string> {
+    RECOG_ASSIGN_OR_RETURN(auto reader, store.ReadSnapshot(map));
+    std::string bytes(reader->size(), '\0');
+    RECOG_RETURN_IF_ERROR(reader->Read(bytes.data(), bytes.size()));
+    return bytes;
+  };
+  {
+    auto store = Open();
+    ASSERT_NE(store, nullptr);
+    auto map = store->CreateMap(TestMapConfig("n"));
+    ASSERT_TRUE(map.ok());
+    n = map->id;
+    ASSERT_TRUE(store->CommitEntry(n, MakeTestEntry(0)).ok());
+    for (const auto& [map_id, covers] : {std::pair{m, 3u}, std::pair{n, 1u}}) {
+      auto writer = store->WriteSnapshot(map_id, covers);
+      ASSERT_TRUE(writer.ok());
+      ASSERT_TRUE((*writer)->Append("index of " + std::to_string(map_id)).ok());
+      ASSERT_TRUE((*writer)->Commit().ok());
+    }
+  }
+  {
+    auto store = Open();
+    ASSERT_NE(store, nullptr);
+    const StatusOr<std::string> of_m = read_snapshot(*store, m);
+    ASSERT_TRUE(of_m.ok()) << of_m.status().ToString();
+    EXPECT_EQ(*of_m, "index of " + std::to_string(m));
+    const StatusOr<std::string> of_n = read_snapshot(*store, n);
+    ASSERT_TRUE(of_n.ok()) << of_n.status().ToString();
+    EXPECT_EQ(*of_n, "index of " + std::to_string(n));
+    EXPECT_GT(*store->MapDiskBytes(m), 0u);
+  }
+  // Damage: m's header, n's bound beyond its entries; add a leftover temporary file and the
+  // snapshot of a map that does not exist.
+  const std::string folder = storage::SnapshotDirectory(StorePath());
+  {
+    std::fstream file(storage::SnapshotPath(StorePath(), m), std::ios::in | std::ios::out);
+    file.seekp(0);
+    file.put('X');
+  }
+  {
+    std::fstream file(storage::SnapshotPath(StorePath(), n), std::ios::in | std::ios::out);
+    file.seekp(8);
+    file.put(char(50));
+  }
+  std::ofstream(storage::SnapshotPath(StorePath(), n) + ".tmp") << "half written";
+  fs::copy_file(storage::SnapshotPath(StorePath(), n), storage::SnapshotPath(StorePath(), 999));
+  auto store = Open();
+  ASSERT_NE(store, nullptr);
+  EXPECT_EQ(store->ReadSnapshot(m).status().code(), StatusCode::kNotFound);
+  EXPECT_EQ(store->ReadSnapshot(n).status().code(), StatusCode::kNotFound);
+  EXPECT_TRUE(fs::is_empty(folder));
+  Status scanned;
+  EXPECT_EQ(ScanIds(*store, m, kEntryAllParts, &scanned).size(), 3u);  // the entries stay
+  EXPECT_TRUE(scanned.ok());
 }
 
 TEST_F(RocksDbStoreTest, AStoreWrittenBeforeBlobsExistedOpensAndTakesBlobs) {

@@ -76,10 +76,12 @@ class StoreDamageTest : public ::testing::Test {
     return OpenRocksDbIndexStore(StorePath(), options, recovery);
   }
 
-  // Writes m1 then m2 (kEntries each) and closes the store; with `tables`, flushed to *.sst by a
-  // checkpoint first.
+  // Writes m1 then m2 (kEntries each) and closes the store leaving the writes in its log, as a
+  // crash would; with `tables`, flushed to *.sst by a checkpoint first.
   void MakeStore(bool tables = false) {
-    auto store = OpenRocksDbIndexStore(StorePath(), RocksDbStoreOptions());
+    RocksDbStoreOptions options;
+    options.write_memtables_at_close = false;
+    auto store = OpenRocksDbIndexStore(StorePath(), options);
     ASSERT_TRUE(store.ok()) << store.status().ToString();
     for (const char* name : {"m1", "m2"}) {
       auto map = (*store)->CreateMap(TestMapConfig(name));
@@ -98,7 +100,7 @@ class StoreDamageTest : public ::testing::Test {
   StatusOr<std::vector<EntryId>> Ids(IndexStore& store, const std::string& name) {
     RECOG_ASSIGN_OR_RETURN(MapInfo map, store.GetMap(name));
     std::vector<EntryId> ids;
-    RECOG_RETURN_IF_ERROR(store.ScanEntries(map.id, kEntryAllParts, [&](EntryRecord& e) {
+    RECOG_RETURN_IF_ERROR(store.ScanEntries(map.id, 0, kEntryAllParts, [&](EntryRecord& e) {
       ids.push_back(e.id);
       return Status::Ok();
     }));

@@ -10,9 +10,13 @@
 // to be verified geometrically.
 //
 // Writes go to the store first, then to memory: Add() returns only after the entry is committed
-// (atomically, every part), and a query sees an entry only once it is fully indexed. Opening a
-// database rebuilds the in-memory index from the store and checks that every entry's bag of
-// words, direct index and metadata agree with each other and with the vocabulary.
+// (atomically, every part), and a query sees an entry only once it is fully indexed.
+//
+// Opening a database loads the index from the map's snapshot in the store (SaveSnapshot; checked
+// with its checksum and against the map) and then reads the entries added since; without a
+// usable snapshot (a map written before snapshots existed, one removed from since, a damaged
+// snapshot) it rebuilds the whole index from the entries. Every entry read is checked: its bag of
+// words, direct index and metadata must agree with each other and with the vocabulary.
 //
 // A database refuses a vocabulary other than the one its map was created with
 // (FAILED_PRECONDITION): word ids of two vocabularies mean different things.
@@ -68,6 +72,14 @@ struct BcMatch {
   friend bool operator==(const BcMatch&, const BcMatch&) = default;
 };
 
+// How Open built the index.
+struct DatabaseOpenReport {
+  bool from_snapshot = false;     // loaded from the map's snapshot ...
+  EntryId snapshot_covers = 0;    // ... which held the entries below this id
+  size_t entries_read = 0;        // entries read from the store: all of them, or those after it
+  std::string snapshot_rejected;  // why the store's snapshot was not used (empty: no such thing)
+};
+
 struct DatabaseStats {
   size_t entries = 0;
   size_t postings = 0;
@@ -83,12 +95,14 @@ class Database {
                                                     std::shared_ptr<const Vocabulary> vocabulary,
                                                     ScoringType scoring = ScoringType::kL1,
                                                     uint32_t direct_index_levels_up = 2);
-  // Opens map `name` of `store` and rebuilds its index. NOT_FOUND for an unknown map,
-  // FAILED_PRECONDITION for another vocabulary, DATA_LOSS when the stored entries disagree.
+  // Opens map `name` of `store` and loads its index (see above; open_report() says how).
+  // NOT_FOUND for an unknown map, FAILED_PRECONDITION for another vocabulary, DATA_LOSS when the
+  // stored entries disagree.
   static StatusOr<std::unique_ptr<Database>> Open(IndexStore* store, const std::string& name,
                                                   std::shared_ptr<const Vocabulary> vocabulary);
 
   const MapInfo& info() const { return info_; }
+  const DatabaseOpenReport& open_report() const { return open_report_; }
   const Vocabulary& vocabulary() const { return *vocabulary_; }
 
   // Converts the features with the vocabulary (direct index at the map's level) and adds them.
@@ -127,6 +141,15 @@ class Database {
   Status Remove(EntryId id);
   // Removes every entry (ids keep increasing afterwards).
   Status Clear();
+
+  // Writes the in-memory index to the store as the map's snapshot, so that the next Open loads it
+  // instead of reading every entry; returns the bytes written, 0 when the store's snapshot is
+  // already current. Adds and removals wait until it is written (seconds for a million entries:
+  // meant for shutdown and quiet moments); queries go on. The snapshot holds, little-endian: a
+  // header (the magic "RCGINDEX", format version, map id, vocabulary checksum and words, the
+  // entry id bound it covers, entries, postings), a byte per entry id below that bound (1:
+  // indexed), each word's posting count and postings, and an XXH3-64 checksum of all of that.
+  StatusOr<uint64_t> SaveSnapshot();
 
   size_t size() const;
   // The id the next added entry will get (constant time, unlike Stats()).
@@ -170,6 +193,11 @@ class Database {
   std::string CheckParts(const BowVector& bow, const FeatureVector& direct,
                          uint32_t num_features) const;
   void IndexEntry(EntryId id, const BowVector& bow);  // requires index_mutex_ exclusively
+  // Loads the index from a snapshot of the store; DATA_LOSS (the index then half-filled) when it
+  // is damaged or does not describe this map. Only while opening.
+  Status LoadSnapshot(IndexStore::SnapshotReader& reader);
+  // Reads the stored entries from id `first` on, checks them and indexes them; only while opening.
+  Status IndexStoredEntries(EntryId first);
 
   // Checks that every word of `query` is in the vocabulary.
   Status CheckQueryWords(const BowVector& query) const;
@@ -182,8 +210,12 @@ class Database {
   IndexStore* store_;
   MapInfo info_;
   std::shared_ptr<const Vocabulary> vocabulary_;
+  DatabaseOpenReport open_report_;
 
-  std::mutex write_mutex_;                 // serialises Add/Remove/Clear
+  std::mutex write_mutex_;  // serialises Add/Remove/Clear/SaveSnapshot
+  // The id bound of the store's snapshot of this map, kInvalidEntryId when it has none (as far as
+  // this database knows); guarded by write_mutex_.
+  EntryId snapshot_covers_ = kInvalidEntryId;
   mutable std::shared_mutex index_mutex_;  // guards everything below
   std::vector<PostingList> postings_;      // by word
   std::vector<uint8_t> present_;           // by entry id: 1 when indexed

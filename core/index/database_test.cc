@@ -1,6 +1,8 @@
 #include "core/index/database.h"
 
 #include <algorithm>
+#include <cstring>
+#include <functional>
 #include <random>
 #include <thread>
 
@@ -388,6 +390,167 @@ TEST_F(DatabaseTest, ReopeningRebuildsTheSameIndex) {
   auto id = (*reopened)->Add(sets[0]);
   ASSERT_TRUE(id.ok());
   EXPECT_EQ(*id, 15u);
+}
+
+// The top-5 answers of `db` to each of `sets`.
+std::vector<std::vector<QueryResult>> Answers(const Database& db,
+                                              const std::vector<BowVector>& queries) {
+  std::vector<std::vector<QueryResult>> answers(queries.size());
+  for (size_t i = 0; i < queries.size(); ++i) {
+    EXPECT_TRUE(db.Query(queries[i], {.max_results = 5}, &answers[i]).ok());
+  }
+  return answers;
+}
+
+TEST_F(DatabaseTest, ReopeningFromASnapshotGivesTheSameIndexAndReadsOnlyTheLaterEntries) {
+  std::vector<BowVector> queries;
+  for (int i = 0; i < 20; ++i) {
+    const FeatureSet f = SyntheticFeatures(120, 70 + i);
+    queries.push_back(BowOf(f));
+    ASSERT_TRUE(db_->Add(f).ok());
+    if (i == 14) {
+      ASSERT_TRUE(db_->Remove(3).ok());  // a hole the snapshot must keep
+      auto bytes = db_->SaveSnapshot();
+      ASSERT_TRUE(bytes.ok()) << bytes.status().ToString();
+      EXPECT_GT(*bytes, 0u);
+      EXPECT_EQ(*db_->SaveSnapshot(), 0u);  // nothing changed since
+    }
+  }
+  const auto before = Answers(*db_, queries);
+  const DatabaseStats stats = db_->Stats();
+  db_.reset();
+
+  auto reopened = Database::Open(&store_, "map-1", vocabulary_);
+  ASSERT_TRUE(reopened.ok()) << reopened.status().ToString();
+  const DatabaseOpenReport& report = (*reopened)->open_report();
+  EXPECT_TRUE(report.from_snapshot);
+  EXPECT_EQ(report.snapshot_covers, 15u);
+  EXPECT_EQ(report.entries_read, 5u);
+  EXPECT_EQ(report.snapshot_rejected, "");
+  EXPECT_EQ((*reopened)->Stats().postings, stats.postings);
+  EXPECT_EQ((*reopened)->Stats().words_in_use, stats.words_in_use);
+  EXPECT_EQ((*reopened)->size(), 19u);
+  EXPECT_FALSE((*reopened)->Contains(3));
+  EXPECT_EQ(Answers(**reopened, queries), before);
+  const FeatureSet added = SyntheticFeatures(120, 90);
+  auto id = (*reopened)->Add(added);
+  ASSERT_TRUE(id.ok());
+  EXPECT_EQ(*id, 20u);
+  queries.push_back(BowOf(added));
+  const auto loaded_then_added = Answers(**reopened, queries);
+  const DatabaseStats loaded_stats = (*reopened)->Stats();
+
+  // The same index as a rebuild from the entries.
+  ASSERT_TRUE(store_.DropSnapshot((*reopened)->info().id).ok());
+  reopened->reset();
+  auto rebuilt = Database::Open(&store_, "map-1", vocabulary_);
+  ASSERT_TRUE(rebuilt.ok());
+  EXPECT_FALSE((*rebuilt)->open_report().from_snapshot);
+  EXPECT_EQ((*rebuilt)->open_report().entries_read, 20u);
+  EXPECT_EQ((*rebuilt)->Stats().postings, loaded_stats.postings);
+  EXPECT_EQ(Answers(**rebuilt, queries), loaded_then_added);
+}
+
+TEST_F(DatabaseTest, ARemovalAfterASnapshotMakesTheNextOpenRebuild) {
+  for (int i = 0; i < 6; ++i) ASSERT_TRUE(db_->Add(SyntheticFeatures(100, 200 + i)).ok());
+  ASSERT_TRUE(db_->SaveSnapshot().ok());
+  ASSERT_TRUE(db_->Remove(2).ok());
+  db_.reset();
+  auto reopened = Database::Open(&store_, "map-1", vocabulary_);
+  ASSERT_TRUE(reopened.ok());
+  EXPECT_FALSE((*reopened)->open_report().from_snapshot);
+  EXPECT_EQ((*reopened)->open_report().snapshot_rejected, "");
+  EXPECT_EQ((*reopened)->open_report().entries_read, 5u);
+  EXPECT_FALSE((*reopened)->Contains(2));
+  // The next save writes a new snapshot, which the next open uses.
+  EXPECT_GT(*(*reopened)->SaveSnapshot(), 0u);
+  reopened->reset();
+  reopened = Database::Open(&store_, "map-1", vocabulary_);
+  ASSERT_TRUE(reopened.ok());
+  EXPECT_TRUE((*reopened)->open_report().from_snapshot);
+  EXPECT_EQ((*reopened)->size(), 5u);
+}
+
+// A store whose snapshots come back altered by `damage`.
+class SnapshotDamagingStore : public MemoryIndexStore {
+ public:
+  std::function<void(std::string*)> damage;
+
+  StatusOr<std::unique_ptr<SnapshotReader>> ReadSnapshot(MapId map) override {
+    RECOG_ASSIGN_OR_RETURN(std::unique_ptr<SnapshotReader> reader,
+                           MemoryIndexStore::ReadSnapshot(map));
+    std::string bytes(reader->size(), '\0');
+    RECOG_RETURN_IF_ERROR(reader->Read(bytes.data(), bytes.size()));
+    damage(&bytes);
+    return std::unique_ptr<SnapshotReader>(new BytesReader(reader->covers(), std::move(bytes)));
+  }
+
+ private:
+  class BytesReader : public SnapshotReader {
+   public:
+    BytesReader(EntryId covers, std::string bytes) : covers_(covers), bytes_(std::move(bytes)) {}
+    EntryId covers() const override { return covers_; }
+    uint64_t size() const override { return bytes_.size(); }
+    Status Read(void* out, size_t size) override {
+      if (bytes_.size() - position_ < size) return Status::DataLoss("the snapshot ends early");
+      std::memcpy(out, bytes_.data() + position_, size);
+      position_ += size;
+      return Status::Ok();
+    }
+
+   private:
+    EntryId covers_;
+    std::string bytes_;
+    size_t position_ = 0;
+  };
+};
+
+TEST(DatabaseSnapshotTest, ADamagedSnapshotIsRejectedDroppedAndTheIndexRebuilt) {
+  SnapshotDamagingStore store;
+  const auto vocabulary = SmallVocabulary();
+  std::vector<BowVector> queries;
+  std::vector<std::vector<QueryResult>> expected;
+  {
+    auto db = Database::Create(&store, "m", vocabulary);
+    ASSERT_TRUE(db.ok());
+    for (int i = 0; i < 8; ++i) {
+      const FeatureSet f = SyntheticFeatures(100, 300 + i);
+      ASSERT_TRUE((*db)->Add(f).ok());
+      BowVector bow;
+      ASSERT_TRUE(vocabulary->Transform(f.descriptors, &bow).ok());
+      queries.push_back(std::move(bow));
+    }
+    expected = Answers(**db, queries);
+  }
+  // The header (magic, map id), an entry flag, a posting's entry id, the checksum, a cut end and
+  // a byte too many. The header is 56 bytes, the 8 entry flags follow, then the lists.
+  const std::vector<std::pair<std::string, std::function<void(std::string*)>>> damages = {
+      {"magic", [](std::string* b) { (*b)[0] ^= 1; }},
+      {"map id", [](std::string* b) { (*b)[12] ^= 1; }},
+      {"entry flag", [](std::string* b) { (*b)[58] = 0; }},
+      {"posting", [](std::string* b) { (*b)[b->size() / 2] ^= 0x10; }},
+      {"checksum", [](std::string* b) { b->back() ^= 1; }},
+      {"cut", [](std::string* b) { b->resize(b->size() - 9); }},
+      {"trailing byte", [](std::string* b) { b->push_back('x'); }},
+  };
+  for (const auto& [what, damage] : damages) {
+    SCOPED_TRACE(what);
+    {
+      auto db = Database::Open(&store, "m", vocabulary);
+      ASSERT_TRUE(db.ok());
+      ASSERT_TRUE((*db)->SaveSnapshot().ok());
+    }
+    store.damage = damage;
+    auto db = Database::Open(&store, "m", vocabulary);
+    store.damage = [](std::string*) {};
+    ASSERT_TRUE(db.ok()) << db.status().ToString();
+    EXPECT_FALSE((*db)->open_report().from_snapshot);
+    EXPECT_NE((*db)->open_report().snapshot_rejected, "");
+    EXPECT_EQ((*db)->open_report().entries_read, 8u);
+    EXPECT_EQ((*db)->size(), 8u);
+    EXPECT_EQ(Answers(**db, queries), expected);
+    EXPECT_EQ(store.ReadSnapshot((*db)->info().id).status().code(), StatusCode::kNotFound);
+  }
 }
 
 TEST_F(DatabaseTest, AnotherVocabularyIsRefused) {

@@ -10,9 +10,17 @@
 //    (every part) or entirely absent. Once CommitEntry has returned OK, the entry survives a crash
 //    of the process (and, with the durable implementation's "sync every write" policy, of the
 //    machine).
-//  - ScanEntries visits the entries of a map in increasing id order; an entry missing one of the
-//    requested parts is DATA_LOSS.
-//  - DeleteMap removes every record of the map; its name can then be created again.
+//  - ScanEntries visits the entries of a map from a given id on, in increasing id order; an entry
+//    missing one of the requested parts is DATA_LOSS.
+//  - DeleteMap removes every record of the map (its index snapshot included); its name can then be
+//    created again.
+//  - A map's index snapshot (written by Database::SaveSnapshot) describes the entries with ids
+//    below its `covers` id, and the store keeps it only while that holds: it is dropped, before
+//    the write, by committing an entry with an id below `covers`, by removing an entry of the map,
+//    by deleting the map, and by a recovery that loses writes. A snapshot being written is
+//    installed by Commit, atomically (the previous one or the new one, never a mix) and durably
+//    along with every entry it covers; FAILED_PRECONDITION when a drop happened since the writer
+//    was made.
 //  - Blobs are independent of maps. PutBlob (create or overwrite) and DeleteBlob are atomic and
 //    as durable as CommitEntry: after a crash a blob holds its old or its new value, never a mix.
 //    ListBlobKeys returns keys in increasing byte order.
@@ -28,6 +36,7 @@
 
 #include <cstddef>
 #include <functional>
+#include <memory>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -55,13 +64,36 @@ class IndexStore {
   virtual Status RemoveEntry(MapId map, EntryId id) = 0;
   // Reads the requested parts (EntryPart flags) of one entry into *out.
   virtual Status ReadEntry(MapId map, EntryId id, uint32_t parts, EntryRecord* out) = 0;
-  // Calls `visit` for every entry of the map in increasing id order, with the requested parts;
-  // stops at the first error `visit` returns and returns it.
-  virtual Status ScanEntries(MapId map, uint32_t parts,
+  // Calls `visit` for every entry of the map with an id of at least `first`, in increasing id
+  // order, with the requested parts; stops at the first error `visit` returns and returns it.
+  virtual Status ScanEntries(MapId map, EntryId first, uint32_t parts,
                              const std::function<Status(EntryRecord&)>& visit) = 0;
   // The largest id ever committed to the map plus one (0 for a new map), so that ids removed
   // from the end are not reused after a reopen.
   virtual StatusOr<EntryId> NextEntryId(MapId map) = 0;
+
+  // Index snapshots (see the contract above): opaque bytes the store keeps beside a map's entries.
+  class SnapshotWriter {
+   public:
+    virtual ~SnapshotWriter() = default;  // without Commit: the bytes are discarded
+    virtual Status Append(std::string_view bytes) = 0;
+    // Installs the snapshot as the map's (after making every write so far durable).
+    virtual Status Commit() = 0;
+  };
+  class SnapshotReader {
+   public:
+    virtual ~SnapshotReader() = default;
+    virtual EntryId covers() const = 0;
+    virtual uint64_t size() const = 0;  // the bytes Append wrote
+    // Reads the next `size` bytes into `out`; DATA_LOSS when fewer remain.
+    virtual Status Read(void* out, size_t size) = 0;
+  };
+  // Starts a snapshot of map `map` that covers its entries with ids below `covers`.
+  virtual StatusOr<std::unique_ptr<SnapshotWriter>> WriteSnapshot(MapId map, EntryId covers) = 0;
+  // The map's snapshot; NOT_FOUND when it has none.
+  virtual StatusOr<std::unique_ptr<SnapshotReader>> ReadSnapshot(MapId map) = 0;
+  // Drops the map's snapshot (OK when it has none).
+  virtual Status DropSnapshot(MapId map) = 0;
 
   // Blobs: named byte strings kept beside the maps (object model versions, ...). Keys are 1 to
   // kMaxBlobKeyBytes arbitrary bytes, values at most kMaxBlobBytes; anything else is
@@ -85,7 +117,8 @@ class IndexStore {
   virtual Status Checkpoint(const std::string& dir) = 0;
 
   // Approximately how many bytes the entries of map `map` take on disk (the files, plus what is
-  // still in memory on its way there); 0 where nothing is on disk. NOT_FOUND for an unknown map.
+  // still in memory on its way there, plus its index snapshot); 0 where nothing is on disk.
+  // NOT_FOUND for an unknown map.
   virtual StatusOr<uint64_t> MapDiskBytes(MapId map) = 0;
 
   // What Verify read.

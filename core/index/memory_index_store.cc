@@ -1,8 +1,16 @@
 #include "core/index/memory_index_store.h"
 
 #include <chrono>
+#include <cstring>
 
 namespace recog {
+namespace {
+
+Status UnknownMap(MapId map) {
+  return Status::NotFound("map " + std::to_string(map) + " does not exist");
+}
+
+}  // namespace
 
 void CopyEntryParts(const EntryRecord& from, uint32_t parts, EntryRecord* to) {
   to->id = from.id;
@@ -22,6 +30,12 @@ MemoryIndexStore::StoredMap* MemoryIndexStore::Find(MapId map) {
     if (stored.info.id == map) return &stored;
   }
   return nullptr;
+}
+
+void MemoryIndexStore::DropStaleSnapshot(StoredMap* stored, bool stale) {
+  if (!stale) return;
+  stored->snapshot.reset();
+  ++stored->snapshot_drops;
 }
 
 StatusOr<MapInfo> MemoryIndexStore::CreateMap(const MapConfig& config) {
@@ -62,11 +76,13 @@ Status MemoryIndexStore::DeleteMap(const std::string& name) {
 Status MemoryIndexStore::CommitEntry(MapId map, const EntryRecord& entry) {
   std::lock_guard lock(mutex_);
   StoredMap* stored = Find(map);
-  if (stored == nullptr) return Status::NotFound("map " + std::to_string(map) + " does not exist");
+  if (stored == nullptr) return UnknownMap(map);
   if (entry.id == kInvalidEntryId) return Status::InvalidArgument("entry has no id");
   if (stored->entries.count(entry.id) != 0) {
     return Status::AlreadyExists("entry " + std::to_string(entry.id) + " already exists");
   }
+  // An entry below the next id may fall in a snapshot's range (installed or being written).
+  DropStaleSnapshot(stored, entry.id < stored->next_id);
   CopyEntryParts(entry, kEntryAllParts, &stored->entries[entry.id]);
   stored->next_id = std::max(stored->next_id, entry.id + 1);
   return Status::Ok();
@@ -74,25 +90,26 @@ Status MemoryIndexStore::CommitEntry(MapId map, const EntryRecord& entry) {
 
 StatusOr<uint64_t> MemoryIndexStore::MapDiskBytes(MapId map) {
   std::lock_guard lock(mutex_);
-  if (Find(map) == nullptr)
-    return Status::NotFound("map " + std::to_string(map) + " does not exist");
+  if (Find(map) == nullptr) return UnknownMap(map);
   return uint64_t{0};  // nothing is on disk
 }
 
 Status MemoryIndexStore::RemoveEntry(MapId map, EntryId id) {
   std::lock_guard lock(mutex_);
   StoredMap* stored = Find(map);
-  if (stored == nullptr) return Status::NotFound("map " + std::to_string(map) + " does not exist");
-  if (stored->entries.erase(id) == 0) {
+  if (stored == nullptr) return UnknownMap(map);
+  if (stored->entries.count(id) == 0) {
     return Status::NotFound("entry " + std::to_string(id) + " does not exist");
   }
+  DropStaleSnapshot(stored, true);
+  stored->entries.erase(id);
   return Status::Ok();
 }
 
 Status MemoryIndexStore::ReadEntry(MapId map, EntryId id, uint32_t parts, EntryRecord* out) {
   std::lock_guard lock(mutex_);
   StoredMap* stored = Find(map);
-  if (stored == nullptr) return Status::NotFound("map " + std::to_string(map) + " does not exist");
+  if (stored == nullptr) return UnknownMap(map);
   auto it = stored->entries.find(id);
   if (it == stored->entries.end()) {
     return Status::NotFound("entry " + std::to_string(id) + " does not exist");
@@ -101,7 +118,7 @@ Status MemoryIndexStore::ReadEntry(MapId map, EntryId id, uint32_t parts, EntryR
   return Status::Ok();
 }
 
-Status MemoryIndexStore::ScanEntries(MapId map, uint32_t parts,
+Status MemoryIndexStore::ScanEntries(MapId map, EntryId first, uint32_t parts,
                                      const std::function<Status(EntryRecord&)>& visit) {
   // Copy under the lock, visit outside it, so that `visit` may call the store.
   std::vector<EntryRecord> copies;
@@ -109,11 +126,11 @@ Status MemoryIndexStore::ScanEntries(MapId map, uint32_t parts,
     std::lock_guard lock(mutex_);
     StoredMap* stored = Find(map);
     if (stored == nullptr) {
-      return Status::NotFound("map " + std::to_string(map) + " does not exist");
+      return UnknownMap(map);
     }
-    copies.resize(stored->entries.size());
-    size_t i = 0;
-    for (const auto& [id, record] : stored->entries) CopyEntryParts(record, parts, &copies[i++]);
+    for (auto it = stored->entries.lower_bound(first); it != stored->entries.end(); ++it) {
+      CopyEntryParts(it->second, parts, &copies.emplace_back());
+    }
   }
   for (EntryRecord& record : copies) RECOG_RETURN_IF_ERROR(visit(record));
   return Status::Ok();
@@ -122,8 +139,93 @@ Status MemoryIndexStore::ScanEntries(MapId map, uint32_t parts,
 StatusOr<EntryId> MemoryIndexStore::NextEntryId(MapId map) {
   std::lock_guard lock(mutex_);
   StoredMap* stored = Find(map);
-  if (stored == nullptr) return Status::NotFound("map " + std::to_string(map) + " does not exist");
+  if (stored == nullptr) return UnknownMap(map);
   return stored->next_id;
+}
+
+class MemoryIndexStore::MemorySnapshotWriter final : public SnapshotWriter {
+ public:
+  MemorySnapshotWriter(MemoryIndexStore* store, MapId map, EntryId covers, uint64_t drops)
+      : store_(store), map_(map), covers_(covers), drops_(drops) {}
+  Status Append(std::string_view bytes) override {
+    bytes_.append(bytes);
+    return Status::Ok();
+  }
+  Status Commit() override {
+    std::lock_guard lock(store_->mutex_);
+    StoredMap* stored = store_->Find(map_);
+    if (stored == nullptr) return UnknownMap(map_);
+    if (stored->snapshot_drops != drops_) {
+      return Status::FailedPrecondition("map " + std::to_string(map_) +
+                                        " changed while its snapshot was written");
+    }
+    stored->snapshot = Snapshot{covers_, std::make_shared<const std::string>(std::move(bytes_))};
+    return Status::Ok();
+  }
+
+ private:
+  MemoryIndexStore* store_;
+  MapId map_;
+  EntryId covers_;
+  uint64_t drops_;
+  std::string bytes_;
+};
+
+namespace {
+
+class MemorySnapshotReader final : public IndexStore::SnapshotReader {
+ public:
+  MemorySnapshotReader(EntryId covers, std::shared_ptr<const std::string> bytes)
+      : covers_(covers), bytes_(std::move(bytes)) {}
+  EntryId covers() const override { return covers_; }
+  uint64_t size() const override { return bytes_->size(); }
+  Status Read(void* out, size_t size) override {
+    if (bytes_->size() - position_ < size) {
+      return Status::DataLoss("the snapshot ends " + std::to_string(bytes_->size() - position_) +
+                              " bytes before the " + std::to_string(size) + " to read");
+    }
+    std::memcpy(out, bytes_->data() + position_, size);
+    position_ += size;
+    return Status::Ok();
+  }
+
+ private:
+  EntryId covers_;
+  std::shared_ptr<const std::string> bytes_;
+  size_t position_ = 0;
+};
+
+}  // namespace
+
+StatusOr<std::unique_ptr<IndexStore::SnapshotWriter>> MemoryIndexStore::WriteSnapshot(
+    MapId map, EntryId covers) {
+  std::lock_guard lock(mutex_);
+  StoredMap* stored = Find(map);
+  if (stored == nullptr) return UnknownMap(map);
+  if (covers > stored->next_id) {
+    return Status::InvalidArgument("a snapshot of map " + std::to_string(map) +
+                                   " cannot cover entry ids up to " + std::to_string(covers) +
+                                   ", beyond its next id " + std::to_string(stored->next_id));
+  }
+  return std::unique_ptr<SnapshotWriter>(
+      new MemorySnapshotWriter(this, map, covers, stored->snapshot_drops));
+}
+
+StatusOr<std::unique_ptr<IndexStore::SnapshotReader>> MemoryIndexStore::ReadSnapshot(MapId map) {
+  std::lock_guard lock(mutex_);
+  StoredMap* stored = Find(map);
+  if (stored == nullptr) return UnknownMap(map);
+  if (!stored->snapshot) return Status::NotFound("map " + std::to_string(map) + " has no snapshot");
+  return std::unique_ptr<SnapshotReader>(
+      new MemorySnapshotReader(stored->snapshot->covers, stored->snapshot->bytes));
+}
+
+Status MemoryIndexStore::DropSnapshot(MapId map) {
+  std::lock_guard lock(mutex_);
+  StoredMap* stored = Find(map);
+  if (stored == nullptr) return UnknownMap(map);
+  DropStaleSnapshot(stored, true);
+  return Status::Ok();
 }
 
 Status MemoryIndexStore::PutBlob(const std::string& key, std::string_view value) {

@@ -3,7 +3,9 @@
 #pragma once
 
 #include <map>
+#include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 
 #include "core/index/index_store.h"
@@ -19,8 +21,11 @@ class MemoryIndexStore : public IndexStore {
   Status CommitEntry(MapId map, const EntryRecord& entry) override;
   Status RemoveEntry(MapId map, EntryId id) override;
   Status ReadEntry(MapId map, EntryId id, uint32_t parts, EntryRecord* out) override;
-  Status ScanEntries(MapId map, uint32_t parts,
+  Status ScanEntries(MapId map, EntryId first, uint32_t parts,
                      const std::function<Status(EntryRecord&)>& visit) override;
+  StatusOr<std::unique_ptr<SnapshotWriter>> WriteSnapshot(MapId map, EntryId covers) override;
+  StatusOr<std::unique_ptr<SnapshotReader>> ReadSnapshot(MapId map) override;
+  Status DropSnapshot(MapId map) override;
   StatusOr<EntryId> NextEntryId(MapId map) override;
   Status PutBlob(const std::string& key, std::string_view value) override;
   StatusOr<std::string> GetBlob(const std::string& key) override;
@@ -32,12 +37,21 @@ class MemoryIndexStore : public IndexStore {
   StatusOr<uint64_t> MapDiskBytes(MapId map) override;
 
  private:
+  struct Snapshot {
+    EntryId covers = 0;
+    std::shared_ptr<const std::string> bytes;  // shared with the readers
+  };
   struct StoredMap {
     MapInfo info;
     std::map<EntryId, EntryRecord> entries;
     EntryId next_id = 0;
+    std::optional<Snapshot> snapshot;
+    uint64_t snapshot_drops = 0;  // how many times a write dropped the snapshot
   };
+  class MemorySnapshotWriter;
   StoredMap* Find(MapId map);  // requires mutex_
+  // Drops the map's snapshot (and fails the writers of one) when `stale`; requires mutex_.
+  static void DropStaleSnapshot(StoredMap* stored, bool stale);
 
   std::mutex mutex_;
   std::map<std::string, StoredMap> maps_;

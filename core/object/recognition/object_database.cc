@@ -45,7 +45,7 @@ StatusOr<std::unique_ptr<ObjectDatabase>> ObjectDatabase::Open(
   }
   std::unique_ptr<ObjectDatabase> database(new ObjectDatabase(std::move(*index)));
   RECOG_RETURN_IF_ERROR(store->ScanEntries(
-      database->index_->info().id, kEntryAllParts, [&](EntryRecord& record) -> Status {
+      database->index_->info().id, 0, kEntryAllParts, [&](EntryRecord& record) -> Status {
         RECOG_ASSIGN_OR_RETURN(std::shared_ptr<const IndexedObject> object, database->Load(record));
         database->by_name_[object->metadata.name] = object->id;
         database->by_id_[object->id] = std::move(object);
