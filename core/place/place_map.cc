@@ -235,6 +235,15 @@ bool PlaceMap::deleted() const {
   return deleted_;
 }
 
+StatusOr<uint64_t> PlaceMap::SaveIndexSnapshot() {
+  {
+    std::lock_guard lock(mutex_);
+    if (deleted_) return Status::NotFound("map '" + name_ + "' was deleted");
+  }
+  // A deletion from here on makes the store refuse the snapshot.
+  return database_->SaveSnapshot();
+}
+
 StatusOr<size_t> PlaceMap::DeleteFrames() {
   std::lock_guard lock(mutex_);  // waits for the frame being added, then stops the others
   const size_t frames = has_rig() ? rig_detector_->frames() : database_->size();

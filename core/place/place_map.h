@@ -185,6 +185,13 @@ class PlaceMap {
   // RemoveFrame by id is constant time). NOT_FOUND when no frame has that client id.
   StatusOr<std::vector<EntryId>> RemoveFramesByClientId(const std::string& client_id);
 
+  // Writes the map's index snapshot (Database::SaveSnapshot), which the next open loads instead
+  // of reading every frame; returns the bytes written, 0 when it is already current. Frames being
+  // added wait for it; queries do not. NOT_FOUND once the map is deleted.
+  StatusOr<uint64_t> SaveIndexSnapshot();
+  // How opening the map built its index.
+  const DatabaseOpenReport& open_report() const { return database_->open_report(); }
+
   const std::string& name() const { return name_; }
   // The map group it was created in (MapRegistry::Create; empty for none).
   const std::string& group() const { return group_; }

@@ -66,6 +66,40 @@ Status CheckGroupPlacement(const PlacementTable& table, const ServerState& state
   return Status::Ok();
 }
 
+// Says how a place map's index was built at start-up: from its snapshot (and the frames added
+// after it) or from every frame.
+void LogIndexOpening(const PlaceMap& map) {
+  const DatabaseOpenReport& report = map.open_report();
+  if (!report.snapshot_rejected.empty()) {
+    spdlog::warn("place map '{}': its index snapshot was not used: {}", map.name(),
+                 report.snapshot_rejected);
+  }
+  if (report.from_snapshot) {
+    spdlog::info(
+        "place map '{}': {} frames; index loaded from its snapshot, {} frames read after it",
+        map.name(), map.frames(), report.entries_read);
+  } else {
+    spdlog::info("place map '{}': {} frames; index rebuilt from them", map.name(), map.frames());
+  }
+}
+
+// Writes the index snapshot of every place map that changed since its last one, so that the next
+// start loads the indexes instead of reading every frame. A failure only costs that start time.
+void SaveIndexSnapshots(const MapRegistry& maps) {
+  for (const std::shared_ptr<PlaceMap>& map : maps.List()) {
+    const auto start = std::chrono::steady_clock::now();
+    const StatusOr<uint64_t> written = map->SaveIndexSnapshot();
+    if (!written.ok()) {
+      spdlog::warn("place map '{}': no index snapshot: {}", map->name(),
+                   written.status().ToString());
+    } else if (*written > 0) {
+      spdlog::info("place map '{}': index snapshot of {} MB written in {:.1f} s", map->name(),
+                   double(*written) / 1e6,
+                   std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+    }
+  }
+}
+
 }  // namespace
 
 RecognitionServer::RecognitionServer() = default;
@@ -197,6 +231,9 @@ Status RecognitionServer::Open() {
     RECOG_RETURN_IF_ERROR(CheckGroupPlacement(*placement, state));
   }
   for (const std::shared_ptr<PlaceMap>& map : state.maps->List()) {
+    LogIndexOpening(*map);
+    state.metrics.SetMapIndexOpening(map->name(), map->open_report().from_snapshot,
+                                     map->open_report().entries_read);
     state.metrics.SetMapEntries(map->name(), map->frames());
   }
   state.metrics.SetObjects(state.objects->size());
@@ -265,6 +302,7 @@ void RecognitionServer::Shutdown(std::chrono::milliseconds grace) {
     state.verifier.reset();  // waits for a check in progress
     if (state.pool != nullptr) state.pool->Stop();
     state.thumbnails.reset();  // writes the queued ones before the store is flushed
+    if (state.maps != nullptr) SaveIndexSnapshots(*state.maps);
     if (state.store != nullptr) {
       const Status flushed = state.store->Flush();
       if (!flushed.ok()) spdlog::error("flushing the store failed: {}", flushed.ToString());

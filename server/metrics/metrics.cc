@@ -103,6 +103,12 @@ ServerMetrics::ServerMetrics()
       &Register(prometheus::BuildGauge(), r, "recog_worker_busy", "Workers running a task").Add({});
   map_entries_ =
       &Register(prometheus::BuildGauge(), r, "recog_map_entries", "Entries of each place map");
+  map_index_from_snapshot_ =
+      &Register(prometheus::BuildGauge(), r, "recog_map_index_from_snapshot",
+                "1 when start-up loaded the place map's index from its snapshot, 0 when rebuilt");
+  map_frames_read_at_start_ =
+      &Register(prometheus::BuildGauge(), r, "recog_map_frames_read_at_start",
+                "Frames start-up read from the store to index the place map");
   objects_ =
       &Register(prometheus::BuildGauge(), r, "recog_objects", "Object models in the database")
            .Add({});
@@ -257,10 +263,21 @@ void ServerMetrics::SetMapEntries(std::string_view map, uint64_t entries) {
   map_entries_->Add({{"map", std::string(map)}}).Set(static_cast<double>(entries));
 }
 
+void ServerMetrics::SetMapIndexOpening(std::string_view map, bool from_snapshot,
+                                       uint64_t frames_read) {
+  const prometheus::Labels labels = {{"map", std::string(map)}};
+  std::lock_guard lock(map_mutex_);
+  map_index_from_snapshot_->Add(labels).Set(from_snapshot ? 1.0 : 0.0);
+  map_frames_read_at_start_->Add(labels).Set(static_cast<double>(frames_read));
+}
+
 void ServerMetrics::RemoveMap(std::string_view map) {
   const prometheus::Labels labels = {{"map", std::string(map)}};
   std::lock_guard lock(map_mutex_);
-  if (map_entries_->Has(labels)) map_entries_->Remove(&map_entries_->Add(labels));
+  for (prometheus::Family<prometheus::Gauge>* family :
+       {map_entries_, map_index_from_snapshot_, map_frames_read_at_start_}) {
+    if (family->Has(labels)) family->Remove(&family->Add(labels));
+  }
 }
 
 void ServerMetrics::SetObjects(uint64_t objects) { objects_->Set(static_cast<double>(objects)); }

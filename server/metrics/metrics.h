@@ -8,6 +8,10 @@
 //   recog_worker_queue_depth                   gauge: tasks waiting for a worker
 //   recog_worker_busy                          gauge: workers running a task
 //   recog_map_entries{map}                     gauge: entries of each place map
+//   recog_map_index_from_snapshot{map}         gauge: 1 when the map's index was loaded from its
+//                                              snapshot at start-up, 0 when rebuilt from frames
+//   recog_map_frames_read_at_start{map}        gauge: the frames start-up read from the store to
+//                                              index the map (those after its snapshot, or all)
 //   recog_objects                              gauge: object models in the database
 //   recog_store_recovery_lost{kind}            gauge: what this start-up's point-in-time recovery
 //                                              of a damaged store lost, kind "entries", "maps" or
@@ -110,6 +114,8 @@ class ServerMetrics {
 
   // The number of entries of place map `map`; RemoveMap drops its series (a deleted map).
   void SetMapEntries(std::string_view map, uint64_t entries);
+  // How start-up built the index of place map `map` (see above); RemoveMap drops these too.
+  void SetMapIndexOpening(std::string_view map, bool from_snapshot, uint64_t frames_read);
   void RemoveMap(std::string_view map);
   void SetObjects(uint64_t objects);
   void SetStoreRecoveryLoss(uint64_t entries, uint64_t maps, uint64_t blobs);
@@ -171,6 +177,8 @@ class ServerMetrics {
 
   prometheus::Family<prometheus::Histogram>* rpc_duration_;
   prometheus::Family<prometheus::Gauge>* map_entries_;
+  prometheus::Family<prometheus::Gauge>* map_index_from_snapshot_;
+  prometheus::Family<prometheus::Gauge>* map_frames_read_at_start_;
   prometheus::Family<prometheus::Gauge>* stream_active_;
   prometheus::Counter* place_frames_;
   prometheus::Counter* object_frames_;

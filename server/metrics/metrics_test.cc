@@ -215,7 +215,13 @@ TEST(ServerMetricsTest, MapEntriesHaveOneSeriesPerMapUntilTheMapIsRemoved) {
   metrics.SetMapEntries("corridor", 10);
   metrics.SetMapEntries("corridor", 12);
   metrics.SetMapEntries("lab", 4);
+  metrics.SetMapIndexOpening("corridor", true, 2);
+  metrics.SetMapIndexOpening("lab", false, 4);
   std::string text = metrics.Serialize();
+  EXPECT_THAT(Sample(text, "recog_map_index_from_snapshot{map=\"corridor\"}"), Optional(1.0));
+  EXPECT_THAT(Sample(text, "recog_map_frames_read_at_start{map=\"corridor\"}"), Optional(2.0));
+  EXPECT_THAT(Sample(text, "recog_map_index_from_snapshot{map=\"lab\"}"), Optional(0.0));
+  EXPECT_THAT(Sample(text, "recog_map_frames_read_at_start{map=\"lab\"}"), Optional(4.0));
   EXPECT_THAT(Sample(text, "recog_map_entries{map=\"corridor\"}"), Optional(12.0));
   EXPECT_THAT(Sample(text, "recog_map_entries{map=\"lab\"}"), Optional(4.0));
 

@@ -431,6 +431,48 @@ TEST_F(ServerLifecycleTest, ShutdownDrainsAStreamWithoutLosingAnsweredFrames) {
   EXPECT_EQ(info.frames(), 2u);
 }
 
+// A clean stop writes each changed map's index snapshot; the next start loads it instead of
+// reading every frame (the metrics say which), and the map answers as before.
+TEST_F(ServerLifecycleTest, ARestartLoadsEachMapsIndexFromTheSnapshotWrittenAtStop) {
+  StopServer();
+  config().metrics_listen = "127.0.0.1:0";
+  StartServer();
+  ASSERT_TRUE(CreateMap("m").ok());
+  for (int n : {1, 20, 41}) {
+    pb::AddFrameResponse added;
+    const grpc::Status status = AddFrame("m", JpegFrame(CorridorJpeg(n)), &added);
+    ASSERT_TRUE(status.ok()) << status.error_message();
+  }
+  const auto query = [&](pb::QueryPlaceResponse* response) {
+    pb::QueryPlaceRequest request;
+    request.set_map("m");
+    *request.mutable_frame() = JpegFrame(CorridorJpeg(60));
+    return places_->QueryPlace(Context().get(), request, response);
+  };
+  pb::QueryPlaceResponse before;
+  ASSERT_TRUE(query(&before).ok());
+  RestartServer();
+  std::string metrics = FetchMetrics(server_->metrics_port());
+  EXPECT_NE(metrics.find("recog_map_index_from_snapshot{map=\"m\"} 1"), std::string::npos)
+      << metrics;
+  EXPECT_NE(metrics.find("recog_map_frames_read_at_start{map=\"m\"} 0"), std::string::npos);
+  pb::QueryPlaceResponse after;
+  ASSERT_TRUE(query(&after).ok());
+  EXPECT_EQ(after.result().DebugString(), before.result().DebugString());
+
+  // A frame added after the snapshot: the stop writes a new one, so the next start reads no frame
+  // either (a crash would leave the old one, and the start would read that frame alone).
+  pb::AddFrameResponse added;
+  ASSERT_TRUE(AddFrame("m", JpegFrame(CorridorJpeg(60)), &added).ok());
+  RestartServer();
+  metrics = FetchMetrics(server_->metrics_port());
+  EXPECT_NE(metrics.find("recog_map_index_from_snapshot{map=\"m\"} 1"), std::string::npos);
+  EXPECT_NE(metrics.find("recog_map_frames_read_at_start{map=\"m\"} 0"), std::string::npos);
+  pb::MapInfo info;
+  ASSERT_TRUE(GetMap("m", &info).ok());
+  EXPECT_EQ(info.frames(), 4u);
+}
+
 TEST_F(ServerLifecycleTest, KillNineDuringAStreamLosesNoAcknowledgedFrame) {
   StopServer();  // the store is the child's now
   const recog::testing::TempDir socket_dir("socket");
