@@ -231,6 +231,9 @@ class SnapshotDecoder {
     bytes_ += size;
     return Status::Ok();
   }
+  // The bytes left to read: what a length read from the snapshot, not yet checked by its
+  // checksum, is bounded by before anything is allocated for it.
+  uint64_t remaining() const { return reader_->size() - std::min(reader_->size(), bytes_); }
   Status Finish() {
     uint64_t stored = 0;
     RECOG_RETURN_IF_ERROR(reader_->Read(&stored, sizeof(stored)));
@@ -487,9 +490,10 @@ Status Database::LoadSnapshot(IndexStore::SnapshotReader& reader) {
   for (size_t word = 0; word < postings_.size(); ++word) {
     uint32_t count = 0;
     RECOG_RETURN_IF_ERROR(in.Read(&count, sizeof(count)));
-    if (count > header.postings - num_postings_) {
+    if (count > header.postings - num_postings_ ||
+        uint64_t(count) * sizeof(Posting) > in.remaining()) {
       return Status::DataLoss("the snapshot's lists hold more than its " +
-                              std::to_string(header.postings) + " postings");
+                              std::to_string(header.postings) + " postings or its bytes");
     }
     std::vector<Posting>& list = postings_[word].postings;
     list.resize(count);

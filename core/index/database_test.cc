@@ -522,8 +522,9 @@ TEST(DatabaseSnapshotTest, ADamagedSnapshotIsRejectedDroppedAndTheIndexRebuilt) 
     }
     expected = Answers(**db, queries);
   }
-  // The header (magic, map id), an entry flag, a posting's entry id, the checksum, a cut end and
-  // a byte too many. The header is 56 bytes, the 8 entry flags follow, then the lists.
+  // The header (magic, map id), an entry flag, a posting's entry id, the checksum, a cut end, a
+  // byte too many and lengths beyond the snapshot. The header is 56 bytes, the 8 entry flags
+  // follow, then the lists.
   const std::vector<std::pair<std::string, std::function<void(std::string*)>>> damages = {
       {"magic", [](std::string* b) { (*b)[0] ^= 1; }},
       {"map id", [](std::string* b) { (*b)[12] ^= 1; }},
@@ -532,6 +533,14 @@ TEST(DatabaseSnapshotTest, ADamagedSnapshotIsRejectedDroppedAndTheIndexRebuilt) 
       {"checksum", [](std::string* b) { b->back() ^= 1; }},
       {"cut", [](std::string* b) { b->resize(b->size() - 9); }},
       {"trailing byte", [](std::string* b) { b->push_back('x'); }},
+      // A header and a first list that claim 2^31 postings: refused before anything is allocated.
+      {"huge list",
+       [](std::string* b) {
+         const uint64_t postings = uint64_t(1) << 31;
+         std::memcpy(b->data() + 48, &postings, sizeof(postings));
+         const uint32_t count = uint32_t(postings);
+         std::memcpy(b->data() + 56 + 8, &count, sizeof(count));
+       }},
   };
   for (const auto& [what, damage] : damages) {
     SCOPED_TRACE(what);
