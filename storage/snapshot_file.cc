@@ -111,10 +111,11 @@ class FileSnapshotReader final : public IndexStore::SnapshotReader {
   uint64_t size() const override { return size_; }
 
   Status Read(void* out, size_t size) override {
+    if (size == 0) return Status::Ok();  // `out` may be null then
     ReadAhead(size);
     char* to = static_cast<char*>(out);
     const size_t buffered = std::min(size, buffer_end_ - buffer_position_);
-    std::memcpy(to, buffer_.data() + buffer_position_, buffered);
+    if (buffered > 0) std::memcpy(to, buffer_.data() + buffer_position_, buffered);
     buffer_position_ += buffered;
     to += buffered;
     size -= buffered;

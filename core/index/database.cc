@@ -191,6 +191,7 @@ class SnapshotEncoder {
     buffer_.reserve(kBufferBytes);
   }
   Status Write(const void* data, size_t size) {
+    if (size == 0) return Status::Ok();  // `data` may be null then
     XXH3_64bits_update(hash_.get(), data, size);
     bytes_ += size;
     if (buffer_.size() + size > kBufferBytes) RECOG_RETURN_IF_ERROR(FlushBuffer());
@@ -226,6 +227,7 @@ class SnapshotDecoder {
  public:
   explicit SnapshotDecoder(IndexStore::SnapshotReader* reader) : reader_(reader) {}
   Status Read(void* data, size_t size) {
+    if (size == 0) return Status::Ok();  // `data` may be null then
     RECOG_RETURN_IF_ERROR(reader_->Read(data, size));
     XXH3_64bits_update(hash_.get(), data, size);
     bytes_ += size;

@@ -180,6 +180,7 @@ class MemorySnapshotReader final : public IndexStore::SnapshotReader {
   EntryId covers() const override { return covers_; }
   uint64_t size() const override { return bytes_->size(); }
   Status Read(void* out, size_t size) override {
+    if (size == 0) return Status::Ok();  // `out` may be null then
     if (bytes_->size() - position_ < size) {
       return Status::DataLoss("the snapshot ends " + std::to_string(bytes_->size() - position_) +
                               " bytes before the " + std::to_string(size) + " to read");
