@@ -14,19 +14,6 @@ namespace {
 
 constexpr size_t kMaxUserDataBytes = 64 * 1024;
 
-// Appends with 25 % headroom instead of doubling, so that a posting list wastes at most a quarter
-// of its size: about 10 bytes per 8-byte posting on average.
-template <class T>
-void AppendCompact(std::vector<T>& v, const T& item) {
-  if (v.size() == v.capacity()) v.reserve(v.size() + v.size() / 4 + 4);
-  v.push_back(item);
-}
-
-// Orders postings by entry id for std::lower_bound.
-constexpr auto kEntryBelow = [](const auto& posting, EntryId entry) {
-  return posting.entry < entry;
-};
-
 // Per-thread accumulators of a query: a score and a one-byte stamp per entry id. An entry whose
 // stamp is not the current query's generation has not been touched yet, so nothing is cleared
 // between queries but once every 255 (when the generation wraps). One byte rather than four keeps
@@ -43,6 +30,8 @@ struct QueryScratch {
   std::vector<QueryResult> candidates;   // a bounded query's best entries on its rarer words
   std::vector<size_t> candidate_blocks;  // where each candidate is in one completed word's list
   std::vector<size_t> scan_positions;    // by query word: where a scan reads its list next
+  std::vector<size_t> scan_stops;        // by query word: where its list's current page ends
+  std::vector<float> scan_weights;       // by query word: its weight in the vocabulary
 
   void Prepare(size_t entries) {
     if (score.size() < entries) {
@@ -67,7 +56,7 @@ struct QueryScratch {
     constexpr size_t kAhead = 8;  // each list's size is a cache miss away
     for (size_t i = 0; i < words.size(); ++i) {
       if (i + kAhead < words.size()) __builtin_prefetch(&lists[words[i + kAhead].word]);
-      list_lengths.push_back({lists[words[i].word].postings.size(), uint32_t(i)});
+      list_lengths.push_back({lists[words[i].word].size(), uint32_t(i)});
       total += list_lengths.back().first;
     }
     if (total <= budget) return false;
@@ -98,8 +87,10 @@ struct QueryScratch {
 // order). After each range, `finish_range(first)` is called with the index in `touched` of the
 // first entry the range added; every entry from there on has its whole sum.
 constexpr EntryId kScanRange = 1 << 14;  // 16K entries: 144 KB of sums and stamps
-template <ScoringType kType, class Lists, class FinishRange>
-void ScanLists(const Lists& lists, std::span<const BowEntry> words, EntryId bound,
+static_assert((1u << PostingList::kPageBits) % kScanRange == 0, "no range across two pages");
+template <ScoringType kType, class FinishRange>
+void ScanLists(const std::vector<PostingList>& lists, const Vocabulary& vocabulary,
+               const float* entry_scales, std::span<const BowEntry> words, EntryId bound,
                QueryScratch& scratch, std::vector<QueryResult>* touched,
                FinishRange&& finish_range) {
   const uint8_t generation = scratch.generation;
@@ -111,35 +102,51 @@ void ScanLists(const Lists& lists, std::span<const BowEntry> words, EntryId boun
   // short lists.)
   constexpr size_t kListsAhead = 4, kVectorsAhead = 8;
   std::vector<size_t>& positions = scratch.scan_positions;
+  std::vector<size_t>& stops = scratch.scan_stops;
   positions.assign(words.size(), 0);
+  stops.resize(words.size());
+  std::vector<float>& weights = scratch.scan_weights;
+  weights.resize(words.size());
+  for (size_t i = 0; i < words.size(); ++i) weights[i] = vocabulary.WordWeight(words[i].word);
   for (uint64_t range_begin = 0; range_begin < bound; range_begin += kScanRange) {
     const EntryId range_end = EntryId(std::min<uint64_t>(bound, range_begin + kScanRange));
+    const uint64_t page = range_begin >> PostingList::kPageBits;
+    if (range_begin % (uint64_t(1) << PostingList::kPageBits) == 0) {
+      // A new page: where each list's postings on it end (its postings start where the scan is).
+      for (size_t i = 0; i < words.size(); ++i) {
+        if (i + kVectorsAhead < words.size()) {
+          __builtin_prefetch(&lists[words[i + kVectorsAhead].word]);
+        }
+        if (i + kListsAhead < words.size()) {
+          __builtin_prefetch(lists[words[i + kListsAhead].word].page_end_address(page));
+        }
+        stops[i] = lists[words[i].word].PageEnd(page);
+      }
+    }
     const size_t first_new = touched->size();
     for (size_t i = 0; i < words.size(); ++i) {
       if (i + kVectorsAhead < words.size()) {
         __builtin_prefetch(&lists[words[i + kVectorsAhead].word]);
       }
       if (i + kListsAhead < words.size()) {
-        __builtin_prefetch(lists[words[i + kListsAhead].word].postings.data() +
-                           positions[i + kListsAhead]);
+        __builtin_prefetch(lists[words[i + kListsAhead].word].address(positions[i + kListsAhead]));
       }
       const BowEntry& q = words[i];
-      if (q.value <= 0.f) continue;
+      if (q.value <= 0.f || positions[i] == stops[i]) continue;
       const double v = q.value;
-      const auto& postings = lists[q.word].postings;
-      const auto* p = postings.data() + positions[i];
-      for (const auto* const end = postings.data() + postings.size();
-           p != end && p->entry < range_end; ++p) {
-        const double term = CommonTerm(kType, v, p->value);
-        if (stamp[p->entry] != generation) {
-          stamp[p->entry] = generation;
-          score[p->entry] = term;
-          touched->push_back({p->entry, 0.0});
-        } else {
-          score[p->entry] += term;
-        }
-      }
-      positions[i] = size_t(p - postings.data());
+      // Captured by value: the stores to the stamps (bytes, which may alias anything) would
+      // otherwise make the compiler reload every captured pointer for every posting.
+      lists[q.word].VisitRange(&positions[i], stops[i], page, range_end, weights[i], entry_scales,
+                               [=](EntryId entry, float value) {
+                                 const double term = CommonTerm(kType, v, value);
+                                 if (stamp[entry] != generation) {
+                                   stamp[entry] = generation;
+                                   score[entry] = term;
+                                   touched->push_back({entry, 0.0});
+                                 } else {
+                                   score[entry] += term;
+                                 }
+                               });
     }
     finish_range(first_new);
   }
@@ -156,7 +163,7 @@ auto BetterResult(bool higher_is_better) {
 // The snapshot's framing (Database::SaveSnapshot): the header, and writing or reading the bytes
 // while hashing them with XXH3-64 (about 20 GB/s, far faster than the disk).
 constexpr char kSnapshotMagic[8] = {'R', 'C', 'G', 'I', 'N', 'D', 'E', 'X'};
-constexpr uint32_t kSnapshotVersion = 1;
+constexpr uint32_t kSnapshotVersion = 2;
 static_assert(std::endian::native == std::endian::little, "snapshots are little-endian");
 
 struct SnapshotHeader {
@@ -258,48 +265,6 @@ class SnapshotDecoder {
 
 }  // namespace
 
-void Database::PostingList::Append(const Posting& posting) {
-  if (postings.size() % kBlock == 0) AppendCompact(block_first, posting.entry);
-  AppendCompact(postings, posting);
-}
-
-bool Database::PostingList::Erase(EntryId entry) {
-  const auto it = std::lower_bound(postings.begin(), postings.end(), entry, kEntryBelow);
-  if (it == postings.end() || it->entry != entry) return false;
-  const size_t first_block = size_t(it - postings.begin()) / kBlock;
-  postings.erase(it);
-  block_first.resize(first_block);
-  for (size_t i = first_block * kBlock; i < postings.size(); i += kBlock) {
-    block_first.push_back(postings[i].entry);
-  }
-  return true;
-}
-
-void Database::PostingList::IndexBlocks() {
-  block_first.clear();
-  block_first.reserve((postings.size() + kBlock - 1) / kBlock);
-  for (size_t i = 0; i < postings.size(); i += kBlock) block_first.push_back(postings[i].entry);
-}
-
-size_t Database::PostingList::BlockOf(EntryId entry, size_t from) const {
-  if (block_first.empty() || entry < block_first[0]) return kNoBlock;
-  size_t block = from == kNoBlock ? 0 : from;
-  while (block + 1 < block_first.size() && block_first[block + 1] <= entry) ++block;
-  return block;
-}
-
-const Database::Posting* Database::PostingList::FindInBlock(size_t block, EntryId entry) const {
-  const Posting* first = postings.data() + block * kBlock;
-  const size_t size = std::min(kBlock, postings.size() - block * kBlock);
-  size_t below = 0;  // counted rather than searched: no branch to mispredict
-  for (size_t i = 0; i < size; ++i) below += first[i].entry < entry;
-  return below < size && first[below].entry == entry ? first + below : nullptr;
-}
-
-size_t Database::PostingList::capacity_bytes() const {
-  return postings.capacity() * sizeof(Posting) + block_first.capacity() * sizeof(EntryId);
-}
-
 Database::Database(IndexStore* store, MapInfo info, std::shared_ptr<const Vocabulary> vocabulary)
     : store_(store),
       info_(std::move(info)),
@@ -345,6 +310,7 @@ StatusOr<std::unique_ptr<Database>> Database::Open(IndexStore* store, const std:
   std::unique_ptr<Database> db(new Database(store, std::move(info), std::move(vocabulary)));
   RECOG_ASSIGN_OR_RETURN(db->next_id_, store->NextEntryId(db->info_.id));
   db->present_.assign(db->next_id_, 0);
+  db->entry_scale_.assign(db->next_id_, 0.f);
 
   DatabaseOpenReport& report = db->open_report_;
   StatusOr<std::unique_ptr<IndexStore::SnapshotReader>> snapshot =
@@ -359,6 +325,7 @@ StatusOr<std::unique_ptr<Database>> Database::Open(IndexStore* store, const std:
       report.snapshot_rejected = loaded.message();
       db->postings_.assign(db->postings_.size(), PostingList());
       db->present_.assign(db->next_id_, 0);
+      db->entry_scale_.assign(db->next_id_, 0.f);
       db->num_entries_ = db->num_postings_ = 0;
       (void)store->DropSnapshot(db->info_.id);  // best effort: SaveSnapshot replaces it anyway
     }
@@ -396,9 +363,10 @@ Status Database::IndexStoredEntries(EntryId first) {
         }
         for (const BowEntry& e : record.bow.entries()) {
           ++count[e.word];
-          buckets[e.word >> shift].push_back({e.word, {record.id, e.value}});
+          buckets[e.word >> shift].push_back({e.word, record.id, e.value});
         }
         present_[record.id] = 1;
+        entry_scale_[record.id] = PostingList::FitScale(record.bow.entries(), *vocabulary_);
         ++num_entries_;
         ++open_report_.entries_read;
         num_postings_ += record.bow.size();
@@ -410,13 +378,13 @@ Status Database::IndexStoredEntries(EntryId first) {
     for (size_t b = first_bucket; b < buckets.size(); b += 2) {
       const size_t end_word = std::min(words, (b + 1) << shift);
       for (size_t w = b << shift; w < end_word; ++w) {
-        if (count[w] != 0) postings_[w].postings.reserve(postings_[w].postings.size() + count[w]);
+        if (count[w] != 0) postings_[w].Reserve(postings_[w].size() + count[w]);
       }
-      for (const PendingPosting& p : buckets[b]) postings_[p.word].postings.push_back(p.posting);
+      for (const PendingPosting& p : buckets[b]) {
+        postings_[p.word].Append(p.entry, p.value, vocabulary_->WordWeight(p.word),
+                                 entry_scale_[p.entry]);
+      }
       std::vector<PendingPosting>().swap(buckets[b]);  // release as we go
-      for (size_t w = b << shift; w < end_word; ++w) {
-        if (count[w] != 0) postings_[w].IndexBlocks();
-      }
     }
   };
   std::thread helper(fill, 1);
@@ -443,10 +411,16 @@ StatusOr<uint64_t> Database::SaveSnapshot() {
   header.postings = num_postings_;
   RECOG_RETURN_IF_ERROR(out.Write(&header, sizeof(header)));
   RECOG_RETURN_IF_ERROR(out.Write(present_.data(), next_id_));
-  for (const PostingList& list : postings_) {
-    const uint32_t count = uint32_t(list.postings.size());
+  RECOG_RETURN_IF_ERROR(out.Write(entry_scale_.data(), next_id_ * sizeof(float)));
+  const auto write_array = [&out](const auto& items) {
+    const uint32_t count = uint32_t(items.size());
     RECOG_RETURN_IF_ERROR(out.Write(&count, sizeof(count)));
-    RECOG_RETURN_IF_ERROR(out.Write(list.postings.data(), count * sizeof(Posting)));
+    return out.Write(items.data(), count * sizeof(items[0]));
+  };
+  for (const PostingList& list : postings_) {
+    RECOG_RETURN_IF_ERROR(write_array(list.parts().postings));
+    RECOG_RETURN_IF_ERROR(write_array(list.parts().page_end));
+    RECOG_RETURN_IF_ERROR(write_array(list.parts().stored));
   }
   RECOG_RETURN_IF_ERROR(out.Finish());
   RECOG_RETURN_IF_ERROR(writer->Commit());
@@ -489,29 +463,40 @@ Status Database::LoadSnapshot(IndexStore::SnapshotReader& reader) {
     num_entries_ += present_[id];
   }
   if (num_entries_ != header.entries) return mismatch("entry count", num_entries_, header.entries);
-  for (size_t word = 0; word < postings_.size(); ++word) {
+  RECOG_RETURN_IF_ERROR(in.Read(entry_scale_.data(), covers * sizeof(float)));
+  for (EntryId id = 0; id < covers; ++id) {
+    if (!std::isfinite(entry_scale_[id]) || entry_scale_[id] < 0.f) {
+      return Status::DataLoss("the snapshot's entry scales are not finite and positive");
+    }
+  }
+  // Reads an array's length and items; the length must fit the bytes left (checked before
+  // anything is allocated for it, since the checksum is only read at the end).
+  const auto read_array = [&in](auto* items) {
     uint32_t count = 0;
     RECOG_RETURN_IF_ERROR(in.Read(&count, sizeof(count)));
-    if (count > header.postings - num_postings_ ||
-        uint64_t(count) * sizeof(Posting) > in.remaining()) {
+    if (uint64_t(count) * sizeof((*items)[0]) > in.remaining()) {
+      return Status::DataLoss("the snapshot's lists hold more than its bytes");
+    }
+    items->resize(count);
+    return in.Read(items->data(), count * sizeof((*items)[0]));
+  };
+  for (size_t word = 0; word < postings_.size(); ++word) {
+    PostingList::Parts parts;
+    RECOG_RETURN_IF_ERROR(read_array(&parts.postings));
+    RECOG_RETURN_IF_ERROR(read_array(&parts.page_end));
+    RECOG_RETURN_IF_ERROR(read_array(&parts.stored));
+    const size_t count = parts.postings.size();
+    if (count > header.postings - num_postings_) {
       return Status::DataLoss("the snapshot's lists hold more than its " +
-                              std::to_string(header.postings) + " postings or its bytes");
+                              std::to_string(header.postings) + " postings");
     }
-    std::vector<Posting>& list = postings_[word].postings;
-    list.resize(count);
-    RECOG_RETURN_IF_ERROR(in.Read(list.data(), count * sizeof(Posting)));
-    EntryId previous = 0;
-    for (size_t i = 0; i < list.size(); ++i) {
-      const Posting& p = list[i];
-      if (p.entry >= covers || present_[p.entry] == 0 || (i > 0 && p.entry <= previous) ||
-          !std::isfinite(p.value) || p.value < 0.f) {
-        return Status::DataLoss("the snapshot's list of word " + std::to_string(word) +
-                                " has a posting of no indexed entry, out of order, or without a "
-                                "weight");
-      }
-      previous = p.entry;
+    const std::string problem =
+        postings_[word].Restore(std::move(parts), covers, present_.data(),
+                                vocabulary_->WordWeight(WordId(word)), entry_scale_.data());
+    if (!problem.empty()) {
+      return Status::DataLoss("the snapshot's list of word " + std::to_string(word) + " has " +
+                              problem);
     }
-    postings_[word].IndexBlocks();
     num_postings_ += count;
   }
   if (num_postings_ != header.postings) {
@@ -560,8 +545,14 @@ std::string Database::CheckParts(const BowVector& bow, const FeatureVector& dire
 }
 
 void Database::IndexEntry(EntryId id, const BowVector& bow) {
-  for (const BowEntry& e : bow.entries()) postings_[e.word].Append(Posting{id, e.value});
-  if (present_.size() <= id) present_.resize(size_t(id) + 1, 0);
+  if (present_.size() <= id) {
+    present_.resize(size_t(id) + 1, 0);
+    entry_scale_.resize(size_t(id) + 1, 0.f);
+  }
+  const float scale = entry_scale_[id] = PostingList::FitScale(bow.entries(), *vocabulary_);
+  for (const BowEntry& e : bow.entries()) {
+    postings_[e.word].Append(id, e.value, vocabulary_->WordWeight(e.word), scale);
+  }
   present_[id] = 1;
   ++num_entries_;
   num_postings_ += bow.size();
@@ -635,14 +626,16 @@ void Database::ScoreEntries(const BowVector& query, const QueryOptions& options,
   thread_local QueryScratch scratch;
   scratch.Prepare(next_id_);
   const double constant = QueryConstant(kType, query);
+  const float* const scales = entry_scale_.data();
   if (options.full_scan_postings == 0 || num_postings_ <= options.full_scan_postings ||
       !scratch.SplitByListLength(query, postings_, options.full_scan_postings)) {
-    ScanLists<kType>(postings_, query.entries(), bound, scratch, touched, [&](size_t first) {
-      for (size_t i = first; i < touched->size(); ++i) {
-        QueryResult& r = (*touched)[i];
-        r.score = FinishScore(kType, scratch.score[r.id], constant);
-      }
-    });
+    ScanLists<kType>(postings_, *vocabulary_, scales, query.entries(), bound, scratch, touched,
+                     [&](size_t first) {
+                       for (size_t i = first; i < touched->size(); ++i) {
+                         QueryResult& r = (*touched)[i];
+                         r.score = FinishScore(kType, scratch.score[r.id], constant);
+                       }
+                     });
     return;
   }
   // Bounded query: the rarest words' lists are read in full; the entries that score best on them
@@ -652,19 +645,21 @@ void Database::ScoreEntries(const BowVector& query, const QueryOptions& options,
   const auto better = BetterResult(true);
   std::vector<QueryResult>& best = scratch.candidates;  // a heap, the worst on top
   best.clear();
-  ScanLists<kType>(postings_, scratch.scanned_words, bound, scratch, touched, [&](size_t first) {
-    for (size_t i = first; i < touched->size(); ++i) {
-      const QueryResult candidate{(*touched)[i].id, sign * scratch.score[(*touched)[i].id]};
-      if (best.size() == keep) {
-        if (!better(candidate, best.front())) continue;  // most entries: a predictable branch
-        std::pop_heap(best.begin(), best.end(), better);
-        best.pop_back();
-      }
-      best.push_back(candidate);
-      std::push_heap(best.begin(), best.end(), better);
-    }
-    touched->resize(first);  // the range's entries are no longer needed
-  });
+  ScanLists<kType>(
+      postings_, *vocabulary_, scales, scratch.scanned_words, bound, scratch, touched,
+      [&](size_t first) {
+        for (size_t i = first; i < touched->size(); ++i) {
+          const QueryResult candidate{(*touched)[i].id, sign * scratch.score[(*touched)[i].id]};
+          if (best.size() == keep) {
+            if (!better(candidate, best.front())) continue;  // most entries: a predictable branch
+            std::pop_heap(best.begin(), best.end(), better);
+            best.pop_back();
+          }
+          best.push_back(candidate);
+          std::push_heap(best.begin(), best.end(), better);
+        }
+        touched->resize(first);  // the range's entries are no longer needed
+      });
   touched->assign(best.begin(), best.end());
   double* const score = scratch.score.data();
   const std::span<const BowEntry> completed = scratch.completed_words;
@@ -676,28 +671,28 @@ void Database::ScoreEntries(const BowVector& query, const QueryOptions& options,
   for (size_t w = 0; w < completed.size(); ++w) {
     if (w + 2 < completed.size()) __builtin_prefetch(&postings_[completed[w + 2].word]);
     if (w + 1 < completed.size()) {
-      __builtin_prefetch(postings_[completed[w + 1].word].block_first.data());
+      __builtin_prefetch(postings_[completed[w + 1].word].block_index_address());
     }
     const BowEntry& q = completed[w];
     const PostingList& list = postings_[q.word];
-    if (q.value <= 0.f || list.postings.empty()) continue;
+    if (q.value <= 0.f || list.empty()) continue;
+    const float word_weight = vocabulary_->WordWeight(q.word);
     // Where each candidate's posting would be (the candidates in increasing id order), from the
     // small array of block starts; then the blocks, fetched a few candidates ahead.
-    size_t block = PostingList::kNoBlock;
+    size_t block = PostingList::kNotFound;
     for (size_t i = 0; i < blocks.size(); ++i) {
       block = blocks[i] = list.BlockOf((*touched)[i].id, block);
     }
     for (size_t i = 0; i < blocks.size(); ++i) {
-      if (i + kBlocksAhead < blocks.size() && blocks[i + kBlocksAhead] != PostingList::kNoBlock) {
-        const Posting* ahead =
-            list.postings.data() + blocks[i + kBlocksAhead] * PostingList::kBlock;
-        __builtin_prefetch(ahead);
-        __builtin_prefetch(ahead + PostingList::kBlock - 1);
+      if (i + kBlocksAhead < blocks.size() && blocks[i + kBlocksAhead] != PostingList::kNotFound) {
+        const size_t ahead = blocks[i + kBlocksAhead] * PostingList::kBlock;
+        __builtin_prefetch(list.address(ahead));
+        __builtin_prefetch(list.address(ahead + PostingList::kBlock - 1));
       }
-      if (blocks[i] == PostingList::kNoBlock) continue;
+      if (blocks[i] == PostingList::kNotFound) continue;
       const EntryId id = (*touched)[i].id;
-      if (const Posting* p = list.FindInBlock(blocks[i], id)) {
-        score[id] += CommonTerm(kType, q.value, p->value);
+      if (const size_t p = list.FindInBlock(blocks[i], id); p != PostingList::kNotFound) {
+        score[id] += CommonTerm(kType, q.value, list.ValueAt(p, word_weight, scales[id]));
       }
     }
   }
@@ -737,17 +732,18 @@ Status Database::QueryBcMatching(const BowVector& query, double beta, size_t max
     for (const BowEntry& q : query.entries()) {
       if (q.value <= 0.f) continue;
       const double v = q.value;
-      for (const Posting& p : postings_[q.word].postings) {
-        const double w = p.value;
-        if (stamp[p.entry] != generation) {
-          stamp[p.entry] = generation;
-          bhattacharyya[p.entry] = 0.0;
-          chi_square[p.entry] = 0.0;
-          results->push_back({p.entry, 0.0, 0.0});
-        }
-        bhattacharyya[p.entry] += std::sqrt(v * w);
-        chi_square[p.entry] += 2.0 * v * w / (v + w);
-      }
+      postings_[q.word].ForEach(vocabulary_->WordWeight(q.word), entry_scale_.data(),
+                                [&](EntryId entry, float value) {
+                                  const double w = value;
+                                  if (stamp[entry] != generation) {
+                                    stamp[entry] = generation;
+                                    bhattacharyya[entry] = 0.0;
+                                    chi_square[entry] = 0.0;
+                                    results->push_back({entry, 0.0, 0.0});
+                                  }
+                                  bhattacharyya[entry] += std::sqrt(v * w);
+                                  chi_square[entry] += 2.0 * v * w / (v + w);
+                                });
     }
     for (BcMatch& r : *results) {
       r.bhattacharyya = bhattacharyya[r.id];
@@ -868,9 +864,11 @@ DatabaseStats Database::Stats() const {
   stats.entries = num_entries_;
   stats.postings = num_postings_;
   stats.next_entry_id = next_id_;
-  stats.index_bytes = postings_.capacity() * sizeof(PostingList) + present_.capacity();
+  stats.index_bytes = postings_.capacity() * sizeof(PostingList) + present_.capacity() +
+                      entry_scale_.capacity() * sizeof(float);
   for (const PostingList& list : postings_) {
-    stats.words_in_use += !list.postings.empty();
+    stats.words_in_use += !list.empty();
+    stats.values_stored_aside += list.stored_values();
     stats.index_bytes += list.capacity_bytes();
   }
   return stats;

@@ -2,12 +2,12 @@
 // through an IndexStore (thesis §3.1.4, §4.3.2, §5.4.3).
 //
 // The inverted index keeps, for every word, the list of <entry, value> pairs of the entries that
-// contain it (8 bytes a posting, sorted by entry id), so a query scores every stored entry that
-// shares a word with it while touching nothing else (thesis Algorithm 1). In a large map, where
-// that would mean millions of postings, a query reads its rarest words' lists in full and looks up
-// only its best candidates in the others (QueryOptions::full_scan_postings). The direct index and
-// the features of each entry stay in the store and are read on demand (Get) when a candidate has
-// to be verified geometrically.
+// contain it (PostingList: 3 bytes a posting, sorted by entry id, the values exact), so a query
+// scores every stored entry that shares a word with it while touching nothing else (thesis
+// Algorithm 1). In a large map, where that would mean millions of postings, a query reads its
+// rarest words' lists in full and looks up only its best candidates in the others
+// (QueryOptions::full_scan_postings). The direct index and the features of each entry stay in the
+// store and are read on demand (Get) when a candidate has to be verified geometrically.
 //
 // Writes go to the store first, then to memory: Add() returns only after the entry is committed
 // (atomically, every part), and a query sees an entry only once it is fully indexed.
@@ -39,6 +39,7 @@
 #include "core/common/status.h"
 #include "core/index/entry.h"
 #include "core/index/index_store.h"
+#include "core/index/posting_list.h"
 #include "core/vocabulary/vocabulary.h"
 
 namespace recog {
@@ -83,8 +84,9 @@ struct DatabaseOpenReport {
 struct DatabaseStats {
   size_t entries = 0;
   size_t postings = 0;
-  size_t words_in_use = 0;  // words with at least one posting
-  size_t index_bytes = 0;   // memory held by the inverted index
+  size_t values_stored_aside = 0;  // postings whose value is not coded in their byte (PostingList)
+  size_t words_in_use = 0;         // words with at least one posting
+  size_t index_bytes = 0;          // memory held by the inverted index
   EntryId next_entry_id = 0;
 };
 
@@ -146,9 +148,11 @@ class Database {
   // instead of reading every entry; returns the bytes written, 0 when the store's snapshot is
   // already current. Adds and removals wait until it is written (seconds for a million entries:
   // meant for shutdown and quiet moments); queries go on. The snapshot holds, little-endian: a
-  // header (the magic "RCGINDEX", format version, map id, vocabulary checksum and words, the
+  // header (the magic "RCGINDEX", format version 2, map id, vocabulary checksum and words, the
   // entry id bound it covers, entries, postings), a byte per entry id below that bound (1:
-  // indexed), each word's posting count and postings, and an XXH3-64 checksum of all of that.
+  // indexed), a float per entry id (its PostingList scale), for each word its PostingList::Parts
+  // (each a 32-bit count and its items: postings, page ends, values kept aside), and an XXH3-64
+  // checksum of all of that.
   StatusOr<uint64_t> SaveSnapshot();
 
   size_t size() const;
@@ -157,34 +161,10 @@ class Database {
   DatabaseStats Stats() const;
 
  private:
-  struct Posting {
-    EntryId entry;
-    float value;
-  };
-  static_assert(sizeof(Posting) == 8);
-  // A word's postings, sorted by entry id, and the entry id of every kBlock-th of them: a search
-  // of this small array and of one block of kBlock postings (two cache lines) finds one entry's
-  // posting in a long list, which is how a bounded query completes its candidates' scores.
-  struct PostingList {
-    static constexpr size_t kBlock = 16;
-    static constexpr size_t kNoBlock = SIZE_MAX;
-    std::vector<Posting> postings;
-    std::vector<EntryId> block_first;
-
-    void Append(const Posting& posting);
-    bool Erase(EntryId entry);  // false when absent
-    void IndexBlocks();         // recomputes block_first after a bulk fill
-    // The block that holds `entry` if any posting does: the last one starting at or before it,
-    // walked to from block `from` (the previous answer, for entries in increasing order; kNoBlock
-    // to start at the first); kNoBlock when `entry` precedes every posting.
-    size_t BlockOf(EntryId entry, size_t from) const;
-    // The posting of `entry` in `block`, or null.
-    const Posting* FindInBlock(size_t block, EntryId entry) const;
-    size_t capacity_bytes() const;
-  };
   struct PendingPosting {  // a posting on its way to its list, while the index is rebuilt
     WordId word;
-    Posting posting;
+    EntryId entry;
+    float value;
   };
 
   Database(IndexStore* store, MapInfo info, std::shared_ptr<const Vocabulary> vocabulary);
@@ -219,6 +199,7 @@ class Database {
   mutable std::shared_mutex index_mutex_;  // guards everything below
   std::vector<PostingList> postings_;      // by word
   std::vector<uint8_t> present_;           // by entry id: 1 when indexed
+  std::vector<float> entry_scale_;         // by entry id: PostingList::FitScale of its words
   size_t num_entries_ = 0;
   size_t num_postings_ = 0;
   EntryId next_id_ = 0;
