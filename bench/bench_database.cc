@@ -92,22 +92,6 @@ class DiscardingStore : public IndexStore {
   MapInfo info_;
 };
 
-// Adds an entry with the given bag of words and `features` placeholder features.
-void AddEntry(Database& db, const BowVector& bow, int features) {
-  static const cv::Mat descriptors(1000, 32, CV_8U, cv::Scalar(0));
-  static const std::vector<uint32_t> all = [] {
-    std::vector<uint32_t> v(1000);
-    std::iota(v.begin(), v.end(), 0u);
-    return v;
-  }();
-  FeatureSet f;
-  f.descriptors = descriptors.rowRange(0, features);
-  f.keypoints.resize(size_t(features));
-  FeatureVector direct;
-  direct.AppendNode(0, std::span(all.data(), size_t(features)));
-  if (!db.AddConverted(bow, direct, f).ok()) std::abort();
-}
-
 // `count` words drawn uniformly from the vocabulary, each occurrence weighted by its word's weight
 // (as Vocabulary::Transform weighs them), L1-normalised.
 BowVector RandomBow(std::mt19937_64& rng, const Vocabulary& vocabulary, int count) {
@@ -184,52 +168,8 @@ const std::vector<cv::Mat>& Photos() {
   return photos;
 }
 
-BowVector Transform(const Vocabulary& vocabulary, const cv::Mat& descriptors) {
-  BowVector bow;
-  if (!vocabulary.Transform(descriptors, &bow).ok()) std::abort();
-  return bow;
-}
-
-// A random 60-100 % of the rows of `all` into `subset` (`rows` is scratch).
-void RandomSubset(const cv::Mat& all, std::mt19937_64& rng, std::vector<int>* rows,
-                  cv::Mat* subset) {
-  std::uniform_real_distribution<double> keep(0.6, 1.0);
-  rows->resize(size_t(all.rows));
-  std::iota(rows->begin(), rows->end(), 0);
-  std::shuffle(rows->begin(), rows->end(), rng);
-  rows->resize(size_t(all.rows * keep(rng)));
-  subset->create(int(rows->size()), all.cols, all.type());
-  for (size_t r = 0; r < rows->size(); ++r) all.row((*rows)[r]).copyTo(subset->row(int(r)));
-}
-
-// Adds to `db` every non-query photo once (when it is empty) and then, until it holds `entries`,
-// random 60-100 % subsets of their features, the photos in turn (none when `entries` is at most
-// the number of those photos). `rng` carries on across calls; `insert_ms`, when not null,
-// receives the time of each AddConverted. Each entry has `features` placeholder features.
-void GrowRealDatabase(Database& db, size_t entries, std::mt19937_64& rng,
-                      std::vector<double>* insert_ms = nullptr, int features = 1000) {
-  const std::vector<cv::Mat>& photos = Photos();
-  const size_t base = photos.size() - kQueryPhotos;
-  const auto add = [&](const cv::Mat& descriptors) {
-    const BowVector bow = Transform(db.vocabulary(), descriptors);
-    const auto start = std::chrono::steady_clock::now();
-    AddEntry(db, bow, features);
-    if (insert_ms != nullptr) {
-      insert_ms->push_back(
-          std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
-              .count());
-    }
-  };
-  if (db.size() == 0) {
-    for (size_t i = kQueryPhotos; i < photos.size(); ++i) add(photos[i]);
-  }
-  std::vector<int> rows;
-  cv::Mat subset;
-  for (size_t i = db.size() - base; db.size() < entries; ++i) {
-    RandomSubset(photos[kQueryPhotos + i % base], rng, &rows, &subset);
-    add(subset);
-  }
-}
+// The photos entries are made from: all but the first kQueryPhotos.
+std::span<const cv::Mat> StoredPhotos() { return std::span(Photos()).subspan(kQueryPhotos); }
 
 const std::shared_ptr<const Vocabulary>& ShippedVocabulary() {
   static const auto vocabulary = std::make_shared<const Vocabulary>(LoadBundledPlaceVocabulary());
@@ -244,7 +184,7 @@ std::unique_ptr<Database> NewShippedDatabase(IndexStore* store) {
 std::unique_ptr<Database> BuildRealDatabase(IndexStore* store, size_t entries) {
   auto db = NewShippedDatabase(store);
   std::mt19937_64 rng(5);
-  GrowRealDatabase(*db, entries, rng);
+  GrowRealDatabase(*db, StoredPhotos(), entries, rng);
   return db;
 }
 
@@ -369,17 +309,6 @@ std::vector<double> TimeQueries(const Database& db, const QueryOptions& options,
   return ms;
 }
 
-// The bytes of the files under `dir` (only those under `only_under` when given).
-uint64_t DirectoryBytes(const std::string& dir, const std::string& only_under = "") {
-  uint64_t bytes = 0;
-  for (const auto& f : std::filesystem::recursive_directory_iterator(dir)) {
-    if (!f.is_regular_file()) continue;
-    if (!only_under.empty() && f.path().string().rfind(only_under, 0) != 0) continue;
-    bytes += f.file_size();
-  }
-  return bytes;
-}
-
 // Tells the kernel to drop the cached pages of the files under `dir`, so that the next read of
 // them comes from the disk.
 void EvictFromPageCache(const std::string& dir) {
@@ -431,7 +360,7 @@ void BM_Restart_Shipped_k10L5(benchmark::State& state) {
     auto db = NewShippedDatabase(store->get());
     std::mt19937_64 rng(5);
     for (size_t size = 100000; db->size() < entries; size += 100000) {
-      GrowRealDatabase(*db, std::min(size, entries), rng, nullptr, 50);
+      GrowRealDatabase(*db, StoredPhotos(), std::min(size, entries), rng, nullptr, 50);
       std::fprintf(stderr, "bench_database: %zu entries stored\n", db->size());
     }
     expected = FirstAnswers(*db);
@@ -488,7 +417,7 @@ void BM_Query_L1_Shipped_k10L5_Scale(benchmark::State& state) {
   static const std::unique_ptr<Database> db = NewShippedDatabase(&store);
   static std::mt19937_64 rng(5);
   std::vector<double> insert_ms;
-  GrowRealDatabase(*db, size_t(state.range(0)), rng, &insert_ms);
+  GrowRealDatabase(*db, StoredPhotos(), size_t(state.range(0)), rng, &insert_ms);
   std::sort(insert_ms.begin(), insert_ms.end());
   const QueryOptions options{.max_results = 10};
   std::vector<double> query_ms;

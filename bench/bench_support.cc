@@ -3,10 +3,12 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <numeric>
 #include <random>
 
 #include "core/features/feature_extractor.h"
@@ -109,6 +111,71 @@ std::vector<cv::Mat> RealImageDescriptors(uint64_t seed) {
     if (features.size() >= 50) descriptors.push_back(features.descriptors.clone());
   }
   return descriptors;
+}
+
+BowVector Transform(const Vocabulary& vocabulary, const cv::Mat& descriptors) {
+  BowVector bow;
+  if (!vocabulary.Transform(descriptors, &bow).ok()) std::abort();
+  return bow;
+}
+
+void RandomSubset(const cv::Mat& all, std::mt19937_64& rng, std::vector<int>* rows,
+                  cv::Mat* subset) {
+  std::uniform_real_distribution<double> keep(0.6, 1.0);
+  rows->resize(size_t(all.rows));
+  std::iota(rows->begin(), rows->end(), 0);
+  std::shuffle(rows->begin(), rows->end(), rng);
+  rows->resize(size_t(all.rows * keep(rng)));
+  subset->create(int(rows->size()), all.cols, all.type());
+  for (size_t r = 0; r < rows->size(); ++r) all.row((*rows)[r]).copyTo(subset->row(int(r)));
+}
+
+void AddEntry(Database& db, const BowVector& bow, int features) {
+  static const cv::Mat descriptors(1000, 32, CV_8U, cv::Scalar(0));
+  static const std::vector<uint32_t> all = [] {
+    std::vector<uint32_t> v(1000);
+    std::iota(v.begin(), v.end(), 0u);
+    return v;
+  }();
+  FeatureSet f;
+  f.descriptors = descriptors.rowRange(0, features);
+  f.keypoints.resize(size_t(features));
+  FeatureVector direct;
+  direct.AppendNode(0, std::span(all.data(), size_t(features)));
+  if (!db.AddConverted(bow, direct, f).ok()) std::abort();
+}
+
+void GrowRealDatabase(Database& db, std::span<const cv::Mat> photos, size_t entries,
+                      std::mt19937_64& rng, std::vector<double>* insert_ms, int features) {
+  const auto add = [&](const cv::Mat& descriptors) {
+    const BowVector bow = Transform(db.vocabulary(), descriptors);
+    const auto start = std::chrono::steady_clock::now();
+    AddEntry(db, bow, features);
+    if (insert_ms != nullptr) {
+      insert_ms->push_back(
+          std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
+              .count());
+    }
+  };
+  if (db.size() == 0) {
+    for (const cv::Mat& photo : photos) add(photo);
+  }
+  std::vector<int> rows;
+  cv::Mat subset;
+  for (size_t i = db.size() - photos.size(); db.size() < entries; ++i) {
+    RandomSubset(photos[i % photos.size()], rng, &rows, &subset);
+    add(subset);
+  }
+}
+
+uint64_t DirectoryBytes(const std::string& dir, const std::string& only_under) {
+  uint64_t bytes = 0;
+  for (const auto& f : std::filesystem::recursive_directory_iterator(dir)) {
+    if (!f.is_regular_file()) continue;
+    if (!only_under.empty() && f.path().string().rfind(only_under, 0) != 0) continue;
+    bytes += f.file_size();
+  }
+  return bytes;
 }
 
 std::string TempPath(const std::string& name) {

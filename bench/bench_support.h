@@ -1,14 +1,18 @@
-// Inputs shared by the benchmarks: real ORB descriptors of the corridor frames, and vocabularies
-// of a given shape with random centroids (for sizes no training set here can fill, e.g. 1M words).
+// Inputs shared by the benchmarks: real ORB descriptors of the corridor frames and photos, maps
+// grown to any size from real photos' bags of words, and vocabularies of a given shape with random
+// centroids (for sizes no training set here can fill, e.g. 1M words).
 #pragma once
 
 #include <cstdint>
+#include <random>
+#include <span>
 #include <string>
 #include <vector>
 
 #include <opencv2/core.hpp>
 
 #include "core/bow/bow_vector.h"
+#include "core/index/database.h"
 #include "core/vocabulary/vocabulary.h"
 
 namespace recog::bench {
@@ -30,6 +34,30 @@ Vocabulary LoadBundledPlaceVocabulary();
 // without the shared data, every bundled corridor frame) with at least 50 features, in a random
 // order drawn from `seed`.
 std::vector<cv::Mat> RealImageDescriptors(uint64_t seed);
+
+// The bag of words of `descriptors` (aborts on failure).
+BowVector Transform(const Vocabulary& vocabulary, const cv::Mat& descriptors);
+
+// A random 60-100 % of the rows of `all` into `subset` (`rows` is scratch).
+void RandomSubset(const cv::Mat& all, std::mt19937_64& rng, std::vector<int>* rows,
+                  cv::Mat* subset);
+
+// Adds an entry with the given bag of words and `features` placeholder features (at most 1000:
+// zero descriptors, default keypoints, all under one direct-index node).
+void AddEntry(Database& db, const BowVector& bow, int features);
+
+// Grows `db` to `entries` entries of real word statistics: every photo of `photos` (ORB
+// descriptors, e.g. RealImageDescriptors) once when `db` is empty, then random 60-100 % subsets
+// of their features, the photos in turn (none when `entries` is at most their number). `rng`
+// carries on across calls; `insert_ms`, when not null, receives the time of each insertion. Each
+// entry has `features` placeholder features (AddEntry): the bags of words are real, the stored
+// features are not.
+void GrowRealDatabase(Database& db, std::span<const cv::Mat> photos, size_t entries,
+                      std::mt19937_64& rng, std::vector<double>* insert_ms = nullptr,
+                      int features = 1000);
+
+// The bytes of the files under `dir` (only those under `only_under` when given).
+uint64_t DirectoryBytes(const std::string& dir, const std::string& only_under = "");
 
 // A fresh temporary file path in the system temp folder.
 std::string TempPath(const std::string& name);
