@@ -469,22 +469,27 @@ Status Database::LoadSnapshot(IndexStore::SnapshotReader& reader) {
       return Status::DataLoss("the snapshot's entry scales are not finite and positive");
     }
   }
-  // Reads an array's length and items; the length must fit the bytes left (checked before
-  // anything is allocated for it, since the checksum is only read at the end).
-  const auto read_array = [&in](auto* items) {
+  // Reads an array's length and items into `items`, with room for `capacity(length)` of them;
+  // the length must fit the bytes left (checked before anything is allocated for it, since the
+  // checksum is only read at the end).
+  const auto read_array = [&in](auto* items, const auto& capacity) {
     uint32_t count = 0;
     RECOG_RETURN_IF_ERROR(in.Read(&count, sizeof(count)));
     if (uint64_t(count) * sizeof((*items)[0]) > in.remaining()) {
       return Status::DataLoss("the snapshot's lists hold more than its bytes");
     }
+    items->reserve(capacity(count));
     items->resize(count);
     return in.Read(items->data(), count * sizeof((*items)[0]));
   };
+  const auto exact = [](size_t count) { return count; };
   for (size_t word = 0; word < postings_.size(); ++word) {
     PostingList::Parts parts;
-    RECOG_RETURN_IF_ERROR(read_array(&parts.postings));
-    RECOG_RETURN_IF_ERROR(read_array(&parts.page_end));
-    RECOG_RETURN_IF_ERROR(read_array(&parts.stored));
+    RECOG_RETURN_IF_ERROR(read_array(&parts.postings, [word](size_t count) {
+      return PostingList::RestoredCapacity(count, uint32_t(word));
+    }));
+    RECOG_RETURN_IF_ERROR(read_array(&parts.page_end, exact));
+    RECOG_RETURN_IF_ERROR(read_array(&parts.stored, exact));
     const size_t count = parts.postings.size();
     if (count > header.postings - num_postings_) {
       return Status::DataLoss("the snapshot's lists hold more than its " +

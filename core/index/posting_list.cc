@@ -8,10 +8,12 @@
 namespace recog {
 namespace {
 
-// Grows a vector by an eighth (at least 4 items) when it is full, instead of doubling.
+// Lists grow by an eighth (at least 4 items) when they are full, instead of doubling.
+constexpr size_t kGrowthDivisor = 8;
+
 template <class T>
 void AppendCompact(std::vector<T>& v, const T& item) {
-  if (v.size() == v.capacity()) v.reserve(v.size() + v.size() / 8 + 4);
+  if (v.size() == v.capacity()) v.reserve(v.size() + v.size() / kGrowthDivisor + 4);
   v.push_back(item);
 }
 
@@ -69,8 +71,10 @@ void PostingList::Append(EntryId entry, float value, float word_weight, float en
 }
 
 bool PostingList::Erase(EntryId entry) {
-  const size_t block = BlockOf(entry, kNotFound);
-  if (block == kNotFound) return false;
+  // The last block that starts at or before `entry`, searched rather than walked to.
+  const auto after = std::upper_bound(block_first_.begin(), block_first_.end(), entry);
+  if (after == block_first_.begin()) return false;
+  const size_t block = size_t(after - block_first_.begin()) - 1;
   const size_t position = FindInBlock(block, entry);
   if (position == kNotFound) return false;
   parts_.postings.erase(parts_.postings.begin() + ptrdiff_t(position));
@@ -87,6 +91,12 @@ bool PostingList::Erase(EntryId entry) {
 }
 
 void PostingList::Reserve(size_t postings) { parts_.postings.reserve(postings); }
+
+size_t PostingList::RestoredCapacity(size_t postings, uint32_t word) {
+  // A share of one growth step between 0 and 1, from the word id's bits mixed (Fibonacci hashing).
+  const uint64_t share = (uint64_t(word) * 0x9E3779B97F4A7C15ull) >> 48;  // of 65,536
+  return postings + size_t(uint64_t(postings / kGrowthDivisor) * share >> 16);
+}
 
 size_t PostingList::capacity_bytes() const {
   return parts_.postings.capacity() * sizeof(Posting) +

@@ -1,5 +1,6 @@
 #include "core/index/posting_list.h"
 
+#include <algorithm>
 #include <bit>
 #include <cstring>
 #include <map>
@@ -135,7 +136,10 @@ TEST_F(PagedPostingListTest, ErasingKeepsTheOthersFindableWithTheirValues) {
     EXPECT_TRUE(list_.Erase(expected_[i].entry));
     expected_.erase(expected_.begin() + ptrdiff_t(i));
   }
-  EXPECT_FALSE(list_.Erase(7));
+  // Absent: before the first posting, between two, on another page, beyond the last.
+  for (EntryId absent : {EntryId(3), EntryId(7), EntryId(65536 + 7), EntryId(1'000'000)}) {
+    EXPECT_FALSE(list_.Erase(absent)) << absent;
+  }
   EXPECT_EQ(AllPostings(list_, 1.0, scales_), expected_);
   for (size_t i = 0; i < expected_.size(); ++i) {
     const size_t block = list_.BlockOf(expected_[i].entry, PostingList::kNotFound);
@@ -183,4 +187,21 @@ TEST_F(PagedPostingListTest, RestoreTakesGoodPartsAndRefusesDamagedOnes) {
 }
 
 }  // namespace
+TEST(PostingListTest, RestoredListsGetRoomSpreadOverOneGrowthStep) {
+  // Between none and an eighth more than the postings, differing from word to word, so that
+  // restored lists do not all copy themselves on the same new frame.
+  std::vector<size_t> capacities;
+  for (uint32_t word = 0; word < 1000; ++word) {
+    const size_t capacity = PostingList::RestoredCapacity(80'000, word);
+    ASSERT_GE(capacity, 80'000u);
+    ASSERT_LT(capacity, 90'000u);
+    capacities.push_back(capacity);
+  }
+  std::sort(capacities.begin(), capacities.end());
+  EXPECT_LT(capacities[100], 81'500u);  // about a tenth within the first tenth of the step
+  EXPECT_GT(capacities[900], 88'500u);
+  EXPECT_GT(std::unique(capacities.begin(), capacities.end()) - capacities.begin(), 900);
+  EXPECT_EQ(PostingList::RestoredCapacity(0, 12), 0u);
+}
+
 }  // namespace recog
