@@ -4,6 +4,7 @@
 #include <bit>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <span>
 #include <thread>
 
@@ -14,14 +15,15 @@ namespace {
 
 constexpr size_t kMaxUserDataBytes = 64 * 1024;
 
-// Per-thread accumulators of a query: a score and a one-byte stamp per entry id. An entry whose
-// stamp is not the current query's generation has not been touched yet, so nothing is cleared
-// between queries but once every 255 (when the generation wraps). One byte rather than four keeps
-// the stamps of a million entries in 1 MB of each querying thread, where the cache can hold them;
-// the queries took the same time either way (bench_database's Scale cases, A/B).
+// Per-thread accumulators of a query. A scoring query (ScanLists) sums one range of entry ids at
+// a time in `range_sums`; BC matching sums every entry in `score` and `second_score`, with a
+// one-byte stamp per entry id: an entry whose stamp is not the current query's generation has not
+// been touched yet, so nothing is cleared between queries but once every 255 (when the
+// generation wraps).
 struct QueryScratch {
-  std::vector<double> score;
-  std::vector<double> second_score;  // BC matching's chi-square sums
+  std::vector<double> range_sums;  // all -0 between queries, when range_sums_clean
+  bool range_sums_clean = false;
+  std::vector<double> score, second_score;
   std::vector<uint8_t> stamp;
   uint8_t generation = 0;
   // A bounded query's words: those whose lists are read in full, and the others.
@@ -33,7 +35,8 @@ struct QueryScratch {
   std::vector<size_t> scan_stops;        // by query word: where its list's current page ends
   std::vector<float> scan_weights;       // by query word: its weight in the vocabulary
 
-  void Prepare(size_t entries) {
+  // Readies the stamps and sums of BC matching for `entries` ids.
+  void PrepareStamps(size_t entries) {
     if (score.size() < entries) {
       score.resize(entries);
       second_score.resize(entries);
@@ -79,28 +82,86 @@ struct QueryScratch {
   }
 };
 
-// Adds CommonTerm(v, w) of every posting below `bound` in the lists of `words` to the scratch's
-// sums; `touched` receives each entry the first time it is touched. The entry ids are taken
-// kScanRange at a time: every list's postings in one range are added before the next range's, so
-// that the range's sums and stamps stay in the core's cache instead of each posting missing it
-// in a map of a million entries (the lists are sorted by entry id, so each is read once, in
-// order). After each range, `finish_range(first)` is called with the index in `touched` of the
-// first entry the range added; every entry from there on has its whole sum.
-constexpr EntryId kScanRange = 1 << 14;  // 16K entries: 144 KB of sums and stamps
+// CommonTerm of a query word's value `v` and a posting's value `w`. The L1 term, their minimum, is
+// taken in float (the same value as the double minimum of the two), which the compiler makes a
+// min instruction: with one operand a double it branched, and mispredicted about every other
+// posting.
+template <ScoringType kType>
+double PostingTerm(float v, float w) {
+  if constexpr (kType == ScoringType::kL1) {
+    return double(v < w ? v : w);
+  } else {
+    return CommonTerm(kType, v, w);
+  }
+}
+
+// A range's sums start as -0, which no sum of terms is: x + -0 is x for every x, +0 included,
+// and a term is never -0 (lists keep no -0 value). So a sum whose bits are still those of -0
+// belongs to an entry that no posting touched, and the first term replaces it exactly.
+constexpr uint64_t kUntouchedBits = 0x8000'0000'0000'0000;
+constexpr double kNoFloor = -std::numeric_limits<double>::infinity();
+static_assert(std::bit_cast<uint64_t>(-0.0) == kUntouchedBits);
+
+// Calls touched(offset, sum) for every sum of `sums[0, count)` that some term reached and with
+// sign * sum > *floor, in increasing offset order, and sets every sum back to -0 (untouched) as
+// it goes: one pass over the sums, while they are in the core's cache, instead of a scan and a
+// fill. `touched` may raise *floor as it goes (it is read again every few sums; those it lets
+// through anyway are the caller's to test).
+template <class Touched>
+void TakeTouched(double* sums, size_t count, double sign, const double* floor, Touched&& touched) {
+  constexpr size_t kGroup = 8;  // compared together (vectorised), then visited by their mask
+  size_t i = 0;
+  for (; i + kGroup <= count; i += kGroup) {
+    const double current_floor = *floor;
+    double group[kGroup];
+    uint32_t mask = 0;
+    for (size_t k = 0; k < kGroup; ++k) {
+      group[k] = sums[i + k];
+      sums[i + k] = -0.0;
+      mask |= uint32_t((std::bit_cast<uint64_t>(group[k]) != kUntouchedBits) &
+                       (sign * group[k] > current_floor))
+              << k;
+    }
+    for (; mask != 0; mask &= mask - 1) {
+      const size_t k = size_t(std::countr_zero(mask));
+      touched(i + k, group[k]);
+    }
+  }
+  for (; i < count; ++i) {
+    const double sum = sums[i];
+    sums[i] = -0.0;
+    if (std::bit_cast<uint64_t>(sum) != kUntouchedBits && sign * sum > *floor) touched(i, sum);
+  }
+}
+
+// Sums CommonTerm(v, w) of every posting below `bound` in the lists of `words`, by entry. The
+// entry ids are taken kScanRange at a time: every list's postings in one range are added before
+// the next range's, so that the range's sums stay in the core's cache instead of each posting
+// missing it in a map of a million entries (the lists are sorted by entry id, so each is read
+// once, in order). After each range that any posting fell in, `finish_range(range_begin, sums,
+// count)` is called, where sums[id - range_begin] is the sum of entry id for the range's `count`
+// ids, or -0 when nothing touched it; finish_range hands them to TakeTouched, which sets them back
+// to -0 for the next range. Each posting costs one add: no test of whether its entry was touched
+// before, which cost as much as the rest of the scan on a map of a million entries.
+constexpr EntryId kScanRange = 1 << 14;  // 16K entries: 128 KB of sums
 static_assert((1u << PostingList::kPageBits) % kScanRange == 0, "no range across two pages");
+
 template <ScoringType kType, class FinishRange>
 void ScanLists(const std::vector<PostingList>& lists, const Vocabulary& vocabulary,
                const float* entry_scales, std::span<const BowEntry> words, EntryId bound,
-               QueryScratch& scratch, std::vector<QueryResult>* touched,
-               FinishRange&& finish_range) {
-  const uint8_t generation = scratch.generation;
-  double* const score = scratch.score.data();
-  uint8_t* const stamp = scratch.stamp.data();
+               QueryScratch& scratch, FinishRange&& finish_range) {
+  std::vector<double>& range_sums = scratch.range_sums;
   // Each word's posting list is a cache miss away (its vector, then its postings), which costs
   // more than scoring a short list: the lists of the words a few steps ahead are fetched
   // meanwhile. (Measured by bench_place Relocalize_Group10x2600_vs_One26K, whose small maps have
   // short lists.)
   constexpr size_t kListsAhead = 4, kVectorsAhead = 8;
+  // A scan leaves every sum it touched at -0 again (TakeTouched); one cut short by an exception
+  // leaves them dirty, and the next one clears them.
+  if (!scratch.range_sums_clean || range_sums.size() < std::min<uint64_t>(kScanRange, bound)) {
+    range_sums.assign(kScanRange, -0.0);
+  }
+  scratch.range_sums_clean = false;
   std::vector<size_t>& positions = scratch.scan_positions;
   std::vector<size_t>& stops = scratch.scan_stops;
   positions.assign(words.size(), 0);
@@ -123,7 +184,9 @@ void ScanLists(const std::vector<PostingList>& lists, const Vocabulary& vocabula
         stops[i] = lists[words[i].word].PageEnd(page);
       }
     }
-    const size_t first_new = touched->size();
+    double* const sums = range_sums.data();
+    const EntryId base = EntryId(range_begin);
+    bool touched = false;
     for (size_t i = 0; i < words.size(); ++i) {
       if (i + kVectorsAhead < words.size()) {
         __builtin_prefetch(&lists[words[i + kVectorsAhead].word]);
@@ -133,23 +196,18 @@ void ScanLists(const std::vector<PostingList>& lists, const Vocabulary& vocabula
       }
       const BowEntry& q = words[i];
       if (q.value <= 0.f || positions[i] == stops[i]) continue;
-      const double v = q.value;
-      // Captured by value: the stores to the stamps (bytes, which may alias anything) would
-      // otherwise make the compiler reload every captured pointer for every posting.
-      lists[q.word].VisitRange(&positions[i], stops[i], page, range_end, weights[i], entry_scales,
-                               [=](EntryId entry, float value) {
-                                 const double term = CommonTerm(kType, v, value);
-                                 if (stamp[entry] != generation) {
-                                   stamp[entry] = generation;
-                                   score[entry] = term;
-                                   touched->push_back({entry, 0.0});
-                                 } else {
-                                   score[entry] += term;
-                                 }
-                               });
+      const float v = q.value;
+      const size_t first = positions[i];
+      lists[q.word].VisitRange(
+          &positions[i], stops[i], page, range_end, weights[i], entry_scales,
+          [=](EntryId entry, float value) { sums[entry - base] += PostingTerm<kType>(v, value); });
+      touched |= positions[i] != first;
     }
-    finish_range(first_new);
+    if (touched) {
+      finish_range(base, sums, size_t(range_end - base));
+    }
   }
+  scratch.range_sums_clean = true;
 }
 
 // Orders query results best first; equal scores by increasing id.
@@ -629,18 +687,17 @@ template <ScoringType kType>
 void Database::ScoreEntries(const BowVector& query, const QueryOptions& options, EntryId bound,
                             std::vector<QueryResult>* touched) const {
   thread_local QueryScratch scratch;
-  scratch.Prepare(next_id_);
   const double constant = QueryConstant(kType, query);
   const float* const scales = entry_scale_.data();
   if (options.full_scan_postings == 0 || num_postings_ <= options.full_scan_postings ||
       !scratch.SplitByListLength(query, postings_, options.full_scan_postings)) {
-    ScanLists<kType>(postings_, *vocabulary_, scales, query.entries(), bound, scratch, touched,
-                     [&](size_t first) {
-                       for (size_t i = first; i < touched->size(); ++i) {
-                         QueryResult& r = (*touched)[i];
-                         r.score = FinishScore(kType, scratch.score[r.id], constant);
-                       }
-                     });
+    ScanLists<kType>(
+        postings_, *vocabulary_, scales, query.entries(), bound, scratch,
+        [&](EntryId range_begin, double* sums, size_t count) {
+          TakeTouched(sums, count, 1.0, &kNoFloor, [&](size_t offset, double sum) {
+            touched->push_back({range_begin + EntryId(offset), FinishScore(kType, sum, constant)});
+          });
+        });
     return;
   }
   // Bounded query: the rarest words' lists are read in full; the entries that score best on them
@@ -650,23 +707,26 @@ void Database::ScoreEntries(const BowVector& query, const QueryOptions& options,
   const auto better = BetterResult(true);
   std::vector<QueryResult>& best = scratch.candidates;  // a heap, the worst on top
   best.clear();
-  ScanLists<kType>(
-      postings_, *vocabulary_, scales, scratch.scanned_words, bound, scratch, touched,
-      [&](size_t first) {
-        for (size_t i = first; i < touched->size(); ++i) {
-          const QueryResult candidate{(*touched)[i].id, sign * scratch.score[(*touched)[i].id]};
-          if (best.size() == keep) {
-            if (!better(candidate, best.front())) continue;  // most entries: a predictable branch
-            std::pop_heap(best.begin(), best.end(), better);
-            best.pop_back();
-          }
-          best.push_back(candidate);
-          std::push_heap(best.begin(), best.end(), better);
-        }
-        touched->resize(first);  // the range's entries are no longer needed
-      });
-  touched->assign(best.begin(), best.end());
-  double* const score = scratch.score.data();
+  // An entry is kept only above the worst kept one (ranges come in increasing id order, so a tie
+  // goes to the kept one): TakeTouched passes only those, and none at all until `keep` are kept.
+  double worst_kept = kNoFloor;
+  ScanLists<kType>(postings_, *vocabulary_, scales, scratch.scanned_words, bound, scratch,
+                   [&](EntryId range_begin, double* sums, size_t count) {
+                     TakeTouched(sums, count, sign, &worst_kept, [&](size_t offset, double sum) {
+                       const QueryResult candidate{range_begin + EntryId(offset), sign * sum};
+                       if (best.size() == keep) {
+                         if (!better(candidate, best.front())) return;
+                         std::pop_heap(best.begin(), best.end(), better);
+                         best.pop_back();
+                       }
+                       best.push_back(candidate);
+                       std::push_heap(best.begin(), best.end(), better);
+                       if (best.size() == keep) worst_kept = best.front().score;
+                     });
+                   });
+  // From here on each candidate's score is its sum of terms (sign is +-1: exact).
+  touched->clear();
+  for (const QueryResult& b : best) touched->push_back({b.id, sign * b.score});
   const std::span<const BowEntry> completed = scratch.completed_words;
   std::sort(touched->begin(), touched->end(),
             [](const QueryResult& a, const QueryResult& b) { return a.id < b.id; });
@@ -695,13 +755,14 @@ void Database::ScoreEntries(const BowVector& query, const QueryOptions& options,
         __builtin_prefetch(list.address(ahead + PostingList::kBlock - 1));
       }
       if (blocks[i] == PostingList::kNotFound) continue;
-      const EntryId id = (*touched)[i].id;
-      if (const size_t p = list.FindInBlock(blocks[i], id); p != PostingList::kNotFound) {
-        score[id] += CommonTerm(kType, q.value, list.ValueAt(p, word_weight, scales[id]));
+      QueryResult& candidate = (*touched)[i];
+      if (const size_t p = list.FindInBlock(blocks[i], candidate.id); p != PostingList::kNotFound) {
+        candidate.score +=
+            PostingTerm<kType>(q.value, list.ValueAt(p, word_weight, scales[candidate.id]));
       }
     }
   }
-  for (QueryResult& r : *touched) r.score = FinishScore(kType, score[r.id], constant);
+  for (QueryResult& r : *touched) r.score = FinishScore(kType, r.score, constant);
 }
 
 Status Database::CheckQueryWords(const BowVector& query) const {
@@ -729,7 +790,7 @@ Status Database::QueryBcMatching(const BowVector& query, double beta, size_t max
   thread_local QueryScratch scratch;
   {
     std::shared_lock lock(index_mutex_);
-    scratch.Prepare(next_id_);
+    scratch.PrepareStamps(next_id_);
     const uint8_t generation = scratch.generation;
     double* const bhattacharyya = scratch.score.data();
     double* const chi_square = scratch.second_score.data();

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cstring>
 #include <functional>
+#include <map>
 #include <random>
 #include <thread>
 
@@ -188,6 +189,69 @@ TEST_P(DatabaseScoringTest, BoundedQueryScoresItsCandidatesExactly) {
   }
 }
 
+TEST_P(DatabaseScoringTest, ABoundedQueryKeepsTheBestOnItsScannedWordTiesToTheLowerId) {
+  // Every bag of words twice, side by side (so every score ties with the next entry's), and a
+  // query of two common words that reads only the shorter list and keeps a few candidates: they
+  // are the best on that word alone, a tie going to the lower id, each returned with its whole
+  // score.
+  const ScoringType type = GetParam();
+  for (int i = 0; i < 60; ++i) {  // twins: entries 2i and 2i + 1
+    AddEntries(1, 30 + i % 20, 1, 2000 + uint64_t(i));
+    AddEntries(1, 30 + i % 20, 1, 2000 + uint64_t(i));
+  }
+  std::map<WordId, size_t> holders;
+  for (const BowVector& bow : bows_) {
+    for (const BowEntry& e : bow.entries()) ++holders[e.word];
+  }
+  std::vector<std::pair<size_t, WordId>> by_holders;
+  for (const auto& [word, count] : holders) by_holders.push_back({count, word});
+  std::sort(by_holders.rbegin(), by_holders.rend());
+  const double sign = TraitsOf(type).higher_is_better ? 1.0 : -1.0;
+  int queries = 0;
+  for (size_t k = 1; k < by_holders.size() && queries < 6; ++k) {
+    // The scanned word: held by fewer entries than the completed one, and by enough.
+    const auto [count, scanned] = by_holders[k];
+    const WordId completed = by_holders[0].second;
+    if (count == by_holders[0].first || count < 16) continue;
+    ++queries;
+    const float scanned_value = 0.2f + 0.1f * float(k % 5);
+    const BowVector query = scanned < completed
+                                ? BowVector({{scanned, scanned_value}, {completed, 0.5f}})
+                                : BowVector({{completed, 0.5f}, {scanned, scanned_value}});
+    std::vector<QueryResult> on_scanned;  // sign x the scanned word's term
+    for (EntryId id = 0; id < bows_.size(); ++id) {
+      if (const float value = bows_[id].ValueOf(scanned); value > 0) {
+        on_scanned.push_back({id, sign * CommonTerm(type, scanned_value, value)});
+      }
+    }
+    // Odd, so that it cuts a pair of twins whenever the sorted candidates end at one; and a
+    // quarter, so that most entries come after the first ones kept and must beat them.
+    const size_t keep = (on_scanned.size() / 4) | 1;
+    std::stable_sort(on_scanned.begin(), on_scanned.end(),
+                     [](const auto& a, const auto& b) { return a.score > b.score; });
+    std::vector<EntryId> expected;
+    for (size_t i = 0; i < keep; ++i) expected.push_back(on_scanned[i].id);
+    std::sort(expected.begin(), expected.end());
+
+    std::vector<QueryResult> results;
+    ASSERT_TRUE(
+        db_->Query(query,
+                   {.max_results = keep, .full_scan_postings = 1, .rescored_candidates = keep},
+                   &results)
+            .ok());
+    std::vector<EntryId> ids;
+    for (const QueryResult& r : results) {
+      ids.push_back(r.id);
+      EXPECT_NEAR(r.score, Score(type, query, bows_[r.id]),
+                  1e-6 * std::max(1.0, std::fabs(r.score)))
+          << ScoringName(type) << " entry " << r.id;
+    }
+    std::sort(ids.begin(), ids.end());
+    EXPECT_EQ(ids, expected) << ScoringName(type) << " word " << scanned;
+  }
+  EXPECT_EQ(queries, 6) << "the map has too few common words";
+}
+
 INSTANTIATE_TEST_SUITE_P(AllScores, DatabaseScoringTest,
                          ::testing::Values(ScoringType::kL1, ScoringType::kL2,
                                            ScoringType::kChiSquare, ScoringType::kKL,
@@ -317,6 +381,37 @@ TEST_F(DatabaseTest, EntriesAtOrAboveTheBoundAreNotScored) {
   ASSERT_TRUE(db_->Query(BowOf(f), {.max_results = 20, .max_entry_id = 4}, &results).ok());
   ASSERT_EQ(results.size(), 4u);
   for (size_t i = 0; i < results.size(); ++i) EXPECT_EQ(results[i].id, EntryId(i)) << "ties by id";
+}
+
+TEST_F(DatabaseTest, AnEntrySharingOnlyZeroWeightsIsStillReturnedWithScoreZero) {
+  // A query tells the entries its words touched by their sums; an entry whose only common word
+  // weighs 0 in it (written +0 or -0) still shares that word, as the linear merge says, whether
+  // the query reads every list or only its rarest one.
+  FeatureSet empty;
+  empty.descriptors = cv::Mat(0, 32, CV_8U);
+  const WordId rare = 3, common = 4;
+  for (const float zero : {0.f, -0.f}) {  // entries 0 and 1
+    ASSERT_TRUE(db_->AddConverted(BowVector({{rare, zero}}), FeatureVector(), empty, {}).ok());
+  }
+  for (int i = 0; i < 3; ++i) {  // entries 2 to 4
+    ASSERT_TRUE(db_->AddConverted(BowVector({{common, 1.f}}), FeatureVector(), empty, {}).ok());
+  }
+  const BowVector query({{rare, 0.5f}, {common, 0.5f}});
+  for (const size_t budget : {size_t(0), size_t(1)}) {
+    std::vector<QueryResult> results;
+    ASSERT_TRUE(
+        db_->Query(query, {.max_results = 10, .full_scan_postings = budget}, &results).ok());
+    // Every list read: entries 2 to 4 first (0.5), then 0 and 1. Only the rarest list read: its
+    // two entries.
+    ASSERT_EQ(results.size(), budget == 0 ? 5u : 2u) << "budget " << budget;
+    const size_t zeros = results.size() - 2;
+    for (size_t i = 0; i < results.size(); ++i) {
+      const bool zero = i >= results.size() - 2;
+      EXPECT_EQ(results[i].id, zero ? EntryId(i - zeros) : EntryId(2 + i)) << "rank " << i;
+      EXPECT_EQ(results[i].score, zero ? 0.0 : 0.5) << "rank " << i;
+      EXPECT_FALSE(std::signbit(results[i].score)) << "rank " << i << " kept a -0 weight";
+    }
+  }
 }
 
 TEST_F(DatabaseTest, RemovedEntriesLeaveTheIndexAndTheirIdsAreNotReused) {

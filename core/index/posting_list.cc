@@ -64,7 +64,11 @@ void PostingList::Append(EntryId entry, float value, float word_weight, float en
       if (steps >= -3 && steps <= 3) code = uint8_t(occurrences << 3 | uint32_t(steps + 3));
     }
   }
-  if (code == kStoredCode) AppendCompact(parts_.stored, StoredValue{uint32_t(position), value});
+  if (code == kStoredCode) {
+    // A zero is kept as +0: a query tells the entries it touched by their sums' bits, and a
+    // term of -0 would leave an entry's untouched -0 as it was.
+    AppendCompact(parts_.stored, StoredValue{uint32_t(position), value + 0.f});
+  }
   const uint32_t low = entry & ((1u << kPageBits) - 1);
   AppendCompact(parts_.postings, Posting{{uint8_t(low), uint8_t(low >> 8)}, code});
   parts_.page_end[page] = uint32_t(position + 1);
@@ -133,7 +137,7 @@ std::string PostingList::Restore(Parts parts, EntryId covers, const uint8_t* pre
       }
       const float value = is_stored ? stored[next_stored++].value
                                     : Decode(postings[p].code, word_weight, entry_scales[entry]);
-      if (!std::isfinite(value) || value < 0.f) {
+      if (!std::isfinite(value) || std::signbit(value)) {  // -0 too: Append keeps +0
         problem = "a posting without a weight";
         break;
       }

@@ -165,6 +165,7 @@ TEST_F(PagedPostingListTest, RestoreTakesGoodPartsAndRefusesDamagedOnes) {
       {"no occurrences", [](auto& p) { p.postings[1].code = 3; }},
       {"stored position", [](auto& p) { p.stored[1].position = 10; }},
       {"stored value", [](auto& p) { p.stored[0].value = -1.f; }},
+      {"stored -0", [](auto& p) { p.stored[0].value = -0.f; }},  // Append keeps +0
       {"page end", [](auto& p) { p.page_end.back() = 1000; }},
       {"pages out of order", [](auto& p) { p.page_end[1] = p.page_end[0] - 1; }},
       {"postings beyond the pages", [](auto& p) { p.postings.push_back(p.postings.back()); }},
