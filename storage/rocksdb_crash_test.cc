@@ -302,10 +302,16 @@ TEST(RocksDbCrashTest, ADatabaseKilledMidStreamReopensWithEveryAcknowledgedEntry
     if (::read(acks, &id, sizeof(id)) == sizeof(id)) {
       EXPECT_EQ(id, kOpenedMarker);
     }
+    // Then until its first entry is acknowledged, however slow the machine (a sanitizer build
+    // once took longer than the wait below to add it), so that the kill comes mid-stream.
+    EntryId last = kInvalidEntryId;
+    if (::read(acks, &id, sizeof(id)) == sizeof(id)) {
+      acknowledged.insert(id);
+      last = id;
+    }
     std::this_thread::sleep_for(
         std::chrono::milliseconds(std::uniform_int_distribution<int>(50, 200)(rng)));
     ::kill(pid, SIGKILL);
-    EntryId last = kInvalidEntryId;
     while (::read(acks, &id, sizeof(id)) == sizeof(id)) {
       acknowledged.insert(id);
       last = id;
