@@ -4,7 +4,6 @@
 #include <filesystem>
 
 #include <grpcpp/ext/proto_server_reflection_plugin.h>
-#include <grpcpp/health_check_service_interface.h>
 #include <spdlog/spdlog.h>
 
 #include "core/vocabulary/vocabulary_io.h"
@@ -13,6 +12,7 @@
 #include "server/console/web_console.h"
 #include "server/replication/repository_follower.h"
 #include "server/services/admin_service.h"
+#include "server/services/health_service.h"
 #include "server/services/object_service.h"
 #include "server/services/place_service.h"
 #include "server/services/repository_service.h"
@@ -140,7 +140,8 @@ StatusOr<std::unique_ptr<RecognitionServer>> RecognitionServer::Start(const Serv
   server->repository_service_ = std::make_unique<RepositoryService>(&state);
   server->admin_service_ = std::make_unique<AdminService>(&state);
 
-  grpc::EnableDefaultHealthCheckService(true);
+  server->health_service_ =
+      std::make_unique<HealthService>(std::vector<std::string>{kStoreHealthService});
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();
   grpc::ServerBuilder builder;
   builder.AddListeningPort(config.listen, credentials, &server->port_);
@@ -160,6 +161,7 @@ StatusOr<std::unique_ptr<RecognitionServer>> RecognitionServer::Start(const Serv
   builder.RegisterService(server->object_service_.get());
   builder.RegisterService(server->repository_service_.get());
   builder.RegisterService(server->admin_service_.get());
+  builder.RegisterService(server->health_service_.get());
   RegisterServiceMethods(
       state.metrics,
       {pb::PlaceRecognition::service_full_name(), pb::ObjectRecognition::service_full_name(),
@@ -173,7 +175,6 @@ StatusOr<std::unique_ptr<RecognitionServer>> RecognitionServer::Start(const Serv
     return Status::Unavailable("cannot listen on " + config.listen +
                                " (address in use, or not an address of this machine)");
   }
-  server->server_->GetHealthCheckService()->SetServingStatus(false);
   spdlog::info("recogd listening on port {} ({}), opening {}", server->port_,
                config.tls.cert.empty() ? "plaintext" : "TLS", config.data_dir);
   RECOG_RETURN_IF_ERROR(server->Open());
@@ -185,8 +186,8 @@ StatusOr<std::unique_ptr<RecognitionServer>> RecognitionServer::Start(const Serv
     RECOG_ASSIGN_OR_RETURN(server->console_,
                            WebConsole::Start(&state, server->server_->InProcessChannel(arguments)));
   }
-  server->server_->GetHealthCheckService()->SetServingStatus(true);
-  server->server_->GetHealthCheckService()->SetServingStatus(kStoreHealthService, true);
+  server->health_service_->Set("", true);
+  server->health_service_->Set(kStoreHealthService, true);
   spdlog::info("recogd ready: {} place maps, {} objects, {} workers, metrics on {}, console on {}",
                state.maps->List().size(), state.objects->size(), state.pool->threads(),
                config.metrics_listen.empty() ? "(off)" : config.metrics_listen,
@@ -253,9 +254,9 @@ void RecognitionServer::StoreChecked(const StoreVerifier::Result& result,
   const bool damaged = result.status().code() == StatusCode::kDataLoss;
   const uint64_t bytes = result.ok() ? result->bytes : 0;
   state_->metrics.StoreVerified(damaged, bytes, took.count());
-  if (damaged) server_->GetHealthCheckService()->SetServingStatus(kStoreHealthService, false);
+  if (damaged) health_service_->Set(kStoreHealthService, false);
   if (result.ok()) {
-    server_->GetHealthCheckService()->SetServingStatus(kStoreHealthService, true);
+    health_service_->Set(kStoreHealthService, true);
     spdlog::info("store verified: {} files, {:.1f} MiB in {:.1f} s ({:.1f} MiB/s), no damage",
                  result->files, double(bytes) / (1 << 20), took.count(),
                  double(bytes) / (1 << 20) / std::max(took.count(), 1e-9));
@@ -295,7 +296,7 @@ void RecognitionServer::Shutdown(std::chrono::milliseconds grace) {
     state.draining = true;
     if (server_ != nullptr) {
       spdlog::info("recogd draining (up to {} ms)", grace.count());
-      server_->GetHealthCheckService()->SetServingStatus(false);
+      health_service_->Shutdown();
       repository_service_->CloseWatchers();
       server_->Shutdown(std::chrono::system_clock::now() + grace);
     }

@@ -25,9 +25,9 @@
 // is logged and the one in use is kept. With TLS, checked copies of the files are kept under
 // <data_dir>/tls.
 //
-// Also serving: grpc.health.v1.Health, server reflection, and Prometheus metrics over HTTP on
-// `metrics_listen` (unless empty), including the standard gRPC server metrics of the recognition
-// services (server/app/grpc_metrics.h).
+// Also serving: grpc.health.v1.Health (server/services/health_service.h), server reflection, and
+// Prometheus metrics over HTTP on `metrics_listen` (unless empty), including the standard gRPC
+// server metrics of the recognition services (server/app/grpc_metrics.h).
 #pragma once
 
 #include <chrono>
@@ -49,6 +49,7 @@ class PlaceService;
 class ObjectService;
 class RepositoryService;
 class AdminService;
+class HealthService;
 class RepositoryFollower;
 class ServerTls;
 class WebConsole;
@@ -100,6 +101,7 @@ class RecognitionServer {
   std::unique_ptr<ObjectService> object_service_;
   std::unique_ptr<RepositoryService> repository_service_;
   std::unique_ptr<AdminService> admin_service_;
+  std::unique_ptr<HealthService> health_service_;  // NOT_SERVING until the store is open
   std::unique_ptr<grpc::Server> server_;
   std::unique_ptr<RepositoryFollower> follower_;  // on a replica, once ready
   std::unique_ptr<WebConsole> console_;           // with console.listen, once ready

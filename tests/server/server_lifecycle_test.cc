@@ -17,11 +17,11 @@
 #include <future>
 #include <thread>
 
-#include <grpcpp/generic/generic_stub.h>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 
 #include "core/vocabulary/vocabulary_io.h"
+#include "grpc/health/v1/health.grpc.pb.h"
 #include "server/api/converters.h"
 #include "tests/server/server_fixture.h"
 #include "tests/testing/metrics_scrape.h"
@@ -40,37 +40,29 @@ using recog::testing::FetchMetrics;
 constexpr char kRobotToken[] = "robot-token-0123456789";
 constexpr char kOperatorToken[] = "operator-token-0123456789";
 
-// grpc.health.v1.Health/Check over a generic stub (the health proto is not compiled here): the
-// response is field 1, a varint; SERVING = 1, NOT_SERVING = 2.
-int HealthStatus(const std::shared_ptr<grpc::Channel>& channel) {
-  grpc::GenericStub stub(channel);
+namespace health = ::grpc::health::v1;
+
+// grpc.health.v1.Health/Check of `service`: SERVING = 1, NOT_SERVING = 2; -1 when the call fails.
+int HealthStatus(const std::shared_ptr<grpc::Channel>& channel, const std::string& service = "") {
   grpc::ClientContext context;
   context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(5));
-  grpc::ByteBuffer request, response;
-  grpc::Slice empty("");
-  request = grpc::ByteBuffer(&empty, 1);
-  std::promise<grpc::Status> done;
-  stub.UnaryCall(&context, "/grpc.health.v1.Health/Check", grpc::StubOptions(), &request, &response,
-                 [&](grpc::Status status) { done.set_value(status); });
-  if (!done.get_future().get().ok()) return -1;
-  std::vector<grpc::Slice> slices;
-  if (!response.Dump(&slices).ok() || slices.empty() || slices[0].size() < 2) return 0;
-  return slices[0].begin()[1];
+  health::HealthCheckRequest request;
+  request.set_service(service);
+  health::HealthCheckResponse response;
+  if (!health::Health::NewStub(channel)->Check(&context, request, &response).ok()) return -1;
+  return response.status();
 }
 
-// grpc.health.v1.Health/Watch over a generic stub: the status now, then each change.
+// grpc.health.v1.Health/Watch of `service`: the status now, then each change.
 class HealthWatch {
  public:
-  explicit HealthWatch(const std::shared_ptr<grpc::Channel>& channel) : stub_(channel) {
-    call_ = stub_.PrepareCall(&context_, "/grpc.health.v1.Health/Watch", &queue_);
-    call_->StartCall(Tag(1));
-    if (!Await(1)) return;
-    grpc::Slice empty("");
-    grpc::ByteBuffer request(&empty, 1);
-    call_->Write(request, Tag(2));
-    if (!Await(2)) return;
-    call_->WritesDone(Tag(3));
-    started_ = Await(3);
+  explicit HealthWatch(const std::shared_ptr<grpc::Channel>& channel,
+                       const std::string& service = "")
+      : stub_(health::Health::NewStub(channel)) {
+    health::HealthCheckRequest request;
+    request.set_service(service);
+    call_ = stub_->AsyncWatch(&context_, request, &queue_, Tag(1));
+    started_ = Await(1);
   }
   ~HealthWatch() {
     context_.TryCancel();
@@ -82,15 +74,14 @@ class HealthWatch {
     }
   }
 
-  // The next status sent (SERVING = 1, NOT_SERVING = 2), -1 when none comes within 10 s.
+  // The next status sent (SERVING = 1, NOT_SERVING = 2, SERVICE_UNKNOWN = 3); -1 when the stream
+  // has ended or nothing comes within 10 s.
   int Next() {
     if (!started_) return -1;
-    grpc::ByteBuffer response;
+    health::HealthCheckResponse response;
     call_->Read(&response, Tag(4));
     if (!Await(4)) return -1;
-    std::vector<grpc::Slice> slices;
-    if (!response.Dump(&slices).ok() || slices.empty() || slices[0].size() < 2) return 0;
-    return slices[0].begin()[1];
+    return response.status();
   }
 
  private:
@@ -103,10 +94,10 @@ class HealthWatch {
            tag == Tag(expected);
   }
 
-  grpc::GenericStub stub_;
+  std::unique_ptr<health::Health::Stub> stub_;
   grpc::ClientContext context_;
   grpc::CompletionQueue queue_;
-  std::unique_ptr<grpc::GenericClientAsyncReaderWriter> call_;
+  std::unique_ptr<grpc::ClientAsyncReader<health::HealthCheckResponse>> call_;
   grpc::Status status_;
   bool started_ = false;
 };
@@ -186,6 +177,7 @@ TEST_F(ServerLifecycleTest, HealthIsNotServingUntilTheStoreIsOpen) {
   ASSERT_TRUE(
       channel->WaitForConnected(std::chrono::system_clock::now() + std::chrono::seconds(10)));
   EXPECT_EQ(HealthStatus(channel), 2);
+  EXPECT_EQ(HealthStatus(channel, RecognitionServer::kStoreHealthService), 2);
   HealthWatch watch(channel);
   EXPECT_EQ(watch.Next(), 2);
   auto stub = pb::PlaceRecognition::NewStub(channel);
@@ -223,6 +215,21 @@ TEST_F(ServerLifecycleTest, HealthIsNotServingUntilTheStoreIsOpen) {
   EXPECT_EQ(listed.maps(0).name(), "kept");
 }
 
+TEST_F(ServerLifecycleTest, HealthAnswersForTheServerAndTheStoreAndRefusesOtherNames) {
+  EXPECT_EQ(HealthStatus(channel_), 1);
+  EXPECT_EQ(HealthStatus(channel_, RecognitionServer::kStoreHealthService), 1);
+  grpc::ClientContext context;
+  health::HealthCheckRequest request;
+  request.set_service("recog.nothing");
+  health::HealthCheckResponse response;
+  EXPECT_EQ(health::Health::NewStub(channel_)->Check(&context, request, &response).error_code(),
+            grpc::StatusCode::NOT_FOUND);
+  HealthWatch unknown(channel_, "recog.nothing");
+  EXPECT_EQ(unknown.Next(), health::HealthCheckResponse::SERVICE_UNKNOWN);
+  HealthWatch store(channel_, RecognitionServer::kStoreHealthService);
+  EXPECT_EQ(store.Next(), 1);
+}
+
 TEST_F(ServerLifecycleTest, DrainingAnswersNotServingAndRefusesNewCalls) {
   ASSERT_TRUE(CreateMap("busy").ok());
   HealthWatch watch(channel_);
@@ -236,10 +243,14 @@ TEST_F(ServerLifecycleTest, DrainingAnswersNotServingAndRefusesNewCalls) {
   ASSERT_TRUE(stream->Write(request));
   pb::StreamFramesResponse response;
   ASSERT_TRUE(stream->Read(&response));
-  // The open stream holds the drain for its whole grace period.
+  // The open stream, waiting for its next frame, holds the drain for its whole grace period. The
+  // pause lets the server finish the answer's write first: a stream whose write completes after
+  // the drain began ends there (every frame sent was answered), and nothing would hold the drain.
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
   auto shutdown =
       std::async(std::launch::async, [&] { server_->Shutdown(std::chrono::milliseconds(3000)); });
   EXPECT_EQ(watch.Next(), 2);
+  EXPECT_EQ(watch.Next(), -1) << "the health watch did not end with the drain's NOT_SERVING";
   // Once the drain is under way a new client is refused (the listener is closed), and so is a new
   // call on a connection opened before it. (A call that arrives in the very instant gRPC begins
   // its shutdown may be CANCELLED instead: hence the pause.)
