@@ -91,7 +91,7 @@ Vocabulary LoadBundledPlaceVocabulary() {
   return std::move(vocabulary).value();
 }
 
-std::vector<cv::Mat> RealImageDescriptors(uint64_t seed) {
+std::vector<FeatureSet> RealImageFeatures(uint64_t seed) {
   const std::string caltech = testing::SharedData("training/caltech101");
   auto listed = cli::ListImages(
       std::filesystem::exists(caltech) ? caltech : testing::ProjectTestData("corridor"));
@@ -103,13 +103,22 @@ std::vector<cv::Mat> RealImageDescriptors(uint64_t seed) {
   std::mt19937_64 rng(seed);
   std::shuffle(files.begin(), files.end(), rng);
   auto extractor = CreateFeatureExtractor(FeatureOptions{});
-  std::vector<cv::Mat> descriptors;
+  std::vector<FeatureSet> photos;
   FeatureSet features;
   for (const std::string& f : files) {
     auto image = ReadGrayImage(f);
     if (!image.ok() || !(*extractor)->Extract(*image, &features).ok()) continue;
-    if (features.size() >= 50) descriptors.push_back(features.descriptors.clone());
+    if (features.size() < 50) continue;
+    features.descriptors = features.descriptors.clone();
+    photos.push_back(std::move(features));
+    features = {};
   }
+  return photos;
+}
+
+std::vector<cv::Mat> RealImageDescriptors(uint64_t seed) {
+  std::vector<cv::Mat> descriptors;
+  for (FeatureSet& photo : RealImageFeatures(seed)) descriptors.push_back(photo.descriptors);
   return descriptors;
 }
 
@@ -130,6 +139,14 @@ void RandomSubset(const cv::Mat& all, std::mt19937_64& rng, std::vector<int>* ro
   for (size_t r = 0; r < rows->size(); ++r) all.row((*rows)[r]).copyTo(subset->row(int(r)));
 }
 
+void RandomSubset(const FeatureSet& all, std::mt19937_64& rng, std::vector<int>* rows,
+                  FeatureSet* subset) {
+  RandomSubset(all.descriptors, rng, rows, &subset->descriptors);
+  subset->keypoints.clear();
+  for (int r : *rows) subset->keypoints.push_back(all.keypoints[size_t(r)]);
+  subset->image_size = all.image_size;
+}
+
 void AddEntry(Database& db, const BowVector& bow, int features) {
   static const cv::Mat descriptors(1000, 32, CV_8U, cv::Scalar(0));
   static const std::vector<uint32_t> all = [] {
@@ -145,9 +162,29 @@ void AddEntry(Database& db, const BowVector& bow, int features) {
   if (!db.AddConverted(bow, direct, f).ok()) std::abort();
 }
 
+namespace {
+
+// GrowRealDatabase's order: add(p, {}) for every photo p once when `db` is empty, then
+// add(p, subset) with subsets of the photos in turn until `db` holds `entries` entries.
+template <typename Photo, typename Add>
+void GrowFromPhotos(Database& db, std::span<const Photo> photos, size_t entries,
+                    std::mt19937_64& rng, Add add) {
+  if (db.size() == 0) {
+    for (const Photo& photo : photos) add(photo);
+  }
+  std::vector<int> rows;
+  Photo subset;
+  for (size_t i = db.size() - photos.size(); db.size() < entries; ++i) {
+    RandomSubset(photos[i % photos.size()], rng, &rows, &subset);
+    add(subset);
+  }
+}
+
+}  // namespace
+
 void GrowRealDatabase(Database& db, std::span<const cv::Mat> photos, size_t entries,
                       std::mt19937_64& rng, std::vector<double>* insert_ms, int features) {
-  const auto add = [&](const cv::Mat& descriptors) {
+  GrowFromPhotos(db, photos, entries, rng, [&](const cv::Mat& descriptors) {
     const BowVector bow = Transform(db.vocabulary(), descriptors);
     const auto start = std::chrono::steady_clock::now();
     AddEntry(db, bow, features);
@@ -156,16 +193,14 @@ void GrowRealDatabase(Database& db, std::span<const cv::Mat> photos, size_t entr
           std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
               .count());
     }
-  };
-  if (db.size() == 0) {
-    for (const cv::Mat& photo : photos) add(photo);
-  }
-  std::vector<int> rows;
-  cv::Mat subset;
-  for (size_t i = db.size() - photos.size(); db.size() < entries; ++i) {
-    RandomSubset(photos[i % photos.size()], rng, &rows, &subset);
-    add(subset);
-  }
+  });
+}
+
+void GrowRealDatabase(Database& db, std::span<const FeatureSet> photos, size_t entries,
+                      std::mt19937_64& rng) {
+  GrowFromPhotos(db, photos, entries, rng, [&](const FeatureSet& features) {
+    if (!db.Add(features).ok()) std::abort();
+  });
 }
 
 uint64_t DirectoryBytes(const std::string& dir, const std::string& only_under) {

@@ -30,9 +30,11 @@ Vocabulary RandomFullTreeVocabulary(uint32_t k, uint32_t levels, uint64_t seed);
 // binary with a message when it is missing.
 Vocabulary LoadBundledPlaceVocabulary();
 
-// ORB descriptors of real images, one set per distinct photo: every shared Caltech photo (or,
+// ORB features of real images, one set per distinct photo: every shared Caltech photo (or,
 // without the shared data, every bundled corridor frame) with at least 50 features, in a random
 // order drawn from `seed`.
+std::vector<FeatureSet> RealImageFeatures(uint64_t seed);
+// The descriptors alone of RealImageFeatures(seed).
 std::vector<cv::Mat> RealImageDescriptors(uint64_t seed);
 
 // The bag of words of `descriptors` (aborts on failure).
@@ -41,6 +43,10 @@ BowVector Transform(const Vocabulary& vocabulary, const cv::Mat& descriptors);
 // A random 60-100 % of the rows of `all` into `subset` (`rows` is scratch).
 void RandomSubset(const cv::Mat& all, std::mt19937_64& rng, std::vector<int>* rows,
                   cv::Mat* subset);
+// The same of the features (descriptors and keypoints) of `all`: the rows drawn are those the
+// descriptor version draws from the same `rng`.
+void RandomSubset(const FeatureSet& all, std::mt19937_64& rng, std::vector<int>* rows,
+                  FeatureSet* subset);
 
 // Adds an entry with the given bag of words and `features` placeholder features (at most 1000:
 // zero descriptors, default keypoints, all under one direct-index node).
@@ -55,6 +61,11 @@ void AddEntry(Database& db, const BowVector& bow, int features);
 void GrowRealDatabase(Database& db, std::span<const cv::Mat> photos, size_t entries,
                       std::mt19937_64& rng, std::vector<double>* insert_ms = nullptr,
                       int features = 1000);
+// The same, each entry storing the real features it was made from (Database::Add: its bag of
+// words, direct index, keypoints and descriptors), as a map of real frames holds them; from the
+// same `rng`, the same bags of words as the version above.
+void GrowRealDatabase(Database& db, std::span<const FeatureSet> photos, size_t entries,
+                      std::mt19937_64& rng);
 
 // The bytes of the files under `dir` (only those under `only_under` when given).
 uint64_t DirectoryBytes(const std::string& dir, const std::string& only_under = "");
