@@ -33,7 +33,8 @@ class HealthWatch final : public grpc::ServerWriteReactor<health::HealthCheckRes
 
  private:
   void SendLocked(HealthService::ServingStatus status) {
-    if (finished_) return;
+    if (finished_ || status == latest_) return;
+    latest_ = status;
     if (writing_) {
       next_ = status;
       has_next_ = true;
@@ -62,7 +63,9 @@ class HealthWatch final : public grpc::ServerWriteReactor<health::HealthCheckRes
       FinishLocked({grpc::StatusCode::CANCELLED, "the client went away"});
     } else if (has_next_) {
       has_next_ = false;
-      SendLocked(next_);
+      response_.set_status(next_);
+      writing_ = true;
+      StartWrite(&response_);
     } else if (end_) {
       FinishLocked({grpc::StatusCode::UNAVAILABLE, "the server is shutting down"});
     }
@@ -86,6 +89,8 @@ class HealthWatch final : public grpc::ServerWriteReactor<health::HealthCheckRes
   const std::string name_;
   std::mutex mutex_;                      // guards everything below
   health::HealthCheckResponse response_;  // being written
+  // The latest status written or waiting to be (UNKNOWN, which is never sent, before the first).
+  HealthService::ServingStatus latest_ = health::HealthCheckResponse::UNKNOWN;
   HealthService::ServingStatus next_ = health::HealthCheckResponse::UNKNOWN;
   bool has_next_ = false, writing_ = false, end_ = false, cancelled_ = false, finished_ = false;
 };
