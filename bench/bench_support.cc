@@ -164,8 +164,8 @@ void AddEntry(Database& db, const BowVector& bow, int features) {
 
 namespace {
 
-// GrowRealDatabase's order: add(p, {}) for every photo p once when `db` is empty, then
-// add(p, subset) with subsets of the photos in turn until `db` holds `entries` entries.
+// GrowRealDatabase's order: add(photo) for every photo once when `db` is empty, then add(subset)
+// with random subsets of the photos in turn (RandomSubset) until `db` holds `entries` entries.
 template <typename Photo, typename Add>
 void GrowFromPhotos(Database& db, std::span<const Photo> photos, size_t entries,
                     std::mt19937_64& rng, Add add) {
