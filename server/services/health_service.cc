@@ -4,7 +4,7 @@ namespace recog::server {
 
 namespace health = ::grpc::health::v1;
 
-// One Watch stream: the latest status not yet written waits in `next_` while a write is out.
+// One Watch stream: while a write is out, `latest_` keeps the newest status, written after it.
 class HealthWatch final : public grpc::ServerWriteReactor<health::HealthCheckResponse> {
  public:
   HealthWatch(HealthService& service, std::string name)
@@ -35,12 +35,11 @@ class HealthWatch final : public grpc::ServerWriteReactor<health::HealthCheckRes
   void SendLocked(HealthService::ServingStatus status) {
     if (finished_ || status == latest_) return;
     latest_ = status;
-    if (writing_) {
-      next_ = status;
-      has_next_ = true;
-      return;
-    }
-    response_.set_status(status);
+    if (!writing_) WriteLatestLocked();
+  }
+
+  void WriteLatestLocked() {
+    response_.set_status(latest_);
     writing_ = true;
     StartWrite(&response_);
   }
@@ -61,11 +60,8 @@ class HealthWatch final : public grpc::ServerWriteReactor<health::HealthCheckRes
     writing_ = false;
     if (!ok || cancelled_) {
       FinishLocked({grpc::StatusCode::CANCELLED, "the client went away"});
-    } else if (has_next_) {
-      has_next_ = false;
-      response_.set_status(next_);
-      writing_ = true;
-      StartWrite(&response_);
+    } else if (latest_ != response_.status()) {
+      WriteLatestLocked();
     } else if (end_) {
       FinishLocked({grpc::StatusCode::UNAVAILABLE, "the server is shutting down"});
     }
@@ -89,10 +85,9 @@ class HealthWatch final : public grpc::ServerWriteReactor<health::HealthCheckRes
   const std::string name_;
   std::mutex mutex_;                      // guards everything below
   health::HealthCheckResponse response_;  // being written
-  // The latest status written or waiting to be (UNKNOWN, which is never sent, before the first).
+  // The newest status, written or to be written (UNKNOWN, which is never sent, before the first).
   HealthService::ServingStatus latest_ = health::HealthCheckResponse::UNKNOWN;
-  HealthService::ServingStatus next_ = health::HealthCheckResponse::UNKNOWN;
-  bool has_next_ = false, writing_ = false, end_ = false, cancelled_ = false, finished_ = false;
+  bool writing_ = false, end_ = false, cancelled_ = false, finished_ = false;
 };
 
 HealthService::HealthService(const std::vector<std::string>& services) {
