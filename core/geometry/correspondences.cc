@@ -5,6 +5,7 @@
 #include <limits>
 #include <span>
 #include <string>
+#include <vector>
 
 #include <opencv2/calib3d.hpp>
 
@@ -41,7 +42,7 @@ Status CheckBinary(const cv::Mat& a, const cv::Mat& b) {
 struct Nearest {
   uint32_t best = std::numeric_limits<uint32_t>::max();
   uint32_t second = std::numeric_limits<uint32_t>::max();
-  uint32_t index = 0;
+  uint32_t index = 0;  // the nearest feature of B, as its caller numbers it
 
   void Offer(uint32_t distance, uint32_t b) {
     if (distance < best) {
@@ -64,6 +65,27 @@ uint32_t Distance(const cv::Mat& a, uint32_t i, const cv::Mat& b, uint32_t j) {
   const uint8_t* q = b.ptr<uint8_t>(int(j));
   return a.cols == 32 ? Hamming256(p, q) : HammingDistance(p, q, size_t(a.cols));
 }
+
+// The cross check of MatchOptions::mutual over one set of candidates: for each feature of B
+// (numbered 0..n-1 by the caller), the nearest feature of A offered to it. Reused between sets.
+class NearestOfB {
+ public:
+  void Reset(size_t n) {
+    distance_.assign(n, std::numeric_limits<uint32_t>::max());
+    a_.assign(n, 0);
+  }
+  void Offer(size_t b, uint32_t distance, uint32_t a) {
+    if (distance < distance_[b]) {
+      distance_[b] = distance;
+      a_[b] = a;
+    }
+  }
+  bool IsNearest(size_t b, uint32_t a) const { return a_[b] == a; }
+
+ private:
+  std::vector<uint32_t> distance_;
+  std::vector<uint32_t> a_;
+};
 
 // Keeps one match per feature of B (the nearest), then sorts by feature of A.
 void MakeOneToOne(std::vector<Match>* matches) {
@@ -89,6 +111,8 @@ Status MatchSharedNodes(const FeatureVector& a_direct, const cv::Mat& a_descript
   matches->clear();
   const uint32_t a_rows = uint32_t(a_descriptors.rows);
   const uint8_t* a_base = a_descriptors.data;  // null when empty: no index passes the checks
+  NearestOfB nearest_of_b;
+  std::vector<Match> node_matches;  // b is the position in the node until the cross check
   auto match = [&](const auto& distance) -> Status {
     size_t i = 0, j = 0;
     while (i < a_direct.size() && j < b_direct.size()) {
@@ -102,13 +126,22 @@ Status MatchSharedNodes(const FeatureVector& a_direct, const cv::Mat& a_descript
         // Checked here, not trusted: a direct index may come from a decoded record.
         RECOG_RETURN_IF_ERROR(CheckDirectFeatures(a_features, a_rows, "A"));
         RECOG_RETURN_IF_ERROR(CheckDirectFeatures(b_features, b_rows, "B"));
+        nearest_of_b.Reset(options.mutual ? b_features.size() : 0);
+        node_matches.clear();
         for (uint32_t fa : a_features) {
           const uint8_t* a_row = a_base + size_t(fa) * stride;
           Nearest nearest;
           for (size_t k = 0; k < b_features.size(); ++k) {
-            nearest.Offer(distance(a_row, row_of_b(j, k)), b_features[k]);
+            const uint32_t d = distance(a_row, row_of_b(j, k));
+            nearest.Offer(d, uint32_t(k));
+            if (options.mutual) nearest_of_b.Offer(k, d, fa);
           }
-          if (nearest.Accept(options)) matches->push_back({fa, nearest.index, nearest.best});
+          if (nearest.Accept(options)) node_matches.push_back({fa, nearest.index, nearest.best});
+        }
+        for (const Match& m : node_matches) {
+          if (!options.mutual || nearest_of_b.IsNearest(m.b, m.a)) {
+            matches->push_back({m.a, b_features[m.b], m.distance});
+          }
         }
         ++i;
         ++j;
@@ -184,12 +217,19 @@ Status MatchExhaustive(const cv::Mat& a_descriptors, const cv::Mat& b_descriptor
                        const MatchOptions& options, std::vector<Match>* matches) {
   matches->clear();
   RECOG_RETURN_IF_ERROR(CheckBinary(a_descriptors, b_descriptors));
+  NearestOfB nearest_of_b;
+  nearest_of_b.Reset(options.mutual ? size_t(b_descriptors.rows) : 0);
   for (uint32_t fa = 0; fa < uint32_t(a_descriptors.rows); ++fa) {
     Nearest nearest;
     for (uint32_t fb = 0; fb < uint32_t(b_descriptors.rows); ++fb) {
-      nearest.Offer(Distance(a_descriptors, fa, b_descriptors, fb), fb);
+      const uint32_t d = Distance(a_descriptors, fa, b_descriptors, fb);
+      nearest.Offer(d, fb);
+      if (options.mutual) nearest_of_b.Offer(fb, d, fa);
     }
     if (nearest.Accept(options)) matches->push_back({fa, nearest.index, nearest.best});
+  }
+  if (options.mutual) {
+    std::erase_if(*matches, [&](const Match& m) { return !nearest_of_b.IsNearest(m.b, m.a); });
   }
   MakeOneToOne(matches);
   return Status::Ok();

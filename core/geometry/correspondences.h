@@ -6,7 +6,8 @@
 //  - exhaustively: every feature of A against every feature of B.
 // Both keep a match when the nearest neighbour is close enough (max_distance), clearly better than
 // the second nearest (ratio test, thesis §4.4.6: 0.6), and one-to-one (a feature of B taken by
-// two features of A goes to the nearer one). Binary descriptors use the Hamming distance.
+// two features of A goes to the nearer one); optionally mutual (B's feature has A's as its own
+// nearest, among the same candidates). Binary descriptors use the Hamming distance.
 //
 // VerifyEpipolar fits a fundamental matrix with RANSAC (OpenCV's, which is deterministic) and
 // keeps the inliers. Two measures say how much those inliers are worth as evidence:
@@ -35,6 +36,10 @@ struct Match {
 struct MatchOptions {
   double ratio = 0.6;          // best < ratio * second best, in (0, 1]; 1 disables the test
   uint32_t max_distance = 50;  // Hamming distance of an acceptable match (of 256 bits)
+  // True: a match a -> b is kept only when a is also the nearest to b of A's features compared
+  // with it (the cross check). It keeps a looser ratio from pairing a repeated element (one of a
+  // façade's windows) with whichever copy happened to be nearest. Ties go to the first feature.
+  bool mutual = false;
 
   // OK, or INVALID_ARGUMENT naming the field out of range; `name` names the struct in the message
   // (a holder passes the member's path, "RecognitionOptions.match").

@@ -78,6 +78,41 @@ TEST(CorrespondencesTest, MatchesAreOneToOneKeepingTheNearer) {
   EXPECT_EQ(matches[0], (Match{1, 0, 0}));
 }
 
+// Sets bits [first, last) of row `row`.
+void SetBits(cv::Mat* d, int row, int first, int last) {
+  for (int bit = first; bit < last; ++bit) d->at<uint8_t>(row, bit / 8) |= uint8_t(1u << (bit % 8));
+}
+
+TEST(CorrespondencesTest, TheMutualCheckDropsAMatchWhoseFeatureOfBIsNearerAnotherOfA) {
+  // d(a0, b0) = 10, d(a0, b1) = 17: a0's nearest is b0, clearly. d(a1, b1) = 2, d(a1, b0) = 5:
+  // a1's nearest is b1. But b0's nearest in A is a1 (5 < 10): one-to-one keeps a0 -> b0 (no other
+  // feature of A chose b0), the cross check does not.
+  cv::Mat a = cv::Mat::zeros(2, 32, CV_8U), b = cv::Mat::zeros(2, 32, CV_8U);
+  SetBits(&b, 0, 0, 10);
+  SetBits(&a, 1, 0, 15);
+  SetBits(&b, 1, 0, 17);
+  const MatchOptions one_to_one{.ratio = 0.8, .max_distance = 50};
+  MatchOptions mutual = one_to_one;
+  mutual.mutual = true;
+  std::vector<Match> exhaustive, direct;
+  ASSERT_TRUE(MatchExhaustive(a, b, one_to_one, &exhaustive).ok());
+  EXPECT_EQ(exhaustive, (std::vector<Match>{{0, 0, 10}, {1, 1, 2}}));
+  ASSERT_TRUE(MatchExhaustive(a, b, mutual, &exhaustive).ok());
+  EXPECT_EQ(exhaustive, (std::vector<Match>{{1, 1, 2}}));
+  ASSERT_TRUE(
+      MatchByDirectIndex(AllUnderOneNode(2), a, AllUnderOneNode(2), b, mutual, &direct).ok());
+  EXPECT_EQ(direct, exhaustive);
+  // Under two nodes, a1 is never compared with b0: b0's nearest is then a0, and both match.
+  FeatureVector split_a, split_b;
+  const uint32_t first[] = {0}, second[] = {1};
+  split_a.AppendNode(1, first);
+  split_a.AppendNode(2, second);
+  split_b.AppendNode(1, first);
+  split_b.AppendNode(2, second);
+  ASSERT_TRUE(MatchByDirectIndex(split_a, a, split_b, b, mutual, &direct).ok());
+  EXPECT_EQ(direct, (std::vector<Match>{{0, 0, 10}, {1, 1, 2}}));
+}
+
 TEST(CorrespondencesTest, NonBinaryOrMismatchedDescriptorsAreRefused) {
   std::vector<Match> matches;
   EXPECT_EQ(MatchExhaustive(cv::Mat(3, 32, CV_32F), cv::Mat(3, 32, CV_32F), {}, &matches).code(),

@@ -45,7 +45,8 @@ TEST(DetectorSettingsTest, EachPresetsValuesReadBackExactly) {
     }
   }
   EXPECT_EQ(FormatDetectorSetting(*FindDetectorSetting("alpha"), odd), "0.30000000000000004");
-  EXPECT_EQ(FormatDetectorSetting(*FindDetectorSetting("geometry"), odd), "direct_index");
+  EXPECT_EQ(FormatDetectorSetting(*FindDetectorSetting("geometry"), odd), "exhaustive");
+  EXPECT_EQ(FormatDetectorSetting(*FindDetectorSetting("mutual"), odd), "true");
   EXPECT_EQ(FormatDetectorSetting(*FindDetectorSetting("strong_acceptance"), odd), "false");
 }
 

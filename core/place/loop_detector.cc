@@ -16,14 +16,6 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-// Candidates close in id (eq. 4.2): H is the sum of their eta, `best` the one with the highest.
-struct Island {
-  EntryId first = 0, last = 0;
-  double score = 0;  // H
-  EntryId best = 0;
-  double best_eta = 0, best_score = 0;
-};
-
 // The query's answer as candidates, eta = s / reference (0 when the reference is 0).
 std::vector<LoopCandidate> Candidates(const std::vector<QueryResult>& results, double reference) {
   std::vector<LoopCandidate> candidates;
@@ -217,7 +209,11 @@ LoopDetectorParams LoopDetectorParams::Keyframes() {
   params.recent_frames = 4;
   params.consistency_max_island_gap = 1;
   params.min_spread = 0.25;
-  params.strong_min_inliers = 20;
+  params.geometry = GeometryCheck::kExhaustive;
+  params.matching = {.ratio = 0.85, .max_distance = 64, .mutual = true};
+  params.epipolar.min_inliers = 45;
+  params.strong_min_inliers = 45;
+  params.verified_candidates = 10;
   return params;
 }
 
@@ -237,6 +233,7 @@ Status LoopDetectorParams::Validate(std::string_view name) const {
   check.AtLeast("max_query_results", max_query_results, 1);
   check.AtLeast("query_rescored_candidates", query_rescored_candidates, 1);
   check.AtLeast("island_min_size", island_min_size, 1);
+  check.AtLeast("verified_candidates", verified_candidates, 1);
   check.Member("matching", matching);
   // RANSAC of F needs 8 correspondences; PnP of the metric check 6.
   check.InRange("epipolar.threshold_px", epipolar.threshold_px, RealRange::Above(0));
@@ -309,8 +306,8 @@ Status LoopDetector::Convert(const FeatureSet& features, BowVector* bow,
                                            TraitsOf(map.scoring).normalization);
 }
 
-bool LoopDetector::FindBestIsland(const std::vector<QueryResult>& results, double reference,
-                                  LoopResult* result) const {
+bool LoopDetector::FindIslands(const std::vector<QueryResult>& results, double reference,
+                               LoopResult* result, std::vector<Island>* islands) const {
   struct Candidate {
     EntryId id;
     double eta, score;
@@ -330,16 +327,16 @@ bool LoopDetector::FindBestIsland(const std::vector<QueryResult>& results, doubl
   }
   std::sort(candidates.begin(), candidates.end(),
             [](const Candidate& a, const Candidate& b) { return a.id < b.id; });
-  std::vector<Island> islands;
+  islands->clear();
   size_t island_size = 0;
   for (size_t i = 0; i < candidates.size(); ++i) {
     const Candidate& c = candidates[i];
-    if (i == 0 || c.id - islands.back().last > params_.island_max_gap) {
-      if (i > 0 && island_size < params_.island_min_size) islands.pop_back();
-      islands.push_back({c.id, c.id, 0.0, c.id, 0.0, 0.0});
+    if (i == 0 || c.id - islands->back().last > params_.island_max_gap) {
+      if (i > 0 && island_size < params_.island_min_size) islands->pop_back();
+      islands->push_back({c.id, c.id, 0.0, c.id, 0.0, 0.0});
       island_size = 0;
     }
-    Island& island = islands.back();
+    Island& island = islands->back();
     island.last = c.id;
     island.score += c.eta;
     if (c.eta > island.best_eta) {
@@ -349,22 +346,25 @@ bool LoopDetector::FindBestIsland(const std::vector<QueryResult>& results, doubl
     }
     ++island_size;
   }
-  if (island_size < params_.island_min_size) islands.pop_back();
-  if (islands.empty()) {
+  if (island_size < params_.island_min_size) islands->pop_back();
+  if (islands->empty()) {
     result->status = LoopStatus::kNoConsistentIsland;
     return false;
   }
-  // Best island by H; on a tie, the older one.
-  const Island& best =
-      *std::max_element(islands.begin(), islands.end(),
-                        [](const Island& a, const Island& b) { return a.score < b.score; });
-  result->island_first = best.first;
-  result->island_last = best.last;
-  result->island_score = best.score;
-  result->match = best.best;
-  result->normalized_score = best.best_eta;
-  result->score = best.best_score;
+  // By H; on a tie, the older one first.
+  std::stable_sort(islands->begin(), islands->end(),
+                   [](const Island& a, const Island& b) { return a.score > b.score; });
+  SetIsland(islands->front(), result);
   return true;
+}
+
+void LoopDetector::SetIsland(const Island& island, LoopResult* result) {
+  result->island_first = island.first;
+  result->island_last = island.last;
+  result->island_score = island.score;
+  result->match = island.best;
+  result->normalized_score = island.best_eta;
+  result->score = island.best_score;
 }
 
 Status LoopDetector::QueryDatabase(const BowVector& bow, RecencyBound bound,
@@ -429,7 +429,7 @@ StatusOr<LoopResult> LoopDetector::Process(const FeatureSet& features,
     result.candidates = Candidates(query_results_, reference);
 
     start = Clock::now();
-    if (FindBestIsland(query_results_, reference, &result)) {
+    if (FindIslands(query_results_, reference, &result, &islands_)) {
       // Temporal consistency with the previous query's island.
       uint32_t consistent = 0;
       if (previous_match_.has_value() &&
@@ -448,30 +448,23 @@ StatusOr<LoopResult> LoopDetector::Process(const FeatureSet& features,
     }
     result.timings.islands = MillisecondsSince(start);
 
+    const bool strong_allowed = params_.strong_acceptance &&
+                                params_.geometry != GeometryCheck::kNone &&
+                                result.consistent_queries >= params_.strong_temporal_matches;
     if (result.status == LoopStatus::kLoopDetected) {
       RECOG_RETURN_IF_ERROR(
           Verify(features, direct, CameraOf(geometry), params_.epipolar, &result));
       if (result.status == LoopStatus::kLoopDetected) {
         result.acceptance = LoopAcceptance::kTemporalConsistency;
+      } else if (strong_allowed && params_.verified_candidates > 1) {
+        // The consistent candidate failed: the next ones may still be strong evidence.
+        RECOG_RETURN_IF_ERROR(AcceptStrongest(features, direct, CameraOf(geometry), reference,
+                                              /*best_verified=*/true, &result));
       }
-    } else if (result.status == LoopStatus::kFailedTemporalConsistency &&
-               params_.strong_acceptance && params_.geometry != GeometryCheck::kNone &&
-               result.consistent_queries >= params_.strong_temporal_matches) {
-      // Too few consistent queries for a weak candidate: a strong one is accepted now. RANSAC
-      // runs only when there are correspondences enough for strong_min_inliers.
-      LoopResult trial = result;
-      EpipolarOptions epipolar = params_.epipolar;
-      epipolar.min_inliers = params_.strong_min_inliers;
-      bool strong = false;
-      RECOG_RETURN_IF_ERROR(
-          Verify(features, direct, CameraOf(geometry), epipolar, &trial, &strong));
-      if (strong) {
-        result = std::move(trial);
-        result.status = LoopStatus::kLoopDetected;
-        result.acceptance = LoopAcceptance::kStrongEvidence;
-      } else {
-        result.timings.verification = trial.timings.verification;
-      }
+    } else if (result.status == LoopStatus::kFailedTemporalConsistency && strong_allowed) {
+      // Too few consistent queries for a weak candidate: a strong one is accepted now.
+      RECOG_RETURN_IF_ERROR(AcceptStrongest(features, direct, CameraOf(geometry), reference,
+                                            /*best_verified=*/false, &result));
     }
     if (result.status == LoopStatus::kLoopDetected && geometry != nullptr) {
       RECOG_RETURN_IF_ERROR(VerifyMetric(features, *geometry, &result));
@@ -547,7 +540,8 @@ StatusOr<LoopResult> LoopDetector::Recognise(const FeatureSet& features,
 
   const auto start = Clock::now();
   result.candidates = Candidates(shortlist.results, reference_score);
-  const bool found = FindBestIsland(shortlist.results, reference_score, &result);
+  std::vector<Island> islands;
+  const bool found = FindIslands(shortlist.results, reference_score, &result, &islands);
   if (found) result.status = LoopStatus::kLoopDetected;
   result.timings.islands = MillisecondsSince(start);
 
@@ -609,6 +603,55 @@ StatusOr<EntryId> LoopDetector::Insert(const FeatureSet& features, const BowVect
     entry_ids_.push_back(id);
   }
   return id;
+}
+
+Status LoopDetector::AcceptStrongest(const FeatureSet& features, const FeatureVector& direct,
+                                     const cv::Matx33d* camera, double reference,
+                                     bool best_verified, LoopResult* result) const {
+  // The best island's best entry, then the other candidates of an island, best score first
+  // (query_results_ comes so), each with its island.
+  struct Trial {
+    const QueryResult* candidate;
+    const Island* island;
+  };
+  std::vector<Trial> trials;
+  for (const QueryResult& r : query_results_) {
+    if (trials.size() + 1 >= params_.verified_candidates) break;
+    if (r.id == result->match || r.score < params_.alpha * reference) continue;
+    const auto island = std::find_if(islands_.begin(), islands_.end(), [&](const Island& x) {
+      return x.first <= r.id && r.id <= x.last;
+    });
+    if (island != islands_.end()) trials.push_back({&r, &*island});
+  }
+  // RANSAC runs only when there are correspondences enough for strong_min_inliers.
+  EpipolarOptions epipolar = params_.epipolar;
+  epipolar.min_inliers = params_.strong_min_inliers;
+  std::optional<LoopResult> strongest;
+  double verification_ms = result->timings.verification;
+  for (size_t i = best_verified ? 1 : 0; i <= trials.size(); ++i) {
+    LoopResult trial = *result;
+    trial.timings.verification = 0;
+    if (i > 0) {
+      const QueryResult& r = *trials[i - 1].candidate;
+      SetIsland(*trials[i - 1].island, &trial);
+      trial.match = r.id;
+      trial.score = r.score;
+      trial.normalized_score = r.score / reference;
+    }
+    bool strong = false;
+    RECOG_RETURN_IF_ERROR(Verify(features, direct, camera, epipolar, &trial, &strong));
+    verification_ms += trial.timings.verification;
+    if (strong && (!strongest || trial.evidence.inliers > strongest->evidence.inliers)) {
+      strongest = std::move(trial);
+    }
+  }
+  if (strongest.has_value()) {
+    *result = *std::move(strongest);
+    result->status = LoopStatus::kLoopDetected;
+    result->acceptance = LoopAcceptance::kStrongEvidence;
+  }
+  result->timings.verification = verification_ms;
+  return Status::Ok();
 }
 
 Status LoopDetector::Verify(const FeatureSet& features, const FeatureVector& direct,

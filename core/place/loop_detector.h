@@ -21,7 +21,9 @@
 //     at least strong_min_spread of both images, and not explained by a homography about as well
 //     as by F (R_H = S_H / (S_H + S_F) at most strong_max_homography_ratio, ORB-SLAM's model
 //     selection): a planar scene or a pure rotation makes F fit without proving a 3D match.
-//     Weak evidence waits for k. result.acceptance says which rule accepted a loop;
+//     Weak evidence waits for k. With verified_candidates > 1, when the best entry is not
+//     accepted, the next candidates by score are verified for strong evidence too, and the strong
+//     one with the most inliers is the loop. result.acceptance says which rule accepted a loop;
 //  7. the frame is added to the database.
 // Every frame gets a LoopResult whose status says why there is, or is not, a loop.
 //
@@ -213,6 +215,13 @@ struct LoopDetectorParams {
   // Default 30 inliers: two and a half times the 12 that verify a candidate waiting for k. At
   // least epipolar.min_inliers; RANSAC does not even run with fewer correspondences.
   uint32_t strong_min_inliers = 30;
+  // How many candidates are verified for strong evidence: the best island's best entry, then the
+  // other candidates of an island, best score first; the strong one with the most inliers is
+  // the loop. Default 1 (the best island's best entry only, as the thesis verifies); the
+  // keyframes preset 10: on a walk of keyframes metres apart the best score often goes to a
+  // look-alike place, and the true one is among the next (docs/places.md, "Repeated
+  // architecture and wide baselines").
+  uint32_t verified_candidates = 1;
   // Default 0.25: the inliers occupy at least 4 of the 4 x 4 cells over each image's keypoints,
   // in both images (InlierSpread): a match of one small textured patch is not a place.
   double strong_min_spread = 0.25;
@@ -263,9 +272,11 @@ struct LoopDetectorParams {
   // For keyframe streams (a SLAM's keyframes, metres apart; chosen on the corridor's every 2nd,
   // 3rd and 4th frame and a seqgen tour of one frame per place, docs/places.md, "Keyframe
   // streams"): the scores normalised by the best candidate, tau_c of 4 keyframes, consecutive
-  // loops consistent only when their islands are at most 1 keyframe apart, and strong evidence
-  // from 20 inliers (a short walk of keyframes rarely gives k consistent queries; every false loop
-  // seen on real keyframes had 12 to 18 inliers, docs/places.md, "Repeated architecture").
+  // loops consistent only when their islands are at most 1 keyframe apart, and a verification
+  // for views metres apart (chosen on the Strecha walks of shared/data, docs/places.md,
+  // "Repeated architecture and wide baselines"): correspondences from every pair of features
+  // with ratio 0.85, 64 bits and the cross check, 45 inliers for any loop, spread over a quarter
+  // of both images, and up to 10 candidates verified.
   static LoopDetectorParams Keyframes();
   // OK, or INVALID_ARGUMENT naming the first field out of its range with its value
   // ("LoopDetectorParams.alpha = inf: must be finite and >= 0"); `name` names the struct in the
@@ -472,12 +483,30 @@ class LoopDetector {
   // Step 2: the best max_query_results entries below `bound` that are not `excluded`.
   Status QueryDatabase(const BowVector& bow, RecencyBound bound, std::span<const EntryId> excluded,
                        std::vector<QueryResult>* results) const;
+  // Candidates close in id (eq. 4.2): H is the sum of their eta, `best` the one with the highest.
+  struct Island {
+    EntryId first = 0, last = 0;
+    double score = 0;  // H
+    EntryId best = 0;
+    double best_eta = 0, best_score = 0;
+  };
   // Steps 3 and 4: normalises the scores of `results` by `reference` (eta = s / reference), keeps
-  // those reaching alpha, groups them into islands and fills the match, score, eta and island of
-  // `result` with the best island by H. False, with the status that says why, when no island is
-  // left.
-  bool FindBestIsland(const std::vector<QueryResult>& results, double reference,
-                      LoopResult* result) const;
+  // those reaching alpha, groups them into `islands`, best H first (on a tie, the older first),
+  // and fills the match, score, eta and island of `result` with the best. False, with the status
+  // that says why, when no island is left.
+  bool FindIslands(const std::vector<QueryResult>& results, double reference, LoopResult* result,
+                   std::vector<Island>* islands) const;
+  // The match, score, eta and island of `result` from `island`.
+  static void SetIsland(const Island& island, LoopResult* result);
+  // Acceptance on strong evidence (step 6): verifies the verified_candidates first candidates of
+  // Process's query (the best island's best entry, unless `best_verified` says it has just failed
+  // a weaker floor, then the other candidates of an island, with eta relative to `reference`) with
+  // strong_min_inliers; the strong one with the most inliers becomes the loop
+  // (kStrongEvidence), with the island it is in. Without one, `result` is kept as it is; its
+  // verification time adds every trial's.
+  Status AcceptStrongest(const FeatureSet& features, const FeatureVector& direct,
+                         const cv::Matx33d* camera, double reference, bool best_verified,
+                         LoopResult* result) const;
   // The 3D check (§3.3.3), after Verify passed: when one side has 3D points (see above), fills
   // result->metric (PnP RANSAC over the epipolar inliers with a 3D point, LM refinement, the
   // covariance) and sets kFailedGeometry when the loop does not agree in structure. Nothing when
@@ -535,6 +564,7 @@ class LoopDetector {
   std::vector<double> entry_timestamps_;
   std::vector<EntryId> entry_ids_;
   std::vector<QueryResult> query_results_;  // reused by Process (Query uses its own)
+  std::vector<Island> islands_;             // of Process's query, best H first
 };
 
 }  // namespace recog

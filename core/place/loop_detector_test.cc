@@ -1,7 +1,9 @@
 #include "core/place/loop_detector.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
+#include <random>
 #include <set>
 #include <string>
 #include <thread>
@@ -575,6 +577,58 @@ TEST_F(LoopDetectorTest, AStrongCandidateIsAcceptedWithoutTemporalConsistency) {
     EXPECT_NE(r.status, LoopStatus::kLoopDetected) << r.entry;
     EXPECT_EQ(r.acceptance, LoopAcceptance::kNone);
   }
+}
+
+TEST_F(LoopDetectorTest, ACandidateThatFailsVerificationGivesWayToTheNextOnes) {
+  // Frame 41 revisits frame 1's place. Between them, a look-alike: frame 41's own features with
+  // their keypoints shuffled, so it has the best score of all (the same words) and no geometry.
+  auto extractor = CreateFeatureExtractor(FeatureOptions{});
+  ASSERT_TRUE(extractor.ok());
+  const std::vector<cv::Mat> corridor = CorridorRevisits();  // 1, 20, 5 views of a place, 41, 60
+  std::vector<FeatureSet> frames;
+  for (size_t i : {0u, 7u, 2u, 3u, 4u, 5u, 6u, 7u}) {
+    FeatureSet f;
+    ASSERT_TRUE((*extractor)->Extract(corridor[i], &f).ok());
+    frames.push_back(std::move(f));
+  }
+  std::vector<cv::KeyPoint>& look_alike = frames[1].keypoints;
+  std::shuffle(look_alike.begin(), look_alike.end(), std::mt19937(7));
+
+  const auto run = [&](uint32_t verified_candidates) {
+    LoopDetectorParams params = params_;
+    params.verified_candidates = verified_candidates;
+    MemoryIndexStore store;
+    auto db = Database::Create(&store, "look-alike", *vocabulary_);
+    EXPECT_TRUE(db.ok());
+    auto detector = LoopDetector::Create(db->get(), params);
+    EXPECT_TRUE(detector.ok());
+    LoopResult last;
+    for (const FeatureSet& f : frames) {
+      auto r = detector->Process(f);
+      EXPECT_TRUE(r.ok()) << r.status().ToString();
+      last = std::move(r).value();
+    }
+    return last;
+  };
+  // The best candidate alone: the look-alike (entry 1), which fails.
+  const LoopResult best_only = run(1);
+  ASSERT_FALSE(best_only.candidates.empty());
+  EXPECT_EQ(best_only.candidates.front().entry, 1u);
+  EXPECT_EQ(best_only.match, 1u);
+  EXPECT_NE(best_only.status, LoopStatus::kLoopDetected);
+  // Three candidates: the look-alike fails, frame 1 (entry 0) is strong evidence.
+  const LoopResult three = run(3);
+  EXPECT_EQ(three.status, LoopStatus::kLoopDetected);
+  EXPECT_EQ(three.acceptance, LoopAcceptance::kStrongEvidence);
+  EXPECT_EQ(three.match, 0u);
+  EXPECT_GE(three.evidence.inliers, params_.strong_min_inliers);
+  EXPECT_LE(three.island_first, 0u);
+  EXPECT_GE(three.island_last, 0u);
+  const auto frame_1 = std::find_if(best_only.candidates.begin(), best_only.candidates.end(),
+                                    [](const LoopCandidate& c) { return c.entry == 0; });
+  ASSERT_NE(frame_1, best_only.candidates.end());
+  EXPECT_EQ(three.score, frame_1->score) << "the match's own score";
+  EXPECT_GT(three.timings.verification, 0.0);
 }
 
 TEST_F(LoopDetectorTest, ACandidateAHomographyExplainsStillNeedsTemporalConsistency) {

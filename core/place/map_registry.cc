@@ -1,5 +1,6 @@
 #include "core/place/map_registry.h"
 
+#include <algorithm>
 #include <cstdio>
 #include <cstdlib>
 #include <sstream>
@@ -57,9 +58,33 @@ StatusOr<RigCamera> DecodeRigCamera(const std::string& name, std::istream& in) {
   return camera;
 }
 
+// Version 1 stored every kept setting with its value, the preset's own included. Version 2 changed
+// the keyframes preset's geometry check and inlier floor (exhaustive correspondences with a cross
+// check and 45 inliers, docs/places.md, "Repeated architecture and wide baselines"): a version-1
+// keyframes map still holding the preset's values of then follows the preset's values of now, as
+// a map that never changed them should. (Its looser correspondences with the old floor of 12
+// inliers would accept false loops.)
+namespace {
+
+constexpr int kPlaceSettingsVersion = 2;
+
+void DropFormerPresetValues(std::vector<NamedSetting>* settings) {
+  const auto has = [&](std::string_view name, std::string_view value) {
+    return std::any_of(settings->begin(), settings->end(),
+                       [&](const NamedSetting& s) { return s.first == name && s.second == value; });
+  };
+  if (!has("preset", "keyframes")) return;
+  std::erase_if(*settings, [](const NamedSetting& s) {
+    return (s.first == "geometry" && s.second == "direct_index") ||
+           (s.first == "min_inliers" && s.second == "12");
+  });
+}
+
+}  // namespace
+
 std::string EncodePlaceSettings(const LoopDetectorParams& p, const std::string& group,
                                 const std::vector<RigCamera>& rig) {
-  std::string text = "version 1\n";
+  std::string text = "version " + std::to_string(kPlaceSettingsVersion) + "\n";
   for (const auto& [name, value] : MapDetectorSettings(p)) text += name + " " + value + "\n";
   if (!group.empty()) text += "group " + group + "\n";
   for (const RigCamera& camera : rig) text += EncodeRigCamera(camera);
@@ -72,16 +97,16 @@ StatusOr<LoopDetectorParams> DecodePlaceSettings(std::string_view text, std::str
   // before presets were stored have none and start from the default.
   std::istringstream in{std::string(text)};
   std::string key, value;
-  bool versioned = false;
+  int version = 0;
   if (group != nullptr) group->clear();
   std::vector<RigCamera> cameras;
   std::vector<NamedSetting> settings;
   while (in >> key >> value) {
     if (key == "version") {
-      if (value != "1") {
+      if (value != "1" && value != "2") {
         return Status::FailedPrecondition("place settings of an unknown version " + value);
       }
-      versioned = true;
+      version = value[0] - '0';
     } else if (key == "group") {
       if (!ValidateName("group", value).ok()) {
         return Status::DataLoss("place settings: a malformed group name");
@@ -94,7 +119,8 @@ StatusOr<LoopDetectorParams> DecodePlaceSettings(std::string_view text, std::str
       settings.emplace_back(key, value);
     }  // unknown keys: written by a newer minor version, ignored
   }
-  if (!versioned) return Status::DataLoss("place settings without a version line");
+  if (version == 0) return Status::DataLoss("place settings without a version line");
+  if (version == 1) DropFormerPresetValues(&settings);
   LoopDetectorParams p;
   const Status valid = ApplyDetectorSettings(settings, &p);
   if (!valid.ok()) return valid.WithContext("place settings", StatusCode::kDataLoss);

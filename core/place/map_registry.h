@@ -73,7 +73,9 @@ class MapRegistry {
 // geometry check, applied over that preset's values; the map's group (no line for none, as in
 // settings written before groups); and a rig map's cameras, one "rig_camera" line each (name,
 // width, height, fx, fy, cx, cy, body_R_camera row-major, body_t_camera, the number of
-// distortion coefficients, then them), in rig order.
+// distortion coefficients, then them), in rig order. The text starts with its version (2; a
+// version-1 keyframes map's preset values of then give way to the preset's of now, see
+// map_registry.cc); an unknown version is FAILED_PRECONDITION.
 std::string EncodePlaceSettings(const LoopDetectorParams& params, const std::string& group = {},
                                 const std::vector<RigCamera>& rig = {});
 StatusOr<LoopDetectorParams> DecodePlaceSettings(std::string_view text,

@@ -204,6 +204,39 @@ TEST(MapRegistryTest, AMapKeepsItsPresetAcrossAReopenWithItsOwnValuesOverIt) {
   EXPECT_FALSE((*thesis)->params().strong_acceptance) << "a thesis map stays a thesis map";
 }
 
+TEST(MapRegistryTest, AVersionOneKeyframesMapFollowsThePresetsNewValuesUnlessItChangedThem) {
+  const std::string v1 =
+      "version 1\npreset keyframes\nalpha 0.3\ntemporal_matches 3\nmin_inliers 12\n"
+      "recent_seconds 20\nrecent_frames 4\ngeometry direct_index\nkeyframe_confirmations 0\n";
+  auto migrated = DecodePlaceSettings(v1);
+  ASSERT_TRUE(migrated.ok()) << migrated.status().ToString();
+  const LoopDetectorParams now = LoopDetectorParams::Keyframes();
+  EXPECT_EQ(migrated->geometry, now.geometry);
+  EXPECT_EQ(migrated->epipolar.min_inliers, now.epipolar.min_inliers);
+  EXPECT_TRUE(migrated->matching.mutual);
+  // A value the map changed is kept; a default map keeps its direct index (not a keyframes map).
+  auto changed =
+      DecodePlaceSettings("version 1\npreset keyframes\nmin_inliers 40\ngeometry direct_index\n");
+  ASSERT_TRUE(changed.ok());
+  EXPECT_EQ(changed->epipolar.min_inliers, 40u);
+  EXPECT_EQ(changed->geometry, GeometryCheck::kExhaustive);
+  auto video = DecodePlaceSettings("version 1\npreset default\nmin_inliers 12\n");
+  ASSERT_TRUE(video.ok());
+  EXPECT_EQ(video->geometry, GeometryCheck::kDirectIndex);
+  EXPECT_EQ(video->epipolar.min_inliers, 12u);
+  // Written now: version 2, read back exactly, the old values included when a map sets them.
+  LoopDetectorParams own = now;
+  own.geometry = GeometryCheck::kDirectIndex;
+  own.epipolar.min_inliers = 12;
+  own.strong_min_inliers = 12;
+  const std::string text = EncodePlaceSettings(own);
+  EXPECT_EQ(text.rfind("version 2\n", 0), 0u) << text;
+  auto kept = DecodePlaceSettings(text);
+  ASSERT_TRUE(kept.ok());
+  EXPECT_EQ(kept->geometry, GeometryCheck::kDirectIndex);
+  EXPECT_EQ(kept->epipolar.min_inliers, 12u);
+}
+
 TEST(MapRegistryTest, SettingsWrittenBeforePresetsOpenWithTheDefaultAndAnUnknownPresetIsDataLoss) {
   auto old = DecodePlaceSettings(
       "version 1\nalpha 0.3\ntemporal_matches 3\nmin_inliers 12\nrecent_seconds 20\n"
