@@ -76,6 +76,11 @@ TEST(DetectorSettingsTest, BadValuesNameTheSettingAndChangeNothing) {
                                          {"geometry", "sideways"},
                                          {"preset", "sideways"},
                                          {"strong_acceptance", "maybe"},
+                                         {"mutual", "maybe"},
+                                         {"mutual", ""},
+                                         {"verified_candidates", "0"},
+                                         {"verified_candidates", "-3"},
+                                         {"verified_candidates", "1e99"},
                                          {"keyframe_confirmations", "101"},
                                          {"calibrated_max_rotation_deg", "181"},
                                          {"ransac_max_iterations", "0"}};

@@ -979,6 +979,7 @@ TEST(LoopDetectorParamsTest, EachFieldOutOfRangeIsRefusedWithItsNameAndValue) {
       {"max_query_results = 0", [](P& p) { p.max_query_results = 0; }},
       {"query_rescored_candidates = 0", [](P& p) { p.query_rescored_candidates = 0; }},
       {"island_min_size = 0", [](P& p) { p.island_min_size = 0; }},
+      {"verified_candidates = 0", [](P& p) { p.verified_candidates = 0; }},
       {"matching.ratio = nan", [&](P& p) { p.matching.ratio = nan; }},
       {"matching.ratio = 0", [](P& p) { p.matching.ratio = 0; }},
       {"epipolar.threshold_px = inf", [&](P& p) { p.epipolar.threshold_px = inf; }},

@@ -58,14 +58,14 @@ StatusOr<RigCamera> DecodeRigCamera(const std::string& name, std::istream& in) {
   return camera;
 }
 
+namespace {
+
 // Version 1 stored every kept setting with its value, the preset's own included. Version 2 changed
 // the keyframes preset's geometry check and inlier floor (exhaustive correspondences with a cross
 // check and 45 inliers, docs/places.md, "Repeated architecture and wide baselines"): a version-1
 // keyframes map still holding the preset's values of then follows the preset's values of now, as
 // a map that never changed them should. (Its looser correspondences with the old floor of 12
 // inliers would accept false loops.)
-namespace {
-
 constexpr int kPlaceSettingsVersion = 2;
 
 void DropFormerPresetValues(std::vector<NamedSetting>* settings) {
