@@ -55,7 +55,7 @@ TEST(DetectorSettingsTest, ThePresetAppliesFirstWhateverTheOrder) {
   ASSERT_TRUE(Apply({{"recent_frames", "7"}, {"preset", "keyframes"}}, &p).ok());
   EXPECT_EQ(p.preset, DetectorPreset::kKeyframes);
   EXPECT_EQ(p.normalisation, ScoreNormalisation::kBestCandidate) << "from the preset";
-  EXPECT_EQ(p.recent_frames, 7u) << "given after the preset's 4, whatever the order";
+  EXPECT_EQ(p.recent_frames, 7u) << "given after the preset's 3, whatever the order";
   EXPECT_EQ(Apply({{"preset", "thesis"}, {"preset", "default"}}, &p).code(),
             StatusCode::kInvalidArgument);
 }

@@ -206,7 +206,7 @@ LoopDetectorParams LoopDetectorParams::Keyframes() {
   LoopDetectorParams params;
   params.preset = DetectorPreset::kKeyframes;
   params.normalisation = ScoreNormalisation::kBestCandidate;
-  params.recent_frames = 4;
+  params.recent_frames = 3;
   params.consistency_max_island_gap = 1;
   params.min_spread = 0.25;
   params.geometry = GeometryCheck::kExhaustive;
@@ -628,9 +628,11 @@ Status LoopDetector::AcceptStrongest(const FeatureSet& features, const FeatureVe
   epipolar.min_inliers = params_.strong_min_inliers;
   std::optional<LoopResult> strongest;
   double verification_ms = result->timings.verification;
+  uint32_t verified = result->timings.verified_candidates;
   for (size_t i = best_verified ? 1 : 0; i <= trials.size(); ++i) {
     LoopResult trial = *result;
     trial.timings.verification = 0;
+    trial.timings.verified_candidates = 0;
     if (i > 0) {
       const QueryResult& r = *trials[i - 1].candidate;
       SetIsland(*trials[i - 1].island, &trial);
@@ -641,6 +643,7 @@ Status LoopDetector::AcceptStrongest(const FeatureSet& features, const FeatureVe
     bool strong = false;
     RECOG_RETURN_IF_ERROR(Verify(features, direct, camera, epipolar, &trial, &strong));
     verification_ms += trial.timings.verification;
+    verified += trial.timings.verified_candidates;
     if (strong && (!strongest || trial.evidence.inliers > strongest->evidence.inliers)) {
       strongest = std::move(trial);
     }
@@ -651,6 +654,7 @@ Status LoopDetector::AcceptStrongest(const FeatureSet& features, const FeatureVe
     result->acceptance = LoopAcceptance::kStrongEvidence;
   }
   result->timings.verification = verification_ms;
+  result->timings.verified_candidates = verified;
   return Status::Ok();
 }
 
@@ -700,6 +704,7 @@ Status LoopDetector::Verify(const FeatureSet& features, const FeatureVector& dir
                              .homography_ratio <= params_.strong_max_homography_ratio);
   }
   result->timings.verification = MillisecondsSince(start);
+  result->timings.verified_candidates = 1;
   return Status::Ok();
 }
 

@@ -271,12 +271,12 @@ struct LoopDetectorParams {
   static LoopDetectorParams Thesis();
   // For keyframe streams (a SLAM's keyframes, metres apart; chosen on the corridor's every 2nd,
   // 3rd and 4th frame and a seqgen tour of one frame per place, docs/places.md, "Keyframe
-  // streams"): the scores normalised by the best candidate, tau_c of 4 keyframes, consecutive
-  // loops consistent only when their islands are at most 1 keyframe apart, and a verification
-  // for views metres apart (chosen on the Strecha walks of shared/data, docs/places.md,
-  // "Repeated architecture and wide baselines"): correspondences from every pair of features
-  // with ratio 0.85, 64 bits and the cross check, 45 inliers for any loop, spread over a quarter
-  // of both images, and up to 10 candidates verified.
+  // streams"): the scores normalised by the best candidate, tau_c of 3 keyframes (a loop may close
+  // with the keyframe 4 back), consecutive loops consistent only when their islands are at most 1
+  // keyframe apart, and a verification for views metres apart (chosen on the Strecha walks of
+  // shared/data, docs/places.md, "Repeated architecture and wide baselines"): correspondences from
+  // every pair of features with ratio 0.85, 64 bits and the cross check, 45 inliers for any loop,
+  // spread over a quarter of both images, and up to 10 candidates verified.
   static LoopDetectorParams Keyframes();
   // OK, or INVALID_ARGUMENT naming the first field out of its range with its value
   // ("LoopDetectorParams.alpha = inf: must be finite and >= 0"); `name` names the struct in the
@@ -310,6 +310,9 @@ struct LoopEvidence {
 struct LoopTimings {  // milliseconds spent in each stage for one frame
   double conversion = 0, query = 0, islands = 0, insertion = 0, verification = 0;
   double metric_verification = 0;  // VerifyMetric (0 when it did not run)
+  // Candidates whose correspondences and RANSAC `verification` covers (up to verified_candidates;
+  // 0 when none was verified).
+  uint32_t verified_candidates = 0;
 };
 
 // The 3D check of a loop (VerifyMetric) and the metric relative pose it gives.

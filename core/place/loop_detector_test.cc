@@ -629,6 +629,9 @@ TEST_F(LoopDetectorTest, ACandidateThatFailsVerificationGivesWayToTheNextOnes) {
   ASSERT_NE(frame_1, best_only.candidates.end());
   EXPECT_EQ(three.score, frame_1->score) << "the match's own score";
   EXPECT_GT(three.timings.verification, 0.0);
+  EXPECT_EQ(best_only.timings.verified_candidates, 1u);
+  EXPECT_GE(three.timings.verified_candidates, 2u) << "the look-alike, then frame 1";
+  EXPECT_LE(three.timings.verified_candidates, 3u);
 }
 
 TEST_F(LoopDetectorTest, ACandidateAHomographyExplainsStillNeedsTemporalConsistency) {

@@ -60,23 +60,37 @@ StatusOr<RigCamera> DecodeRigCamera(const std::string& name, std::istream& in) {
 
 namespace {
 
-// Version 1 stored every kept setting with its value, the preset's own included. Version 2 changed
-// the keyframes preset's geometry check and inlier floor (exhaustive correspondences with a cross
-// check and 45 inliers, docs/places.md, "Repeated architecture and wide baselines"): a version-1
-// keyframes map still holding the preset's values of then follows the preset's values of now, as
-// a map that never changed them should. (Its looser correspondences with the old floor of 12
-// inliers would accept false loops.)
-constexpr int kPlaceSettingsVersion = 2;
+// Every version stores each kept setting with its value, the preset's own included. When a later
+// version changes a preset's value, a map of that preset still holding the value of then follows
+// the value of now, as a map that never changed it should (a value it changed stays):
+// - version 2: the keyframes preset's correspondences for views metres apart (exhaustive with a
+//   cross check, 45 inliers; docs/places.md, "Repeated architecture and wide baselines"). Its
+//   looser correspondences with the old floor of 12 inliers would accept false loops.
+// - version 3: the keyframes preset leaves out the last 3 keyframes instead of 4, so that a
+//   keyframe can close a loop with the one 4 back (docs/places.md, "Keyframe streams").
+constexpr int kPlaceSettingsVersion = 3;
 
-void DropFormerPresetValues(std::vector<NamedSetting>* settings) {
-  const auto has = [&](std::string_view name, std::string_view value) {
-    return std::any_of(settings->begin(), settings->end(),
-                       [&](const NamedSetting& s) { return s.first == name && s.second == value; });
-  };
-  if (!has("preset", "keyframes")) return;
-  std::erase_if(*settings, [](const NamedSetting& s) {
-    return (s.first == "geometry" && s.second == "direct_index") ||
-           (s.first == "min_inliers" && s.second == "12");
+struct FormerPresetValue {
+  int changed_in;  // the first version whose preset has another value
+  std::string_view setting, value;
+};
+constexpr FormerPresetValue kFormerKeyframesValues[] = {
+    {2, "geometry", "direct_index"},
+    {2, "min_inliers", "12"},
+    {3, "recent_frames", "4"},
+};
+
+void DropFormerPresetValues(int version, std::vector<NamedSetting>* settings) {
+  const bool keyframes = std::any_of(settings->begin(), settings->end(), [](const NamedSetting& s) {
+    return s.first == "preset" && s.second == "keyframes";
+  });
+  if (!keyframes) return;
+  std::erase_if(*settings, [&](const NamedSetting& s) {
+    return std::any_of(std::begin(kFormerKeyframesValues), std::end(kFormerKeyframesValues),
+                       [&](const FormerPresetValue& former) {
+                         return version < former.changed_in && s.first == former.setting &&
+                                s.second == former.value;
+                       });
   });
 }
 
@@ -103,7 +117,7 @@ StatusOr<LoopDetectorParams> DecodePlaceSettings(std::string_view text, std::str
   std::vector<NamedSetting> settings;
   while (in >> key >> value) {
     if (key == "version") {
-      if (value != "1" && value != "2") {
+      if (value.size() != 1 || value[0] < '1' || value[0] > '0' + kPlaceSettingsVersion) {
         return Status::FailedPrecondition("place settings of an unknown version " + value);
       }
       version = value[0] - '0';
@@ -120,7 +134,7 @@ StatusOr<LoopDetectorParams> DecodePlaceSettings(std::string_view text, std::str
     }  // unknown keys: written by a newer minor version, ignored
   }
   if (version == 0) return Status::DataLoss("place settings without a version line");
-  if (version == 1) DropFormerPresetValues(&settings);
+  DropFormerPresetValues(version, &settings);
   LoopDetectorParams p;
   const Status valid = ApplyDetectorSettings(settings, &p);
   if (!valid.ok()) return valid.WithContext("place settings", StatusCode::kDataLoss);

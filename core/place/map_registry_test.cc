@@ -198,13 +198,13 @@ TEST(MapRegistryTest, AMapKeepsItsPresetAcrossAReopenWithItsOwnValuesOverIt) {
   EXPECT_EQ(p.preset, DetectorPreset::kKeyframes);
   EXPECT_EQ(p.normalisation, ScoreNormalisation::kBestCandidate) << "from the preset";
   EXPECT_EQ(p.consistency_max_island_gap, 1u) << "from the preset";
-  EXPECT_EQ(p.recent_frames, 7u) << "the map's own value over the preset's 4";
+  EXPECT_EQ(p.recent_frames, 7u) << "the map's own value over the preset's 3";
   auto thesis = (*reopened)->Get("thesis");
   ASSERT_TRUE(thesis.ok());
   EXPECT_FALSE((*thesis)->params().strong_acceptance) << "a thesis map stays a thesis map";
 }
 
-TEST(MapRegistryTest, AVersionOneKeyframesMapFollowsThePresetsNewValuesUnlessItChangedThem) {
+TEST(MapRegistryTest, AnOlderKeyframesMapFollowsThePresetsNewValuesUnlessItChangedThem) {
   const std::string v1 =
       "version 1\npreset keyframes\nalpha 0.3\ntemporal_matches 3\nmin_inliers 12\n"
       "recent_seconds 20\nrecent_frames 4\ngeometry direct_index\nkeyframe_confirmations 0\n";
@@ -213,28 +213,44 @@ TEST(MapRegistryTest, AVersionOneKeyframesMapFollowsThePresetsNewValuesUnlessItC
   const LoopDetectorParams now = LoopDetectorParams::Keyframes();
   EXPECT_EQ(migrated->geometry, now.geometry);
   EXPECT_EQ(migrated->epipolar.min_inliers, now.epipolar.min_inliers);
+  EXPECT_EQ(migrated->recent_frames, now.recent_frames);
   EXPECT_TRUE(migrated->matching.mutual);
-  // A value the map changed is kept; a default map keeps its direct index (not a keyframes map).
-  auto changed =
-      DecodePlaceSettings("version 1\npreset keyframes\nmin_inliers 40\ngeometry direct_index\n");
+  // Version 2 had today's correspondences: only its recent window was the preset's of then.
+  auto v2 = DecodePlaceSettings("version 2\npreset keyframes\nrecent_frames 4\nmin_inliers 12\n");
+  ASSERT_TRUE(v2.ok()) << v2.status().ToString();
+  EXPECT_EQ(v2->recent_frames, now.recent_frames);
+  EXPECT_EQ(v2->epipolar.min_inliers, 12u) << "a version-2 map chose 12 itself";
+  // A value the map changed is kept; a default map keeps its values (not a keyframes map).
+  auto changed = DecodePlaceSettings(
+      "version 1\npreset keyframes\nmin_inliers 40\ngeometry direct_index\nrecent_frames 6\n");
   ASSERT_TRUE(changed.ok());
   EXPECT_EQ(changed->epipolar.min_inliers, 40u);
   EXPECT_EQ(changed->geometry, GeometryCheck::kExhaustive);
-  auto video = DecodePlaceSettings("version 1\npreset default\nmin_inliers 12\n");
+  EXPECT_EQ(changed->recent_frames, 6u);
+  auto video = DecodePlaceSettings("version 1\npreset default\nmin_inliers 12\nrecent_frames 4\n");
   ASSERT_TRUE(video.ok());
   EXPECT_EQ(video->geometry, GeometryCheck::kDirectIndex);
   EXPECT_EQ(video->epipolar.min_inliers, 12u);
-  // Written now: version 2, read back exactly, the old values included when a map sets them.
+  EXPECT_EQ(video->recent_frames, 4u);
+  // Written now: version 3, read back exactly, the old values included when a map sets them.
   LoopDetectorParams own = now;
   own.geometry = GeometryCheck::kDirectIndex;
   own.epipolar.min_inliers = 12;
   own.strong_min_inliers = 12;
+  own.recent_frames = 4;
   const std::string text = EncodePlaceSettings(own);
-  EXPECT_EQ(text.rfind("version 2\n", 0), 0u) << text;
+  EXPECT_EQ(text.rfind("version 3\n", 0), 0u) << text;
   auto kept = DecodePlaceSettings(text);
   ASSERT_TRUE(kept.ok());
   EXPECT_EQ(kept->geometry, GeometryCheck::kDirectIndex);
   EXPECT_EQ(kept->epipolar.min_inliers, 12u);
+  EXPECT_EQ(kept->recent_frames, 4u);
+  // A newer version than this build knows is refused, nothing guessed.
+  for (const char* version : {"version 4\n", "version 10\n", "version x\n"}) {
+    EXPECT_EQ(DecodePlaceSettings(std::string(version) + "preset keyframes\n").status().code(),
+              StatusCode::kFailedPrecondition)
+        << version;
+  }
 }
 
 TEST(MapRegistryTest, SettingsWrittenBeforePresetsOpenWithTheDefaultAndAnUnknownPresetIsDataLoss) {

@@ -400,7 +400,7 @@ TEST_F(PlaceServiceTest, AKeyframeMapKeepsItsPresetAcrossARestartAndAnUnknownPre
   pb::MapInfo info;
   ASSERT_TRUE(GetMap("slam", &info).ok());
   EXPECT_EQ(info.settings().preset(), "keyframes");
-  EXPECT_EQ(info.settings().recent_frames(), 7u) << "the map's own value over the preset's 4";
+  EXPECT_EQ(info.settings().recent_frames(), 7u) << "the map's own value over the preset's 3";
   ASSERT_TRUE(GetMap("video", &info).ok());
   EXPECT_EQ(info.settings().preset(), "default");
   EXPECT_EQ(info.settings().recent_frames(), 20u);

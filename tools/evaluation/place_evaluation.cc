@@ -253,6 +253,9 @@ void AddTimings(const LoopTimings& t, double features_ms, const double* points_m
   tally->AddTime("islands", t.islands);
   tally->AddTime("insertion", t.insertion);
   tally->AddTime("verification", t.verification);
+  if (t.verified_candidates > 0) {
+    tally->AddTime("verification_per_candidate", t.verification / t.verified_candidates);
+  }
   if (points_ms != nullptr) {
     tally->AddTime("points", *points_ms);
     tally->AddTime("metric_verification", t.metric_verification);

@@ -50,8 +50,10 @@ TEST(PlaceEvaluationTest, CorridorIsDetectedWithFullPrecisionAndTheTargetRecall)
 // correspondences came from every pair with a cross check (through the direct index, ratio 0.6,
 // 12 inliers for a consistent loop, 20 for strong evidence), without its spread floor, closed
 // 22 -> 2 on 13 inliers none of which lie on the true geometry; the keyframes preset with the
-// camera known does not: it closes 14 of the 24 frames with a true earlier match and nothing false
-// (10 with the correspondences before). A loop of a pair listed as ambiguous whose inliers match a
+// camera known does not: it closes 16 of the 24 frames with a true earlier match and nothing false
+// (10 with the correspondences before), 5 -> 1 among them: the truth counts keyframes 4 apart, and
+// the preset's recent window (3 keyframes) lets them through. A loop of a pair listed as
+// ambiguous whose inliers match a
 // look-alike façade (23 -> 2 once, 15 inliers, one on the true geometry) is counted false rather
 // than left out of precision.
 TEST(PlaceEvaluationTest, TheCourtyardsLookAlikeFacadesAreJudgedByTheTrueGeometry) {
@@ -74,8 +76,18 @@ TEST(PlaceEvaluationTest, TheCourtyardsLookAlikeFacadesAreJudgedByTheTrueGeometr
   keyframes.detector = LoopDetectorParams::Keyframes();
   auto e = EvaluatePlace(*sequence, *truth, PlaceVocabulary(), keyframes, nullptr, &trajectory);
   ASSERT_TRUE(e.ok()) << e.status().ToString();
-  EXPECT_GE(e->correct, 13);
+  EXPECT_GE(e->correct, 15);
   EXPECT_EQ(e->correct, e->detections - e->ambiguous);
+  const auto four_back = std::find_if(e->loops.begin(), e->loops.end(), [](const DetectedLoop& l) {
+    return l.status == LoopStatus::kLoopDetected && l.query == 4;
+  });
+  ASSERT_NE(four_back, e->loops.end()) << "5 -> 1, 4 keyframes back";
+  EXPECT_EQ(four_back->match, 0);
+  EXPECT_TRUE(four_back->correct);
+  // Up to 10 candidates verified a frame: the cost of one is its share of the frame's.
+  ASSERT_EQ(e->timing_ms.count("verification_per_candidate"), 1u);
+  EXPECT_GT(e->timing_ms.at("verification_per_candidate").median, 0.0);
+  EXPECT_LE(e->timing_ms.at("verification_per_candidate").max, e->timing_ms.at("verification").max);
   for (const DetectedLoop& loop : e->loops) {
     if (loop.status != LoopStatus::kLoopDetected) continue;
     EXPECT_TRUE(loop.evidence.calibrated);
@@ -96,6 +108,7 @@ TEST(PlaceEvaluationTest, TheCourtyardsLookAlikeFacadesAreJudgedByTheTrueGeometr
   before.detector.epipolar.min_inliers = 12;
   before.detector.strong_min_inliers = 20;
   before.detector.verified_candidates = 1;
+  before.detector.recent_frames = 4;
   before.detector.min_spread = 0.0;
   auto old = EvaluatePlace(*sequence, *truth, PlaceVocabulary(), before, nullptr, &trajectory);
   ASSERT_TRUE(old.ok());
