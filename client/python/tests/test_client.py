@@ -113,7 +113,7 @@ class RecognitionClientTest(unittest.TestCase):
     def test_a_keyframe_map_starts_from_the_keyframes_preset(self):
         info = self.client.create_map("keyframes", {"preset": "keyframes"})
         self.assertEqual(info.settings.preset, "keyframes")
-        self.assertEqual(info.settings.recent_frames, 4)  # the preset's tau_c
+        self.assertEqual(info.settings.recent_frames, 3)  # the preset's tau_c
         self.assertEqual(self.client.create_map("video").settings.preset, "default")
         self.assert_raises(InvalidArgument, self.client.create_map, "odd", {"preset": "sideways"})
 
