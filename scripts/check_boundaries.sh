@@ -3,7 +3,7 @@
 # (nor generated protobuf code), only storage/ includes RocksDB, and in server/ only the api/
 # converters, the services (the RPC handlers) and the web console (an adapter of the same
 # services) see generated protobuf types; the server's
-# infrastructure (config, auth, metrics, runtime) does not; the client library (client/) sees the
+# infrastructure (config, auth, http, metrics, runtime) does not; the client library (client/) sees the
 # generated API only, never core/, storage/ or server/ (its tests may, to start a server); core's
 # modules include only the layers below them (no cycles). The RPC handlers and converters stay
 # thin, and so does the console: they never reach into a place map's lock, deleted flag or loop
@@ -20,8 +20,9 @@ if git grep -n -E '#include\s*[<"]rocksdb/' -- ':!storage/' ':!*.md' ; then
   echo "check_boundaries: only storage/ may include RocksDB headers" >&2
   status=1
 fi
-if git grep -n -E '\.pb\.h' -- 'server/config/' 'server/auth/' 'server/metrics/' 'server/runtime/'; then
-  echo "check_boundaries: server/config, auth, metrics and runtime must not see protobuf types" >&2
+if git grep -n -E '\.pb\.h' -- 'server/config/' 'server/auth/' 'server/http/' 'server/metrics/' \
+    'server/runtime/'; then
+  echo "check_boundaries: server/config, auth, http, metrics and runtime must not see protobuf types" >&2
   status=1
 fi
 if git grep -n -E '#include\s*"(core|storage|server|tools|tests)/' -- 'client/' ':!*_test.cc' \

@@ -24,7 +24,7 @@ StatusOr<cv::Mat> DecodeEncodedImage(const std::string& bytes, PixelBudget& budg
                                      const std::string& field = "frame.encoded_image") {
   if (bytes.empty()) return Status::InvalidArgument(field + " is empty");
   RECOG_ASSIGN_OR_RETURN(const ImageHeader header, ReadImageHeader(bytes, field));
-  RECOG_RETURN_IF_ERROR(budget.Take(header.width, header.height, field));
+  RECOG_RETURN_IF_ERROR(budget.Take(header, field));
   const cv::Mat buffer(1, int(bytes.size()), CV_8UC1, const_cast<char*>(bytes.data()));
   cv::Mat image;
   try {
@@ -152,7 +152,12 @@ Status DecodeDepth(const pb::DepthImage& in, PixelBudget& budget, DecodedFrame* 
       if (header.format != ImageHeader::Format::kPng) {
         return Status::InvalidArgument("frame.depth.encoded must be a 16-bit PNG, not a JPEG");
       }
-      RECOG_RETURN_IF_ERROR(budget.Take(header.width, header.height, "frame.depth.encoded"));
+      if (header.components != 1 || header.bit_depth != 16) {
+        return Status::InvalidArgument(
+            "frame.depth.encoded must be a 16-bit single-channel PNG (its header declares " +
+            Describe(header) + "); 8-bit depth is refused");
+      }
+      RECOG_RETURN_IF_ERROR(budget.Take(header, "frame.depth.encoded", 2));
       const cv::Mat buffer(1, int(bytes.size()), CV_8UC1, const_cast<char*>(bytes.data()));
       try {
         out->depth = cv::imdecode(buffer, cv::IMREAD_UNCHANGED);
@@ -163,21 +168,15 @@ Status DecodeDepth(const pb::DepthImage& in, PixelBudget& budget, DecodedFrame* 
         return Status::InvalidArgument("frame.depth.encoded is not a decodable PNG image (" +
                                        std::to_string(bytes.size()) + " bytes)");
       }
-      if (out->depth.type() != CV_16UC1) {
+      if (out->depth.type() != CV_16UC1 || uint32_t(out->depth.cols) != header.width ||
+          uint32_t(out->depth.rows) != header.height) {
         return Status::InvalidArgument(
-            "frame.depth.encoded must be a 16-bit single-channel PNG (got " +
-            std::to_string(out->depth.elemSize1() * 8) + "-bit, " +
-            std::to_string(out->depth.channels()) + " channel(s)); 8-bit depth is refused");
-      }
-      if (uint32_t(out->depth.cols) != header.width || uint32_t(out->depth.rows) != header.height) {
-        return Status::InvalidArgument(
-            "frame.depth.encoded decodes to another size than its header declares");
+            "frame.depth.encoded decodes to another size or type than its header declares");
       }
       break;
     }
     case pb::DepthImage::kRaw: {
       const pb::RawDepth& raw = in.raw();
-      RECOG_RETURN_IF_ERROR(budget.Take(raw.width(), raw.height(), "frame.depth.raw"));
       int type = 0;
       switch (raw.format()) {
         case pb::DEPTH_FORMAT_U16:
@@ -189,6 +188,8 @@ Status DecodeDepth(const pb::DepthImage& in, PixelBudget& budget, DecodedFrame* 
         default:
           return Status::InvalidArgument("frame.depth.raw.format must be U16 or F32");
       }
+      RECOG_RETURN_IF_ERROR(
+          budget.Take(raw.width(), raw.height(), "frame.depth.raw", CV_ELEM_SIZE(type)));
       const uint64_t expected = uint64_t(raw.width()) * raw.height() * CV_ELEM_SIZE(type);
       if (raw.data().size() != expected) {
         return Status::InvalidArgument(
@@ -284,6 +285,26 @@ Status DecodeStructure(const pb::Frame& frame, PixelBudget& budget, DecodedFrame
   return Status::Ok();
 }
 
+// INVALID_ARGUMENT naming `field` for a width x height image of zero size or beyond one image's.
+Status CheckImageSize(uint64_t width, uint64_t height, const std::string& field) {
+  if (width == 0 || height == 0) {
+    return Status::InvalidArgument(field + " has zero size (" + std::to_string(width) + "x" +
+                                   std::to_string(height) + ")");
+  }
+  if (width > kMaxImageSide || height > kMaxImageSide || width * height > kMaxImagePixels) {
+    return Status::InvalidArgument(field + " is too large (" + std::to_string(width) + "x" +
+                                   std::to_string(height) + "; at most " +
+                                   std::to_string(kMaxImageSide) + " pixels a side and " +
+                                   std::to_string(kMaxImagePixels >> 20) + " Mpixel)");
+  }
+  return Status::Ok();
+}
+
+// Bytes in MiB, rounded up: "576 MiB".
+std::string MiBText(uint64_t bytes) {
+  return std::to_string((bytes + (1 << 20) - 1) >> 20) + " MiB";
+}
+
 void AddCorrespondences(const std::vector<PlaceCorrespondence>& in,
                         google::protobuf::RepeatedPtrField<pb::Correspondence>* out) {
   for (const PlaceCorrespondence& c : in) {
@@ -299,24 +320,51 @@ void AddCorrespondences(const std::vector<PlaceCorrespondence>& in,
 
 }  // namespace
 
-Status PixelBudget::Take(uint64_t width, uint64_t height, const std::string& field) {
-  if (width == 0 || height == 0) {
-    return Status::InvalidArgument(field + " has zero size (" + std::to_string(width) + "x" +
-                                   std::to_string(height) + ")");
+Status PixelBudget::Take(const ImageHeader& header, const std::string& field,
+                         uint32_t bytes_per_pixel) {
+  RECOG_RETURN_IF_ERROR(CheckImageSize(header.width, header.height, field));
+  if (header.format == ImageHeader::Format::kJpeg && header.scans > kMaxJpegScans) {
+    return Status::InvalidArgument(field + " is a JPEG of " + std::to_string(header.scans) +
+                                   " scans; at most " + std::to_string(kMaxJpegScans) +
+                                   " (a progressive JPEG has about 10)");
   }
-  if (width > kMaxImageSide || height > kMaxImageSide || width * height > kMaxImagePixels) {
-    return Status::InvalidArgument(field + " is too large (" + std::to_string(width) + "x" +
-                                   std::to_string(height) + "; at most " +
-                                   std::to_string(kMaxImageSide) + " pixels a side and " +
-                                   std::to_string(kMaxImagePixels >> 20) + " Mpixel)");
+  return Charge(uint64_t(header.width) * header.height, MemoryToDecode(header, bytes_per_pixel),
+                Describe(header), field);
+}
+
+Status PixelBudget::Take(uint64_t width, uint64_t height, const std::string& field,
+                         uint32_t bytes_per_pixel) {
+  RECOG_RETURN_IF_ERROR(CheckImageSize(width, height, field));
+  return Charge(width * height, DecodeMemory{width * height * bytes_per_pixel, 0},
+                std::to_string(width) + "x" + std::to_string(height), field);
+}
+
+Status PixelBudget::Charge(uint64_t pixels, const DecodeMemory& memory, const std::string& what,
+                           const std::string& field) {
+  if (memory.total() > kMaxImageDecodeBytes) {
+    // Buffers larger than the image itself: libjpeg holding every coefficient of the image.
+    const bool whole_coefficients = memory.decoder > memory.image;
+    return Status::InvalidArgument(
+        field + " (" + what + ") needs " + MiBText(memory.total()) + " to decode; at most " +
+        MiBText(kMaxImageDecodeBytes) + " an image" +
+        (whole_coefficients ? " (libjpeg holds every coefficient of a progressive JPEG, 2 bytes "
+                              "each): send a baseline JPEG or a smaller image"
+                            : ": send a smaller image"));
   }
-  if (width * height > left_) {
-    return Status::InvalidArgument(field + " (" + std::to_string(width) + "x" +
-                                   std::to_string(height) + ") takes the call's images beyond " +
+  if (pixels > pixels_left_) {
+    return Status::InvalidArgument(field + " (" + what + ") takes the call's images beyond " +
                                    std::to_string(kMaxCallPixels >> 20) +
                                    " Mpixel together; send fewer or smaller images per call");
   }
-  left_ -= width * height;
+  if (memory.total() > decode_bytes_left_) {
+    return Status::InvalidArgument(field + " (" + what + ", " + MiBText(memory.total()) +
+                                   " to decode) takes the call's images beyond " +
+                                   MiBText(max_decode_bytes_) + " of memory together (" +
+                                   MiBText(max_decode_bytes_ - decode_bytes_left_) +
+                                   " decoded already); send fewer or smaller images per call");
+  }
+  pixels_left_ -= pixels;
+  decode_bytes_left_ -= memory.image;  // the decoder's buffers are freed once it has decoded
   return Status::Ok();
 }
 

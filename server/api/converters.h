@@ -20,15 +20,27 @@
 #include "recognition/v1/object.pb.h"
 #include "recognition/v1/place.pb.h"
 #include "recognition/v1/repository.pb.h"
+#include "server/api/image_header.h"
 
 namespace recog::server {
 
 namespace pb = ::recognition::v1;
 
 // Limits on what a frame may hold (beyond gRPC's message size).
-inline constexpr uint32_t kMaxImageSide = 16384;          // pixels, width or height
-inline constexpr uint64_t kMaxImagePixels = 64ull << 20;  // 64 Mpixel
-inline constexpr uint64_t kMaxCallPixels = 64ull << 20;   // all the images of one call together
+inline constexpr uint32_t kMaxImageSide = 16384;  // pixels, width or height
+// 16 Mpixel (4096x4096; robots' largest cameras give 12.6): what one image costs to process grows
+// with it (a 16384x4096 PNG of 65 KB took 309 MiB and 7 s of a worker at 64 Mpixel).
+inline constexpr uint64_t kMaxImagePixels = 16ull << 20;
+inline constexpr uint64_t kMaxCallPixels = 64ull << 20;  // all the images of one call together
+// Memory to decode one image (MemoryToDecode: the image and the decoder's buffers): 128 MiB holds
+// a 4096x3072 progressive 4:4:4 JPEG (84 MiB), not an 8192x8192 progressive JPEG (256 MiB in
+// 4:2:0, 576 MiB in CMYK).
+inline constexpr uint64_t kMaxImageDecodeBytes = 128ull << 20;
+// PixelBudget's default memory for the images of one call (see there).
+inline constexpr uint64_t kDefaultCallDecodeBytes = 256ull << 20;
+// Scans of a JPEG: each one is a pass of the decoder over the image (a progressive JPEG has 6 to
+// 18; libjpeg's default script makes 10 for colour), so that a few bytes a scan cannot buy seconds.
+inline constexpr uint32_t kMaxJpegScans = 64;
 inline constexpr uint32_t kMaxClientFeatures = 100000;
 inline constexpr size_t kMaxFrameIdBytes = 128;  // camera_id and client_frame_id
 
@@ -51,18 +63,36 @@ struct DecodedFrame {
   bool has_image() const { return !image.empty(); }
 };
 
-// The pixels one call may decode: each image at most kMaxImageSide a side and kMaxImagePixels,
-// and all the images of the call (its frames, their views, depth and right images) together at
-// most kMaxCallPixels. An encoded image is charged with the size its header declares, before it
-// is decoded, so that a small file declaring a huge image costs nothing. One per call.
+// The pixels and the memory one call may decode, charged before anything is decoded from the size
+// an encoded image declares in its header, so that a small file declaring a huge or costly image
+// costs nothing. Each image: at most kMaxImageSide pixels a side and kMaxImagePixels, a JPEG at
+// most kMaxJpegScans scans, and at most kMaxImageDecodeBytes to decode. All the images of the call
+// (its frames, their views, depth and right images) together: at most kMaxCallPixels, and their
+// decoded images plus the decoder's buffers of the one being decoded at most `max_decode_bytes`, so
+// that a call's images never take more. Calls decode on the workers, one call each: with N workers,
+// the images being decoded or held take at most N x max_decode_bytes in all. One per call.
 class PixelBudget {
  public:
-  // Charges a width x height image of `field`. INVALID_ARGUMENT naming it for a zero size or a
-  // size beyond a limit (then nothing is charged).
-  Status Take(uint64_t width, uint64_t height, const std::string& field);
+  explicit PixelBudget(uint64_t max_decode_bytes = kDefaultCallDecodeBytes)
+      : max_decode_bytes_(max_decode_bytes), decode_bytes_left_(max_decode_bytes) {}
+
+  // Charges an encoded image of `field` decoded to `bytes_per_pixel` a pixel (1: 8-bit grey; 2: a
+  // 16-bit depth PNG). INVALID_ARGUMENT naming it and the figure for a zero size or anything
+  // beyond a limit (then nothing is charged).
+  Status Take(const ImageHeader& header, const std::string& field, uint32_t bytes_per_pixel = 1);
+  // Charges a width x height image of `bytes_per_pixel` a pixel that needs no decoder (a raw
+  // image's copy, or a size checked as an image's); as above.
+  Status Take(uint64_t width, uint64_t height, const std::string& field,
+              uint32_t bytes_per_pixel = 1);
 
  private:
-  uint64_t left_ = kMaxCallPixels;
+  // Charges `memory` to decode a `what` image of `pixels` (whose size is checked).
+  Status Charge(uint64_t pixels, const DecodeMemory& memory, const std::string& what,
+                const std::string& field);
+
+  uint64_t pixels_left_ = kMaxCallPixels;
+  uint64_t max_decode_bytes_;
+  uint64_t decode_bytes_left_;  // what the call's decoded images leave of max_decode_bytes_
 };
 
 // Decodes and validates a frame, its images charged to `budget`. Client features must have

@@ -61,7 +61,7 @@ StatusOr<PreparedFrame> PreparedFrame::Prepare(const pb::Frame& request,
 
 StatusOr<PreparedRigFrame> PreparedRigFrame::Prepare(const pb::Frame& request, const PlaceMap& map,
                                                      const ExtractPlaceFeatures& extract,
-                                                     pb::Timing* timing) {
+                                                     PixelBudget& budget, pb::Timing* timing) {
   const std::vector<RigCamera>& rig = map.rig();
   std::string cameras;
   for (const RigCamera& camera : rig) cameras += (cameras.empty() ? "" : ", ") + camera.name;
@@ -105,7 +105,6 @@ StatusOr<PreparedRigFrame> PreparedRigFrame::Prepare(const pb::Frame& request, c
   }
   prepared.frame_.timestamp = prepared.header_.timestamp;
   prepared.frame_.client_id = prepared.header_.client_frame_id;
-  PixelBudget budget;  // every camera's images together
   for (size_t c = 0; c < rig.size(); ++c) {
     const Status status =
         prepared.AddCamera(request.views(view_of[c]), rig[c], map.vocabulary().info().descriptor,

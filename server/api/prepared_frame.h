@@ -59,10 +59,10 @@ class PreparedRigFrame {
   // images charged to one budget). INVALID_ARGUMENT naming the camera for a view of an unknown
   // camera, a camera without a view or with two, a view carrying more than its image and
   // structure, or an image of another size than its camera's; and for a frame with content of its
-  // own.
+  // own. `budget` is the call's.
   static StatusOr<PreparedRigFrame> Prepare(const pb::Frame& request, const PlaceMap& map,
                                             const ExtractPlaceFeatures& extract,
-                                            pb::Timing* timing);
+                                            PixelBudget& budget, pb::Timing* timing);
 
   const RigFrame& frame() const { return frame_; }
   // The rig frames the client left out (exclude_frame_ids).

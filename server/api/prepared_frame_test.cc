@@ -129,7 +129,8 @@ class PreparedRigFrameTest : public ::testing::Test {
   }
 
   StatusOr<PreparedRigFrame> Prepare(const pb::Frame& request) {
-    return PreparedRigFrame::Prepare(request, *map_, extraction_.Function(), &timing_);
+    PixelBudget budget;
+    return PreparedRigFrame::Prepare(request, *map_, extraction_.Function(), budget, &timing_);
   }
 
   static void ExpectRefused(const StatusOr<PreparedRigFrame>& prepared, const std::string& needle) {

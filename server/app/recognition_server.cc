@@ -7,6 +7,8 @@
 #include <spdlog/spdlog.h>
 
 #include "core/vocabulary/vocabulary_io.h"
+#include "server/app/grpc_guards.h"
+#include "server/app/grpc_listener.h"
 #include "server/app/grpc_metrics.h"
 #include "server/app/server_tls.h"
 #include "server/console/web_console.h"
@@ -64,6 +66,27 @@ Status CheckGroupPlacement(const PlacementTable& table, const ServerState& state
     }
   }
   return Status::Ok();
+}
+
+// The limits of config.grpc on the gRPC server (docs/server.md, "Security"), and compressed
+// requests refused: only identity is enabled, so gRPC fails a call whose grpc-encoding names
+// another algorithm (UNIMPLEMENTED) before it inflates anything.
+void ApplyGrpcLimits(const GrpcLimitsConfig& limits, grpc::ServerBuilder& builder) {
+  grpc::ResourceQuota quota("recogd");
+  quota.Resize(size_t(limits.memory_quota_mb) << 20);
+  builder.SetResourceQuota(quota);
+  builder.AddChannelArgument(GRPC_ARG_MAX_CONCURRENT_STREAMS, int(limits.max_concurrent_streams));
+  if (limits.max_connection_idle_ms != 0) {
+    builder.AddChannelArgument(GRPC_ARG_MAX_CONNECTION_IDLE_MS, int(limits.max_connection_idle_ms));
+  }
+  if (limits.max_connection_age_ms != 0) {
+    builder.AddChannelArgument(GRPC_ARG_MAX_CONNECTION_AGE_MS, int(limits.max_connection_age_ms));
+    builder.AddChannelArgument(GRPC_ARG_MAX_CONNECTION_AGE_GRACE_MS,
+                               int(limits.max_connection_age_grace_ms));
+  }
+  for (const grpc_compression_algorithm algorithm : {GRPC_COMPRESS_DEFLATE, GRPC_COMPRESS_GZIP}) {
+    builder.SetCompressionAlgorithmSupportStatus(algorithm, false);
+  }
 }
 
 // Says how a place map's index was built at start-up: from its snapshot (and the frames added
@@ -132,7 +155,7 @@ StatusOr<std::unique_ptr<RecognitionServer>> RecognitionServer::Start(const Serv
       config.WorkerCount(), config.queue_capacity,
       [&state] { return std::make_unique<WorkerContext>(state); });
   if (!config.metrics_listen.empty()) {
-    RECOG_RETURN_IF_ERROR(state.metrics.StartHttp(config.metrics_listen));
+    RECOG_RETURN_IF_ERROR(state.metrics.StartHttp(config.metrics_listen, config.metrics));
   }
   RECOG_RETURN_IF_ERROR(server->ReloadPlacement());
   server->place_service_ = std::make_unique<PlaceService>(&state);
@@ -143,13 +166,18 @@ StatusOr<std::unique_ptr<RecognitionServer>> RecognitionServer::Start(const Serv
   server->health_service_ =
       std::make_unique<HealthService>(std::vector<std::string>{kStoreHealthService});
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();
+  ThrottleLibraryLogs();
+  RECOG_ASSIGN_OR_RETURN(
+      server->listener_,
+      GrpcListener::Bind(
+          {.address = config.listen, .reserve_descriptors = config.grpc.reserve_descriptors}));
+  server->port_ = server->listener_->port();
   grpc::ServerBuilder builder;
-  builder.AddListeningPort(config.listen, credentials, &server->port_);
-  // gRPC's default SO_REUSEPORT would let a second server bind this port and take some of its
-  // connections: binding a port in use must fail instead.
-  builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
+  server->acceptor_ = builder.experimental().AddExternalConnectionAcceptor(
+      grpc::ServerBuilder::experimental_type::ExternalConnectionType::FROM_FD, credentials);
   builder.SetMaxReceiveMessageSize(int(config.max_message_bytes));
   builder.SetMaxSendMessageSize(int(config.max_message_bytes));
+  ApplyGrpcLimits(config.grpc, builder);
   builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_TIME_MS, int(config.keepalive.time_ms));
   builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_TIMEOUT_MS, int(config.keepalive.timeout_ms));
   builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_PERMIT_WITHOUT_CALLS,
@@ -168,14 +196,12 @@ StatusOr<std::unique_ptr<RecognitionServer>> RecognitionServer::Start(const Serv
        pb::ObjectRepository::service_full_name(), pb::Admin::service_full_name()});
   std::vector<std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface>> interceptors;
   interceptors.push_back(MakeGrpcMetricsInterceptorFactory(&state.metrics));
+  interceptors.push_back(MakeReflectionGuardFactory(&state.auth));
   builder.experimental().SetInterceptorCreators(std::move(interceptors));
   server->server_ = builder.BuildAndStart();
-  if (server->server_ == nullptr || server->port_ == 0) {
-    server->server_.reset();
-    return Status::Unavailable("cannot listen on " + config.listen +
-                               " (address in use, or not an address of this machine)");
-  }
-  spdlog::info("recogd listening on port {} ({}), opening {}", server->port_,
+  if (server->server_ == nullptr) return Status::Internal("the gRPC server did not start");
+  server->listener_->Start(server->acceptor_.get());
+  spdlog::info("recogd listening on port {} ({}), opening {}", server->port(),
                config.tls.cert.empty() ? "plaintext" : "TLS", config.data_dir);
   RECOG_RETURN_IF_ERROR(server->Open());
   RECOG_RETURN_IF_ERROR(server->StartFollowing());
@@ -296,6 +322,7 @@ void RecognitionServer::Shutdown(std::chrono::milliseconds grace) {
     state.draining = true;
     if (server_ != nullptr) {
       spdlog::info("recogd draining (up to {} ms)", grace.count());
+      listener_.reset();  // no new connections
       health_service_->Shutdown();
       repository_service_->CloseWatchers();
       server_->Shutdown(std::chrono::system_clock::now() + grace);

@@ -51,6 +51,7 @@ class RepositoryService;
 class AdminService;
 class HealthService;
 class RepositoryFollower;
+class GrpcListener;
 class ServerTls;
 class WebConsole;
 
@@ -102,7 +103,10 @@ class RecognitionServer {
   std::unique_ptr<RepositoryService> repository_service_;
   std::unique_ptr<AdminService> admin_service_;
   std::unique_ptr<HealthService> health_service_;  // NOT_SERVING until the store is open
+  // Hands the listener's connections to server_; outlives the listener's thread.
+  std::unique_ptr<grpc::experimental::ExternalConnectionAcceptor> acceptor_;
   std::unique_ptr<grpc::Server> server_;
+  std::unique_ptr<GrpcListener> listener_;        // the gRPC port's sockets; stopped first
   std::unique_ptr<RepositoryFollower> follower_;  // on a replica, once ready
   std::unique_ptr<WebConsole> console_;           // with console.listen, once ready
   int port_ = 0;

@@ -172,6 +172,47 @@ Status ReadPlaceSettings(YamlSection& place, LoopDetectorParams* params) {
   return applied.ok() ? applied : applied.WithContext("section 'place'");
 }
 
+// The keys of an HTTP port's limits, in its section.
+Status ReadHttpPort(YamlSection& section, HttpPortConfig* port) {
+  RECOG_RETURN_IF_ERROR(section.ReadList("hosts", &port->hosts));
+  RECOG_RETURN_IF_ERROR(section.Read("max_connections", &port->max_connections));
+  RECOG_RETURN_IF_ERROR(
+      section.Read("max_connections_per_client", &port->max_connections_per_client));
+  RECOG_RETURN_IF_ERROR(section.Read("request_timeout_ms", &port->request_timeout_ms));
+  RECOG_RETURN_IF_ERROR(section.Read("header_timeout_ms", &port->header_timeout_ms));
+  RECOG_RETURN_IF_ERROR(section.Read("min_bytes_per_s", &port->min_bytes_per_s));
+  RECOG_RETURN_IF_ERROR(section.Read("max_header_lines", &port->max_header_lines));
+  return section.Read("max_header_bytes", &port->max_header_bytes);
+}
+
+// INVALID_ARGUMENT naming the first bad limit of the HTTP port of YAML section `name`.
+Status ValidateHttpPort(const std::string& name, const HttpPortConfig& port) {
+  const auto in_range = [&](const char* key, uint64_t value, uint64_t min, uint64_t max) -> Status {
+    if (value >= min && value <= max) return Status::Ok();
+    return Status::InvalidArgument(name + "." + key + " must be " + std::to_string(min) + " to " +
+                                   std::to_string(max) + ", not " + std::to_string(value));
+  };
+  RECOG_RETURN_IF_ERROR(in_range("max_connections", port.max_connections, 1, 1024));
+  RECOG_RETURN_IF_ERROR(in_range("max_connections_per_client", port.max_connections_per_client, 1,
+                                 port.max_connections));
+  RECOG_RETURN_IF_ERROR(in_range("request_timeout_ms", port.request_timeout_ms, 1000, 600000));
+  RECOG_RETURN_IF_ERROR(in_range("header_timeout_ms", port.header_timeout_ms, 1000, 600000));
+  RECOG_RETURN_IF_ERROR(in_range("min_bytes_per_s", port.min_bytes_per_s, 0, 1u << 30));
+  RECOG_RETURN_IF_ERROR(in_range("max_header_lines", port.max_header_lines, 1, 10000));
+  RECOG_RETURN_IF_ERROR(in_range("max_header_bytes", port.max_header_bytes, 1024, 1u << 20));
+  for (const std::string& host : port.hosts) {
+    const bool valid =
+        !host.empty() && host.size() <= 253 && std::all_of(host.begin(), host.end(), [](char c) {
+          return std::isalnum(static_cast<unsigned char>(c)) || c == '-' || c == '.';
+        });
+    if (!valid) {
+      return Status::InvalidArgument(name + ".hosts: '" + host +
+                                     "' is not a host name (letters, digits, '-' and '.')");
+    }
+  }
+  return Status::Ok();
+}
+
 Status ReadConfig(const YAML::Node& root, ServerConfig* config) {
   YamlSection top(root, "");
   RECOG_RETURN_IF_ERROR(top.Read("listen", &config->listen));
@@ -197,6 +238,19 @@ Status ReadConfig(const YAML::Node& root, ServerConfig* config) {
       keepalive.Read("min_ping_interval_ms", &config->keepalive.min_ping_interval_ms));
   RECOG_RETURN_IF_ERROR(keepalive.RejectUnknownKeys());
 
+  RECOG_ASSIGN_OR_RETURN(YamlSection grpc, top.Section("grpc"));
+  GrpcLimitsConfig& limits = config->grpc;
+  RECOG_RETURN_IF_ERROR(grpc.Read("max_concurrent_streams", &limits.max_concurrent_streams));
+  RECOG_RETURN_IF_ERROR(grpc.Read("memory_quota_mb", &limits.memory_quota_mb));
+  RECOG_RETURN_IF_ERROR(grpc.Read("pending_requests_mb", &limits.pending_requests_mb));
+  RECOG_RETURN_IF_ERROR(grpc.Read("decode_memory_mb", &limits.decode_memory_mb));
+  RECOG_RETURN_IF_ERROR(grpc.Read("max_connection_idle_ms", &limits.max_connection_idle_ms));
+  RECOG_RETURN_IF_ERROR(grpc.Read("max_connection_age_ms", &limits.max_connection_age_ms));
+  RECOG_RETURN_IF_ERROR(
+      grpc.Read("max_connection_age_grace_ms", &limits.max_connection_age_grace_ms));
+  RECOG_RETURN_IF_ERROR(grpc.Read("reserve_descriptors", &limits.reserve_descriptors));
+  RECOG_RETURN_IF_ERROR(grpc.RejectUnknownKeys());
+
   RECOG_ASSIGN_OR_RETURN(YamlSection tls, top.Section("tls"));
   RECOG_RETURN_IF_ERROR(tls.Read("cert", &config->tls.cert));
   RECOG_RETURN_IF_ERROR(tls.Read("key", &config->tls.key));
@@ -219,12 +273,15 @@ Status ReadConfig(const YAML::Node& root, ServerConfig* config) {
   RECOG_RETURN_IF_ERROR(console.Read("vendor_dir", &config->console.vendor_dir));
   RECOG_RETURN_IF_ERROR(console.Read("loops_per_map", &config->console.loops_per_map));
   RECOG_RETURN_IF_ERROR(console.Read("charts_dir", &config->console.charts_dir));
-  RECOG_RETURN_IF_ERROR(console.ReadList("hosts", &config->console.hosts));
-  RECOG_RETURN_IF_ERROR(console.Read("max_connections", &config->console.max_connections));
+  RECOG_RETURN_IF_ERROR(console.Read("max_body_bytes", &config->console.max_body_bytes));
   RECOG_RETURN_IF_ERROR(
-      console.Read("max_connections_per_client", &config->console.max_connections_per_client));
-  RECOG_RETURN_IF_ERROR(console.Read("request_timeout_ms", &config->console.request_timeout_ms));
+      console.Read("max_inflight_body_bytes", &config->console.max_inflight_body_bytes));
+  RECOG_RETURN_IF_ERROR(ReadHttpPort(console, &config->console));
   RECOG_RETURN_IF_ERROR(console.RejectUnknownKeys());
+
+  RECOG_ASSIGN_OR_RETURN(YamlSection metrics, top.Section("metrics"));
+  RECOG_RETURN_IF_ERROR(ReadHttpPort(metrics, &config->metrics));
+  RECOG_RETURN_IF_ERROR(metrics.RejectUnknownKeys());
 
   RECOG_ASSIGN_OR_RETURN(YamlSection store, top.Section("store"));
   RECOG_RETURN_IF_ERROR(store.ReadParsed("sync", &config->store.sync, ParseStoreSync));
@@ -268,6 +325,29 @@ Status ParseWith(int argc, const char* const* argv, std::string* config_file, Se
     return Status::InvalidArgument(e.what());
   }
   return Status::Ok();
+}
+
+// INVALID_ARGUMENT naming the first key of the "grpc" section out of its range.
+Status ValidateGrpcLimits(const GrpcLimitsConfig& grpc, uint32_t max_message_bytes) {
+  const auto range = [](std::string_view key, uint64_t value, uint64_t low,
+                        uint64_t high) -> Status {
+    if (value >= low && value <= high) return Status::Ok();
+    return Status::InvalidArgument("grpc." + std::string(key) + " must be " + std::to_string(low) +
+                                   " to " + std::to_string(high) + ", not " +
+                                   std::to_string(value));
+  };
+  const uint64_t message_mb = (uint64_t(max_message_bytes) + (1 << 20) - 1) >> 20;
+  RECOG_RETURN_IF_ERROR(range("max_concurrent_streams", grpc.max_concurrent_streams, 1, 10000));
+  RECOG_RETURN_IF_ERROR(range("memory_quota_mb", grpc.memory_quota_mb, 16, 65536));
+  RECOG_RETURN_IF_ERROR(range("pending_requests_mb", grpc.pending_requests_mb, message_mb, 65536));
+  RECOG_RETURN_IF_ERROR(range("decode_memory_mb", grpc.decode_memory_mb, 16, 65536));
+  RECOG_RETURN_IF_ERROR(range("reserve_descriptors", grpc.reserve_descriptors, 16, 65536));
+  for (const auto& [key, value] :
+       {std::pair{"max_connection_idle_ms", grpc.max_connection_idle_ms},
+        std::pair{"max_connection_age_ms", grpc.max_connection_age_ms}}) {
+    if (value != 0) RECOG_RETURN_IF_ERROR(range(key, value, 1000, (1u << 31) - 1));
+  }
+  return range("max_connection_age_grace_ms", grpc.max_connection_age_grace_ms, 0, (1u << 31) - 1);
 }
 
 }  // namespace
@@ -382,35 +462,24 @@ Status ServerConfig::Validate() const {
     return Status::InvalidArgument("console.listen ('" + console.listen +
                                    "') must differ from listen and metrics_listen");
   }
+  RECOG_RETURN_IF_ERROR(ValidateGrpcLimits(grpc, max_message_bytes));
   if (console.loops_per_map < 1 || console.loops_per_map > 1000) {
     return Status::InvalidArgument("console.loops_per_map must be 1 to 1000, not " +
                                    std::to_string(console.loops_per_map));
   }
-  if (console.max_connections < 1 || console.max_connections > 1024) {
-    return Status::InvalidArgument("console.max_connections must be 1 to 1024, not " +
-                                   std::to_string(console.max_connections));
+  RECOG_RETURN_IF_ERROR(ValidateHttpPort("console", console));
+  if (console.max_body_bytes < 1024 || console.max_body_bytes > INT32_MAX) {
+    return Status::InvalidArgument("console.max_body_bytes must be 1024 to 2147483647, not " +
+                                   std::to_string(console.max_body_bytes));
   }
-  if (console.max_connections_per_client < 1 ||
-      console.max_connections_per_client > console.max_connections) {
+  if (console.max_inflight_body_bytes < console.max_body_bytes ||
+      console.max_inflight_body_bytes > (uint64_t{16} << 30)) {
     return Status::InvalidArgument(
-        "console.max_connections_per_client must be 1 to console.max_connections (" +
-        std::to_string(console.max_connections) + "), not " +
-        std::to_string(console.max_connections_per_client));
+        "console.max_inflight_body_bytes must be console.max_body_bytes (" +
+        std::to_string(console.max_body_bytes) + ") to 17179869184, not " +
+        std::to_string(console.max_inflight_body_bytes));
   }
-  if (console.request_timeout_ms < 1000 || console.request_timeout_ms > 600000) {
-    return Status::InvalidArgument("console.request_timeout_ms must be 1000 to 600000, not " +
-                                   std::to_string(console.request_timeout_ms));
-  }
-  for (const std::string& host : console.hosts) {
-    const bool name =
-        !host.empty() && host.size() <= 253 && std::all_of(host.begin(), host.end(), [](char c) {
-          return std::isalnum(static_cast<unsigned char>(c)) || c == '-' || c == '.';
-        });
-    if (!name) {
-      return Status::InvalidArgument("console.hosts: '" + host +
-                                     "' is not a host name (letters, digits, '-' and '.')");
-    }
-  }
+  RECOG_RETURN_IF_ERROR(ValidateHttpPort("metrics", metrics));
   if (store.group_sync_interval_ms < 1 || store.group_sync_interval_ms > kMaxGroupSyncIntervalMs) {
     return Status::InvalidArgument("store.group_sync_interval_ms must be between 1 and " +
                                    std::to_string(kMaxGroupSyncIntervalMs));

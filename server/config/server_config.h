@@ -60,6 +60,42 @@ struct KeepaliveConfig {
   uint32_t min_ping_interval_ms = 10000;
 };
 
+// What the gRPC port lets one client take (docs/server.md, "Security"). Compressed requests
+// (grpc-encoding other than identity) are always refused: gRPC 1.51 inflates a message before it
+// checks max_message_bytes, so a few hundred kilobytes of gzip could take gigabytes.
+struct GrpcLimitsConfig {
+  // Default 100: calls one connection may have open at once (HTTP/2 SETTINGS
+  // MAX_CONCURRENT_STREAMS); 1 to 10000.
+  uint32_t max_concurrent_streams = 100;
+  // Default 128: MiB that gRPC's transport (connections, read buffers, calls) may hold in all
+  // (gRPC's resource quota; beyond it gRPC refuses new calls and shrinks its buffers); 16 to
+  // 65536.
+  uint32_t memory_quota_mb = 128;
+  // Default 128: MiB of requests taken and not yet answered (waiting for a worker or being
+  // worked on), by their serialised size; a call beyond it is refused with RESOURCE_EXHAUSTED and
+  // a retry hint. At least max_message_bytes, at most 65536.
+  uint32_t pending_requests_mb = 128;
+  // Default 256: MiB that the images of one call may take to decode, together (the decoded
+  // images, and the decoder's buffers of the one being decoded: a progressive JPEG holds 2 bytes
+  // a sample); beyond it the call is refused with INVALID_ARGUMENT naming the image. At most
+  // workers x this is spent on images at once. 16 to 65536; below 128 it also lowers the 128 MiB
+  // that one image may take.
+  uint32_t decode_memory_mb = 256;
+  // Default 300000 (5 minutes): a connection without a call for this long is closed (GOAWAY;
+  // clients reconnect by themselves); 0 = never. Otherwise at least 1000.
+  uint32_t max_connection_idle_ms = 300000;
+  // Default 0 = never: a connection older than this is closed (GOAWAY), its calls given
+  // max_connection_age_grace_ms to finish; robots streaming a session for hours keep the default.
+  // Otherwise at least 1000.
+  uint32_t max_connection_age_ms = 0;
+  // Default 30000: how long calls of a connection closed for its age may still run.
+  uint32_t max_connection_age_grace_ms = 30000;
+  // Default 64: descriptors kept free below the process's limit (ulimit -n); a new connection
+  // beyond is closed at once, so that running out of descriptors never stops the port (see
+  // server/app/grpc_listener.h); 16 to 65536.
+  uint32_t reserve_descriptors = 64;
+};
+
 // Transport security. All empty (the default): plaintext. cert and key: TLS. client_ca as well:
 // mutual TLS, every client must present a certificate signed by that CA.
 struct TlsConfig {
@@ -109,11 +145,46 @@ struct RepositoryConfig {
   std::string tls_ca;      // default "": PEM CA of the primary's certificate; "" = plaintext
 };
 
+// What one of recogd's HTTP ports (the console, the metrics) answers, and how much a client may
+// take of it (server/http/guarded_http_server.h): every request is held to these limits before
+// anything of it is routed. The defaults are the console's; MetricsConfig's connection caps are
+// lower.
+struct HttpPortConfig {
+  // Default []: host names the port answers to besides IP addresses and "localhost" (the names
+  // of its URL, e.g. behind a proxy: ["recog.example.com"]). A request whose Host (or, on the
+  // console, Origin) names another host is refused with 403, so that a web page cannot reach
+  // the port through a name it rebinds to this machine's address (DNS rebinding).
+  std::vector<std::string> hosts;
+  // Default 32: connections served at once, a thread each (1..1024). One more takes the place of
+  // the connection that has waited longest (over a second) for its request's headers, or is
+  // refused with 503 when none has.
+  uint32_t max_connections = 32;
+  // Default 8: connections one client address may hold at once (1..max_connections); the same
+  // rule as max_connections within the address.
+  uint32_t max_connections_per_client = 8;
+  // Default 30000: milliseconds a client has to send a whole request, and again to take its
+  // answer, however slowly it sends (1000..600000).
+  uint32_t request_timeout_ms = 30000;
+  // Default 10000: milliseconds a client has to send a request's line and headers (1000..600000;
+  // at most request_timeout_ms applies); later: 408 and the connection closed.
+  uint32_t header_timeout_ms = 10000;
+  // Default 1024: after its first second, a request (and its answer) must move at least this
+  // many bytes a second on average, or the connection is closed (408 before its headers are
+  // whole); 0 = no minimum, at most 1073741824.
+  uint32_t min_bytes_per_s = 1024;
+  // Default 100: header lines a request may have (1..10000); more: 431 and the connection closed.
+  uint32_t max_header_lines = 100;
+  // Default 16384: bytes of a request's line and headers together (1024..1048576); more: 431 and
+  // the connection closed.
+  uint32_t max_header_bytes = 16384;
+};
+
 // The web console (server/console/): pages and an HTTP/JSON API over the same services, on its
 // own address. `listen` empty (the default): no console, and the gRPC path does nothing for it.
 // It uses the server's TLS files (tls.cert/key; with tls.client_ca, browsers must present a
-// client certificate too) and its tokens: a read token may look, a write token may change.
-struct ConsoleConfig {
+// client certificate too) and its tokens: a read token may look, a write token may change. Its
+// port's limits are HttpPortConfig's, as keys of the same section.
+struct ConsoleConfig : HttpPortConfig {
   std::string listen;  // default "": host:port of the console ("127.0.0.1:8080"); "" = off
   // Default "": the console's pages; empty means the bundled ones (server/console/web, or the
   // installed copy).
@@ -126,18 +197,21 @@ struct ConsoleConfig {
   // Default "": a folder of charts (the .json that `recog eval ... --plot` writes beside each
   // PNG) shown on the console's Charts page; empty means none.
   std::string charts_dir;
-  // Default []: host names the console answers to besides IP addresses and "localhost" (the
-  // names of its URL, e.g. behind a proxy: ["recog.example.com"]). A request whose Host or Origin
-  // names another host is refused, so that a web page cannot reach the console through a name it
-  // rebinds to this machine's address (DNS rebinding).
-  std::vector<std::string> hosts;
-  // Default 32: connections served at once, a thread each; more are refused with 503 (1..1024).
-  uint32_t max_connections = 32;
-  // Default 8: connections one client address may hold at once (1..max_connections).
-  uint32_t max_connections_per_client = 8;
-  // Default 30000: milliseconds a client has to send a whole request, and again to take its
-  // answer, however slowly it sends (1000..600000).
-  uint32_t request_timeout_ms = 30000;
+  // Default 16777216 (16 MiB): the largest body of a call of the JSON gateway (a photo for "Try
+  // it" in base64 and the rest of the request), 1024..2147483647; larger: 413 before it is read.
+  uint64_t max_body_bytes = 16u << 20;
+  // Default 33554432 (32 MiB): the bodies the gateway reads and decodes at once, all calls
+  // together (max_body_bytes..17179869184); a call that would go beyond: 503 before its body is
+  // read. The memory they take is about 4 times as much (two 16 MiB bodies: +129 MiB).
+  uint64_t max_inflight_body_bytes = 32u << 20;
+};
+
+// The metrics port (`metrics_listen`): its limits, as HttpPortConfig's with fewer connections.
+struct MetricsConfig : HttpPortConfig {
+  MetricsConfig() {
+    max_connections = 8;             // default 8 (a scraper or two, and a person with curl)
+    max_connections_per_client = 4;  // default 4
+  }
 };
 
 struct ServerConfig {
@@ -167,12 +241,14 @@ struct ServerConfig {
   // frame. 1 MiB to 2 GiB - 1 (gRPC's limit).
   uint32_t max_message_bytes = 32u << 20;
   KeepaliveConfig keepalive;  // YAML section "keepalive"
+  GrpcLimitsConfig grpc;      // YAML section "grpc"
   TlsConfig tls;              // YAML section "tls"
   // Default "": the token file (server/auth/token_auth.h); empty means no authentication.
   std::string token_file;
   // Default "127.0.0.1:9464": the Prometheus endpoint (host:port, serves /metrics); empty means
   // none.
   std::string metrics_listen = "127.0.0.1:9464";
+  MetricsConfig metrics;        // YAML section "metrics": the limits of that port
   StoreConfig store;            // YAML section "store"
   ShardConfig shard;            // YAML section "shard"
   RepositoryConfig repository;  // YAML section "repository"

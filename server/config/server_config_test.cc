@@ -64,6 +64,13 @@ TEST_F(ServerConfigTest, DefaultsAreValidAndAsDocumented) {
   EXPECT_EQ(config.keepalive.timeout_ms, 10000u);
   EXPECT_TRUE(config.keepalive.permit_without_calls);
   EXPECT_EQ(config.keepalive.min_ping_interval_ms, 10000u);
+  EXPECT_EQ(config.grpc.max_concurrent_streams, 100u);
+  EXPECT_EQ(config.grpc.memory_quota_mb, 128u);
+  EXPECT_EQ(config.grpc.pending_requests_mb, 128u);
+  EXPECT_EQ(config.grpc.decode_memory_mb, 256u);
+  EXPECT_EQ(config.grpc.max_connection_idle_ms, 300000u);
+  EXPECT_EQ(config.grpc.max_connection_age_ms, 0u);
+  EXPECT_EQ(config.grpc.reserve_descriptors, 64u);
   EXPECT_EQ(config.tls.cert, "");
   EXPECT_EQ(config.tls.key, "");
   EXPECT_EQ(config.tls.client_ca, "");
@@ -185,6 +192,15 @@ keepalive:
   timeout_ms: 5000
   permit_without_calls: false
   min_ping_interval_ms: 2000
+grpc:
+  max_concurrent_streams: 20
+  memory_quota_mb: 64
+  pending_requests_mb: 48
+  decode_memory_mb: 100
+  max_connection_idle_ms: 60000
+  max_connection_age_ms: 3600000
+  max_connection_age_grace_ms: 5000
+  reserve_descriptors: 128
 tls:
   cert: server.crt
   key: server.key
@@ -229,6 +245,14 @@ place:
   EXPECT_EQ(config->keepalive.timeout_ms, 5000u);
   EXPECT_FALSE(config->keepalive.permit_without_calls);
   EXPECT_EQ(config->keepalive.min_ping_interval_ms, 2000u);
+  EXPECT_EQ(config->grpc.max_concurrent_streams, 20u);
+  EXPECT_EQ(config->grpc.memory_quota_mb, 64u);
+  EXPECT_EQ(config->grpc.pending_requests_mb, 48u);
+  EXPECT_EQ(config->grpc.decode_memory_mb, 100u);
+  EXPECT_EQ(config->grpc.max_connection_idle_ms, 60000u);
+  EXPECT_EQ(config->grpc.max_connection_age_ms, 3600000u);
+  EXPECT_EQ(config->grpc.max_connection_age_grace_ms, 5000u);
+  EXPECT_EQ(config->grpc.reserve_descriptors, 128u);
   EXPECT_EQ(config->tls.cert, "server.crt");
   EXPECT_EQ(config->tls.key, "server.key");
   EXPECT_EQ(config->tls.client_ca, "ca.crt");
@@ -314,6 +338,36 @@ TEST_F(ServerConfigTest, UnknownKeysAreRejectedByName) {
   StatusOr<ServerConfig> place = Load("place:\n  min_features: 5\n");
   ASSERT_FALSE(place.ok());
   EXPECT_THAT(place.status().message(), HasSubstr("unknown key 'place.min_features'"));
+}
+
+TEST_F(ServerConfigTest, TheHttpPortsLimitsAreReadForTheConsoleAndTheMetrics) {
+  const ServerConfig defaults;
+  EXPECT_EQ(defaults.console.header_timeout_ms, 10000u);
+  EXPECT_EQ(defaults.console.max_body_bytes, 16u << 20);
+  EXPECT_EQ(defaults.metrics.max_connections, 8u);
+  EXPECT_EQ(defaults.metrics.max_connections_per_client, 4u);
+  EXPECT_TRUE(defaults.Validate().ok());
+  StatusOr<ServerConfig> loaded = Load(
+      "console:\n  header_timeout_ms: 2000\n  min_bytes_per_s: 0\n  max_header_lines: 50\n"
+      "  max_header_bytes: 4096\n  max_body_bytes: 1048576\n  max_inflight_body_bytes: 2097152\n"
+      "metrics:\n  hosts: [prometheus.lan]\n  max_connections: 3\n  max_connections_per_client: 1\n"
+      "  request_timeout_ms: 5000\n");
+  ASSERT_TRUE(loaded.ok()) << loaded.status().ToString();
+  EXPECT_EQ(loaded->console.header_timeout_ms, 2000u);
+  EXPECT_EQ(loaded->console.min_bytes_per_s, 0u);
+  EXPECT_EQ(loaded->console.max_header_lines, 50u);
+  EXPECT_EQ(loaded->console.max_header_bytes, 4096u);
+  EXPECT_EQ(loaded->console.max_body_bytes, 1048576u);
+  EXPECT_EQ(loaded->console.max_inflight_body_bytes, 2097152u);
+  EXPECT_EQ(loaded->metrics.hosts, std::vector<std::string>{"prometheus.lan"});
+  EXPECT_EQ(loaded->metrics.max_connections, 3u);
+  EXPECT_EQ(loaded->metrics.max_connections_per_client, 1u);
+  EXPECT_EQ(loaded->metrics.request_timeout_ms, 5000u);
+  EXPECT_EQ(loaded->metrics.header_timeout_ms, 10000u);  // the default
+  EXPECT_TRUE(loaded->Validate().ok());
+  StatusOr<ServerConfig> typo = Load("metrics:\n  listen: \"127.0.0.1:1\"\n");
+  ASSERT_FALSE(typo.ok());
+  EXPECT_THAT(typo.status().message(), HasSubstr("unknown key 'metrics.listen'"));
 }
 
 TEST_F(ServerConfigTest, TheConsoleSectionIsReadAndItsUnknownKeysRejected) {
@@ -428,7 +482,27 @@ TEST_F(ServerConfigTest, ValidateNamesTheBadField) {
       {[](ServerConfig& c) { c.console.max_connections_per_client = 0; },
        "console.max_connections_per_client"},
       {[](ServerConfig& c) { c.console.request_timeout_ms = 999; }, "console.request_timeout_ms"},
+      {[](ServerConfig& c) { c.grpc.max_concurrent_streams = 0; }, "grpc.max_concurrent_streams"},
+      {[](ServerConfig& c) { c.grpc.memory_quota_mb = 8; }, "grpc.memory_quota_mb"},
+      // Fewer pending bytes than one message of max_message_bytes (32 MiB) could never take it.
+      {[](ServerConfig& c) { c.grpc.pending_requests_mb = 31; }, "grpc.pending_requests_mb"},
+      {[](ServerConfig& c) { c.grpc.decode_memory_mb = 15; }, "grpc.decode_memory_mb"},
+      {[](ServerConfig& c) { c.grpc.max_connection_idle_ms = 999; }, "grpc.max_connection_idle_ms"},
+      {[](ServerConfig& c) { c.grpc.max_connection_age_ms = 1; }, "grpc.max_connection_age_ms"},
+      {[](ServerConfig& c) { c.grpc.reserve_descriptors = 8; }, "grpc.reserve_descriptors"},
       {[](ServerConfig& c) { c.console.hosts = {"a b"}; }, "console.hosts: 'a b'"},
+      {[](ServerConfig& c) { c.console.header_timeout_ms = 999; }, "console.header_timeout_ms"},
+      {[](ServerConfig& c) { c.console.min_bytes_per_s = (1u << 30) + 1; },
+       "console.min_bytes_per_s"},
+      {[](ServerConfig& c) { c.console.max_header_lines = 0; }, "console.max_header_lines"},
+      {[](ServerConfig& c) { c.console.max_header_bytes = 1023; }, "console.max_header_bytes"},
+      {[](ServerConfig& c) { c.console.max_body_bytes = 1000; }, "console.max_body_bytes"},
+      {[](ServerConfig& c) { c.console.max_inflight_body_bytes = (16u << 20) - 1; },
+       "console.max_inflight_body_bytes"},
+      {[](ServerConfig& c) { c.metrics.max_connections = 0; }, "metrics.max_connections"},
+      {[](ServerConfig& c) { c.metrics.max_connections_per_client = 9; },
+       "metrics.max_connections_per_client"},
+      {[](ServerConfig& c) { c.metrics.hosts = {"a/b"}; }, "metrics.hosts: 'a/b'"},
       {[](ServerConfig& c) { c.console.hosts = {""}; }, "console.hosts"},
   };
   for (const auto& [mutate, expected] : cases) {

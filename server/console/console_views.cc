@@ -33,23 +33,34 @@ StatusOr<Caller> Reader(const ServerState& state, const std::string& authorizati
   return caller;
 }
 
+// `found`, or when it was not found (or its name is malformed) "no such `what`": errors never echo
+// what a request asked for.
+template <typename T>
+StatusOr<T> Unechoed(StatusOr<T> found, const char* what) {
+  if (found.ok() || (found.status().code() != StatusCode::kNotFound &&
+                     found.status().code() != StatusCode::kInvalidArgument)) {
+    return found;
+  }
+  return Status::NotFound(std::string("no such ") + what);
+}
+
 // The place map `name`, when the caller may read it.
 StatusOr<std::shared_ptr<PlaceMap>> ReadableMap(const ServerState& state,
                                                 const std::string& authorization,
                                                 const std::string& name) {
   RECOG_ASSIGN_OR_RETURN(Caller caller, Reader(state, authorization));
-  RECOG_ASSIGN_OR_RETURN(std::shared_ptr<PlaceMap> map, state.maps->Get(name));
+  RECOG_ASSIGN_OR_RETURN(std::shared_ptr<PlaceMap> map, Unechoed(state.maps->Get(name), "map"));
   RECOG_RETURN_IF_ERROR(TokenAuthenticator::CheckMap(caller, Right::kRead, name, map->group()));
   return map;
 }
 
-// A decimal number of a path or query ("what" names it in the error).
+// A decimal number of a path or query ("what" names it in the error, which does not echo it).
 StatusOr<uint64_t> ParseNumber(const std::string& text, const char* what, uint64_t max) {
   uint64_t value = 0;
   const auto [end, error] = std::from_chars(text.data(), text.data() + text.size(), value);
   if (text.empty() || error != std::errc() || end != text.data() + text.size() || value > max) {
-    return Status::InvalidArgument(std::string(what) + " '" + text +
-                                   "' is not a number from 0 to " + std::to_string(max));
+    return Status::InvalidArgument(std::string(what) + " must be a number from 0 to " +
+                                   std::to_string(max));
   }
   return value;
 }
@@ -59,7 +70,7 @@ StatusOr<std::pair<ModelVersionInfo, ObjectModel>> ReadableModel(const ServerSta
                                                                  const std::string& authorization,
                                                                  const std::string& name) {
   RECOG_RETURN_IF_ERROR(Reader(state, authorization).status());
-  RECOG_ASSIGN_OR_RETURN(auto stored, state.repository->Get(name, 0));
+  RECOG_ASSIGN_OR_RETURN(auto stored, Unechoed(state.repository->Get(name, 0), "model"));
   RECOG_ASSIGN_OR_RETURN(ObjectModel model,
                          DecodeObjectModel(stored.second, "model '" + name + "'"));
   return std::make_pair(std::move(stored.first), std::move(model));
@@ -224,7 +235,7 @@ HttpReply ModelImageView(const ServerState& state, const std::string& authorizat
   const StatusOr<uint64_t> index = ParseNumber(index_text, "view", 1u << 20);
   if (!index.ok()) return Error(index.status());
   if (*index >= views.size() || views[*index].image_png.empty()) {
-    return Error(Status::NotFound("model '" + name + "' has no image of view " + index_text));
+    return Error(Status::NotFound("the model has no image of view " + std::to_string(*index)));
   }
   const std::vector<uint8_t>& png = views[*index].image_png;
   return {200, "image/png", std::string(png.begin(), png.end())};

@@ -1,7 +1,5 @@
 #include "server/console/request_gate.h"
 
-#include <arpa/inet.h>
-
 #include <algorithm>
 #include <cctype>
 #include <charconv>
@@ -27,49 +25,22 @@ HttpReply Refusal(int http_status, grpc::StatusCode code, const std::string& mes
   return reply;
 }
 
-// The host of a Host header value ("name:port", "[v6]:port", "name"), lower case; nullopt when
-// malformed.
-std::optional<std::string> HostOf(const std::string& authority) {
-  if (authority.empty()) return std::nullopt;
-  std::string host;
-  if (authority.front() == '[') {
-    const size_t close = authority.find(']');
-    if (close == std::string::npos) return std::nullopt;
-    host = authority.substr(0, close + 1);
-    const std::string rest = authority.substr(close + 1);
-    if (!rest.empty() && rest.front() != ':') return std::nullopt;
-  } else {
-    host = authority.substr(0, authority.find(':'));
-  }
-  return Lower(host);
-}
-
-bool IsIpLiteral(const std::string& host) {
-  unsigned char address[16];
-  if (host.size() > 2 && host.front() == '[' && host.back() == ']') {
-    return inet_pton(AF_INET6, host.substr(1, host.size() - 2).c_str(), address) == 1;
-  }
-  return inet_pton(AF_INET, host.c_str(), address) == 1;
+// Whether `content_type` is application/json, with parameters (charset) or none.
+bool IsJsonType(const std::string& content_type) {
+  const std::string type = Lower(content_type.substr(0, content_type.find(';')));
+  const size_t first = type.find_first_not_of(" \t"), last = type.find_last_not_of(" \t");
+  return first != std::string::npos && type.substr(first, last - first + 1) == "application/json";
 }
 
 }  // namespace
 
-RequestGate::RequestGate(std::vector<std::string> hosts, bool https, size_t max_body_bytes,
+RequestGate::RequestGate(const std::vector<std::string>& hosts, bool https, size_t max_body_bytes,
                          const TokenAuthenticator* auth)
-    : https_(https), max_body_bytes_(max_body_bytes), auth_(auth) {
-  for (std::string& host : hosts) hosts_.push_back(Lower(std::move(host)));
-}
-
-bool RequestGate::AcceptsHost(const std::string& host) const {
-  // A rebinding page reaches the console through a name of its own; an address cannot be rebound.
-  return IsIpLiteral(host) || host == "localhost" ||
-         std::find(hosts_.begin(), hosts_.end(), host) != hosts_.end();
-}
+    : hosts_(hosts), https_(https), max_body_bytes_(max_body_bytes), auth_(auth) {}
 
 std::optional<HttpReply> RequestGate::Check(const httplib::Request& request) const {
-  const std::string authority = request.get_header_value("Host");
-  const std::optional<std::string> host = HostOf(authority);
-  if (request.get_header_value_count("Host") != 1 || !host.has_value() || !AcceptsHost(*host)) {
+  if (request.get_header_value_count("Host") != 1 ||
+      !hosts_.AcceptsHeader(request.get_header_value("Host"))) {
     return Refusal(403, grpc::StatusCode::PERMISSION_DENIED,
                    "the console answers to its addresses, localhost and the names of "
                    "console.hosts, not to the Host of this request");
@@ -140,7 +111,7 @@ std::optional<HttpReply> RequestGate::CheckApi(const httplib::Request& request) 
   if (request.method != "POST" || !request.path.starts_with(kRpcPrefix)) return std::nullopt;
   // Only JSON bodies: another site's page can send a form or text/plain to this address without
   // asking, but not application/json (the browser asks first, and the console answers no CORS).
-  if (!request.get_header_value("Content-Type").starts_with("application/json")) {
+  if (!IsJsonType(request.get_header_value("Content-Type"))) {
     return Refusal(415, grpc::StatusCode::INVALID_ARGUMENT,
                    "the body must be JSON sent as Content-Type: application/json");
   }

@@ -10,7 +10,6 @@
 #include "core/common/file_io.h"
 #include "core/common/text.h"
 #include "server/console/console_views.h"
-#include "server/console/guarded_http_server.h"
 
 namespace recog::server {
 namespace {
@@ -27,21 +26,6 @@ void Send(const HttpReply& reply, httplib::Response* response) {
   response->set_header("Cache-Control", "no-store");
   for (const auto& [name, value] : reply.headers) response->set_header(name.c_str(), value);
   response->set_content(reply.body, reply.content_type.c_str());
-}
-
-// "host:port" (or "[v6]:port") into its parts; false when malformed.
-bool SplitAddress(const std::string& address, std::string* host, int* port) {
-  const size_t colon = address.rfind(':');
-  if (colon == std::string::npos || colon == 0 || colon + 1 == address.size()) return false;
-  *host = address.substr(0, colon);
-  if (host->front() == '[' && host->back() == ']') *host = host->substr(1, host->size() - 2);
-  try {
-    size_t used = 0;
-    *port = std::stoi(address.substr(colon + 1), &used);
-    return used == address.size() - colon - 1 && *port >= 0 && *port <= 65535;
-  } catch (const std::exception&) {
-    return false;
-  }
 }
 
 // The content of the page's inline import map, which the policy must allow by its hash.
@@ -65,7 +49,7 @@ std::string ScriptHash(const std::string& text) {
 
 // Sent with every answer: scripts, styles and everything else from the console itself (the page's
 // import map by its hash), never framed, types never sniffed, no referrer.
-httplib::Headers SecurityHeaders(const std::string& index_html) {
+HeaderList SecurityHeaders(const std::string& index_html) {
   std::string scripts = "'self'";
   if (const std::string map = InlineImportMap(index_html); !map.empty()) {
     scripts += " " + ScriptHash(map);
@@ -101,17 +85,8 @@ std::string DefaultConsoleWebRoot() {
 WebConsole::WebConsole(ServerState* state, std::shared_ptr<grpc::Channel> channel)
     : state_(state),
       gateway_(std::move(channel)),
-      live_([state] { return state->metrics.ReadTotals(); }, kLiveInterval, kLiveSamples) {}
-
-WebConsole::~WebConsole() {
-  if (!thread_.joinable()) return;
-  // stop() reaches the listening thread only once it listens: until it has stopped, ask again.
-  while (!stopped_) {
-    http_->stop();
-    std::this_thread::sleep_for(std::chrono::milliseconds(5));
-  }
-  thread_.join();
-}
+      live_([state] { return state->metrics.ReadTotals(); }, kLiveInterval, kLiveSamples),
+      body_budget_(state->config.console.max_inflight_body_bytes) {}
 
 StatusOr<std::unique_ptr<WebConsole>> WebConsole::Start(ServerState* state,
                                                         std::shared_ptr<grpc::Channel> channel) {
@@ -123,49 +98,31 @@ StatusOr<std::unique_ptr<WebConsole>> WebConsole::Start(ServerState* state,
   if (!index_html.ok()) {
     return Status::NotFound("console.web_root '" + web_root + "' has no readable index.html");
   }
-  std::string host;
-  int port = 0;
-  if (!SplitAddress(config.console.listen, &host, &port)) {
-    return Status::InvalidArgument("console.listen '" + config.console.listen +
-                                   "' is not host:port");
-  }
   std::unique_ptr<WebConsole> console(new WebConsole(state, std::move(channel)));
-  const ConnectionLimits limits{
-      .max_connections = config.console.max_connections,
-      .max_connections_per_client = config.console.max_connections_per_client,
-      .request_timeout = std::chrono::milliseconds(config.console.request_timeout_ms)};
   const HttpsFiles https{config.tls.cert, config.tls.key, config.tls.client_ca};
-  console->http_ = MakeGuardedHttpServer(limits, config.tls.cert.empty() ? nullptr : &https);
-  httplib::Server& http = *console->http_;
-  if (!http.is_valid()) {
+  const HeaderList security = SecurityHeaders(*index_html);
+  std::unique_ptr<httplib::Server> http = MakeGuardedHttpServer(
+      LimitsOf(config.console), config.tls.cert.empty() ? nullptr : &https, security);
+  if (!http->is_valid()) {
     return Status::FailedPrecondition("the console cannot use the TLS files " + config.tls.cert +
                                       " and " + config.tls.key);
   }
-  // A frame as JSON: its bytes in base64 (4/3) and the rest of the request.
   console->gate_.emplace(config.console.hosts, !config.tls.cert.empty(),
-                         size_t(config.max_message_bytes) / 3 * 4 + (64 << 10), &state->auth);
+                         config.console.max_body_bytes, &state->auth);
   console->files_.AddFolder("/static", web_root);
   console->files_.AddFolder("/vendor/three", config.console.vendor_dir + "/three");
   console->files_.AddFolder("/vendor/chart.js", config.console.vendor_dir + "/chart.js");
-  http.set_default_headers(SecurityHeaders(*index_html));
-  console->AddRoutes();
-  console->port_ = port == 0 ? http.bind_to_any_port(host) : port;
-  if (console->port_ <= 0 || (port != 0 && !http.bind_to_port(host, port))) {
-    return Status::Unavailable("the console cannot listen on " + config.console.listen +
-                               " (address in use, or not an address of this machine)");
-  }
-  console->thread_ = std::thread([&http, console = console.get()] {
-    http.listen_after_bind();
-    console->stopped_ = true;
-  });
-  console->url_ = std::string(config.tls.cert.empty() ? "http" : "https") + "://" + host + ":" +
-                  std::to_string(console->port_) + "/";
+  http->set_default_headers(httplib::Headers(security.begin(), security.end()));
+  console->AddRoutes(*http);
+  RECOG_ASSIGN_OR_RETURN(console->port_,
+                         HttpPort::Listen(std::move(http), config.console.listen, "the console"));
+  console->url_ = std::string(config.tls.cert.empty() ? "http" : "https") + "://" +
+                  console->port_->host() + ":" + std::to_string(console->port_->port()) + "/";
   spdlog::info("console on {} ({} files)", console->url_, console->files_.size());
   return console;
 }
 
-void WebConsole::AddRoutes() {
-  httplib::Server& http = *http_;
+void WebConsole::AddRoutes(httplib::Server& http) {
   ServerState& state = *state_;
   // Before routing, before any body is read: the gate's refusals close the connection.
   http.set_pre_routing_handler(
@@ -182,15 +139,49 @@ void WebConsole::AddRoutes() {
   });
   http.Get(R"(/(static|vendor)/.+)",
            [this](const httplib::Request& request, httplib::Response& response) {
-             Send(StaticFileReply(files_, request.path), &response);
+             HttpReply reply = StaticFileReply(files_, request.path);
+             // cpp-httplib cuts the answer to a Range (the guard left one at most).
+             if (reply.status == 200 && request.ranges.size() == 1) reply.status = 206;
+             Send(reply, &response);
            });
   http.Get("/api/whoami", [&state](const httplib::Request& request, httplib::Response& response) {
     Send(WhoAmIView(state, Authorization(request)), &response);
   });
-  http.Post(R"(/api/rpc/([A-Za-z0-9_.]+/[A-Za-z0-9_]+))", [this](const httplib::Request& request,
-                                                                 httplib::Response& response) {
-    Send(gateway_.Call(request.matches[1].str(), request.body, Authorization(request)), &response);
-  });
+  // The body is read here, once its bytes fit in the gateway's budget (the gate has checked its
+  // Content-Length), so that no more than the budget is ever read and decoded at once.
+  http.Post(
+      R"(/api/rpc/([A-Za-z0-9_.]+/[A-Za-z0-9_]+))",
+      [this](const httplib::Request& request, httplib::Response& response,
+             const httplib::ContentReader& read) {
+        const uint64_t length = request.get_header_value<uint64_t>("Content-Length");
+        const std::optional<ByteBudget::Reservation> reserved = body_budget_.Reserve(length);
+        if (!reserved.has_value()) {
+          HttpReply busy =
+              ErrorReply({grpc::StatusCode::UNAVAILABLE,
+                          "the console is decoding as many request bodies as it may at once (" +
+                              std::to_string(body_budget_.total()) + " bytes); retry later"});
+          busy.headers = {{"Retry-After", "1"}, {"Connection", "close"}};
+          Send(busy, &response);
+          CloseConnectionAfterResponse();  // the body was not read
+          return;
+        }
+        std::string body;
+        body.reserve(length);
+        const bool whole = read([&](const char* data, size_t size) {
+          if (size > length - body.size()) return false;
+          body.append(data, size);
+          return true;
+        });
+        if (!whole || body.size() != length) {
+          HttpReply cut = ErrorReply(
+              {grpc::StatusCode::INVALID_ARGUMENT, "the body did not arrive whole, or in time"});
+          cut.headers = {{"Connection", "close"}};
+          Send(cut, &response);
+          CloseConnectionAfterResponse();
+          return;
+        }
+        Send(gateway_.Call(request.matches[1].str(), body, Authorization(request)), &response);
+      });
   http.Get("/api/maps",
            [this, &state](const httplib::Request& request, httplib::Response& response) {
              Send(MapsView(state, gateway_, Authorization(request)), &response);

@@ -10,20 +10,21 @@
 //   /api/live, /api/whoami   the views the gRPC API has no call for (docs/server.md, "Console")
 // Every request passes the RequestGate first (its Host and Origin, its body's size and framing,
 // the Authorization header, and for the gateway's calls the token, all before a body is read);
-// files are served by exact name (StaticFiles); connections have deadlines and a cap
-// (MakeGuardedHttpServer). Every /api/ view authenticates with the server's tokens and needs the
-// read right (and the map's, for a map's views); the gateway's calls check their own right as any
-// gRPC call does, so a read-only token cannot change anything. Answers that fail are
+// a gateway call's body is read only once it fits in the bytes the gateway decodes at once
+// (console.max_inflight_body_bytes; 503 otherwise). Files are served by exact name
+// (StaticFiles), a Range of one byte range answered 206; connections have deadlines, limits on
+// their headers and a cap (MakeGuardedHttpServer, server/http/). Every /api/ view authenticates
+// with the server's tokens and needs the read right (and the map's, for a map's views); the
+// gateway's calls check their own right as any gRPC call does, so a read-only token cannot change
+// anything. Answers that fail are
 // {"code", "message"} with the HTTP status of the gRPC code; a handler that throws answers 500.
 // Every answer carries a Content-Security-Policy (no framing, scripts of the console only),
 // X-Content-Type-Options: nosniff and X-Frame-Options: DENY.
 #pragma once
 
-#include <atomic>
 #include <memory>
 #include <optional>
 #include <string>
-#include <thread>
 
 #include <grpcpp/grpcpp.h>
 
@@ -32,11 +33,9 @@
 #include "server/console/request_gate.h"
 #include "server/console/rpc_gateway.h"
 #include "server/console/static_files.h"
+#include "server/http/guarded_http_server.h"
+#include "server/runtime/byte_budget.h"
 #include "server/services/server_state.h"
-
-namespace httplib {
-class Server;
-}
 
 namespace recog::server {
 
@@ -48,27 +47,25 @@ class WebConsole {
   // address, FAILED_PRECONDITION when the TLS files cannot be used.
   static StatusOr<std::unique_ptr<WebConsole>> Start(ServerState* state,
                                                      std::shared_ptr<grpc::Channel> channel);
-  ~WebConsole();  // stops serving: requests in flight finish first
+  ~WebConsole() = default;  // stops serving: requests in flight finish first
   WebConsole(const WebConsole&) = delete;
   WebConsole& operator=(const WebConsole&) = delete;
 
-  int port() const { return port_; }
+  int port() const { return port_->port(); }
   // Where a browser opens it: "http://HOST:PORT/" ("https://" with the server's TLS files).
   const std::string& url() const { return url_; }
 
  private:
   WebConsole(ServerState* state, std::shared_ptr<grpc::Channel> channel);
-  void AddRoutes();
+  void AddRoutes(httplib::Server& http);
 
   ServerState* state_;
   RpcGateway gateway_;
   LiveSampler live_;
   std::optional<RequestGate> gate_;  // set by Start
   StaticFiles files_;
-  std::unique_ptr<httplib::Server> http_;
-  std::thread thread_;
-  std::atomic<bool> stopped_{false};  // the thread has left listen_after_bind
-  int port_ = 0;
+  ByteBudget body_budget_;  // of the gateway's calls
+  std::unique_ptr<HttpPort> port_;
   std::string url_;
 };
 

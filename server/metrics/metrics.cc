@@ -2,7 +2,6 @@
 
 #include <prometheus/collectable.h>
 #include <prometheus/counter.h>
-#include <prometheus/exposer.h>
 #include <prometheus/family.h>
 #include <prometheus/gauge.h>
 #include <prometheus/histogram.h>
@@ -14,7 +13,12 @@
 #include <filesystem>
 #include <utility>
 
+#include <httplib.h>
+
 #include "recog_build_info.h"
+#include "server/config/server_config.h"
+#include "server/http/guarded_http_server.h"
+#include "server/http/host_header.h"
 
 namespace recog::server {
 namespace {
@@ -148,7 +152,7 @@ ServerMetrics::ServerMetrics()
       .Set(1.0);
 }
 
-// The exposer stops serving before the registry goes away.
+// The endpoint stops serving before the registry goes away.
 ServerMetrics::~ServerMetrics() = default;
 
 ServerMetrics::FinishedSeries ServerMetrics::FindFinished(std::string_view method,
@@ -311,30 +315,66 @@ void ServerMetrics::StreamClosed(std::string_view rpc) {
 void ServerMetrics::WatchDisk(const std::string& path) { disk_->Watch(path); }
 
 Status ServerMetrics::StartHttp(const std::string& listen_address) {
+  return StartHttp(listen_address, MetricsConfig());
+}
+
+Status ServerMetrics::StartHttp(const std::string& listen_address, const HttpPortConfig& port) {
   if (listen_address.empty()) {
     return Status::InvalidArgument("the metrics endpoint needs an address (host:port)");
   }
-  std::lock_guard lock(exposer_mutex_);
-  if (exposer_ != nullptr) {
+  std::lock_guard lock(http_mutex_);
+  if (http_ != nullptr) {
     return Status::FailedPrecondition("the metrics endpoint is already serving");
   }
-  try {
-    auto exposer = std::make_unique<prometheus::Exposer>(listen_address, /*num_threads=*/2);
-    exposer->RegisterCollectable(registry_);
-    exposer->RegisterCollectable(disk_);
-    exposer_ = std::move(exposer);
-  } catch (const std::exception& e) {
-    return Status::Unavailable("cannot serve metrics on '" + listen_address +
-                               "' (port in use or address not local?): " + e.what());
-  }
+  const HeaderList headers = {{"X-Content-Type-Options", "nosniff"}};
+  std::unique_ptr<httplib::Server> http = MakeGuardedHttpServer(LimitsOf(port), nullptr, headers);
+  http->set_default_headers(httplib::Headers(headers.begin(), headers.end()));
+  // Before routing, before any body: the wrong host, method or a body close the connection.
+  http->set_pre_routing_handler([hosts = HostAllowList(port.hosts)](const httplib::Request& request,
+                                                                    httplib::Response& response) {
+    const auto refuse = [&](int status, const char* message) {
+      response.status = status;
+      response.set_header("Connection", "close");
+      response.set_content(message, "text/plain; charset=utf-8");
+      CloseConnectionAfterResponse();
+      return httplib::Server::HandlerResponse::Handled;
+    };
+    if (request.get_header_value_count("Host") != 1 ||
+        !hosts.AcceptsHeader(request.get_header_value("Host"))) {
+      return refuse(403,
+                    "the metrics answer to their addresses, localhost and the names of "
+                    "metrics.hosts, not to the Host of this request\n");
+    }
+    if (request.method != "GET" && request.method != "HEAD") {
+      return refuse(405, "the metrics answer GET and HEAD only\n");
+    }
+    if (request.has_header("Transfer-Encoding") ||
+        request.get_header_value<uint64_t>("Content-Length") > 0) {
+      return refuse(400, "a request for the metrics has no body\n");
+    }
+    return httplib::Server::HandlerResponse::Unhandled;
+  });
+  http->Get("/metrics", [this](const httplib::Request&, httplib::Response& response) {
+    response.set_header("Cache-Control", "no-store");
+    response.set_content(Serialize(), "text/plain; version=0.0.4; charset=utf-8");
+  });
+  http->set_error_handler([](const httplib::Request&, httplib::Response& response) {
+    if (response.body.empty()) {
+      response.set_content(
+          response.status == 404 ? "the metrics are at /metrics\n" : "the request is malformed\n",
+          "text/plain; charset=utf-8");
+    }
+  });
+  StatusOr<std::unique_ptr<::recog::server::HttpPort>> listening =
+      ::recog::server::HttpPort::Listen(std::move(http), listen_address, "the metrics endpoint");
+  if (!listening.ok()) return listening.status();
+  http_ = std::move(listening).value();
   return Status::Ok();
 }
 
 int ServerMetrics::HttpPort() const {
-  std::lock_guard lock(exposer_mutex_);
-  if (exposer_ == nullptr) return 0;
-  const std::vector<int> ports = exposer_->GetListeningPorts();
-  return ports.empty() ? 0 : ports.front();
+  std::lock_guard lock(http_mutex_);
+  return http_ == nullptr ? 0 : http_->port();
 }
 
 std::string ServerMetrics::Serialize() const {

@@ -40,10 +40,12 @@
 //   grpc_server_msg_sent_total                 counter: response messages sent
 // A finished call is recorded once, by ObserveRpc, in both recog_rpc_duration_seconds and the
 // grpc_server_handled_total / grpc_server_handling_seconds pair.
-// StartHttp serves them as text on http://<listen_address>/metrics; Serialize returns the same
-// text. Every method is thread-safe; ObserveRpc, RpcStarted, MessageReceived and MessageSent, on
-// every call's path, take a shared lock and allocate nothing once a (method, code) pair has been
-// seen. No method throws.
+// StartHttp serves them as text on http://<listen_address>/metrics (Serialize's text), through
+// the guarded HTTP server of server/http/ (its deadlines, header limits and connection caps, as
+// MetricsConfig sets them) and only to a Host that is an IP address, localhost or a name of
+// `metrics.hosts` (403 otherwise: DNS rebinding). Every method is thread-safe; ObserveRpc,
+// RpcStarted, MessageReceived and MessageSent, on every call's path, take a shared lock and
+// allocate nothing once a (method, code) pair has been seen. No method throws.
 #pragma once
 
 #include <cstdint>
@@ -61,7 +63,6 @@
 namespace prometheus {
 class Collectable;
 class Counter;
-class Exposer;
 class Gauge;
 class Histogram;
 class Registry;
@@ -70,6 +71,9 @@ class Family;
 }  // namespace prometheus
 
 namespace recog::server {
+
+class HttpPort;
+struct HttpPortConfig;
 
 enum class FrameKind {
   kPlace,   // a frame given to a place map (loop detection, query, keyframe)
@@ -136,11 +140,13 @@ class ServerMetrics {
   void StreamClosed(std::string_view rpc);
 
   // Serves the metrics on http://<listen_address>/metrics ("127.0.0.1:9464"; port 0 picks a free
-  // port, see HttpPort) from two background threads until the object is destroyed; destruction
-  // then waits up to 2 s for civetweb's listener thread to notice.
-  // INVALID_ARGUMENT for an empty address, FAILED_PRECONDITION when already serving, UNAVAILABLE
-  // when the address cannot be bound (port in use, no such interface).
+  // port, see HttpPort) with the limits of `port` (MetricsConfig's defaults when not given), from
+  // background threads until the object is destroyed. GET and HEAD of /metrics only (other paths
+  // 404, other methods 405, a body 400).
+  // INVALID_ARGUMENT for an empty or malformed address, FAILED_PRECONDITION when already serving,
+  // UNAVAILABLE when the address cannot be bound (port in use, no such interface).
   Status StartHttp(const std::string& listen_address);
+  Status StartHttp(const std::string& listen_address, const HttpPortConfig& port);
   // The port StartHttp bound, 0 before.
   int HttpPort() const;
 
@@ -173,7 +179,7 @@ class ServerMetrics {
 
   std::shared_ptr<prometheus::Registry> registry_;
   std::shared_ptr<DiskSpace> disk_;
-  std::unique_ptr<prometheus::Exposer> exposer_;  // null until StartHttp succeeds
+  std::unique_ptr<::recog::server::HttpPort> http_;  // null until StartHttp succeeds
 
   prometheus::Family<prometheus::Histogram>* rpc_duration_;
   prometheus::Family<prometheus::Gauge>* map_entries_;
@@ -225,7 +231,7 @@ class ServerMetrics {
   StringMap<StringMap<prometheus::Histogram*>> rpc_histograms_;
   StringMap<GrpcSeries> grpc_series_;
   std::mutex map_mutex_;  // makes RemoveMap's find-and-remove atomic with SetMapEntries
-  mutable std::mutex exposer_mutex_;
+  mutable std::mutex http_mutex_;
 };
 
 }  // namespace recog::server

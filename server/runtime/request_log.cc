@@ -13,17 +13,18 @@ bool RequestLog::ValidRequestId(std::string_view request_id) {
                      [](char c) { return c >= ' ' && c <= '~'; });
 }
 
-RequestLog::Claim RequestLog::Begin(const std::string& key, Clock::time_point now,
-                                    Clock::time_point wait_until) {
+RequestLog::Claim RequestLog::Begin(const std::string& key, const std::string& digest,
+                                    Clock::time_point now, Clock::time_point wait_until) {
   if (capacity_ == 0) return {};
   std::unique_lock lock(mutex_);
   ExpireLocked(now);
   for (;;) {
     const auto it = entries_.find(key);
     if (it == entries_.end()) {
-      entries_.emplace(key, Entry{});
+      entries_[key].digest = digest;
       return {};
     }
+    if (it->second.digest != digest) return {Claim::Kind::kConflict, {}};
     if (!it->second.running) return {Claim::Kind::kRepeat, it->second.answer};
     if (ended_.wait_until(lock, wait_until) == std::cv_status::timeout && entries_.contains(key) &&
         entries_.at(key).running) {

@@ -2,13 +2,18 @@
 // a call sent again (a retry after a lost answer) is answered with the first call's result
 // instead of being applied twice.
 //
-// Callers compose the key (the server uses caller, method and request id). The contract:
+// Callers compose the key (the server uses caller, method and request id) and pass a digest of
+// the request beside it, so that a key reused for another request is told apart from a repeat.
+// The contract:
 //  - Begin(key) says kRun for a key it does not hold: the caller runs the call and then calls
 //    End(key, answer) exactly once. A successful call's answer (the serialised response) is
 //    remembered for `window` after End; a failed call's is not (nullopt), so a repeat of a failed
 //    call runs again.
 //  - Begin(key) of a remembered key says kRepeat with the stored answer: the caller answers with
 //    it and changes nothing.
+//  - Begin(key) with another digest than the call that holds the key (running or remembered)
+//    says kConflict at once: the client reused its request id for a different request, which
+//    must neither run as a repeat nor be answered with another request's answer.
 //  - Begin(key) while another call with the key runs waits for that call to end (until
 //    `wait_until`): then kRepeat with its answer, or kRun when it failed, or kTimedOut when it
 //    was still running at `wait_until`. So a duplicate never runs beside the first.
@@ -42,6 +47,7 @@ class RequestLog {
       kRun,       // run the call, then End(key, ...)
       kRepeat,    // answer with `answer`, change nothing
       kTimedOut,  // a call with the same key was still running at wait_until
+      kConflict,  // the key is held by a different request (another digest)
     };
     Kind kind = Kind::kRun;
     std::string answer;  // kRepeat: the stored answer
@@ -53,8 +59,10 @@ class RequestLog {
   // characters (space to '~').
   static bool ValidRequestId(std::string_view request_id);
 
-  // See the header comment. `now` is the time of the call; waiting uses the steady clock.
-  Claim Begin(const std::string& key, Clock::time_point now, Clock::time_point wait_until);
+  // See the header comment. `digest` identifies the request's content; `now` is the time of the
+  // call; waiting uses the steady clock.
+  Claim Begin(const std::string& key, const std::string& digest, Clock::time_point now,
+              Clock::time_point wait_until);
   // Ends the call that Begin(key) let run: remembers `answer` from `now` (nullopt: the call
   // failed, nothing is remembered) and wakes the duplicates waiting for it.
   void End(const std::string& key, std::optional<std::string> answer, Clock::time_point now);
@@ -65,6 +73,7 @@ class RequestLog {
  private:
   struct Entry {
     bool running = true;
+    std::string digest;  // of the request that holds the key
     std::string answer;
     Clock::time_point stored_at;
     std::list<std::string>::iterator order;  // in order_, once stored

@@ -1,5 +1,6 @@
-// RequestLog: answers remembered and repeated, failures forgotten, expiry, the entry bound, the
-// request id rule, and a concurrent duplicate waiting for the first call.
+// RequestLog: answers remembered and repeated, keys reused for other requests refused, failures
+// forgotten, expiry, the entry bound, the request id rule, and a concurrent duplicate waiting for
+// the first call.
 #include "server/runtime/request_log.h"
 
 #include <atomic>
@@ -16,53 +17,67 @@ using Kind = RequestLog::Claim::Kind;
 using Clock = RequestLog::Clock;
 
 const Clock::time_point kLogStart{};
+const std::string kDigest = "digest of the request";
 
 TEST(RequestLogTest, ASuccessfulAnswerIsRepeatedForTheSameKeyOnly) {
   RequestLog log(10);
-  EXPECT_EQ(log.Begin("a", kLogStart, kLogStart).kind, Kind::kRun);
+  EXPECT_EQ(log.Begin("a", kDigest, kLogStart, kLogStart).kind, Kind::kRun);
   log.End("a", "answer a", kLogStart);
-  const RequestLog::Claim repeat = log.Begin("a", kLogStart + minutes(1), kLogStart);
+  const RequestLog::Claim repeat = log.Begin("a", kDigest, kLogStart + minutes(1), kLogStart);
   EXPECT_EQ(repeat.kind, Kind::kRepeat);
   EXPECT_EQ(repeat.answer, "answer a");
-  EXPECT_EQ(log.Begin("b", kLogStart, kLogStart).kind, Kind::kRun);
+  EXPECT_EQ(log.Begin("b", kDigest, kLogStart, kLogStart).kind, Kind::kRun);
   EXPECT_EQ(log.size(), 1u);
+}
+
+TEST(RequestLogTest, AKeyReusedForAnotherRequestIsAConflictNotARepeat) {
+  RequestLog log(10);
+  ASSERT_EQ(log.Begin("a", kDigest, kLogStart, kLogStart).kind, Kind::kRun);
+  // While the first call runs: no waiting for it, no running beside it.
+  EXPECT_EQ(log.Begin("a", "another request", kLogStart, kLogStart + minutes(1)).kind,
+            Kind::kConflict);
+  log.End("a", "answer a", kLogStart);
+  const RequestLog::Claim reused = log.Begin("a", "another request", kLogStart, kLogStart);
+  EXPECT_EQ(reused.kind, Kind::kConflict);
+  EXPECT_TRUE(reused.answer.empty());  // never another request's answer
+  EXPECT_EQ(log.Begin("a", kDigest, kLogStart, kLogStart).kind, Kind::kRepeat);
 }
 
 TEST(RequestLogTest, AFailedCallIsForgottenSoItsRepeatRunsAgain) {
   RequestLog log(10);
-  ASSERT_EQ(log.Begin("a", kLogStart, kLogStart).kind, Kind::kRun);
+  ASSERT_EQ(log.Begin("a", kDigest, kLogStart, kLogStart).kind, Kind::kRun);
   log.End("a", std::nullopt, kLogStart);
-  EXPECT_EQ(log.Begin("a", kLogStart, kLogStart).kind, Kind::kRun);
+  EXPECT_EQ(log.Begin("a", kDigest, kLogStart, kLogStart).kind, Kind::kRun);
   EXPECT_EQ(log.size(), 0u);
 }
 
 TEST(RequestLogTest, AnswersExpireAfterTheWindow) {
   RequestLog log(10, minutes(10));
-  ASSERT_EQ(log.Begin("a", kLogStart, kLogStart).kind, Kind::kRun);
+  ASSERT_EQ(log.Begin("a", kDigest, kLogStart, kLogStart).kind, Kind::kRun);
   log.End("a", "x", kLogStart);
-  EXPECT_EQ(log.Begin("a", kLogStart + minutes(10) - milliseconds(1), kLogStart).kind,
+  EXPECT_EQ(log.Begin("a", kDigest, kLogStart + minutes(10) - milliseconds(1), kLogStart).kind,
             Kind::kRepeat);
-  EXPECT_EQ(log.Begin("a", kLogStart + minutes(10), kLogStart).kind, Kind::kRun);
+  EXPECT_EQ(log.Begin("a", kDigest, kLogStart + minutes(10), kLogStart).kind, Kind::kRun);
   EXPECT_EQ(log.size(), 0u);
 }
 
 TEST(RequestLogTest, TheOldestAnswersAreForgottenBeyondTheCapacity) {
   RequestLog log(2);
   for (const char* key : {"a", "b", "c"}) {
-    ASSERT_EQ(log.Begin(key, kLogStart, kLogStart).kind, Kind::kRun);
+    ASSERT_EQ(log.Begin(key, kDigest, kLogStart, kLogStart).kind, Kind::kRun);
     log.End(key, key, kLogStart);
   }
   EXPECT_EQ(log.size(), 2u);
-  EXPECT_EQ(log.Begin("b", kLogStart, kLogStart).kind, Kind::kRepeat);
-  EXPECT_EQ(log.Begin("c", kLogStart, kLogStart).kind, Kind::kRepeat);
-  EXPECT_EQ(log.Begin("a", kLogStart, kLogStart).kind, Kind::kRun);  // forgotten
+  EXPECT_EQ(log.Begin("b", kDigest, kLogStart, kLogStart).kind, Kind::kRepeat);
+  EXPECT_EQ(log.Begin("c", kDigest, kLogStart, kLogStart).kind, Kind::kRepeat);
+  EXPECT_EQ(log.Begin("a", kDigest, kLogStart, kLogStart).kind, Kind::kRun);  // forgotten
 }
 
 TEST(RequestLogTest, CapacityZeroRemembersNothing) {
   RequestLog log(0);
-  ASSERT_EQ(log.Begin("a", kLogStart, kLogStart).kind, Kind::kRun);
+  ASSERT_EQ(log.Begin("a", kDigest, kLogStart, kLogStart).kind, Kind::kRun);
   log.End("a", "x", kLogStart);
-  EXPECT_EQ(log.Begin("a", kLogStart, kLogStart).kind, Kind::kRun);
+  EXPECT_EQ(log.Begin("a", kDigest, kLogStart, kLogStart).kind, Kind::kRun);
   EXPECT_EQ(log.size(), 0u);
 }
 
@@ -80,11 +95,11 @@ TEST(RequestLogTest, RequestIdsAreOneTo128PrintableCharacters) {
 
 TEST(RequestLogTest, AConcurrentDuplicateWaitsForTheFirstCallAndGetsItsAnswer) {
   RequestLog log(10);
-  ASSERT_EQ(log.Begin("a", Clock::now(), Clock::now()).kind, Kind::kRun);
+  ASSERT_EQ(log.Begin("a", kDigest, Clock::now(), Clock::now()).kind, Kind::kRun);
   std::atomic<bool> ended{false};
   RequestLog::Claim duplicate;
   std::thread waiter([&] {
-    duplicate = log.Begin("a", Clock::now(), Clock::now() + std::chrono::seconds(30));
+    duplicate = log.Begin("a", kDigest, Clock::now(), Clock::now() + std::chrono::seconds(30));
     EXPECT_TRUE(ended.load());  // it returned only after End
   });
   std::this_thread::sleep_for(milliseconds(50));
@@ -97,17 +112,19 @@ TEST(RequestLogTest, AConcurrentDuplicateWaitsForTheFirstCallAndGetsItsAnswer) {
 
 TEST(RequestLogTest, ADuplicateOfAFailedCallRunsItselfAndOneStillRunningTimesOut) {
   RequestLog log(10);
-  ASSERT_EQ(log.Begin("a", Clock::now(), Clock::now()).kind, Kind::kRun);
-  EXPECT_EQ(log.Begin("a", Clock::now(), Clock::now() + milliseconds(20)).kind, Kind::kTimedOut);
+  ASSERT_EQ(log.Begin("a", kDigest, Clock::now(), Clock::now()).kind, Kind::kRun);
+  EXPECT_EQ(log.Begin("a", kDigest, Clock::now(), Clock::now() + milliseconds(20)).kind,
+            Kind::kTimedOut);
   RequestLog::Claim duplicate;
-  std::thread waiter(
-      [&] { duplicate = log.Begin("a", Clock::now(), Clock::now() + std::chrono::seconds(30)); });
+  std::thread waiter([&] {
+    duplicate = log.Begin("a", kDigest, Clock::now(), Clock::now() + std::chrono::seconds(30));
+  });
   std::this_thread::sleep_for(milliseconds(50));
   log.End("a", std::nullopt, Clock::now());
   waiter.join();
   EXPECT_EQ(duplicate.kind, Kind::kRun);  // the first failed: the duplicate is the call now
   log.End("a", "second", Clock::now());
-  EXPECT_EQ(log.Begin("a", Clock::now(), Clock::now()).answer, "second");
+  EXPECT_EQ(log.Begin("a", kDigest, Clock::now(), Clock::now()).answer, "second");
 }
 
 }  // namespace

@@ -185,7 +185,7 @@ grpc::ServerUnaryReactor* AdminService::Verify(grpc::CallbackServerContext* cont
                                                const pb::VerifyRequest* request,
                                                pb::VerifyResponse* response) {
   return RunUnary(
-      state_, context, "/recognition.v1.Admin/Verify", Right::kWrite,
+      state_, context, "/recognition.v1.Admin/Verify", Right::kWrite, *request,
       [=, this](CallInfo& call, WorkerContext&) {
         RECOG_RETURN_IF_ERROR_AS_GRPC(
             TokenAuthenticator::CheckEveryMap(call.caller, Right::kWrite, "Verify"),
@@ -204,9 +204,9 @@ grpc::ServerUnaryReactor* AdminService::Verify(grpc::CallbackServerContext* cont
 }
 
 grpc::ServerUnaryReactor* AdminService::StoreStatus(grpc::CallbackServerContext* context,
-                                                    const pb::StoreStatusRequest*,
+                                                    const pb::StoreStatusRequest* request,
                                                     pb::StoreStatusResponse* response) {
-  return RunUnary(state_, context, "/recognition.v1.Admin/StoreStatus", Right::kRead,
+  return RunUnary(state_, context, "/recognition.v1.Admin/StoreStatus", Right::kRead, *request,
                   [=, this](CallInfo& call, WorkerContext&) {
                     RECOG_RETURN_IF_ERROR_AS_GRPC(
                         TokenAuthenticator::CheckEveryMap(call.caller, Right::kRead, "StoreStatus"),

@@ -5,16 +5,18 @@
 #include <cstdio>
 #include <optional>
 
+#include <google/protobuf/io/coded_stream.h>
+#include <google/protobuf/io/zero_copy_stream_impl_lite.h>
 #include <spdlog/spdlog.h>
 
 #include "core/common/elapsed.h"
 #include "core/common/text.h"
 #include "server/api/status_mapping.h"
+#include "wire/sha256.h"
 
 namespace recog::server {
 namespace {
 
-constexpr size_t kMaxRequestIdBytes = 64;  // of the x-request-id header (log correlation)
 // gRFC A6: how long (ms) gRPC's retry waits before the next attempt; negative = do not retry.
 constexpr char kPushback[] = "grpc-retry-pushback-ms";
 
@@ -35,15 +37,67 @@ std::string_view Metadata(const grpc::CallbackServerContext* context, std::strin
   return {it->second.data(), it->second.size()};
 }
 
+// `text` escaped for a log line (EscapeForLog, at most kMaxCallIdBytes), its spaces too, so that a
+// client's header cannot pass for further fields of the line ("id caller=admin").
+std::string EscapedWithoutSpaces(std::string_view text) {
+  std::string escaped;
+  for (const char c : EscapeForLog(text, kMaxCallIdBytes)) {
+    escaped += c == ' ' ? std::string("\\x20") : std::string(1, c);
+  }
+  return escaped;
+}
+
+// Feeds what protobuf serialises into a SHA-256, without a copy of the message.
+class DigestStream : public google::protobuf::io::CopyingOutputStream {
+ public:
+  explicit DigestStream(Sha256* digest) : digest_(digest) {}
+  bool Write(const void* buffer, int size) override {
+    digest_->Update({static_cast<const char*>(buffer), size_t(size)});
+    return true;
+  }
+
+ private:
+  Sha256* digest_;
+};
+
+// The SHA-256 of `request`'s deterministic serialisation: equal for equal requests.
+std::string RequestDigest(const google::protobuf::Message& request) {
+  Sha256 digest;
+  DigestStream sink(&digest);
+  {
+    google::protobuf::io::CopyingOutputStreamAdaptor adaptor(&sink);
+    google::protobuf::io::CodedOutputStream coded(&adaptor);
+    coded.SetSerializationDeterministic(true);
+    request.SerializeToCodedStream(&coded);
+  }  // flushed
+  return digest.HexDigest();
+}
+
 }  // namespace
+
+bool ValidCallId(std::string_view id) {
+  return !id.empty() && id.size() <= kMaxCallIdBytes &&
+         std::all_of(id.begin(), id.end(), [](char c) { return c > ' ' && c <= '~'; });
+}
 
 grpc::Status BeginCall(ServerState& state, grpc::CallbackServerContext* context,
                        std::string_view method, Right right, CallInfo* call) {
   call->start = std::chrono::steady_clock::now();
   call->method = std::string(method);
   const std::string_view given = Metadata(context, "x-request-id");
-  call->request_id =
-      !given.empty() && given.size() <= kMaxRequestIdBytes ? std::string(given) : MakeRequestId();
+  if (ValidCallId(given)) {
+    call->request_id = std::string(given);
+  } else {
+    call->request_id = MakeRequestId();
+    // A header gRPC let through may hold any byte; only the escaped start of it reaches the log.
+    if (!given.empty()) {
+      spdlog::info(
+          "request={} method={}: x-request-id refused ({} bytes, not 1 to {} printable "
+          "ASCII characters without spaces): \"{}\"",
+          call->request_id, call->method, given.size(), kMaxCallIdBytes,
+          EscapedWithoutSpaces(given));
+    }
+  }
   context->AddTrailingMetadata("x-request-id", call->request_id);
   StatusOr<Caller> caller = state.auth.Authenticate(Metadata(context, "authorization"));
   if (!caller.ok()) return ToGrpcStatus(caller.status(), call->request_id);
@@ -86,6 +140,10 @@ void SampleWorkerGauges(ServerState& state) {
   state.metrics.SetBusyWorkers(state.pool->busy());
 }
 
+PixelBudget CallPixelBudget(const ServerState& state) {
+  return PixelBudget(uint64_t(state.config.grpc.decode_memory_mb) << 20);
+}
+
 grpc::Status CheckStillWanted(grpc::CallbackServerContext* context) {
   // The deadline first: gRPC also marks a call whose deadline passed as cancelled.
   if (context->deadline() < std::chrono::system_clock::now()) {
@@ -117,9 +175,10 @@ grpc::Status CheckRequestId(const std::string& request_id) {
                                                   " printable ASCII characters"};
 }
 
-grpc::Status RunOnce(ServerState& state, grpc::CallbackServerContext* context, const CallInfo& call,
-                     const std::string& request_id, google::protobuf::Message* response,
+grpc::Status RunOnce(ServerState& state, grpc::CallbackServerContext* context, CallInfo& call,
+                     const Replay& replay, google::protobuf::Message* response,
                      const std::function<grpc::Status()>& work) {
+  const std::string& request_id = replay.request_id;
   if (grpc::Status checked = CheckRequestId(request_id); !checked.ok()) return checked;
   if (request_id.empty()) return work();
   // The caller's token is part of the key: one client cannot read another's answers by guessing
@@ -129,7 +188,14 @@ grpc::Status RunOnce(ServerState& state, grpc::CallbackServerContext* context, c
   // Wait for a running duplicate at most until this call's deadline (and the log's window).
   const auto left = std::min<std::chrono::system_clock::duration>(
       context->deadline() - std::chrono::system_clock::now(), RequestLog::kWindow);
-  const RequestLog::Claim claim = state.requests.Begin(key, now, now + left);
+  const RequestLog::Claim claim =
+      state.requests.Begin(key, RequestDigest(*replay.request), now, now + left);
+  if (claim.kind != RequestLog::Claim::Kind::kRun && replay.authorize != nullptr) {
+    const Status allowed = replay.authorize(call);
+    const bool gone =
+        claim.kind == RequestLog::Claim::Kind::kRepeat && allowed.code() == StatusCode::kNotFound;
+    if (!allowed.ok() && !gone) return ToGrpcStatus(allowed, call.request_id);
+  }
   switch (claim.kind) {
     case RequestLog::Claim::Kind::kRepeat:
       spdlog::info("request={} method={} request_id={}: a repeat, answered from the request log",
@@ -138,6 +204,13 @@ grpc::Status RunOnce(ServerState& state, grpc::CallbackServerContext* context, c
         return {grpc::StatusCode::INTERNAL, "the stored answer does not parse"};
       }
       return grpc::Status::OK;
+    case RequestLog::Claim::Kind::kConflict:
+      return {
+          grpc::StatusCode::INVALID_ARGUMENT,
+          "request_id was used by a different request of this caller in the last " +
+              std::to_string(
+                  std::chrono::duration_cast<std::chrono::minutes>(RequestLog::kWindow).count()) +
+              " minutes: give each new request a new request_id (nothing was applied)"};
     case RequestLog::Claim::Kind::kTimedOut:
       return {grpc::StatusCode::ABORTED,
               "a call with the same request_id is still running; its answer was not ready "
@@ -153,27 +226,45 @@ grpc::Status RunOnce(ServerState& state, grpc::CallbackServerContext* context, c
 }
 
 grpc::ServerUnaryReactor* RunUnary(ServerState& state, grpc::CallbackServerContext* context,
-                                   std::string_view method, Right right, std::string request_id,
+                                   std::string_view method, Right right, Replay replay,
                                    google::protobuf::Message* response, UnaryWork work) {
-  return RunUnary(state, context, method, right,
-                  [&state, context, request_id = std::move(request_id), response,
-                   work = std::move(work)](CallInfo& call, WorkerContext& worker) {
-                    return RunOnce(state, context, call, request_id, response,
+  const google::protobuf::Message& request = *replay.request;
+  return RunUnary(state, context, method, right, request,
+                  [&state, context, replay = std::move(replay), response, work = std::move(work)](
+                      CallInfo& call, WorkerContext& worker) {
+                    return RunOnce(state, context, call, replay, response,
                                    [&] { return work(call, worker); });
                   });
 }
 
 grpc::ServerUnaryReactor* RunUnary(ServerState& state, grpc::CallbackServerContext* context,
-                                   std::string_view method, Right right, UnaryWork work) {
+                                   std::string_view method, Right right,
+                                   const google::protobuf::Message& request, UnaryWork work) {
   grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
   auto call = std::make_shared<CallInfo>();
   grpc::Status status = BeginCall(state, context, method, right, call.get());
+  // Held until the work ends (a std::function is copyable, a reservation is not).
+  std::shared_ptr<ByteBudget::Reservation> bytes;
   if (status.ok()) {
-    const bool queued =
-        state.pool->TrySubmit([&state, context, reactor, call, work](WorkerContext& worker) {
+    std::optional<ByteBudget::Reservation> reserved =
+        state.pending_request_bytes.Reserve(request.ByteSizeLong());
+    if (reserved.has_value()) {
+      bytes = std::make_shared<ByteBudget::Reservation>(std::move(*reserved));
+    } else {
+      context->AddTrailingMetadata(kPushback, std::to_string(state.config.retry_after_ms));
+      status = {grpc::StatusCode::RESOURCE_EXHAUSTED,
+                "the server holds " + std::to_string(state.config.grpc.pending_requests_mb) +
+                    " MiB of requests not yet answered (grpc.pending_requests_mb); retry after " +
+                    std::to_string(state.config.retry_after_ms) + " ms"};
+    }
+  }
+  if (status.ok()) {
+    const bool queued = state.pool->TrySubmit(
+        [&state, context, reactor, call, work, bytes](WorkerContext& worker) mutable {
           call->queue_ms = MillisecondsSince(call->start);
           grpc::Status result = CheckStillWanted(context);
           if (result.ok()) result = Final(context, work(*call, worker));
+          bytes.reset();
           EndCall(state, *call, result);
           reactor->Finish(result);
         });

@@ -10,8 +10,14 @@ class HealthWatch final : public grpc::ServerWriteReactor<health::HealthCheckRes
   HealthWatch(HealthService& service, std::string name)
       : service_(service), name_(std::move(name)) {
     std::lock_guard service_lock(service_.mutex_);
-    service_.watches_.insert(this);
     std::lock_guard lock(mutex_);
+    if (service_.watches_.size() >= HealthService::kMaxWatches) {
+      FinishLocked({grpc::StatusCode::RESOURCE_EXHAUSTED,
+                    "too many health watches open (" + std::to_string(HealthService::kMaxWatches) +
+                        "); use Check, or retry later"});
+      return;
+    }
+    service_.watches_.insert(this);
     SendLocked(service_.StatusOfLocked(name_));
     if (service_.shut_down_) EndLocked();
   }

@@ -10,7 +10,8 @@
 // each change (SERVICE_UNKNOWN for an unknown name, as the protocol says; a watcher behind by
 // several changes gets the latest only). Shutdown() sets every status NOT_SERVING for good (Set()
 // is ignored after it) and ends each watch with UNAVAILABLE once that answer is written, so that
-// watchers do not hold the server's drain until its deadline.
+// watchers do not hold the server's drain until its deadline. At most kMaxWatches watches are
+// open at once; one more ends at once with RESOURCE_EXHAUSTED.
 #pragma once
 
 #include <map>
@@ -28,6 +29,8 @@ class HealthWatch;
 class HealthService final : public ::grpc::health::v1::Health::CallbackService {
  public:
   explicit HealthService(const std::vector<std::string>& services);
+
+  static constexpr size_t kMaxWatches = 1000;
 
   // The status of `service` (one of the known names; others are ignored) from now on.
   void Set(const std::string& service, bool serving);

@@ -25,7 +25,7 @@ Status RunRecognition(ServerState& state, WorkerContext& worker, const pb::Frame
                       google::protobuf::RepeatedPtrField<pb::DetectedObject>* out,
                       pb::Timing* timing,
                       google::protobuf::RepeatedPtrField<pb::ObjectExplanation>* explanations) {
-  PixelBudget budget;
+  PixelBudget budget = CallPixelBudget(state);
   RECOG_ASSIGN_OR_RETURN(
       DecodedFrame frame,
       DecodeFrame(request, state.objects->vocabulary().info().descriptor, budget));
@@ -104,7 +104,7 @@ grpc::ServerUnaryReactor* ObjectService::RecognizeObjects(
     grpc::CallbackServerContext* context, const pb::RecognizeObjectsRequest* request,
     pb::RecognizeObjectsResponse* response) {
   return RunUnary(
-      state_, context, ObjectMethod("RecognizeObjects"), Right::kRead,
+      state_, context, ObjectMethod("RecognizeObjects"), Right::kRead, *request,
       [=, this](CallInfo& call, WorkerContext& worker) {
         RECOG_RETURN_IF_ERROR_AS_GRPC(
             RunRecognition(state_, worker, request->frame(), FromProto(request->filter()),

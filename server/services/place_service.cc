@@ -92,6 +92,15 @@ StatusOr<std::shared_ptr<PlaceMap>> CallMap(const ServerState& state, CallInfo& 
   return map;
 }
 
+// The Replay of a mutating call on map `name`: its rights (CallMap) are checked before the request
+// log answers a repeat or refuses a reused request_id.
+Replay MapReplay(ServerState& state, std::string request_id,
+                 const google::protobuf::Message& request, std::string name, Right right) {
+  return {std::move(request_id), &request, [&state, name = std::move(name), right](CallInfo& call) {
+            return CallMap(state, call, name, right).status();
+          }};
+}
+
 // The maps a query searches besides `own` (its search_maps and search_group; PlaceMap::Query on
 // each, SearchMaps): NOT_FOUND naming an unknown map or group, PERMISSION_DENIED naming a map the
 // caller may not read, FAILED_PRECONDITION on a shard for a map or group placed elsewhere (a
@@ -182,8 +191,10 @@ Status CheckRigRequest(const PlaceMap& map, const pb::ResultOptions& options,
 Status RunRigFrame(ServerState& state, WorkerContext& worker, PlaceMap& map, FrameMode mode,
                    const pb::Frame& request, const pb::ResultOptions& options, pb::LoopResult* out,
                    pb::Timing* timing, uint32_t* num_features) {
-  RECOG_ASSIGN_OR_RETURN(PreparedRigFrame prepared,
-                         PreparedRigFrame::Prepare(request, map, PlaceExtractor(worker), timing));
+  PixelBudget budget = CallPixelBudget(state);
+  RECOG_ASSIGN_OR_RETURN(
+      PreparedRigFrame prepared,
+      PreparedRigFrame::Prepare(request, map, PlaceExtractor(worker), budget, timing));
   if (num_features != nullptr) *num_features = uint32_t(prepared.features());
   const auto start = std::chrono::steady_clock::now();
   const std::vector<uint64_t> excluded = prepared.excluded();
@@ -259,7 +270,7 @@ Status RunPlaceFrame(ServerState& state, WorkerContext& worker, PlaceMap& map, F
     RECOG_RETURN_IF_ERROR(CheckRigRequest(map, options, search));
     return RunRigFrame(state, worker, map, mode, request, options, out, timing, num_features);
   }
-  PixelBudget budget;
+  PixelBudget budget = CallPixelBudget(state);
   RECOG_ASSIGN_OR_RETURN(PreparedFrame prepared,
                          PreparedFrame::Prepare(request, map.vocabulary().info().descriptor,
                                                 PlaceExtractor(worker), budget, timing));
@@ -371,7 +382,7 @@ Status RunRelocalize(ServerState& state, WorkerContext& worker, const Caller& ca
   pb::Timing* timing = response->mutable_timing();
   std::vector<PreparedFrame> prepared;
   prepared.reserve(size_t(request.frames_size()));
-  PixelBudget budget;  // every frame's images together
+  PixelBudget budget = CallPixelBudget(state);  // every frame's images together
   const ExtractPlaceFeatures extract = PlaceExtractor(worker);
   for (int i = 0; i < request.frames_size(); ++i) {
     StatusOr<PreparedFrame> frame = PreparedFrame::Prepare(
@@ -407,8 +418,12 @@ Status RunRelocalize(ServerState& state, WorkerContext& worker, const Caller& ca
 grpc::ServerUnaryReactor* PlaceService::CreateMap(grpc::CallbackServerContext* context,
                                                   const pb::CreateMapRequest* request,
                                                   pb::CreateMapResponse* response) {
-  return RunUnary(state_, context, PlaceMethod("CreateMap"), Right::kWrite, request->request_id(),
-                  response, [=, this](CallInfo& call, WorkerContext&) {
+  const Replay replay{request->request_id(), request, [this, request](CallInfo& call) {
+                        return CheckCreation(state_, call, request->name(),
+                                             GroupOf(request->settings()));
+                      }};
+  return RunUnary(state_, context, PlaceMethod("CreateMap"), Right::kWrite, replay, response,
+                  [=, this](CallInfo& call, WorkerContext&) {
                     RECOG_RETURN_IF_ERROR_AS_GRPC(
                         CheckCreation(state_, call, request->name(), GroupOf(request->settings())),
                         call.request_id);
@@ -430,7 +445,7 @@ grpc::ServerUnaryReactor* PlaceService::CreateMap(grpc::CallbackServerContext* c
 grpc::ServerUnaryReactor* PlaceService::GetMap(grpc::CallbackServerContext* context,
                                                const pb::GetMapRequest* request,
                                                pb::GetMapResponse* response) {
-  return RunUnary(state_, context, PlaceMethod("GetMap"), Right::kRead,
+  return RunUnary(state_, context, PlaceMethod("GetMap"), Right::kRead, *request,
                   [=, this](CallInfo& call, WorkerContext&) {
                     StatusOr<std::shared_ptr<PlaceMap>> map =
                         CallMap(state_, call, request->name(), Right::kRead);
@@ -443,7 +458,7 @@ grpc::ServerUnaryReactor* PlaceService::GetMap(grpc::CallbackServerContext* cont
 grpc::ServerUnaryReactor* PlaceService::ListMaps(grpc::CallbackServerContext* context,
                                                  const pb::ListMapsRequest* request,
                                                  pb::ListMapsResponse* response) {
-  return RunUnary(state_, context, PlaceMethod("ListMaps"), Right::kRead,
+  return RunUnary(state_, context, PlaceMethod("ListMaps"), Right::kRead, *request,
                   [=, this](CallInfo& call, WorkerContext&) {
                     size_t page_size =
                         request->page_size() == 0 ? kDefaultPageSize : request->page_size();
@@ -467,26 +482,29 @@ grpc::ServerUnaryReactor* PlaceService::ListMaps(grpc::CallbackServerContext* co
 grpc::ServerUnaryReactor* PlaceService::DeleteMap(grpc::CallbackServerContext* context,
                                                   const pb::DeleteMapRequest* request,
                                                   pb::DeleteMapResponse* response) {
-  return RunUnary(state_, context, PlaceMethod("DeleteMap"), Right::kWrite, request->request_id(),
-                  response, [=, this](CallInfo& call, WorkerContext&) {
-                    StatusOr<std::shared_ptr<PlaceMap>> map =
-                        CallMap(state_, call, request->name(), Right::kWrite);
-                    if (!map.ok()) return ToGrpcStatus(map.status(), call.request_id);
-                    const uint32_t map_id = map.value()->info().id;
-                    StatusOr<size_t> frames = state_.maps->Delete(request->name());
-                    if (!frames.ok()) return ToGrpcStatus(frames.status(), call.request_id);
-                    ForgetConsoleRecords(state_, request->name(), map_id);
-                    response->set_frames_deleted(frames.value());
-                    state_.metrics.RemoveMap(request->name());
-                    return grpc::Status::OK;
-                  });
+  return RunUnary(
+      state_, context, PlaceMethod("DeleteMap"), Right::kWrite,
+      MapReplay(state_, request->request_id(), *request, request->name(), Right::kWrite), response,
+      [=, this](CallInfo& call, WorkerContext&) {
+        StatusOr<std::shared_ptr<PlaceMap>> map =
+            CallMap(state_, call, request->name(), Right::kWrite);
+        if (!map.ok()) return ToGrpcStatus(map.status(), call.request_id);
+        const uint32_t map_id = map.value()->info().id;
+        StatusOr<size_t> frames = state_.maps->Delete(request->name());
+        if (!frames.ok()) return ToGrpcStatus(frames.status(), call.request_id);
+        ForgetConsoleRecords(state_, request->name(), map_id);
+        response->set_frames_deleted(frames.value());
+        state_.metrics.RemoveMap(request->name());
+        return grpc::Status::OK;
+      });
 }
 
 grpc::ServerUnaryReactor* PlaceService::AddFrame(grpc::CallbackServerContext* context,
                                                  const pb::AddFrameRequest* request,
                                                  pb::AddFrameResponse* response) {
   return RunUnary(
-      state_, context, PlaceMethod("AddFrame"), Right::kWrite, request->request_id(), response,
+      state_, context, PlaceMethod("AddFrame"), Right::kWrite,
+      MapReplay(state_, request->request_id(), *request, request->map(), Right::kWrite), response,
       [=, this](CallInfo& call, WorkerContext& worker) {
         StatusOr<std::shared_ptr<PlaceMap>> map =
             CallMap(state_, call, request->map(), Right::kWrite);
@@ -512,8 +530,9 @@ grpc::ServerUnaryReactor* PlaceService::QueryPlace(grpc::CallbackServerContext* 
   return RunUnary(
       state_, context, PlaceMethod("QueryPlace"), right,
       // Only a query that adds its frame changes the map: a relocalisation query just runs again.
-      request->add_frame() ? request->request_id() : std::string(), response,
-      [=, this](CallInfo& call, WorkerContext& worker) {
+      MapReplay(state_, request->add_frame() ? request->request_id() : std::string(), *request,
+                request->map(), right),
+      response, [=, this](CallInfo& call, WorkerContext& worker) {
         StatusOr<std::shared_ptr<PlaceMap>> map = CallMap(state_, call, request->map(), right);
         if (!map.ok()) return ToGrpcStatus(map.status(), call.request_id);
         const FrameMode mode = request->add_frame() ? FrameMode::kDetect : FrameMode::kQuery;
@@ -535,7 +554,8 @@ grpc::ServerUnaryReactor* PlaceService::RemoveFrame(grpc::CallbackServerContext*
                                                     const pb::RemoveFrameRequest* request,
                                                     pb::RemoveFrameResponse* response) {
   return RunUnary(
-      state_, context, PlaceMethod("RemoveFrame"), Right::kWrite, request->request_id(), response,
+      state_, context, PlaceMethod("RemoveFrame"), Right::kWrite,
+      MapReplay(state_, request->request_id(), *request, request->map(), Right::kWrite), response,
       [=, this](CallInfo& call, WorkerContext&) {
         StatusOr<std::shared_ptr<PlaceMap>> map =
             CallMap(state_, call, request->map(), Right::kWrite);
@@ -577,7 +597,7 @@ grpc::ServerUnaryReactor* PlaceService::RemoveFrame(grpc::CallbackServerContext*
 grpc::ServerUnaryReactor* PlaceService::Relocalize(grpc::CallbackServerContext* context,
                                                    const pb::RelocalizeRequest* request,
                                                    pb::RelocalizeResponse* response) {
-  return RunUnary(state_, context, PlaceMethod("Relocalize"), Right::kRead,
+  return RunUnary(state_, context, PlaceMethod("Relocalize"), Right::kRead, *request,
                   [=, this](CallInfo& call, WorkerContext& worker) {
                     RECOG_RETURN_IF_ERROR_AS_GRPC(
                         RunRelocalize(state_, worker, call.caller, *request, response),

@@ -60,7 +60,8 @@ class ModelUpload final : public grpc::ServerReadReactor<pb::PutModelRequest> {
       if (!has_header_) {
         End({grpc::StatusCode::FAILED_PRECONDITION, "PutModel needs a PutModelHeader first"});
       } else if (!state_.pool->TrySubmit([this](WorkerContext&) {
-                   End(RunOnce(state_, context_, call_, header_.request_id(), response_,
+                   End(RunOnce(state_, context_, call_,
+                               Replay{header_.request_id(), &header_, nullptr}, response_,
                                [this] { return Store(); }));
                  })) {
         End(Busy(state_, context_));
@@ -392,7 +393,7 @@ grpc::ServerUnaryReactor* RepositoryService::GetUploadStatus(
     grpc::CallbackServerContext* context, const pb::GetUploadStatusRequest* request,
     pb::GetUploadStatusResponse* response) {
   return RunUnary(
-      state_, context, RepositoryMethod("GetUploadStatus"), Right::kWrite,
+      state_, context, RepositoryMethod("GetUploadStatus"), Right::kWrite, *request,
       [=, this](CallInfo&, WorkerContext&) {
         if (grpc::Status refused = RefuseOnReplica(state_); !refused.ok()) return refused;
         if (!IsSha256Hex(request->sha256())) {
@@ -422,7 +423,7 @@ grpc::ServerUnaryReactor* RepositoryService::ListModels(grpc::CallbackServerCont
                                                         const pb::ListModelsRequest* request,
                                                         pb::ListModelsResponse* response) {
   return RunUnary(
-      state_, context, RepositoryMethod("ListModels"), Right::kRead,
+      state_, context, RepositoryMethod("ListModels"), Right::kRead, *request,
       [=, this](CallInfo& call, WorkerContext&) {
         const ModelFilter filter{request->name_prefix(), request->object_class(), request->tag()};
         StatusOr<ModelPage> page =
@@ -439,7 +440,8 @@ grpc::ServerUnaryReactor* RepositoryService::DeleteModel(grpc::CallbackServerCon
                                                          const pb::DeleteModelRequest* request,
                                                          pb::DeleteModelResponse* response) {
   return RunUnary(state_, context, RepositoryMethod("DeleteModel"), Right::kWrite,
-                  request->request_id(), response, [=, this](CallInfo& call, WorkerContext&) {
+                  Replay{request->request_id(), request, nullptr}, response,
+                  [=, this](CallInfo& call, WorkerContext&) {
                     call.map = request->name();
                     if (grpc::Status refused = RefuseOnReplica(state_); !refused.ok())
                       return refused;

@@ -23,6 +23,7 @@
 #include "server/config/placement_table.h"
 #include "server/config/server_config.h"
 #include "server/metrics/metrics.h"
+#include "server/runtime/byte_budget.h"
 #include "server/runtime/frame_thumbnails.h"
 #include "server/runtime/recent_loops.h"
 #include "server/runtime/request_log.h"
@@ -38,6 +39,7 @@ struct ServerState {
       : config(std::move(config)),
         auth(std::move(authenticator)),
         requests(this->config.request_log_entries),
+        pending_request_bytes(uint64_t(this->config.grpc.pending_requests_mb) << 20),
         recent_loops(this->config.console.listen.empty()
                          ? nullptr
                          : std::make_unique<RecentLoops>(this->config.console.loops_per_map)) {}
@@ -46,6 +48,8 @@ struct ServerState {
   const TokenAuthenticator auth;
   // The answers of recent mutating calls by request_id (RunOnce in call.h).
   RequestLog requests;
+  // The unary requests taken and not yet answered, by size (RunUnary in call.h).
+  ByteBudget pending_request_bytes;
   // The last loops of each map, for the web console; null (nothing recorded) without a console.
   const std::unique_ptr<RecentLoops> recent_loops;
   ServerMetrics metrics;

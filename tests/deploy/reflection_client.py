@@ -60,6 +60,8 @@ def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("target")
     parser.add_argument("--tls-ca")
+    parser.add_argument("--token-file", help="a file holding the bearer token (recogd with tokens "
+                        "answers reflection only with one)")
     parser.add_argument("--version", default="v1alpha", choices=["v1alpha", "v1"])
     parser.add_argument("symbols", nargs="*")
     args = parser.parse_intermixed_args()
@@ -73,10 +75,14 @@ def main():
     call = channel.stream_stream(f"/{package}.ServerReflection/ServerReflectionInfo",
                                  request_serializer=request_class.SerializeToString,
                                  response_deserializer=response_class.FromString)
+    metadata = []
+    if args.token_file:
+        with open(args.token_file) as f:
+            metadata.append(("authorization", "Bearer " + f.read().strip()))
     requests = [request_class(list_services="*")]
     requests += [request_class(file_containing_symbol=s) for s in args.symbols]
     try:
-        responses = list(call(iter(requests), timeout=10))
+        responses = list(call(iter(requests), timeout=10, metadata=metadata))
     except grpc.RpcError as error:
         print(f"{error.code().name}: {error.details()}", file=sys.stderr)
         return 1

@@ -5,7 +5,8 @@
 # with its bearer token (which nginx passes on, and the server checks), that plaintext, an
 # untrusted certificate and a missing token are refused, that health answers on the TLS port and
 # on the plaintext health-only port (which refuses everything else), and that server reflection
-# through the router lists the server's very services and describes them (what grpcurl does).
+# through the router lists the server's very services and describes them (what grpcurl does), for
+# a caller with a token only.
 # Usage: router_tls_test.sh RECOG RECOGD PROJECT_DIR. Exits 77 (skipped) without nginx.
 recog=$1
 recogd=$2
@@ -57,11 +58,15 @@ expect_ok "health on the plaintext health port" "$recog" admin health \
 expect_error "the health port refuses other calls" "UNIMPLEMENTED.*health checks only" \
   "$recog" maps stats corridor-a --token-file "$tmp/token" --server "127.0.0.1:$port_health"
 
-# Reflection through the router: the server's own list, and a service's methods.
-expect_ok "reflection at the server" "${reflect[@]}" "127.0.0.1:$port_shard"
+# Reflection through the router: the server's own list, and a service's methods; with tokens on,
+# only for a caller with a token.
+expect_error "reflection without a token is refused" "CANCELLED" "${reflect[@]}" \
+  "127.0.0.1:$port_shard"
+expect_ok "reflection at the server" "${reflect[@]}" "127.0.0.1:$port_shard" \
+  --token-file "$tmp/token"
 cp "$tmp/out" "$tmp/direct.json"
 expect_ok "reflection through the router" "${reflect[@]}" "127.0.0.1:$port_router" \
-  --tls-ca "$tmp/ca.crt" recognition.v1.PlaceRecognition
+  --tls-ca "$tmp/ca.crt" --token-file "$tmp/token" recognition.v1.PlaceRecognition
 json_check "the router's reflection lists the server's services" "
 direct = json.load(open('$tmp/direct.json'))['services']
 assert d['services'] == direct and 'recognition.v1.PlaceRecognition' in direct \
@@ -70,7 +75,8 @@ json_check "reflection describes PlaceRecognition" \
   "assert {'StreamFrames', 'QueryPlace', 'CreateMap'} <= set(d['methods']['recognition.v1.PlaceRecognition']), d"
 # v1 reflection reaches the server too: it answers, or says it does not serve v1 (gRPC 1.51);
 # never the router's "not a recogd method".
-"${reflect[@]}" "127.0.0.1:$port_router" --tls-ca "$tmp/ca.crt" --version v1 >"$tmp/out" 2>"$tmp/err"
+"${reflect[@]}" "127.0.0.1:$port_router" --tls-ca "$tmp/ca.crt" --token-file "$tmp/token" \
+  --version v1 >"$tmp/out" 2>"$tmp/err"
 code=$?
 if [ "$code" -eq 0 ]; then
   json_check "v1 reflection lists the services" "assert 'grpc.health.v1.Health' in d['services'], d"

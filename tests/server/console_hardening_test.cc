@@ -1,8 +1,11 @@
-// The console and the gRPC port against requests an attacker would send (issue 42's findings, each
-// with the request that found it): invalid UTF-8 in a path, control bytes in the Authorization
-// header, chunked and compressed bodies, decompression bombs, map-scoped tokens on the admin
-// calls, invalid UTF-8 in an uploaded model, DNS rebinding, slow clients, forged log lines,
-// framing and sniffing. After each, recogd must still answer both ports.
+// The console, the metrics port and the gRPC port against requests an attacker would send (issue
+// 42's findings and those of the HTTP ports' probe, each with the request that found it): invalid
+// UTF-8 in a path, control bytes in the Authorization header, chunked and compressed bodies,
+// decompression bombs, map-scoped tokens on the admin calls, invalid UTF-8 in an uploaded model,
+// DNS rebinding (on both HTTP ports), slow clients (on both), forged log lines, framing and
+// sniffing, thousands of byte ranges, millions of header lines, concurrent large gateway bodies,
+// and the strictness of Host, Content-Type, Content-Length and JSON keys. After each, recogd must
+// still answer its ports; the attacks on memory assert how much the process grew.
 #include <arpa/inet.h>
 #include <netinet/in.h>
 #include <poll.h>
@@ -18,6 +21,7 @@
 #include <chrono>
 #include <filesystem>
 #include <fstream>
+#include <future>
 #include <mutex>
 #include <thread>
 
@@ -93,6 +97,51 @@ std::string BodyOf(const std::string& response) {
   return end == std::string::npos ? std::string() : response.substr(end + 4);
 }
 
+// Sends `request` on `fd` while reading what comes back, until the server closes the connection
+// (or `timeout` passes): the server may answer, and close, before it has read everything. The
+// bytes the server took are *sent.
+std::string Exchange(int fd, const std::string& request, std::chrono::milliseconds timeout,
+                     size_t* sent = nullptr) {
+  std::string received;
+  size_t at = 0;
+  char buffer[65536];
+  const auto until = Clock::now() + timeout;
+  while (Clock::now() < until) {
+    pollfd entry{fd, short(POLLIN | (at < request.size() ? POLLOUT : 0)), 0};
+    if (poll(&entry, 1, 50) <= 0) continue;
+    if (entry.revents & (POLLIN | POLLHUP | POLLERR)) {
+      const ssize_t n = recv(fd, buffer, sizeof(buffer), MSG_DONTWAIT);
+      if (n == 0 || (n < 0 && errno != EAGAIN)) break;
+      if (n > 0) received.append(buffer, size_t(n));
+    } else if (entry.revents & POLLOUT) {
+      const ssize_t n = send(fd, request.data() + at, std::min<size_t>(request.size() - at, 65536),
+                             MSG_NOSIGNAL | MSG_DONTWAIT);
+      if (n > 0) at += size_t(n);
+    }
+  }
+  if (sent != nullptr) *sent = at;
+  return received;
+}
+
+// One field of /proc/self/status ("VmRSS", "VmHWM"), in MiB.
+double ProcessMiB(const std::string& field) {
+  std::ifstream status("/proc/self/status");
+  for (std::string line; std::getline(status, line);) {
+    if (line.starts_with(field + ":")) return std::stod(line.substr(field.size() + 1)) / 1024;
+  }
+  return 0;
+}
+
+// How far the process's resident memory rose above where it was while `attack` ran (its peak,
+// VmHWM, reset first), in MiB.
+template <typename Attack>
+double PeakGrowthMiB(Attack attack) {
+  std::ofstream("/proc/self/clear_refs") << "5";  // resets VmHWM to the current RSS
+  const double before = ProcessMiB("VmRSS");
+  attack();
+  return ProcessMiB("VmHWM") - before;
+}
+
 // The log lines recogd writes while it lives, as text.
 class CapturedLog {
  public:
@@ -118,19 +167,35 @@ class CapturedLog {
 
 class ConsoleHardeningTest : public ServerFixture {
  protected:
-  ConsoleHardeningTest() { config().console.listen = "127.0.0.1:0"; }
+  ConsoleHardeningTest() {
+    config().console.listen = "127.0.0.1:0";
+    config().metrics_listen = "127.0.0.1:0";
+  }
 
   int console_port() const { return server_->console_port(); }
+  int metrics_port() const { return server_->metrics_port(); }
   std::string Host() const { return "127.0.0.1:" + std::to_string(console_port()); }
 
-  // Sends `request` as it is (from `source`) and returns the whole response.
-  std::string Raw(const std::string& request, const char* source = "127.0.0.1") {
-    const int fd = Connect(console_port(), source);
+  // Sends `request` as it is (from `source`, to `port`: the console's by default) and returns the
+  // whole response.
+  std::string Raw(const std::string& request, const char* source = "127.0.0.1", int port = 0) {
+    const int fd = Connect(port == 0 ? console_port() : port, source);
     if (fd < 0) return "no connection";
     SendAll(fd, request);
     std::string response = ReceiveUntilClosed(fd, std::chrono::seconds(10));
     close(fd);
     return response;
+  }
+  std::string Scrape(const std::string& host = "127.0.0.1") {
+    return Raw("GET /metrics HTTP/1.1\r\nHost: " + host + "\r\nConnection: close\r\n\r\n",
+               "127.0.0.1", metrics_port());
+  }
+  // A gateway call with `body` and `headers` besides Host and Content-Length.
+  std::string Call(const std::string& method, const std::string& body,
+                   const std::string& headers = "Content-Type: application/json\r\n") {
+    return Raw("POST /api/rpc/" + method + " HTTP/1.1\r\nHost: " + Host() + "\r\n" + headers +
+               "Content-Length: " + std::to_string(body.size()) + "\r\nConnection: close\r\n\r\n" +
+               body);
   }
   std::string RawGet(const std::string& path, const std::string& headers = {}) {
     return Raw("GET " + path + " HTTP/1.1\r\nHost: " + Host() + "\r\nConnection: close\r\n" +
@@ -164,6 +229,9 @@ class ConsoleHardeningTest : public ServerFixture {
     const grpc::Status queried = places_->QueryPlace(Context(token).get(), query, &answer);
     EXPECT_TRUE(queried.ok()) << queried.error_message();
     EXPECT_EQ(StatusOf(RawGet("/api/whoami")), 200);
+    if (metrics_port() > 0) {
+      EXPECT_EQ(StatusOf(Scrape()), 200);
+    }
   }
 };
 
@@ -193,16 +261,20 @@ TEST_F(ConsoleHardeningTest, AnAuthorizationHeaderWithATabOrANonAsciiByteIsRefus
   UseTokens();
   CapturedLog log;
   const std::string body = "{}";
+  // A control byte other than a tab makes the request's head malformed (400, before the gate);
+  // a tab or a byte beyond ASCII reaches the gate, which refuses it (401).
   for (const std::string& authorization :
        {"Bearer\t" + std::string(kAdmin), "Bearer " + std::string(kAdmin) + "\xC3\xA9",
         std::string("Bearer \x01") + kAdmin}) {
+    const int refusal = authorization.find('\x01') == std::string::npos ? 401 : 400;
     const std::string response =
         Raw("POST /api/rpc/recognition.v1.PlaceRecognition/ListMaps HTTP/1.1\r\nHost: " + Host() +
             "\r\nAuthorization: " + authorization +
             "\r\nContent-Type: application/json\r\nContent-Length: 2\r\n\r\n" + body);
-    EXPECT_EQ(StatusOf(response), 401) << response;
-    EXPECT_EQ(json::parse(BodyOf(response), nullptr, false)["code"], "UNAUTHENTICATED");
-    EXPECT_EQ(StatusOf(RawGet("/api/maps", "Authorization: " + authorization + "\r\n")), 401);
+    EXPECT_EQ(StatusOf(response), refusal) << response;
+    EXPECT_EQ(json::parse(BodyOf(response), nullptr, false)["code"],
+              refusal == 401 ? "UNAUTHENTICATED" : "INVALID_ARGUMENT");
+    EXPECT_EQ(StatusOf(RawGet("/api/maps", "Authorization: " + authorization + "\r\n")), refusal);
   }
   ExpectServing(kAdmin);
   EXPECT_EQ(log.Text().find(kAdmin), std::string::npos);
@@ -404,21 +476,21 @@ TEST_F(ConsoleHardeningTest, SlowClientsCannotStarveTheConsole) {
     EXPECT_LT(Clock::now() - start, std::chrono::milliseconds(2000));
     std::this_thread::sleep_for(std::chrono::milliseconds(100));
   }
-  // The slow ones were refused (beyond the per-client cap: 503, or a reset when no thread was
-  // free) or cut at their deadline: the server has closed every one of them.
-  int closed = 0, unavailable = 0;
+  // The slow ones were evicted (beyond the per-client cap, the oldest made room for the newer)
+  // or cut at the minimum rate (408): the server has closed every one of them.
+  int closed = 0, timed_out = 0;
   for (int fd : slow) {
     bool was_closed = false;
     const std::string got = ReceiveUntilClosed(fd, std::chrono::seconds(6), &was_closed);
     closed += was_closed;
-    unavailable += StatusOf(got) == 503;
+    timed_out += StatusOf(got) == 408;
     EXPECT_NE(StatusOf(got), 200);
   }
   trickling = false;
   trickle.join();
   for (int fd : slow) close(fd);
   EXPECT_EQ(closed, 50);
-  EXPECT_GE(unavailable, 1);  // the refusals are sent without waiting: some arrive before a reset
+  EXPECT_GE(timed_out, 1);  // the last 8 were cut by the rate, with an answer
   ExpectServing();
 }
 
@@ -454,6 +526,359 @@ TEST_F(ConsoleHardeningTest, EveryAnswerForbidsFramingAndSniffingAndOnlyTheConso
   EXPECT_EQ(StatusOf(script), 404);
   EXPECT_NE(script.find("Content-Type: application/json"), std::string::npos) << script;
   EXPECT_EQ(script.find("text/html"), std::string::npos) << script;
+}
+
+// Finding 1: a Range of 2,000 ranges of one file used to build a copy of the file per range
+// (2.4 GB for three.js from an 8 KB request).
+TEST_F(ConsoleHardeningTest, ARangeOfThousandsOfRangesIsAnsweredWithTheFileOnce) {
+  const bool vendored = std::filesystem::exists(config().console.vendor_dir + "/three/three.js");
+  const std::string path = vendored ? "/vendor/three/three.js" : "/static/try.js";
+  const std::string whole = BodyOf(RawGet(path));
+  ASSERT_GT(whole.size(), 1000u);
+  std::string ranges = "Range: bytes=0-";
+  for (int i = 1; i < 2000; ++i) ranges += ",0-";
+  std::string response;
+  const double growth = PeakGrowthMiB([&] { response = RawGet(path, ranges + "\r\n"); });
+  EXPECT_EQ(StatusOf(response), 200) << response.substr(0, 300);
+  EXPECT_EQ(BodyOf(response), whole);
+  EXPECT_EQ(response.find("multipart/byteranges"), std::string::npos);
+  EXPECT_LT(growth, 50.0) << path;
+  std::cout << "2000 ranges of " << path << " (" << whole.size() << " bytes): RSS +" << growth
+            << " MiB\n";
+  // One range is served as such.
+  const std::string one = RawGet(path, "Range: bytes=10-19\r\n");
+  EXPECT_EQ(StatusOf(one), 206) << one.substr(0, 300);
+  EXPECT_EQ(BodyOf(one), whole.substr(10, 10));
+  EXPECT_NE(one.find("Content-Range: bytes 10-19/" + std::to_string(whole.size())),
+            std::string::npos);
+  ExpectServing();
+}
+
+// Finding 2: header lines were stored as they came, without a limit (10 million: +1 GB).
+TEST_F(ConsoleHardeningTest, TenMillionHeaderLinesAreRefusedWhileTheyAreRead) {
+  const int fd = Connect(console_port());
+  ASSERT_GE(fd, 0);
+  const std::string head = "GET /api/whoami HTTP/1.1\r\nHost: " + Host() + "\r\n";
+  std::string lines;
+  for (int i = 0; i < 10000; ++i) lines += "X-A: a\r\n";
+  std::string attack = head;  // 10,000,000 lines (80 MB), sent unless the server answers first
+  for (int i = 0; i < 1000; ++i) attack += lines;
+  std::string response;
+  size_t sent = 0;
+  const double growth =
+      PeakGrowthMiB([&] { response = Exchange(fd, attack, std::chrono::seconds(10), &sent); });
+  close(fd);
+  EXPECT_EQ(StatusOf(response), 431) << response;
+  EXPECT_NE(response.find("Content-Security-Policy"), std::string::npos) << response;
+  EXPECT_NE(response.find("Connection: close"), std::string::npos);
+  EXPECT_LT(sent, size_t(16) << 20) << "the server read on after its refusal";
+  EXPECT_LT(growth, 50.0);
+  std::cout << "header lines: " << sent << " bytes taken before the 431, RSS +" << growth
+            << " MiB\n";
+  // The limits themselves: 100 lines and 16 KiB pass, one more line or byte does not.
+  std::string hundred;
+  for (int i = 0; i < 98; ++i) hundred += "X-A: a\r\n";  // with Host and Connection: 100
+  EXPECT_EQ(StatusOf(RawGet("/api/whoami", hundred)), 200);
+  EXPECT_EQ(StatusOf(RawGet("/api/whoami", hundred + "X-A: a\r\n")), 431);
+  // (cpp-httplib takes lines of at most 8 KiB: the bytes are spread over two lines.)
+  const std::string fill = "X-Fill: " + std::string(7900, 'f') + "\r\n";
+  EXPECT_EQ(StatusOf(RawGet("/api/whoami", fill + fill)), 200);
+  EXPECT_EQ(
+      StatusOf(RawGet("/api/whoami", fill + fill + "X-More: " + std::string(600, 'm') + "\r\n")),
+      431);
+  EXPECT_EQ(StatusOf(Raw("GET /" + std::string(20000, 'a') + " HTTP/1.1\r\nHost: " + Host() +
+                         "\r\n\r\n")),
+            431);
+  ExpectServing();
+}
+
+// Finding 3: the gateway held about 5 times each body (8 concurrent 42 MB bodies: +1.6 GB).
+TEST_F(ConsoleHardeningTest, ConcurrentLargeGatewayBodiesStayWithinTheBudget) {
+  // A QueryPlace of `size` bytes, nearly all of them its frame's image in base64: valid JSON that
+  // the gateway decodes whole (the map does not exist).
+  const auto request = [&](size_t size) {
+    const std::string head = R"({"map": "none", "frame": {"image": ")", tail = R"("}})";
+    const std::string body =
+        head + std::string((size - head.size() - tail.size()) / 4 * 4, 'A') + tail;
+    return "POST /api/rpc/recognition.v1.PlaceRecognition/QueryPlace HTTP/1.1\r\nHost: " + Host() +
+           "\r\nContent-Type: application/json\r\nContent-Length: " + std::to_string(body.size()) +
+           "\r\nConnection: close\r\n\r\n" + body;
+  };
+  const auto concurrently = [&](const std::string& text, std::map<int, int>* statuses) {
+    std::vector<std::future<std::string>> answers;
+    for (int i = 0; i < 8; ++i) {
+      answers.push_back(std::async(std::launch::async, [&, i] {
+        const std::string source = "127.0.0." + std::to_string(2 + i);
+        const int fd = Connect(console_port(), source.c_str());
+        std::string answer = Exchange(fd, text, std::chrono::seconds(20));
+        close(fd);
+        return answer;
+      }));
+    }
+    for (auto& answer : answers) ++(*statuses)[StatusOf(answer.get())];
+  };
+  // 42 MB each: over console.max_body_bytes, refused before a byte of the body is read.
+  std::map<int, int> over;
+  const std::string huge = request(42'000'000);
+  const double over_growth = PeakGrowthMiB([&] { concurrently(huge, &over); });
+  EXPECT_EQ(over[413], 8);
+  // 16 MiB each, the most one call may send: two fit in the 32 MiB budget at once, the others
+  // are told to retry (or come when it is free again).
+  std::map<int, int> at_limit;
+  const std::string largest = request(size_t(16) << 20);
+  const double growth = PeakGrowthMiB([&] { concurrently(largest, &at_limit); });
+  // Decoded and called: refused by the service (no such map, or not an image).
+  const int decoded = at_limit[400] + at_limit[404];
+  EXPECT_EQ(decoded + at_limit[503], 8);
+  EXPECT_GE(decoded, 2);
+  std::cout << "8 x 42 MB bodies: RSS +" << over_growth << " MiB; 8 x 16 MiB: " << decoded
+            << " decoded, " << at_limit[503] << " x 503, RSS +" << growth << " MiB\n";
+  // The request strings themselves (42 and 16 MB) are the test's, not the server's.
+  EXPECT_LT(over_growth, 50.0);
+  EXPECT_LT(growth, 200.0);
+  // The budget's refusal says why, and closes the connection: held with a body half sent.
+  StopServer();
+  config().console.max_body_bytes = 1 << 20;
+  config().console.max_inflight_body_bytes = 1 << 20;
+  StartServer();
+  const int holder = Connect(console_port());
+  const std::string held = request(1 << 20);
+  ASSERT_TRUE(SendAll(holder, held.substr(0, held.size() / 2)));
+  std::string busy;
+  const auto until = Clock::now() + std::chrono::seconds(5);
+  while (StatusOf(busy) != 503 && Clock::now() < until) busy = Raw(request(1000));
+  EXPECT_EQ(StatusOf(busy), 503) << busy;
+  EXPECT_NE(BodyOf(busy).find("retry later"), std::string::npos) << busy;
+  EXPECT_NE(busy.find("Retry-After: 1"), std::string::npos);
+  close(holder);
+  const auto again = Clock::now() + std::chrono::seconds(5);
+  while (StatusOf(busy) == 503 && Clock::now() < again) busy = Raw(request(1000));
+  // The budget is free again once the holder is gone: the call is decoded and refused.
+  EXPECT_TRUE(StatusOf(busy) == 400 || StatusOf(busy) == 404) << busy;
+  ExpectServing();
+}
+
+// Finding 4: 40 slow connections from five addresses (a byte every 2 s) held the console's 32
+// places, and 2 the metrics port's: everyone else got 503, or no scrape.
+TEST_F(ConsoleHardeningTest, SlowClientsFromAFewAddressesCannotStarveEitherPort) {
+  std::atomic<bool> attacking{true};
+  std::atomic<int> cut{0};
+  // The attacker keeps 40 connections to the console and 2 to the metrics port open, opening a
+  // new one whenever one is closed, each sending its request a byte every 2 s.
+  std::thread attacker([&] {
+    struct Slow {
+      int port;
+      std::string source;
+      int fd = -1;
+      size_t next = 0;  // the byte of the request it sends next
+      Clock::time_point due = Clock::now();
+    };
+    std::vector<Slow> slow;
+    for (int i = 0; i < 40; ++i) {
+      slow.push_back(
+          Slow{.port = console_port(), .source = "127.0.0." + std::to_string(2 + i % 5)});
+    }
+    for (int i = 0; i < 2; ++i) slow.push_back(Slow{.port = metrics_port(), .source = "127.0.0.7"});
+    const std::string request = "GET /metrics HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n";
+    while (attacking) {
+      for (Slow& s : slow) {
+        char sink[4096];
+        const ssize_t got = s.fd < 0 ? 1 : recv(s.fd, sink, sizeof(sink), MSG_DONTWAIT);
+        if (got == 0 || (got < 0 && errno != EAGAIN)) {
+          close(s.fd);
+          s.fd = -1;
+          ++cut;
+        }
+        if (s.fd < 0) {
+          s.fd = Connect(s.port, s.source.c_str());
+          s.next = 0;
+          s.due = Clock::now();
+        }
+        if (s.fd >= 0 && Clock::now() >= s.due) {
+          send(s.fd, request.data() + s.next % request.size(), 1, MSG_NOSIGNAL | MSG_DONTWAIT);
+          ++s.next;
+          s.due = Clock::now() + std::chrono::seconds(2);
+        }
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+    for (Slow& s : slow) close(s.fd);
+  });
+  // Meanwhile other clients (one of them from an attacker's address, as behind a proxy) are
+  // answered on both ports, again and again, each well within 2 s.
+  for (int i = 0; i < 8; ++i) {
+    const auto start = Clock::now();
+    EXPECT_EQ(StatusOf(Raw(
+                  "GET /api/whoami HTTP/1.1\r\nHost: " + Host() + "\r\nConnection: close\r\n\r\n",
+                  i % 2 == 0 ? "127.0.0.1" : "127.0.0.2")),
+              200);
+    EXPECT_EQ(StatusOf(Scrape()), 200);
+    EXPECT_LT(Clock::now() - start, std::chrono::milliseconds(2000));
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  }
+  attacking = false;
+  attacker.join();
+  // The slow ones were cut (at the minimum rate, after a second), not served for ever.
+  EXPECT_GE(cut.load(), 42);
+  ExpectServing();
+}
+
+// Finding 4 again, without the minimum rate: a full console makes room by closing the connection
+// that has waited longest for its request's headers, across clients and within one address; when
+// every place serves a request, a new connection is refused with 503 (and, finding 6, the
+// security headers of every answer).
+TEST_F(ConsoleHardeningTest, AFullConsoleEvictsTheConnectionWaitingLongestForItsHeaders) {
+  StopServer();
+  config().console.min_bytes_per_s = 0;
+  config().console.header_timeout_ms = 60000;
+  config().console.request_timeout_ms = 60000;
+  config().console.max_connections = 4;
+  config().console.max_connections_per_client = 2;
+  StartServer();
+  // Whether the server has closed `fd` (within `wait`).
+  const auto closed_by_server = [](int fd, std::chrono::milliseconds wait) {
+    bool closed = false;
+    ReceiveUntilClosed(fd, wait, &closed);
+    return closed;
+  };
+  // Four clients send half a request each and wait: every place is taken.
+  const std::string half = "GET /api/whoami HTTP/1.1\r\nHost: " + Host() + "\r\n";
+  std::vector<int> slow;
+  for (const char* source : {"127.0.0.2", "127.0.0.3", "127.0.0.4", "127.0.0.3"}) {
+    slow.push_back(Connect(console_port(), source));
+    ASSERT_TRUE(SendAll(slow.back(), half));
+  }
+  // All four are being served (no refusal), then a new client takes the oldest one's place.
+  for (int fd : slow) EXPECT_FALSE(closed_by_server(fd, std::chrono::milliseconds(50)));
+  EXPECT_EQ(StatusOf(RawGet("/api/whoami")), 200);
+  EXPECT_TRUE(closed_by_server(slow[0], std::chrono::seconds(2)));
+  // Within one address (a proxy's): its third connection takes the place of its oldest.
+  const int third = Connect(console_port(), "127.0.0.3");
+  const std::string proxied = Exchange(
+      third, "GET /api/whoami HTTP/1.1\r\nHost: " + Host() + "\r\nConnection: close\r\n\r\n",
+      std::chrono::seconds(5));
+  close(third);
+  EXPECT_EQ(StatusOf(proxied), 200) << proxied;
+  EXPECT_TRUE(closed_by_server(slow[1], std::chrono::seconds(2)));
+  for (int fd : slow) close(fd);
+  // Four requests whose bodies are coming: nothing to evict, so a fifth client gets 503 at once.
+  std::vector<int> busy;
+  for (const char* source : {"127.0.0.2", "127.0.0.3", "127.0.0.4", "127.0.0.5"}) {
+    busy.push_back(Connect(console_port(), source));
+    ASSERT_TRUE(SendAll(busy.back(),
+                        "POST /api/rpc/recognition.v1.PlaceRecognition/ListMaps HTTP/1.1\r\n"
+                        "Host: " +
+                            Host() +
+                            "\r\nContent-Type: application/json\r\nContent-Length: 100\r\n\r\n{"));
+  }
+  std::string refused;
+  const auto until = Clock::now() + std::chrono::seconds(5);
+  while (StatusOf(refused) != 503 && Clock::now() < until) refused = RawGet("/api/whoami");
+  EXPECT_EQ(StatusOf(refused), 503) << refused;
+  EXPECT_NE(refused.find("Content-Security-Policy: default-src 'self'"), std::string::npos)
+      << refused;
+  EXPECT_NE(refused.find("X-Frame-Options: DENY"), std::string::npos);
+  for (int fd : busy) close(fd);
+  ExpectServing();
+}
+
+// Finding 5: the metrics port answered any Host, so a rebinding page could read map names.
+TEST_F(ConsoleHardeningTest, TheMetricsPortAnswersOnlyItsOwnHosts) {
+  const std::string port = std::to_string(metrics_port());
+  EXPECT_EQ(StatusOf(Scrape("rebind.attacker.example:" + port)), 403);
+  EXPECT_EQ(StatusOf(Scrape("127.0.0.1:1@evil.example")), 403);
+  EXPECT_EQ(StatusOf(Scrape("")), 403);
+  EXPECT_EQ(StatusOf(Scrape("localhost:" + port)), 200);
+  EXPECT_EQ(StatusOf(Scrape("[::1]:" + port)), 200);
+  const std::string scraped = Scrape("127.0.0.1:" + port);
+  EXPECT_EQ(StatusOf(scraped), 200);
+  EXPECT_NE(scraped.find("recog_build_info"), std::string::npos);
+  EXPECT_NE(scraped.find("X-Content-Type-Options: nosniff"), std::string::npos);
+  const auto on_metrics = [&](const std::string& request) {
+    return StatusOf(Raw(request, "127.0.0.1", metrics_port()));
+  };
+  EXPECT_EQ(on_metrics("POST /metrics HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Length: 0\r\n\r\n"),
+            405);
+  EXPECT_EQ(on_metrics("GET /other HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n"), 404);
+  EXPECT_EQ(on_metrics("GET /metrics HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Length: 4\r\n\r\nbody"),
+            400);
+  StopServer();
+  config().metrics.hosts = {"prometheus-target.example"};
+  StartServer();
+  EXPECT_EQ(StatusOf(Scrape("prometheus-target.example:9464")), 200);
+  EXPECT_EQ(StatusOf(Scrape("other.example")), 403);
+}
+
+// Finding 6: what the console let through or said that it should not.
+TEST_F(ConsoleHardeningTest, HostContentTypeContentLengthAndJsonKeysAreReadStrictly) {
+  // Host is host[:port] and nothing else.
+  for (const std::string host :
+       {"127.0.0.1:1@evil.example", "127.0.0.1 evil.example", "127.0.0.1:99999",
+        "127.0.0.1:", "127.0.0.1:8080/x", "evil.example%2F127.0.0.1", "[::1", "[::1]x"}) {
+    EXPECT_EQ(StatusOf(Raw("GET /api/whoami HTTP/1.1\r\nHost: " + host +
+                           "\r\nConnection: close\r\n\r\n")),
+              403)
+        << host;
+  }
+  // Content-Type: exactly application/json, with parameters or none.
+  const std::string list = "recognition.v1.PlaceRecognition/ListMaps";
+  EXPECT_EQ(StatusOf(Call(list, "{}", "Content-Type: application/jsonp\r\n")), 415);
+  EXPECT_EQ(StatusOf(Call(list, "{}", "Content-Type: application/json-seq\r\n")), 415);
+  EXPECT_EQ(StatusOf(Call(list, "{}", "Content-Type: application/json; charset=utf-8\r\n")), 200);
+  EXPECT_EQ(StatusOf(Call(list, "{}", "Content-Type: Application/JSON\r\n")), 200);
+  // A key named twice is refused, naming it.
+  const std::string twice =
+      Call("recognition.v1.PlaceRecognition/GetMap", R"({"name": "tour", "name": "other"})");
+  EXPECT_EQ(StatusOf(twice), 400) << twice;
+  EXPECT_NE(BodyOf(twice).find("the key 'name' twice"), std::string::npos) << twice;
+  EXPECT_EQ(StatusOf(Call("recognition.v1.PlaceRecognition/QueryPlace",
+                          R"({"map": "m", "frame": {"image": "", "image": "QQ=="}})")),
+            400);
+  EXPECT_EQ(StatusOf(Call(list, std::string(200, '[') + std::string(200, ']'))), 400);
+  // Content-Length is plain digits as sent: httplib would decode "%32" into 2.
+  for (const std::string length : {"%32", "+2", "0x2", "2, 2", "2 2", ""}) {
+    const std::string response =
+        Raw("POST /api/rpc/" + list + " HTTP/1.1\r\nHost: " + Host() +
+            "\r\nContent-Type: application/json\r\nContent-Length: " + length + "\r\n\r\n{}");
+    EXPECT_EQ(StatusOf(response), 400) << length << ": " << response;
+  }
+  EXPECT_EQ(StatusOf(Raw("POST /api/rpc/" + list + " HTTP/1.1\r\nHost: " + Host() +
+                         "\r\nContent-Type: application/json\r\nContent-Length: 2\r\n"
+                         "Content-Length: 2\r\n\r\n{}")),
+            400);
+  // Other header values are not decoded either: a Host of "%31%32%37.0.0.1" is no address.
+  EXPECT_EQ(StatusOf(Raw("GET /api/whoami HTTP/1.1\r\nHost: %31%32%37.0.0.1\r\n"
+                         "Connection: close\r\n\r\n")),
+            403);
+  // Malformed heads: a bare LF, a space before the colon, a folded line.
+  for (const std::string line : {"X-A: a\n", "Host : 127.0.0.1\r\n", " folded\r\n"}) {
+    EXPECT_EQ(StatusOf(RawGet("/api/whoami", line)), 400) << line;
+  }
+}
+
+TEST_F(ConsoleHardeningTest, ErrorsNeverEchoTheRequest) {
+  ASSERT_TRUE(CreateMap("echo").ok());
+  const std::string marker = "EchoMarker";
+  const std::vector<std::string> answers = {
+      RawGet("/api/maps/" + marker + "/loops"),
+      RawGet("/api/maps/" + marker + "%0A%3Cb%3E/loops"),
+      RawGet("/api/maps/echo/frames/" + marker + "/thumbnail"),
+      RawGet("/api/models/" + marker),
+      RawGet("/api/models/" + marker + "/points?max=" + marker),
+      RawGet("/api/" + marker),
+      RawGet("/static/" + marker + ".js"),
+      Call("recognition.v1." + marker + "/Get", "{}"),
+      Call("recognition.v1.PlaceRecognition/GetMap", R"({")" + marker + R"(": 1})"),
+      Call("recognition.v1.PlaceRecognition/GetMap", R"({"name": )" + marker + "}"),
+      Call("recognition.v1.PlaceRecognition/GetMap", R"({"name": 1, ")" + marker + R"(": 1})"),
+      Call("recognition.v1.PlaceRecognition/GetMap", R"({"name": ")" + marker + R"("})"),
+      Call("recognition.v1.PlaceRecognition/GetMap",
+           R"({"name": ")" + marker + std::string(5000, 'x') + R"("})"),
+  };
+  for (const std::string& answer : answers) {
+    EXPECT_GE(StatusOf(answer), 400) << answer;
+    EXPECT_EQ(BodyOf(answer).find(marker), std::string::npos) << answer;
+  }
 }
 
 TEST(ConsoleTlsTest, TheConsoleAnswersOverTlsWithTheServersCertificate) {

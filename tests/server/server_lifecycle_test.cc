@@ -281,12 +281,13 @@ TEST_F(ServerLifecycleTest, ACallWhoseDeadlinePassesInTheQueueDoesNotRun) {
       cv::imdecode(std::vector<uchar>(jpeg.begin(), jpeg.end()), cv::IMREAD_COLOR);
   ASSERT_FALSE(small.empty());
   std::vector<uchar> big;
-  ASSERT_TRUE(cv::imencode(".jpg", cv::repeat(small, 12, 12), big));  // 6144x4608
+  // 4096x3072, the largest robots' cameras give (an image may have 16 Mpixel).
+  ASSERT_TRUE(cv::imencode(".jpg", cv::repeat(small, 8, 8), big));
   const pb::Frame large = JpegFrame(std::string(big.begin(), big.end()));
-  // Six of them: seconds of work on one worker (decoding a 28-megapixel JPEG alone takes over
-  // 100 ms). The queued call is sent once the first has ended with at least two still waiting (the
-  // queue-depth gauge is sampled as each call ends), so it waits far beyond its 300 ms deadline
-  // however loaded the machine is.
+  // Six of them: seconds of work on one worker (decoding and ORB on 12.6 Mpixel take several
+  // hundred ms each). The queued call is sent once the first has ended with at least two still
+  // waiting (the queue-depth gauge is sampled as each call ends), so it waits far beyond its 300 ms
+  // deadline however loaded the machine is.
   std::vector<std::future<grpc::Status>> busy;
   for (int i = 0; i < 6; ++i) {
     busy.push_back(std::async(std::launch::async, [&] {
