@@ -21,15 +21,15 @@
 // and the calls per second.
 //
 // Environment:
-//   RECOG_GRPC_FUZZ_CALLS       calls per test case (default 6000: about 25 s for the two cases
-//                               in the ASan + UBSan build; CI runs the default in both passes)
+//   RECOG_GRPC_FUZZ_CALLS       calls per test case (default 6000: 20-30 s for the two cases in
+//                               the ASan + UBSan build; CI runs the default in both passes)
 //   RECOG_GRPC_FUZZ_SEED        the seed (default 1); connection c of a run draws from (seed, c)
 //   RECOG_GRPC_FUZZ_CONNECTION  make only the calls of that connection (to replay a failure;
 //                               with --gtest_filter naming the failed case)
 //   RECOG_GRPC_FUZZ_TRACE       a file that gets every call's frames (hex) before they are sent:
 //                               after a crash, its last line is the call that caused it
-// The campaign, 100,000 calls per case (200,000 in all; 13 minutes on 2 busy cores), from the
-// project's root in CI's sanitizer build, with .ci/run's sanitizer options:
+// The campaign, 100,000 calls per case (200,000 in all; 7 to 13 minutes on 2 busy cores), from
+// the project's root in CI's sanitizer build, with .ci/run's sanitizer options:
 //   export ASAN_OPTIONS=detect_leaks=1:abort_on_error=1:intercept_tls_get_addr=0
 //   export UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
 //   export LSAN_OPTIONS=suppressions=$PWD/.ci/lsan.supp
