@@ -25,9 +25,11 @@
 // is logged and the one in use is kept. With TLS, checked copies of the files are kept under
 // <data_dir>/tls.
 //
-// Also serving: grpc.health.v1.Health (server/services/health_service.h), server reflection, and
-// Prometheus metrics over HTTP on `metrics_listen` (unless empty), including the standard gRPC
-// server metrics of the recognition services (server/app/grpc_metrics.h).
+// Also serving: grpc.health.v1.Health (server/services/health_service.h), server reflection
+// (behind the token when tokens are on: server/app/grpc_guards.h), and Prometheus metrics over
+// HTTP on `metrics_listen` (unless empty), including the standard gRPC server metrics of the
+// recognition services (server/app/grpc_metrics.h). The gRPC port's connections are accepted by
+// a GrpcListener (server/app/grpc_listener.h) and its limits are config.grpc's.
 #pragma once
 
 #include <chrono>
@@ -69,7 +71,8 @@ class RecognitionServer {
   RecognitionServer(const RecognitionServer&) = delete;
   RecognitionServer& operator=(const RecognitionServer&) = delete;
 
-  // The port the gRPC server listens on (the one picked when `listen` ends in ":0").
+  // The port the gRPC server listens on (the one picked when `listen` ends in ":0"); 0 on a unix
+  // socket.
   int port() const { return port_; }
   // The metrics port, 0 when metrics are off.
   int metrics_port() const;
