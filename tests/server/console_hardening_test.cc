@@ -747,6 +747,9 @@ TEST_F(ConsoleHardeningTest, AFullConsoleEvictsTheConnectionWaitingLongestForIts
   for (const char* source : {"127.0.0.2", "127.0.0.3", "127.0.0.4", "127.0.0.3"}) {
     slow.push_back(Connect(console_port(), source));
     ASSERT_TRUE(SendAll(slow.back(), half));
+    // A connection's wait is counted from when its thread takes it up, which may come in another
+    // order than the connections when they arrive together: spaced, "longest waiting" is theirs.
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
   }
   // All four are being served (no refusal), then a new client takes the oldest one's place.
   for (int fd : slow) EXPECT_FALSE(closed_by_server(fd, std::chrono::milliseconds(50)));
@@ -762,15 +765,26 @@ TEST_F(ConsoleHardeningTest, AFullConsoleEvictsTheConnectionWaitingLongestForIts
   EXPECT_TRUE(closed_by_server(slow[1], std::chrono::seconds(2)));
   for (int fd : slow) close(fd);
   // Four requests whose bodies are coming: nothing to evict, so a fifth client gets 503 at once.
+  // The threads of the connections just closed may still be finishing (a refused request's
+  // client is given a moment to stop sending): a request refused meanwhile is sent again.
   std::vector<int> busy;
   for (const char* source : {"127.0.0.2", "127.0.0.3", "127.0.0.4", "127.0.0.5"}) {
-    busy.push_back(Connect(console_port(), source));
-    ASSERT_TRUE(SendAll(busy.back(),
-                        "POST /api/rpc/recognition.v1.PlaceRecognition/ListMaps HTTP/1.1\r\n"
-                        "Host: " +
-                            Host() +
-                            "\r\nContent-Type: application/json\r\nContent-Length: 100\r\n\r\n{"));
+    const auto give_up = Clock::now() + std::chrono::seconds(5);
+    do {
+      const int fd = Connect(console_port(), source);
+      ASSERT_TRUE(SendAll(
+          fd,
+          "POST /api/rpc/recognition.v1.PlaceRecognition/ListMaps HTTP/1.1\r\n"
+          "Host: " +
+              Host() + "\r\nContent-Type: application/json\r\nContent-Length: 100\r\n\r\n{"));
+      if (!closed_by_server(fd, std::chrono::milliseconds(300))) {
+        busy.push_back(fd);
+        break;
+      }
+      close(fd);
+    } while (Clock::now() < give_up);
   }
+  ASSERT_EQ(busy.size(), 4u) << "the four requests were not all taken up";
   std::string refused;
   const auto until = Clock::now() + std::chrono::seconds(5);
   while (StatusOf(refused) != 503 && Clock::now() < until) refused = RawGet("/api/whoami");
