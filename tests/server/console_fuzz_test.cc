@@ -418,11 +418,7 @@ class ConsoleFuzzTest : public ServerFixture {
     EXPECT_TRUE(whoami.starts_with("HTTP/1.1 200")) << whoami;
     // The fuzzer may have deleted its map: a map of its own for the last frame.
     ASSERT_TRUE(CreateMap("after-fuzz", token).ok());
-    pb::QueryPlaceRequest query;
-    query.set_map("after-fuzz");
-    *query.mutable_frame() = JpegFrame(CorridorJpeg(20));
-    pb::QueryPlaceResponse answer;
-    const grpc::Status queried = places_->QueryPlace(Context(token).get(), query, &answer);
+    const grpc::Status queried = QueryCorridorFrame("after-fuzz", 20, token);
     EXPECT_TRUE(queried.ok()) << queried.error_message();
   }
 

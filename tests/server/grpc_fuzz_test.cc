@@ -927,11 +927,7 @@ class GrpcFuzzTest : public ServerFixture {
       const grpc::Status status = places_->AddFrame(Context(token).get(), add, &added);
       ASSERT_TRUE(status.ok()) << status.error_message();
     }
-    pb::QueryPlaceRequest query;
-    query.set_map("after-fuzz");
-    *query.mutable_frame() = JpegFrame(CorridorJpeg(20));
-    pb::QueryPlaceResponse answer;
-    const grpc::Status queried = places_->QueryPlace(Context(token).get(), query, &answer);
+    const grpc::Status queried = QueryCorridorFrame("after-fuzz", 20, token);
     EXPECT_TRUE(queried.ok()) << queried.error_message();
   }
 

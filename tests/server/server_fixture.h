@@ -116,6 +116,15 @@ class ServerFixture : public ::testing::Test {
     return places_->CreateMap(Context().get(), request, &response);
   }
 
+  // Queries `map` with corridor image `n` (a real frame) as the caller of `token`.
+  grpc::Status QueryCorridorFrame(const std::string& map, int n, const std::string& token = {}) {
+    pb::QueryPlaceRequest query;
+    query.set_map(map);
+    *query.mutable_frame() = JpegFrame(CorridorJpeg(n));
+    pb::QueryPlaceResponse answer;
+    return places_->QueryPlace(Context(token).get(), query, &answer);
+  }
+
   grpc::Status AddFrame(const std::string& map, const pb::Frame& frame,
                         pb::AddFrameResponse* response) {
     pb::AddFrameRequest request;
