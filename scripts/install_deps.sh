@@ -20,7 +20,7 @@ serve_packages=(
   libgtest-dev libgmock-dev libbenchmark-dev
   libcli11-dev libyaml-cpp-dev nlohmann-json3-dev
   libcpp-httplib-dev libjs-three libjs-chart.js
-  librosbag-storage-dev libsensor-msgs-dev gnuplot-nox
+  librosbag-storage-dev libsensor-msgs-dev libzstd-dev liblz4-dev libsqlite3-dev gnuplot-nox
 )
 test_packages=(
   python3-grpcio python3-protobuf python3-venv python3-setuptools python3-wheel
