@@ -1,27 +1,26 @@
-// ROS 1 bags (the rosbag 2.0 format that `rosbag record` writes) as a sequence of camera frames,
-// for `recog eval place --bag`, `recog stream --bag` and `recog load --bag` (through FrameSource),
-// read with Debian's librosbag_storage: no ROS master, no ROS environment.
+// Robot recordings as a sequence of camera frames, for `recog eval place --bag`, `recog stream
+// --bag` and `recog load --bag` (through FrameSource): ROS 1 bags, ROS 2 bags (a rosbag2 folder, a
+// lone MCAP or sqlite3 file) — whatever tools/bag/bag_store.h opens, recognised by content. No ROS
+// installation or environment is needed.
 //
 // A bag is opened with the topics of one camera: the image topic (required), and optionally its
 // CameraInfo, a depth topic registered to it, and the right image of a rectified stereo pair with
 // its CameraInfo. Opening checks everything before a frame is given out, so that nothing is
-// streamed half: the file is a ROS 1 bag with its index (a truncated bag and an unindexed one,
-// whose recording was not closed, are DATA_LOSS saying so), each topic is in the bag (an unknown
-// topic is NOT_FOUND listing the bag's topics with their types and counts), of a supported type
-// and, message by message, of a supported encoding with a consistent size; the frames' stamps and
-// their depth and right partners are then fixed. Only the pixels of a compressed image are
-// decoded later, when its frame is read (a JPEG or PNG damaged past its header is then
-// INVALID_ARGUMENT naming the frame).
+// streamed half: the file is a bag whose format checks pass (bag_store.h: a truncated file, a
+// damaged chunk or an unindexed ROS 1 bag is DATA_LOSS saying so), each topic is in the bag (an
+// unknown topic is NOT_FOUND listing the bag's topics with their types and counts), of a supported
+// type and, message by message, of a supported encoding with a consistent size; the frames' stamps
+// and their depth and right partners are then fixed. Only the pixels are decoded later, when their
+// frame is read (a JPEG or PNG damaged past its header is then INVALID_ARGUMENT naming the frame).
 //
-// Supported messages:
-//  - image and right topics: sensor_msgs/Image in mono8 (or 8UC1), rgb8, bgr8, rgba8, bgra8; or
-//    sensor_msgs/CompressedImage holding a JPEG or a PNG (format "jpeg", "png", or
-//    image_transport's "bgr8; jpeg compressed bgr8" and the like).
-//  - depth topic: sensor_msgs/Image in 16UC1 (millimetres, REP 118) or 32FC1 (metres), little
-//    endian; or sensor_msgs/CompressedImage holding a 16-bit grey PNG (format "png", or
-//    compressed_depth_image_transport's "16UC1; compressedDepth png", whose 12-byte header is
-//    skipped). Frames carry depth in the message's own units (no conversion): CV_16UC1
-//    millimetres or CV_32FC1 metres; 0 (and NaN) = no depth.
+// Supported messages (ROS 1 and ROS 2 alike; tools/bag/ros_images.h says every encoding):
+//  - image and right topics: sensor_msgs/Image (mono8, rgb8, bgr8, ...) or CompressedImage (JPEG,
+//    PNG);
+//  - depth topic: sensor_msgs/Image in 16UC1 or mono16 (millimetres, REP 118) or 32FC1 (metres),
+//    either byte order; or CompressedImage holding a 16-bit grey PNG or image_transport's
+//    compressedDepth (PNG or RVL, millimetres or inverse depth). Frames carry depth in the
+//    message's own units (no conversion): CV_16UC1 millimetres or CV_32FC1 metres; 0 (and NaN) =
+//    no depth.
 //  - camera info topics: sensor_msgs/CameraInfo; the first message is the calibration.
 //
 // Frames are the image topic's messages in the order of their header stamps (not the recording
@@ -42,6 +41,7 @@
 
 #include "core/common/status.h"
 #include "core/object/model/object_model.h"
+#include "tools/bag/bag_store.h"
 #include "tools/evaluation/dataset_layouts.h"
 
 namespace recog::cli {
@@ -68,6 +68,10 @@ struct BagReadOptions {
   // Default false: frames carry the grey image only. true: a colour message's frame also
   // carries its BGR image (BagFrame::color); the grey image is then converted from it.
   bool keep_color = false;
+  // Default false: every frame's image is decoded. true: a CompressedImage's frame carries its
+  // bytes as the bag holds them (BagFrame::encoded, a JPEG or a PNG) and no pixels, for a reader
+  // that writes the image files (`recog bag extract`); a raw Image's frame is decoded as before.
+  bool keep_encoded = false;
 
   // INVALID_ARGUMENT naming the field: offsets must be finite and >= 0.
   Status Validate(std::string_view name = "BagReadOptions") const;
@@ -96,20 +100,26 @@ struct BagTopicInfo {
 };
 
 struct BagFrame {
-  double stamp = 0;    // header.stamp of the image message, seconds
-  cv::Mat gray;        // CV_8UC1
-  cv::Mat color;       // CV_8UC3 BGR, with keep_color for a colour message; else empty
-  cv::Mat depth;       // CV_16UC1 millimetres or CV_32FC1 metres; empty without a depth image
-  cv::Mat right;       // CV_8UC1; empty without a right image
-  uint64_t index = 0;  // in stamp order, from 0
+  double stamp = 0;      // header.stamp of the image message, seconds
+  int64_t stamp_ns = 0;  // the same in nanoseconds since the epoch, exactly
+  cv::Mat gray;          // CV_8UC1
+  cv::Mat color;         // CV_8UC3 BGR, with keep_color for a colour message; else empty
+  cv::Mat depth;         // CV_16UC1 millimetres or CV_32FC1 metres; empty without a depth image
+  cv::Mat right;         // CV_8UC1; empty without a right image
+  std::vector<uint8_t> encoded;  // with keep_encoded, a compressed image's bytes (gray empty)
+  uint64_t index = 0;            // in stamp order, from 0
 };
+
+// "1305031102.175304000": a stamp (nanoseconds since the epoch) in seconds, exactly, as the
+// messages and rgb.txt show it.
+std::string BagStampText(int64_t ns);
 
 // A bag opened for reading frames. Not thread-safe (one reader per thread); movable only.
 class RosBagReader {
  public:
   // Opens `path` and checks it (header comment). NOT_FOUND for a missing file or topic;
   // DATA_LOSS for a truncated, unindexed or damaged bag; INVALID_ARGUMENT for anything else that
-  // is not a bag (a ROS 2 bag is named as such), a topic of another type, an encoding or format
+  // is not a bag of a supported kind, a topic of another type, an encoding or format
   // that is not supported, a message whose size disagrees with its data or its partner's, a
   // camera info without calibration (K zero), an image topic without messages, two frames with
   // the same stamp, a frame without a depth or right image (unless keep_unmatched_frames), or
@@ -125,6 +135,8 @@ class RosBagReader {
 
   const std::string& path() const;
   const BagTopics& topics() const;
+  // The bag as a whole: its storage, files, compression, duration and topics.
+  const bag::BagSummary& summary() const;
   size_t size() const;  // frames
   // Each frame's stamp in seconds, in order.
   const std::vector<double>& stamps() const;

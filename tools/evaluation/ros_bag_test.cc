@@ -1,4 +1,4 @@
-// The ROS 1 bag reader on bags that Debian's python3-rosbag writes (tests/testing/write_bag.py):
+// The frame reader on ROS 1 bags that Debian's python3-rosbag writes (tests/testing/write_bag.py):
 // every encoding and format it takes, frames in header-stamp order with their depth, right image
 // and camera info, and each bag it must refuse, with a named error and no frame.
 #include "tools/evaluation/ros_bag.h"
@@ -286,10 +286,10 @@ TEST_F(BagTest, BrokenFilesAreNamedErrors) {
               "does not exist");
   dir_.Text("text.bag", "not a bag\n");
   ExpectError(RosBagReader::Open(dir_ / "text.bag", Topics(kTopic)), StatusCode::kInvalidArgument,
-              "is not a ROS 1 bag");
+              "is not a bag: it starts with 6e 6f 74");
   dir_.Text("ros2/metadata.yaml", "rosbag2_bagfile_information:\n");
   ExpectError(RosBagReader::Open(dir_ / "ros2", Topics(kTopic)), StatusCode::kInvalidArgument,
-              "is a ROS 2 bag");
+              "metadata.yaml': not rosbag2 metadata");
 
   const std::string good = WriteBag("good.bag", "");
   const std::string truncated = dir_ / "truncated.bag";
@@ -333,12 +333,13 @@ TEST_F(BagTest, TopicsTypesAndEncodingsAreCheckedAtOpen) {
   // Encodings.
   ExpectError(RosBagReader::Open(WriteBag("yuv.bag", "--encoding yuv422"), Topics(kTopic)),
               StatusCode::kInvalidArgument,
-              "topic /camera/image_raw, message at stamp 100.000000000 of bag");
+              "topic /camera/image_raw, message 1 at stamp 100.000000000 of bag");
   ExpectError(RosBagReader::Open(dir_ / "yuv.bag", Topics(kTopic)), StatusCode::kInvalidArgument,
-              "encoding 'yuv422' is not supported");
+              "encoding 'yuv422' is not supported for an image topic");
   // A grey image is no depth image.
   ExpectError(RosBagReader::Open(bag, Topics(kTopic, kTopic)), StatusCode::kInvalidArgument,
-              "encoding 'mono8' is not supported (16UC1 (millimetres), 32FC1 (metres))");
+              "encoding 'mono8' (an image encoding) is not supported for a depth topic (16UC1 and "
+              "mono16 in millimetres, 32FC1 in metres)");
   // Options.
   BagReadOptions negative;
   negative.max_depth_offset = -1;

@@ -8,7 +8,9 @@ void BagFlags::AddTo(CLI::App* command, CLI::Option* folder) {
   CLI::Option* bag_option =
       command
           ->add_option("--bag", bag,
-                       "A ROS 1 bag instead of " + folder->get_name() +
+                       "A ROS 1 or ROS 2 bag (a rosbag2 folder, an .mcap, a .db3, a .bag) "
+                       "instead of " +
+                           folder->get_name() +
                            ": the frames of --topic in header-stamp order, their stamps as "
                            "timestamps (docs/cli.md, \"ROS bags\")")
           ->excludes(folder);
@@ -22,8 +24,9 @@ void BagFlags::AddTo(CLI::App* command, CLI::Option* folder) {
         "With --bag: the image topic's sensor_msgs/CameraInfo, the frames' intrinsics (its K, or "
         "its P with --right-topic)");
   topic("--depth-topic", &topics.depth,
-        "With --bag: depth registered to the images (16UC1 millimetres or 32FC1 metres, or a "
-        "16-bit PNG), the nearest within --max-depth-offset of each frame");
+        "With --bag: depth registered to the images (16UC1 or mono16 millimetres, 32FC1 metres, a "
+        "16-bit PNG or image_transport's compressedDepth), the nearest within --max-depth-offset "
+        "of each frame");
   topic("--right-topic", &topics.right,
         "With --bag: the right images of a rectified stereo pair (equal stamps)");
   topic("--right-camera-info-topic", &topics.right_camera_info,
@@ -56,7 +59,10 @@ StatusOr<FrameSource> BagFlags::Open() const {
     RECOG_ASSIGN_OR_RETURN(const std::vector<BagTopicInfo> listed, RosBagReader::ListTopics(bag));
     std::string images;
     for (const BagTopicInfo& t : listed) {
-      if (t.type != "sensor_msgs/Image" && t.type != "sensor_msgs/CompressedImage") continue;
+      if (!bag::IsMessageType(t.type, "sensor_msgs", "Image") &&
+          !bag::IsMessageType(t.type, "sensor_msgs", "CompressedImage")) {
+        continue;
+      }
       images += (images.empty() ? "" : ", ") + t.topic + " (" + t.type + ", " +
                 std::to_string(t.messages) + " messages)";
     }

@@ -1,5 +1,5 @@
-// The flags that read a ROS 1 bag instead of a folder of frames, shared by `recog eval place`,
-// `recog stream` and `recog load`: --bag FILE --topic T, with --camera-info-topic,
+// The flags that read a ROS 1 or ROS 2 bag instead of a folder of frames, shared by `recog eval
+// place`, `recog stream` and `recog load`: --bag FILE --topic T, with --camera-info-topic,
 // --depth-topic, --right-topic, --right-camera-info-topic and --max-depth-offset
 // (tools/evaluation/ros_bag.h reads the bag); `recog eval sequence` takes the first three only.
 #pragma once

@@ -29,5 +29,6 @@ void AddModelsCommands(CLI::App& app, int* exit_code);  // models push|pull|list
 // admin health|checkpoint|verify|status|restore
 void AddAdminCommands(CLI::App& app, int* exit_code);
 void AddLoadCommand(CLI::App& app, int* exit_code);  // load (load_generator.h)
+void AddBagCommands(CLI::App& app, int* exit_code);  // bag info|extract
 
 }  // namespace recog::cli

@@ -1,8 +1,7 @@
 // recog eval place: runs the loop detector over a sequence (a folder, a TUM RGB-D / EuRoC / KITTI
-// dataset folder with timestamps, a list, a video or a ROS 1 bag; or with --rig a multi-camera rig
-// sequence)
-// and reports the detections and per-stage timings, with a ground truth also precision and
-// recall; --sweep alpha draws the PR curve.
+// dataset folder with timestamps, a list, a video or a ROS bag (1 or 2); or with --rig a
+// multi-camera rig sequence) and reports the detections and per-stage timings, with a ground truth
+// also precision and recall; --sweep alpha draws the PR curve.
 #include <cstdio>
 #include <filesystem>
 #include <memory>

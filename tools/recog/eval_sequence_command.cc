@@ -1,5 +1,5 @@
 // recog eval sequence: frame-by-frame recognition of one object over a sequence (a folder, or a
-// ROS 1 bag's image topic) (recall and false positives), optionally tracked from frame to frame,
+// ROS bag's image topic) (recall and false positives), optionally tracked from frame to frame,
 // with pose errors against a ground truth (--truth from recog seqgen objects, or --poses).
 #include <algorithm>
 #include <cstdio>
@@ -452,10 +452,11 @@ void AddEvalSequenceCommand(CLI::App& eval, int* exit_code) {
   sequence->add_option("--camera", sequence_args->camera,
                        "fx,fy,cx,cy[,k1,k2,p1,p2[,k3]]: required with --images; with --bag, this "
                        "or --camera-info-topic");
-  CLI::Option* bag = sequence_args->bag.AddImageTo(
-      sequence, images,
-      "A ROS 1 bag instead of --images: the frames of --topic in header-stamp order, named "
-      "frame_NNNN from --first-frame (docs/cli.md, \"ROS bags\")");
+  CLI::Option* bag =
+      sequence_args->bag.AddImageTo(sequence, images,
+                                    "A ROS 1 or ROS 2 bag instead of --images: the frames of "
+                                    "--topic in header-stamp order, named "
+                                    "frame_NNNN from --first-frame (docs/cli.md, \"ROS bags\")");
   sequence
       ->add_option("--first-frame", sequence_args->first_frame,
                    "With --bag: the number of its first frame, as --poses, --truth and --exclude "

@@ -1,5 +1,5 @@
-// recog load: simulated robots replaying image sequences (or a ROS 1 bag) into recogd, each
-// through its own frame stream into its own fresh map. Reports per RPC the count, throughput,
+// recog load: simulated robots replaying image sequences (or a ROS 1 or ROS 2 bag) into recogd,
+// each through its own frame stream into its own fresh map. Reports per RPC the count, throughput,
 // latency percentiles and errors, the loops detected, and what the generator itself cost (its CPU
 // time per frame, against the server's throughput); --verify checks every robot's loops against the
 // offline detector,

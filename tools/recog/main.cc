@@ -42,6 +42,7 @@ int main(int argc, char** argv) {
   recog::cli::AddModelsCommands(app, &exit_code);
   recog::cli::AddAdminCommands(app, &exit_code);
   recog::cli::AddLoadCommand(app, &exit_code);
+  recog::cli::AddBagCommands(app, &exit_code);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -7,6 +7,9 @@
 # are, and mono8 pixels) gives exactly the loops of its folder in eval place (100 % precision,
 # 81.8 % recall), in stream and in load --verify. Frames are stamped 0.97 s apart: tau_c's 20 s
 # then leave out the 20 frames before each, as its 20 frames do for a folder without timestamps.
+# ROS 2 bags: `recog bag info` and `bag extract` on the MCAP and sqlite3 fixtures of
+# tests/data/bags, bad ROS 2 bags refused by name, and with the shared data every rosbag2 test bag
+# (bags/rosbag2) listed as its metadata.yaml says.
 # Usage: recog_bag_cli_test.sh RECOG_BINARY RECOGD_BINARY PROJECT_DIR
 set -u
 recog=$1
@@ -23,6 +26,7 @@ trap cleanup EXIT
 source "$(dirname "$0")/cli_test_lib.sh"
 
 images=$project/tests/data/corridor
+shared=${RECOG_SHARED_DATA:-$project/../shared/data}
 topic=/camera/image_raw
 write_bag() {
   /usr/bin/python3 "$project/tests/testing/write_bag.py" "$@" >"$tmp/write.log" 2>&1 \
@@ -58,7 +62,7 @@ expect_error "a truncated bag" "DATA_LOSS: bag '$tmp/truncated.bag' is truncated
 expect_error "an unindexed bag" "DATA_LOSS: .* is unindexed: its recording was not closed .*rosbag reindex" \
   "$recog" eval place --bag "$tmp/unindexed.bag" --topic "$topic" -q
 expect_error "an unsupported encoding" \
-  "INVALID_ARGUMENT: topic $topic, message at stamp 1000.000000000 of bag '$tmp/yuv.bag': encoding 'yuv422' is not supported" \
+  "INVALID_ARGUMENT: topic $topic, message 1 at stamp 1000.000000000 of bag '$tmp/yuv.bag': encoding 'yuv422' is not supported" \
   "$recog" eval place --bag "$tmp/yuv.bag" --topic "$topic" -q
 expect_error "a frame without depth within the offset" \
   "INVALID_ARGUMENT: bag '$tmp/late_depth.bag': frame 1 (stamp 1000.000000000) of $topic has no depth image on /camera/depth/image_raw within 0.02 s" \
@@ -88,6 +92,92 @@ expect_ok "eval place --bag with depth and camera info" "$recog" eval place --ba
   --json -q
 json_check "the frames are the bag's, with 3D points" \
   "assert d['frames']==4 and d['layout']=='bag' and 'points' in d['timing_ms'], d"
+
+# ROS 2 bags: the fixtures written by real writers (tests/data/bags, its README: 6 frames 64 x 48,
+# mono8 and PNG images, 16UC1 and compressedDepth depth, CameraInfo).
+fixtures=$project/tests/data/bags
+expect_ok "bag info --json of an MCAP file" "$recog" bag info --json "$fixtures/fixture.mcap"
+json_check "bag info --json: storage, compression, topics, counts, encodings and sizes" "
+t = {x['name']: x for x in d['topics']}
+assert d['storage'] == 'mcap' and d['compression'] == 'zstd' and d['messages'] == 30, d
+assert d['start_ns'] == 1700000000000000000 and d['end_ns'] == 1700000000500000000, d
+assert all(x['messages'] == 6 and x['serialization'] == 'cdr' for x in d['topics']), d
+assert (t['/camera/image_raw']['encoding'], t['/camera/image_raw']['width']) == ('mono8', 64), t
+assert t['/camera/depth/image_raw/compressedDepth']['encoding'] == '16UC1; compressedDepth png', t
+assert t['/camera/depth/image_raw/compressedDepth']['height'] == 48, t"
+expect_ok "bag info of a rosbag2 sqlite3 folder" "$recog" bag info "$fixtures/fixture_sqlite3"
+grep -q "^storage: *sqlite3$" "$tmp/out" &&
+  grep -Eq "^  /camera/image_raw/compressed +sensor_msgs/msg/CompressedImage +6 messages  cdr  mono8; png compressed mono8 \(64 x 48\)$" "$tmp/out" &&
+  pass || fail "bag info's text: $(cat "$tmp/out")"
+expect_ok "eval place --bag on an MCAP file with compressedDepth and camera info" \
+  "$recog" eval place --bag "$fixtures/fixture_lz4.mcap" --topic /camera/image_raw \
+  --camera-info-topic /camera/camera_info --depth-topic /camera/depth/image_raw/compressedDepth \
+  --json -q
+json_check "the MCAP file's frames, with 3D points" \
+  "assert d['frames']==6 and d['layout']=='bag' and 'points' in d['timing_ms'], d"
+expect_ok "bag extract of a rosbag2 folder" "$recog" bag extract "$fixtures/fixture_sqlite3" \
+  --topic /camera/image_raw/compressed -o "$tmp/extracted"
+[ "$(grep -vc '^#' "$tmp/extracted/rgb.txt")" = 6 ] &&
+  grep -q "^1700000000.500000000 rgb/000005.png$" "$tmp/extracted/rgb.txt" &&
+  cmp -s <(/usr/bin/python3 -c "import cv2; print(cv2.imread('$tmp/extracted/rgb/000002.png', 0)[20, 10])") <(echo 210) &&
+  pass || fail "bag extract: rgb.txt and the PNG files as the bag holds them: $(cat "$tmp/extracted/rgb.txt")"
+expect_ok "eval place on the extracted folder (the TUM layout)" "$recog" eval place \
+  --images "$tmp/extracted" --json -q
+json_check "the extracted folder's frames" "assert d['frames']==6 and d['layout']=='tum', d"
+# Bad ROS 2 bags: one line each, naming the file and the record.
+head -c 5000 "$fixtures/fixture.mcap" >"$tmp/cut.mcap"
+expect_error "an MCAP file cut short" "DATA_LOSS: MCAP file '$tmp/cut.mcap' does not end with the MCAP magic" \
+  "$recog" eval place --bag "$tmp/cut.mcap" --topic /camera/image_raw -q
+/usr/bin/python3 -c "
+data = bytearray(open('$fixtures/fixture.mcap', 'rb').read()); data[3000] ^= 0xff
+open('$tmp/crc.mcap', 'wb').write(data)"
+expect_error "a chunk whose CRC does not match" "DATA_LOSS: MCAP file '$tmp/crc.mcap', Chunk record at byte [0-9]*: its records' CRC is" \
+  "$recog" eval place --bag "$tmp/crc.mcap" --topic /camera/image_raw -q
+mkdir -p "$tmp/no_db3"
+cp "$fixtures/fixture_sqlite3/metadata.yaml" "$tmp/no_db3/"
+expect_error "a metadata.yaml naming a file that is not there" \
+  "NOT_FOUND: '$tmp/no_db3/metadata.yaml' names the file 'fixture_0.db3', which is not there" \
+  "$recog" bag info "$tmp/no_db3"
+expect_error "a file that is no bag" "INVALID_ARGUMENT: '$images/1.jpg' is not a bag: it starts with ff d8 ff" \
+  "$recog" bag info "$images/1.jpg"
+
+# The rosbag2 test bags (shared data, bags/rosbag2): bag info lists the topics and counts of each
+# bag's metadata.yaml (or of its tables, with no metadata.yaml; topics without messages too), the
+# sqlite3 and MCAP twins alike; the bags of an unknown serialization format are refused by name.
+rosbag2=$shared/bags/rosbag2
+if [ -d "$rosbag2" ]; then
+  for bag in "$rosbag2"/*; do
+    name=$(basename "$bag")
+    [ -f "$bag/$name" ] && bag=$bag/$name  # a lone file in a folder of its name
+    if [[ $name == *wrong_rmw_test ]]; then
+      expect_error "bag info $name" "INVALID_ARGUMENT: .*'wrong_format' (only cdr is read)" \
+        "$recog" bag info "$bag"
+      continue
+    fi
+    expect_ok "bag info $name" "$recog" bag info --json "$bag"
+    cp "$tmp/out" "$tmp/$name.json"
+    [ -f "$bag/metadata.yaml" ] || continue
+    json_check "bag info $name: the topics and counts of its metadata.yaml" "
+import yaml
+info = yaml.safe_load(open('$bag/metadata.yaml'))['rosbag2_bagfile_information']
+listed = {t.get('topic_metadata', t.get('topic_and_type'))['name']: t['message_count'] for t in info['topics_with_message_count']}
+found = {t['name']: t['messages'] for t in d['topics']}
+assert all(found.get(n) == c for n, c in listed.items()), (listed, found)
+assert all(n in listed or c == 0 for n, c in found.items()), (listed, found)
+assert d['messages'] == info['message_count'], (d['messages'], info['message_count'])"
+  done
+  for db3 in "$tmp"/db3_*.json; do
+    mcap=$tmp/mcap_${db3#"$tmp"/db3_}
+    [ -f "$mcap" ] || continue
+    /usr/bin/python3 -c "
+import json
+topics = lambda f: [(t['name'], t['type'], t['messages']) for t in json.load(open(f))['topics']]
+assert topics('$db3') == topics('$mcap'), (topics('$db3'), topics('$mcap'))" &&
+      pass || fail "the sqlite3 and MCAP twins $(basename "$db3" .json) give the same topics and counts"
+  done
+else
+  skip_shared "the rosbag2 test bags: $rosbag2 not found (set RECOG_SHARED_DATA)"
+fi
 
 port=$(free_port)
 server=(--server "127.0.0.1:$port")
@@ -134,7 +224,6 @@ expect_ok "load --bag with depth --verify" "$recog" load --bag "$tmp/small.bag" 
 json_check "load --bag --verify" "assert d['verified'] and d['frames_answered']==8, d"
 
 # The shared corridor as a bag: exactly its folder's loops, offline, streamed and under load.
-shared=${RECOG_SHARED_DATA:-$project/../shared/data}
 corridor=$shared/places/corridor
 if [ -d "$corridor/images" ]; then
   write_bag "$tmp/corridor.bag" --images "$corridor/images" --encoding jpeg --period 0.97

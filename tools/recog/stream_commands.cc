@@ -1,7 +1,6 @@
-// recog stream: a recorded sequence (folder, list, video or ROS 1 bag; or a multi-camera rig
-// sequence)
-// through one StreamFrames call of recogd, printing every loop closure as it is answered, over
-// the C++ client library. It takes the ServerFlags; a failed call prints one line
+// recog stream: a recorded sequence (folder, list, video or ROS 1 or ROS 2 bag; or a multi-camera
+// rig sequence) through one StreamFrames call of recogd, printing every loop closure as it is
+// answered, over the C++ client library. It takes the ServerFlags; a failed call prints one line
 // "recog stream: CODE: message" and exits 1.
 #include <chrono>
 #include <csignal>
