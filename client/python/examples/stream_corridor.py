@@ -15,16 +15,27 @@ loop in a folder of recent_frames (20) frames or fewer: a frame's match must be 
 many frames older. The images (.jpg, .jpeg, .png) go in natural order of their names (2.jpg
 before 10.jpg). The server is --server, else RECOG_SERVER, else 127.0.0.1:50051. Exit status:
 0 when the folder was streamed, 1 on an error (one line on stderr), 2 on a bad command line.
+
+Or a bag's image topic instead of the folder, ``--bag BAG --topic T`` (then the settings): a ROS 1
+bag, an MCAP file, a rosbag2 sqlite3 file or a rosbag2 folder, read by the project's CLI
+(``recog bag extract``, see bag_frames.py; the binary is --recog, else RECOG_BIN, else recog on
+PATH, else the checkout's build/bin/recog). Its frames go in the order of their header stamps,
+each stamp the frame's timestamp: the map's tau_c then counts seconds (recent_seconds, 20 s by
+default), and a frame is named by its stamp (`stamp 1002.000 revisits stamp 1000.000`).
 """
 
 import argparse
 import re
+import statistics
 import sys
 from pathlib import Path
 
+import bag_frames  # next to this file: the bag's frames through `recog bag extract`
+
 try:
     from google.protobuf import json_format
-    from recog_client import AlreadyExists, RecogError, RecognitionClient, Unavailable, place_pb2
+    from recog_client import (AlreadyExists, RecogError, RecognitionClient, Unavailable,
+                              make_frame, place_pb2)
 except ModuleNotFoundError as missing:  # not the interpreter of the client's environment
     sys.exit(f"stream_corridor: {sys.executable} has no module {missing.name}: run this with "
              ".venv/bin/python (client/python/README.md, Installing) or, without installing, "
@@ -62,11 +73,35 @@ def parse_arguments() -> argparse.Namespace:
                         "127.0.0.1:50051)")
     parser.add_argument("--map", default="corridor",
                         help="name of the new map (default: %(default)s; it must not exist)")
-    parser.add_argument("folder", type=Path, help="folder of the images")
+    parser.add_argument("folder", nargs="?", help="folder of the images (or --bag)")
     parser.add_argument("settings", nargs="*", type=setting, default=[], metavar="KEY=VALUE",
                         help="the new map's settings, e.g. temporal_matches=0 recent_frames=1 "
                         "(default: the server's)")
-    return parser.parse_intermixed_args()  # options may come after the settings too
+    parser.add_argument("--bag", type=Path, help="a bag instead of the folder: ROS 1, MCAP, "
+                        "rosbag2 sqlite3 file or folder (read by `recog bag extract`)")
+    parser.add_argument("--topic", help="with --bag: its image topic (without: the error lists "
+                        "them)")
+    parser.add_argument("--recog", help="with --bag: the recog binary that reads it (default: "
+                        "RECOG_BIN, else recog on PATH, else the checkout's build/bin/recog)")
+    arguments = parser.parse_intermixed_args()  # options may come after the settings too
+    if arguments.bag is None:
+        if arguments.folder is None:
+            parser.error("the following arguments are required: folder (or --bag BAG --topic "
+                         "TOPIC)")
+        for option in ("topic", "recog"):
+            if getattr(arguments, option):
+                parser.error(f"--{option} goes with --bag")
+    elif arguments.folder is not None:  # the first setting, taken for a folder
+        if "=" not in arguments.folder:
+            parser.error("give either a folder of images or --bag BAG --topic TOPIC")
+        try:
+            arguments.settings.insert(0, setting(arguments.folder))
+        except argparse.ArgumentTypeError as error:
+            parser.error(f"argument KEY=VALUE: {error}")
+        arguments.folder = None
+    if arguments.folder is not None:
+        arguments.folder = Path(arguments.folder)
+    return arguments
 
 
 def fail(message: str) -> int:
@@ -81,8 +116,23 @@ def plural(count: int, noun: str) -> str:
 
 
 def main() -> int:
-    """Streams the folder; returns the exit status."""
+    """Streams the folder or the bag; returns the exit status."""
     arguments = parse_arguments()
+    settings = json_format.ParseDict(dict(arguments.settings), place_pb2.MapSettings())
+    if arguments.bag:
+        try:
+            bag = bag_frames.extract(arguments.bag, arguments.topic, arguments.recog)
+        except bag_frames.BagError as error:
+            return fail(str(error))
+        with bag:  # the extracted images live until the stream ends
+            if not bag.frames:
+                return fail(f"{arguments.bag}: no message on {arguments.topic}")
+            # Read one at a time, as the stream sends them.
+            images = (make_frame(str(frame.path), timestamp=frame.stamp)
+                      for frame in bag.frames)
+            return stream(arguments, settings, images,
+                          [f"stamp {frame.stamp:.3f}" for frame in bag.frames],
+                          [frame.stamp for frame in bag.frames])
     folder = arguments.folder
     if not folder.is_dir():
         return fail(f"{folder}: no such folder")
@@ -90,8 +140,13 @@ def main() -> int:
                      if path.is_file() and path.suffix.lower() in IMAGE_SUFFIXES), key=natural_key)
     if not images:
         return fail(f"{folder}: no .jpg, .jpeg or .png image in it")
-    settings = json_format.ParseDict(dict(arguments.settings), place_pb2.MapSettings())
+    return stream(arguments, settings, images, [path.name for path in images])
 
+
+def stream(arguments: argparse.Namespace, settings: place_pb2.MapSettings, images,
+           labels: list[str], stamps: list[float] | None = None) -> int:
+    """Creates the map with ``settings``, streams ``images`` (one per label; ``stamps``, their
+    timestamps, for a bag) into it, prints its loops and the summary; returns the exit status."""
     names = {}  # frame id in the map -> file name
     loops = failed = 0
     client = None
@@ -99,7 +154,7 @@ def main() -> int:
         client = RecognitionClient(arguments.server)
         settings = client.create_map(arguments.map, settings).settings  # every field: effective
         for answer in client.stream_frames(arguments.map, images, create_if_missing=False):
-            name = images[answer.sequence].name
+            name = labels[answer.sequence]
             if answer.HasField("error"):  # this frame only (e.g. not an image); the rest go on
                 failed += 1
                 print(f"{name}: not added: {answer.error.message}", file=sys.stderr)
@@ -125,10 +180,17 @@ def main() -> int:
         if client is not None:
             client.close()
 
-    summary = f"{plural(len(images), 'frame')}, {plural(loops, 'loop')}"
+    summary = f"{plural(len(labels), 'frame')}, {plural(loops, 'loop')}"
     print(summary + (f" ({failed} not added)" if failed else ""))
-    if not loops and len(images) <= settings.recent_frames:
-        print(f"{PROGRAM}: no loop can be found in {len(images)} frames with recent_frames="
+    if stamps is not None:
+        if not loops and len(stamps) > 1 and stamps[-1] - stamps[0] <= settings.recent_seconds:
+            period = statistics.median(b - a for a, b in zip(stamps, stamps[1:]))
+            print(f"{PROGRAM}: no loop can be found in a bag of {stamps[-1] - stamps[0]:g} s with "
+                  f"recent_seconds={settings.recent_seconds:g} (a frame's match must be more "
+                  f"than {settings.recent_seconds:g} s older); try temporal_matches=0 "
+                  f"recent_seconds={1.5 * period:.3g}", file=sys.stderr)
+    elif not loops and len(labels) <= settings.recent_frames:
+        print(f"{PROGRAM}: no loop can be found in {len(labels)} frames with recent_frames="
               f"{settings.recent_frames} (a frame's match must be more than "
               f"{settings.recent_frames} frames older); try temporal_matches=0 recent_frames=1",
               file=sys.stderr)

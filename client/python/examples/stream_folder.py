@@ -11,16 +11,21 @@ exists gets the frames after its own. The last line sums up, e.g.
 status: 0 when the folder was streamed, 1 on an error (one line on stderr), 2 on a bad command
 line.
 
-Or a ROS 1 bag's image topic instead of the folder (``--bag FILE --topic T``, read with Debian's
-python3-rosbag): sensor_msgs/Image in mono8, rgb8 or bgr8 (sent as raw pixels) or
+Or a bag's image topic instead of the folder (``--bag BAG --topic T``): a ROS 1 bag, an MCAP
+file, a rosbag2 sqlite3 file or a rosbag2 folder, read by the project's CLI (``recog bag
+extract``, see bag_frames.py; the binary is --recog, else RECOG_BIN, else recog on PATH, else
+the checkout's build/bin/recog). sensor_msgs/Image (sent as lossless PNG) or
 sensor_msgs/CompressedImage (its JPEG or PNG bytes), in the order of their header stamps, each
-stamp the frame's timestamp (the map's tau_c then counts seconds: recent_seconds).
+stamp the frame's timestamp (the map's tau_c then counts seconds: recent_seconds). Without
+--topic, the error lists the bag's image topics.
 """
 
 import argparse
 import re
 import sys
 from pathlib import Path
+
+import bag_frames  # next to this file: the bag's frames through `recog bag extract`
 
 try:
     from recog_client import RecogError, RecognitionClient, Unavailable, make_frame, place_pb2
@@ -30,13 +35,6 @@ except ModuleNotFoundError as missing:  # not the interpreter of the client's en
              "PYTHONPATH=build/python /usr/bin/python3")
 
 IMAGE_SUFFIXES = {".jpg", ".jpeg", ".png"}
-#: sensor_msgs/Image encodings --bag takes: channels of a pixel.
-BAG_ENCODINGS = {"mono8": 1, "rgb8": 3, "bgr8": 3}
-BAG_IMAGE_TYPES = ("sensor_msgs/Image", "sensor_msgs/CompressedImage")
-
-
-class BagError(Exception):
-    """A bag that cannot be streamed (its message is the example's one line)."""
 
 
 def natural_key(name: str) -> list:
@@ -51,51 +49,6 @@ def list_images(folder: Path) -> list[Path]:
     return sorted(images, key=lambda path: natural_key(path.name))
 
 
-def bag_image(message):
-    """The image of a bag's message as the client takes it: the bytes of a CompressedImage, a
-    (h, w) grey or (h, w, 3) BGR array of a raw Image."""
-    if message._type == "sensor_msgs/CompressedImage":
-        return bytes(message.data)
-    channels = BAG_ENCODINGS.get(message.encoding)
-    if channels is None:
-        raise BagError(f"encoding {message.encoding!r} of the image at stamp "
-                       f"{message.header.stamp.to_sec():.3f} is not mono8, rgb8 or bgr8")
-    import numpy  # pylint: disable=import-outside-toplevel
-    rows = numpy.frombuffer(message.data, numpy.uint8).reshape(message.height, message.step)
-    pixels = rows[:, :message.width * channels].reshape(message.height, message.width, channels)
-    if message.encoding == "rgb8":
-        pixels = pixels[:, :, ::-1]  # the client's arrays are OpenCV's BGR
-    return pixels[:, :, 0] if channels == 1 else pixels
-
-
-def read_bag(path: Path, topic: str | None) -> list:
-    """The frames of ``topic`` in the bag at ``path``, in header-stamp order, as frames with their
-    stamps as timestamps; BagError for anything that keeps them from being streamed."""
-    try:
-        import rosbag  # pylint: disable=import-outside-toplevel
-    except ImportError as error:
-        raise BagError(f"--bag needs Python's rosbag module ({error}): install Debian's "
-                       "python3-rosbag and run this with /usr/bin/python3 (or a .venv made "
-                       "with --system-site-packages)") from None
-    try:
-        with rosbag.Bag(str(path)) as bag:
-            topics = bag.get_type_and_topic_info().topics
-            if topic not in topics or topics[topic].msg_type not in BAG_IMAGE_TYPES:
-                listed = ", ".join(f"{name} ({info.msg_type}, {info.message_count} messages)"
-                                   for name, info in sorted(topics.items()))
-                wanted = f"no image topic {topic}" if topic else "give --topic"
-                raise BagError(f"{path}: {wanted}; its topics: {listed or 'none'}")
-            messages = [message for _, message, _ in bag.read_messages(topics=[topic])]
-    except (rosbag.ROSBagException, OSError) as error:
-        raise BagError(f"{path}: {error}") from None
-    messages.sort(key=lambda message: message.header.stamp)
-    try:
-        return [make_frame(bag_image(message), timestamp=message.header.stamp.to_sec())
-                for message in messages]
-    except BagError as error:
-        raise BagError(f"{path}: {error}") from None
-
-
 def parse_arguments() -> argparse.Namespace:
     """Reads the command line."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n", 1)[0])
@@ -105,14 +58,18 @@ def parse_arguments() -> argparse.Namespace:
     parser.add_argument("--token-file", help="file of the bearer token, when the server has "
                         "tokens (default: RECOG_TOKEN_FILE)")
     parser.add_argument("images", type=Path, nargs="?", help="folder of the images")
-    parser.add_argument("--bag", type=Path, help="a ROS 1 bag instead of the folder (Debian's "
-                        "python3-rosbag reads it)")
-    parser.add_argument("--topic", help="with --bag: its image topic")
+    parser.add_argument("--bag", type=Path, help="a bag instead of the folder: ROS 1, MCAP, "
+                        "rosbag2 sqlite3 file or folder (read by `recog bag extract`)")
+    parser.add_argument("--topic", help="with --bag: its image topic (without: the error lists "
+                        "them)")
+    parser.add_argument("--recog", help="with --bag: the recog binary that reads it (default: "
+                        "RECOG_BIN, else recog on PATH, else the checkout's build/bin/recog)")
     arguments = parser.parse_args()
     if (arguments.images is None) == (arguments.bag is None):
-        parser.error("give either a folder of images or --bag FILE --topic TOPIC")
-    if arguments.topic and not arguments.bag:
-        parser.error("--topic goes with --bag")
+        parser.error("give either a folder of images or --bag BAG --topic TOPIC")
+    for option in ("topic", "recog"):
+        if getattr(arguments, option) and not arguments.bag:
+            parser.error(f"--{option} goes with --bag")
     return arguments
 
 
@@ -128,22 +85,31 @@ def plural(count: int, noun: str) -> str:
 
 
 def main() -> int:
-    """Streams the folder; returns the exit status (1 when the stream failed)."""
+    """Streams the folder or the bag; returns the exit status (1 when the stream failed)."""
     arguments = parse_arguments()
     if arguments.bag:
         try:
-            images = read_bag(arguments.bag, arguments.topic)
-        except BagError as error:
+            bag = bag_frames.extract(arguments.bag, arguments.topic, arguments.recog)
+        except bag_frames.BagError as error:
             return fail(str(error))
-        labels = [f"stamp {frame.timestamp:.3f}" for frame in images]
-    else:
-        if not arguments.images.is_dir():
-            return fail(f"{arguments.images}: no such folder")
-        images = list_images(arguments.images)
-        labels = [path.name for path in images]
+        with bag:  # the extracted images live until the stream ends
+            if not bag.frames:
+                return fail(f"{arguments.bag}: no message on {arguments.topic}")
+            # Read one at a time, as the stream sends them.
+            images = (make_frame(str(frame.path), timestamp=frame.stamp)
+                      for frame in bag.frames)
+            return stream(arguments, images, [f"stamp {frame.stamp:.3f}" for frame in bag.frames])
+    if not arguments.images.is_dir():
+        return fail(f"{arguments.images}: no such folder")
+    images = list_images(arguments.images)
     if not images:
-        return fail(f"{arguments.bag}: no message on {arguments.topic}" if arguments.bag
-                    else f"{arguments.images}: no .jpg, .jpeg or .png image in it")
+        return fail(f"{arguments.images}: no .jpg, .jpeg or .png image in it")
+    return stream(arguments, images, [path.name for path in images])
+
+
+def stream(arguments: argparse.Namespace, images, labels: list[str]) -> int:
+    """Streams ``images`` (one per label) into the map and prints its loops and the summary;
+    returns the exit status."""
     names = {}  # frame id in the map -> "id (file name)", for this run's frames
     loops = candidates = failed = 0
     client = None
@@ -180,7 +146,7 @@ def main() -> int:
     finally:
         if client is not None:
             client.close()
-    summary = (f"{plural(len(images), 'frame')} streamed into map {arguments.map!r}, "
+    summary = (f"{plural(len(labels), 'frame')} streamed into map {arguments.map!r}, "
                f"{plural(loops, 'loop')}")
     if candidates:
         summary += f", {plural(candidates, 'candidate')}"
