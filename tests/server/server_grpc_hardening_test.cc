@@ -206,11 +206,17 @@ TEST_F(GrpcHardeningTest, RunningOutOfDescriptorsDoesNotDeafenThePort) {
     }
     sockets.push_back(fd);
   }
-  std::this_thread::sleep_for(std::chrono::milliseconds(500));  // the listener's turn
+  // The listener takes the connections up in its own time: its turn (500 ms), then up to 10 s
+  // more on a busy machine until it has closed one of them for want of a descriptor.
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));
   size_t closed_by_server = 0;
-  for (const int fd : sockets) {
-    char byte;
-    if (recv(fd, &byte, 1, MSG_DONTWAIT) == 0) ++closed_by_server;
+  const auto listened_until = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+  while (closed_by_server == 0 && std::chrono::steady_clock::now() < listened_until) {
+    for (const int fd : sockets) {
+      char byte;
+      if (recv(fd, &byte, 1, MSG_DONTWAIT) == 0) ++closed_by_server;
+    }
+    if (closed_by_server == 0) std::this_thread::sleep_for(std::chrono::milliseconds(50));
   }
   for (const int fd : sockets) close(fd);
   EXPECT_GT(sockets.size(), 400u);
@@ -279,8 +285,20 @@ TEST_F(GrpcHardeningTest, HealthWatchesAreCapped) {
     }
     clients.back()->Poll(std::chrono::milliseconds(50));
   }
-  std::this_thread::sleep_for(std::chrono::milliseconds(300));
-  for (auto& client : clients) client->Poll(std::chrono::milliseconds(10));
+  // Every watch has its answer's headers, so the server counts it (up to 20 s on a busy machine).
+  const auto answered_until = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+  size_t answered = 0;
+  while (answered < HealthService::kMaxWatches &&
+         std::chrono::steady_clock::now() < answered_until) {
+    answered = 0;
+    for (auto& client : clients) {
+      client->Poll(std::chrono::milliseconds(10));
+      for (uint32_t stream = 1; stream < 2 * 50; stream += 2) {
+        answered += client->stream(stream).http_status.empty() ? 0 : 1;
+      }
+    }
+  }
+  ASSERT_EQ(answered, HealthService::kMaxWatches);
   RawHttp2Client extra(server_->port());
   const RawHttp2Client::StreamEnd& end = RawCall(extra, 1, kWatch, "");
   ASSERT_TRUE(end.ended);
