@@ -412,8 +412,13 @@ void BM_Rig_2Cameras_26K(benchmark::State& state) {
     }
   }
   const std::vector<RigCamera> rig = {
-      {"front", size, K, {}, cv::Matx33d::eye(), {0, 0, 0.4}},
-      {"rear", size, K, {}, cv::Matx33d(-1, 0, 0, 0, 1, 0, 0, 0, -1), {0, 0, -0.4}}};
+      {.name = "front", .size = size, .K = K, .distortion = {}, .body_t_camera = {0, 0, 0.4}},
+      {.name = "rear",
+       .size = size,
+       .K = K,
+       .distortion = {},
+       .body_R_camera = cv::Matx33d(-1, 0, 0, 0, 1, 0, 0, 0, -1),
+       .body_t_camera = {0, 0, -0.4}}};
   auto vocabulary = std::make_shared<const Vocabulary>(LoadBundledPlaceVocabulary());
   std::mt19937_64 rng(13);
   std::map<std::string, std::vector<double>> times;

@@ -85,7 +85,17 @@ double RefineDisparity(const cv::Mat& left, const cv::Mat& right, int x, int y, 
 Status PointsFromDepth(const std::vector<cv::KeyPoint>& keypoints, cv::Size image_size,
                        const cv::Matx33d& K, const cv::Mat& depth, double depth_scale,
                        std::vector<cv::Point3f>* points) {
+  return PointsFromDepth(keypoints, image_size,
+                         CameraIntrinsics{K(0, 0), K(1, 1), K(0, 2), K(1, 2), {}}, depth,
+                         depth_scale, points);
+}
+
+Status PointsFromDepth(const std::vector<cv::KeyPoint>& keypoints, cv::Size image_size,
+                       const CameraIntrinsics& camera, const cv::Mat& depth, double depth_scale,
+                       std::vector<cv::Point3f>* points) {
+  const cv::Matx33d K = camera.K();
   RECOG_RETURN_IF_ERROR(CheckIntrinsics(K));
+  const bool pinhole = camera.IsPinhole();
   if (depth.empty()) return Status::InvalidArgument("depth image is empty");
   if (depth.type() != CV_16U && depth.type() != CV_32F) {
     return Status::InvalidArgument(
@@ -115,7 +125,14 @@ Status PointsFromDepth(const std::vector<cv::KeyPoint>& keypoints, cv::Size imag
       }
       if (z != 0.0) break;
     }
-    if (z > 0.0) (*points)[i] = BackProject(K, p, z);
+    if (!(z > 0.0)) continue;
+    cv::Vec3d bearing;
+    if (pinhole) {
+      (*points)[i] = BackProject(K, p, z);
+    } else if (UnprojectPixel(camera, p, &bearing) && bearing[2] > 1e-6) {
+      const cv::Vec3d point = bearing * (z / bearing[2]);  // z: the depth along the axis
+      (*points)[i] = cv::Point3f(float(point[0]), float(point[1]), float(point[2]));
+    }
   }
   return Status::Ok();
 }

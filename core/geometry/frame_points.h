@@ -32,6 +32,7 @@
 
 #include "core/common/feature_set.h"
 #include "core/common/status.h"
+#include "core/geometry/camera_model.h"
 #include "core/geometry/correspondences.h"
 
 namespace recog {
@@ -41,6 +42,12 @@ namespace recog {
 // of the image the keypoints come from.
 Status PointsFromDepth(const std::vector<cv::KeyPoint>& keypoints, cv::Size image_size,
                        const cv::Matx33d& K, const cv::Mat& depth, double depth_scale,
+                       std::vector<cv::Point3f>* points);
+// The same for the keypoints of a camera with a lens (as detected, distortion in them; the depth
+// image aligned with that image): a keypoint's point lies along its bearing (UnprojectPixel) at
+// the depth's z. Move the keypoints into the pinhole image of K (ToPinhole) after, not before.
+Status PointsFromDepth(const std::vector<cv::KeyPoint>& keypoints, cv::Size image_size,
+                       const CameraIntrinsics& camera, const cv::Mat& depth, double depth_scale,
                        std::vector<cv::Point3f>* points);
 
 struct StereoOptions {

@@ -34,6 +34,11 @@ std::string EncodeRigCamera(const RigCamera& camera) {
   std::snprintf(number, sizeof(number), " %zu", camera.distortion.size());
   line += number;
   for (const double v : camera.distortion) add(v);
+  // A lens other than radtan follows its coefficients (lines written before lenses have none).
+  if (camera.lens != LensModel::kRadialTangential) {
+    line += " lens ";
+    line += LensModelName(camera.lens);
+  }
   line += '\n';
   return line;
 }
@@ -54,6 +59,20 @@ StatusOr<RigCamera> DecodeRigCamera(const std::string& name, std::istream& in) {
   camera.distortion.resize(distortion);
   for (double& v : camera.distortion) in >> v;
   if (!in) return Status::DataLoss("place settings: a malformed rig camera '" + name + "'");
+  // The rest of the line: nothing, or the lens.
+  std::string rest, word, lens;
+  std::getline(in, rest);
+  std::istringstream tail(rest);
+  if (tail >> word) {
+    StatusOr<LensModel> model = word == "lens" && (tail >> lens)
+                                    ? ParseLensModel(lens)
+                                    : Status::DataLoss("an unexpected '" + word + "'");
+    if (!model.ok()) {
+      return Status::DataLoss("place settings: a malformed rig camera '" + name +
+                              "': " + model.status().message());
+    }
+    camera.lens = *model;
+  }
   camera.K = cv::Matx33d(fx, 0, cx, 0, fy, cy, 0, 0, 1);
   return camera;
 }

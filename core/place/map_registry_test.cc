@@ -154,7 +154,8 @@ TEST(MapRegistryTest, ARigRoundTripsThroughTheSettingsTextExactly) {
   front.body_t_camera = {0.1 / 3.0, 0, 0.4};
   RigCamera rear = front;
   rear.name = "rear";
-  rear.distortion.clear();
+  rear.distortion = {0.0034, 0.0007, -0.0029, 0.0003};
+  rear.lens = LensModel::kEquidistant;
   rear.body_R_camera = cv::Matx33d(-1, 0, 0, 0, 1, 0, 0, 0, -1);
   const std::string text = EncodePlaceSettings({}, "fleet", {front, rear});
   std::vector<RigCamera> rig;
@@ -168,7 +169,16 @@ TEST(MapRegistryTest, ARigRoundTripsThroughTheSettingsTextExactly) {
   EXPECT_EQ(rig[0].distortion, front.distortion);
   EXPECT_EQ(rig[0].body_t_camera, front.body_t_camera);
   EXPECT_EQ(rig[1].body_R_camera, rear.body_R_camera);
-  EXPECT_TRUE(rig[1].distortion.empty());
+  EXPECT_EQ(rig[0].lens, LensModel::kRadialTangential);
+  EXPECT_EQ(rig[1].distortion, rear.distortion);
+  EXPECT_EQ(rig[1].lens, LensModel::kEquidistant);
+  // A line of before lenses is a radtan camera; a lens no one knows is damage.
+  const std::string before_lenses = text.substr(0, text.find(" lens equidistant")) + "\n";
+  ASSERT_TRUE(DecodePlaceSettings(before_lenses, nullptr, &rig).ok());
+  EXPECT_EQ(rig[1].lens, LensModel::kRadialTangential);
+  std::string unknown = text;
+  unknown.replace(unknown.find("equidistant"), 11, "omni");
+  EXPECT_EQ(DecodePlaceSettings(unknown, nullptr, &rig).status().code(), StatusCode::kDataLoss);
 
   // A line cut short, and a camera that is not a rigid transform, are damage.
   const std::string cut = text.substr(0, text.rfind(' '));

@@ -125,17 +125,27 @@ StatusOr<FeatureSet> DecodeFeatures(const pb::Features& features, const Descript
   return out;
 }
 
+// The proto's lens enum numbers the models as core's LensModel does.
+static_assert(int(pb::LENS_MODEL_RADTAN) == int(LensModel::kRadialTangential) &&
+              int(pb::LENS_MODEL_EQUIDISTANT) == int(LensModel::kEquidistant) &&
+              int(pb::LENS_MODEL_DOUBLE_SPHERE) == int(LensModel::kDoubleSphere));
+
+StatusOr<LensModel> LensFromProto(int lens, const std::string& field) {
+  if (!pb::LensModel_IsValid(lens)) {
+    return Status::InvalidArgument(field + ".lens " + std::to_string(lens) +
+                                   " is not a lens model (radtan 0, equidistant 1, "
+                                   "double sphere 2)");
+  }
+  return LensModel(lens);
+}
+
 Status DecodeIntrinsics(const pb::CameraIntrinsics& in, CameraIntrinsics* out) {
   out->fx = in.fx();
   out->fy = in.fy();
   out->cx = in.cx();
   out->cy = in.cy();
   out->distortion.assign(in.distortion().begin(), in.distortion().end());
-  const size_t d = out->distortion.size();
-  if (d != 0 && d != 4 && d != 5 && d != 8 && d != 12 && d != 14) {
-    return Status::InvalidArgument("frame.intrinsics.distortion has " + std::to_string(d) +
-                                   " values; OpenCV takes 4, 5, 8, 12 or 14");
-  }
+  RECOG_ASSIGN_OR_RETURN(out->lens, LensFromProto(in.lens(), "frame.intrinsics"));
   const Status valid = out->Validate();
   if (!valid.ok()) return valid.WithContext("frame.intrinsics", StatusCode::kInvalidArgument);
   return Status::Ok();
@@ -467,6 +477,7 @@ StatusOr<std::vector<RigCamera>> RigFromProto(const pb::MapSettings& settings) {
     const pb::CameraIntrinsics& k = in.intrinsics();
     camera.K = cv::Matx33d(k.fx(), 0, k.cx(), 0, k.fy(), k.cy(), 0, 0, 1);
     camera.distortion.assign(k.distortion().begin(), k.distortion().end());
+    RECOG_ASSIGN_OR_RETURN(camera.lens, LensFromProto(k.lens(), field + ".intrinsics"));
     const pb::Pose& pose = in.body_pose();
     if (pose.rotation_size() != 0 || pose.translation_size() != 0) {
       if (pose.rotation_size() != 9 || pose.translation_size() != 3) {
@@ -498,6 +509,7 @@ void ToProto(const std::vector<RigCamera>& rig, pb::MapSettings* out) {
     k->set_cx(camera.K(0, 2));
     k->set_cy(camera.K(1, 2));
     k->mutable_distortion()->Assign(camera.distortion.begin(), camera.distortion.end());
+    k->set_lens(pb::LensModel(camera.lens));
     ToProto(camera.body_R_camera, camera.body_t_camera, settings->mutable_body_pose());
   }
 }

@@ -5,7 +5,7 @@
 #include <string>
 
 #include "core/common/elapsed.h"
-#include "core/geometry/camera_rig.h"
+#include "core/geometry/camera_model.h"
 #include "core/geometry/frame_points.h"
 
 namespace recog::server {
@@ -25,11 +25,6 @@ Status PointsOf(const DecodedFrame& frame, const FeatureSet& features,
   RECOG_RETURN_IF_ERROR(extract(frame.right, &right_features));
   return PointsFromStereo(features, frame.image, right_features, frame.right, out->K,
                           frame.baseline_m, StereoOptions{}, &out->points);
-}
-
-bool IsPinhole(const CameraIntrinsics& intrinsics) {
-  return std::all_of(intrinsics.distortion.begin(), intrinsics.distortion.end(),
-                     [](double d) { return d == 0; });
 }
 
 }  // namespace
@@ -52,8 +47,11 @@ StatusOr<PreparedFrame> PreparedFrame::Prepare(const pb::Frame& request,
   if (!frame.depth.empty() || !frame.right.empty()) {
     RECOG_RETURN_IF_ERROR(
         PointsOf(frame, prepared.features(), extract, &prepared.geometry_.emplace()));
-  } else if (frame.intrinsics.has_value() && IsPinhole(*frame.intrinsics)) {
-    prepared.geometry_.emplace().K = frame.intrinsics->K();  // pinhole keypoints
+  } else if (frame.intrinsics.has_value()) {
+    // The geometry of loops works in the pinhole image of K: a lens's keypoints move there once.
+    FeatureSet& features = frame.has_image() ? prepared.extracted_ : prepared.frame_.features;
+    ToPinhole(*frame.intrinsics, features.keypoints);
+    prepared.geometry_.emplace().K = frame.intrinsics->K();
   }
   timing->set_recognition_ms(timing->recognition_ms() + MillisecondsSince(start));
   return prepared;
@@ -124,8 +122,8 @@ Status PreparedRigFrame::AddCamera(const pb::Frame& view, const RigCamera& camer
                                    const DescriptorFormat& descriptor,
                                    const ExtractPlaceFeatures& extract, PixelBudget& budget,
                                    pb::Timing* timing) {
-  const CameraIntrinsics intrinsics{camera.K(0, 0), camera.K(1, 1), camera.K(0, 2), camera.K(1, 2),
-                                    camera.distortion};
+  const CameraIntrinsics intrinsics{camera.K(0, 0), camera.K(1, 1),    camera.K(0, 2),
+                                    camera.K(1, 2), camera.distortion, camera.lens};
   RECOG_ASSIGN_OR_RETURN(
       const PreparedFrame prepared,
       PreparedFrame::Prepare(view, descriptor, extract, budget, timing, &intrinsics));
@@ -140,8 +138,7 @@ Status PreparedRigFrame::AddCamera(const pb::Frame& view, const RigCamera& camer
                                    std::to_string(camera.size.width) + "x" +
                                    std::to_string(camera.size.height));
   }
-  FeatureSet& features = frame_.cameras.emplace_back(prepared.features());
-  UndistortKeypoints(camera, &features.keypoints);
+  frame_.cameras.push_back(prepared.features());  // in the camera's pinhole image (Prepare)
   const FrameGeometry* geometry = prepared.geometry();
   frame_.points.push_back(geometry != nullptr ? geometry->points : std::vector<cv::Point3f>());
   return Status::Ok();

@@ -1,9 +1,10 @@
 // PreparedFrame and PreparedRigFrame: a request's frame made ready for a place map. A frame is
 // decoded and validated (DecodeFrame, converters.h), given its features (the client's, or those
 // extracted from its image) and its 3D structure (points from its depth or right image, or only
-// the camera matrix of a pinhole camera). A rig frame is the same preparation view by view, each
-// view taking its camera's intrinsics and image size, its keypoints then moved into the camera's
-// pinhole model (PlaceMap's rig calls).
+// the camera matrix). A frame whose camera has a lens distortion has its keypoints moved into the
+// pinhole image of the camera's K (ToPinhole, core/geometry/camera_model.h), where the geometry
+// of loops works. A rig frame is the same preparation view by view, each view taking its camera's
+// intrinsics and image size (PlaceMap's rig calls).
 //
 // The request is read where it lies: a view is decoded as it is, its camera's intrinsics given
 // beside it rather than written into a copy of the view (and of its image bytes). What a prepared

@@ -3,6 +3,7 @@
 // keypoints in its camera's pinhole model, and the rig requests a map refuses.
 #include "server/api/prepared_frame.h"
 
+#include <cmath>
 #include <cstring>
 #include <memory>
 
@@ -66,6 +67,53 @@ TEST(PreparedFrameTest, AnImageIsExtractedAndAPinholeCameraGivesItsMatrix) {
   ASSERT_NE(prepared->geometry(), nullptr);
   EXPECT_EQ(prepared->geometry()->K, kK);
   EXPECT_TRUE(prepared->geometry()->points.empty());
+}
+
+// A fisheye's keypoints move into the pinhole image of its K, where the loop geometry works: the
+// one on the principal point stays, the one 10 px right and below lies at radius θd = 0.283 on
+// the normalised plane (no coefficients beyond θ), so at tan(θ) = tan(0.283) there.
+TEST(PreparedFrameTest, ALensMovesTheKeypointsIntoThePinholeImageOfItsMatrix) {
+  pb::Frame request;
+  request.set_encoded_image(Png());
+  pb::CameraIntrinsics* intrinsics = request.mutable_intrinsics();
+  intrinsics->set_fx(50);
+  intrinsics->set_fy(50);
+  intrinsics->set_cx(31.5);
+  intrinsics->set_cy(23.5);
+  intrinsics->set_lens(pb::LENS_MODEL_EQUIDISTANT);
+  for (int i = 0; i < 4; ++i) intrinsics->add_distortion(0);
+  FakeExtraction extraction;
+  auto prepared = Prepare(request, extraction);
+  ASSERT_TRUE(prepared.ok()) << prepared.status().ToString();
+  ASSERT_NE(prepared->geometry(), nullptr);
+  EXPECT_EQ(prepared->geometry()->K, kK);
+  const std::vector<cv::KeyPoint>& keypoints = prepared->features().keypoints;
+  EXPECT_EQ(keypoints[0].pt, cv::Point2f(31.5f, 23.5f));
+  const double theta = std::hypot(10.0, 10.0) / 50.0;
+  const double moved = 50.0 * std::tan(theta) / std::sqrt(2.0);  // along each axis
+  EXPECT_NEAR(keypoints[1].pt.x, 31.5 + moved, 1e-3);
+  EXPECT_NEAR(keypoints[1].pt.y, 23.5 + moved, 1e-3);
+}
+
+TEST(PreparedFrameTest, AnUnknownLensOrCoefficientsItDoesNotTakeAreRefused) {
+  pb::Frame request;
+  request.set_encoded_image(Png());
+  pb::CameraIntrinsics* intrinsics = request.mutable_intrinsics();
+  intrinsics->set_fx(50);
+  intrinsics->set_fy(50);
+  intrinsics->set_lens(pb::LensModel(7));
+  FakeExtraction extraction;
+  auto unknown = Prepare(request, extraction);
+  ASSERT_FALSE(unknown.ok());
+  EXPECT_EQ(unknown.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(unknown.status().message().find("frame.intrinsics.lens 7"), std::string::npos)
+      << unknown.status().ToString();
+  intrinsics->set_lens(pb::LENS_MODEL_DOUBLE_SPHERE);
+  for (int i = 0; i < 4; ++i) intrinsics->add_distortion(0.1);
+  auto miscounted = Prepare(request, extraction);
+  ASSERT_FALSE(miscounted.ok());
+  EXPECT_NE(miscounted.status().message().find("frame.intrinsics"), std::string::npos)
+      << miscounted.status().ToString();
 }
 
 TEST(PreparedFrameTest, ClientFeaturesAreNotExtractedAgainAndNoCameraGivesNoGeometry) {

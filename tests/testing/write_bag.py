@@ -12,7 +12,8 @@ one message each on --topic in --encoding:
                                    as its bytes, any other is encoded with OpenCV
   any other name (e.g. yuv422)     sensor_msgs/Image with that encoding and mono8 pixels: a bag
                                    the reader must refuse
-Optional: a CameraInfo per frame (--camera-info-topic, --camera fx,fy,cx,cy[,k1,k2,p1,p2,k3]), a
+Optional: a CameraInfo per frame (--camera-info-topic, --camera fx,fy,cx,cy[,k1,k2,p1,p2,k3],
+--distortion-model, plumb_bob by default: D is --camera's coefficients, 5 for plumb_bob), a
 depth image per frame (--depth-images, 16-bit PNGs, in --depth-encoding 16UC1, 32FC1 (metres:
 the PNG's units / --depth-units-per-metre), png, or compressedDepth (compressed_depth_image_
 transport's 12-byte header, then the PNG) at --depth-offset seconds from its frame), the right
@@ -119,14 +120,15 @@ def depth_message(path, encoding, units_per_metre, stamp):
     return message
 
 
-def camera_info(camera, size, stamp, tx=0.0):
+def camera_info(camera, model, size, stamp, tx=0.0):
     values = [float(v) for v in camera.split(",")]
     fx, fy, cx, cy = values[:4]
     info = CameraInfo()
     info.header.stamp = stamp
     info.width, info.height = size
-    info.distortion_model = "plumb_bob"
-    info.D = (values[4:] + [0.0] * 5)[:5]
+    info.distortion_model = model
+    # plumb_bob's five coefficients, the ones given padded with zeros; any other model's as given.
+    info.D = (values[4:] + [0.0] * 5)[:5] if model == "plumb_bob" else values[4:]
     info.K = [fx, 0, cx, 0, fy, cy, 0, 0, 1]
     info.R = [1, 0, 0, 0, 1, 0, 0, 0, 1]
     info.P = [fx, 0, cx, tx, 0, fy, cy, 0, 0, 0, 1, 0]
@@ -144,6 +146,8 @@ def main():
     parser.add_argument("--frames", type=int, default=0, help="only the first N images (0: all)")
     parser.add_argument("--camera-info-topic", default="")
     parser.add_argument("--camera", default="", help="fx,fy,cx,cy[,k1,k2,p1,p2,k3]")
+    parser.add_argument("--distortion-model", default="plumb_bob",
+                        help="CameraInfo's distortion_model; D is --camera's coefficients")
     parser.add_argument("--depth-images", default="")
     parser.add_argument("--depth-topic", default="/camera/depth/image_raw")
     parser.add_argument("--depth-encoding", default="16UC1",
@@ -176,7 +180,8 @@ def main():
         size = (message.width, message.height) if isinstance(message, Image) else \
             cv2.imread(images[k], cv2.IMREAD_UNCHANGED).shape[1::-1]
         if args.camera_info_topic:
-            bag.write(args.camera_info_topic, camera_info(args.camera, size, stamp), record)
+            bag.write(args.camera_info_topic, camera_info(args.camera, args.distortion_model, size,
+                                                             stamp), record)
         if k < len(depths):
             depth_stamp = stamp_of(args.start + k * args.period + args.depth_offset)
             bag.write(args.depth_topic, depth_message(depths[k], args.depth_encoding,
@@ -187,7 +192,8 @@ def main():
             if args.right_camera_info_topic:
                 fx = float(args.camera.split(",")[0])
                 bag.write(args.right_camera_info_topic,
-                          camera_info(args.camera, size, stamp, -fx * args.baseline), record)
+                          camera_info(args.camera, args.distortion_model, size, stamp,
+                                      -fx * args.baseline), record)
     if args.unindexed:
         bag._file.flush()  # what a killed `rosbag record` leaves: messages, no index
         os._exit(0)

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <numeric>
+#include <utility>
 
 namespace recog::cli {
 
@@ -14,15 +15,44 @@ StageStats StatsOf(const std::vector<double>& values) {
   return s;
 }
 
-void LoopTally::CountStatus(std::string_view status) { ++figures_->statuses[std::string(status)]; }
+std::string_view MissReasonName(MissReason reason) {
+  switch (reason) {
+    case MissReason::kNotQueried:
+      return "not_queried";
+    case MissReason::kNoCandidate:
+      return "no_candidate";
+    case MissReason::kLowScore:
+      return "low_score";
+    case MissReason::kWrongTopCandidate:
+      return "wrong_top_candidate";
+    case MissReason::kNotConsistent:
+      return "not_consistent";
+    case MissReason::kFailedGeometry:
+      return "failed_geometry";
+    case MissReason::kWrongLoop:
+      return "wrong_loop";
+  }
+  return "unknown";
+}
 
-void LoopTally::CountDetection(bool correct, bool ambiguous) {
+void LoopTally::CountStatus(std::string_view status) {
+  ++figures_->statuses[std::string(status)];
+  figures_->frame_statuses.emplace_back(status);
+}
+
+bool LoopTally::CountDetection(bool correct, bool ambiguous) {
   ++figures_->detections;
   if (ambiguous) {
     ++figures_->ambiguous;
-  } else if (correct) {
-    ++figures_->correct;
+    return false;
   }
+  if (correct) ++figures_->correct;
+  return correct;
+}
+
+void LoopTally::CountMiss(MissedRevisit miss) {
+  ++figures_->miss_reasons[std::string(MissReasonName(miss.reason))];
+  figures_->misses.push_back(std::move(miss));
 }
 
 void LoopTally::AddTime(const std::string& stage, double ms) { times_[stage].push_back(ms); }

@@ -54,6 +54,36 @@ TEST(LoopTallyTest, EachStageGetsTheMeanMedianAndMaxOfItsFrames) {
   EXPECT_EQ(none.max, 0.0);
 }
 
+// Recall's complement: a revisit without a correct loop is a miss, counted by its reason; an
+// ambiguous pair's loop is not counted correct.
+TEST(LoopTallyTest, MissesAreCountedByReasonBesideEachFramesStatus) {
+  LoopFigures figures;
+  LoopTally tally(&figures);
+  tally.CountStatus("loop_detected");
+  tally.CountStatus("failed_geometry");
+  tally.CountStatus("loop_detected");
+  EXPECT_EQ(figures.frame_statuses,
+            (std::vector<std::string>{"loop_detected", "failed_geometry", "loop_detected"}));
+  EXPECT_TRUE(tally.CountDetection(/*correct=*/true, /*ambiguous=*/false));
+  EXPECT_FALSE(tally.CountDetection(true, /*ambiguous=*/true));
+  EXPECT_FALSE(tally.CountDetection(false, false));
+  MissedRevisit failed;
+  failed.query = 1;
+  failed.reason = MissReason::kFailedGeometry;
+  tally.CountMiss(failed);
+  MissedRevisit wrong = failed;
+  wrong.query = 2;
+  wrong.reason = MissReason::kWrongLoop;
+  tally.CountMiss(wrong);
+  tally.CountMiss(failed);
+  ASSERT_EQ(figures.misses.size(), 3u);
+  EXPECT_EQ(figures.misses[1].query, 2);
+  EXPECT_EQ(figures.miss_reasons,
+            (std::map<std::string, int>{{"failed_geometry", 2}, {"wrong_loop", 1}}));
+  EXPECT_EQ(MissReasonName(MissReason::kWrongTopCandidate), "wrong_top_candidate");
+  EXPECT_EQ(std::size(kMissReasons), 7u);
+}
+
 TEST(LoopTallyTest, TheTruthMustCoverTheSequence) {
   GroundTruth truth;
   truth.frames = 3;

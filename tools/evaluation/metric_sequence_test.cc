@@ -331,7 +331,7 @@ TEST_F(MetricSequenceTest, TheEvaluationReadsDepthAndStereoDatasetsAndGivesMetri
   options.detector.recent_seconds = 0.65;  // tau_c: the 6 frames before, as Detect's recent_frames
   options.detector.temporal_matches = 1;
   SequenceGeometryOptions geometry;
-  geometry.K = kK;
+  geometry.camera = {kK(0, 0), kK(1, 1), kK(0, 2), kK(1, 2), {}};
   geometry.baseline_m = kBaseline;  // TUM's depth scale is the default
   for (const char* layout : {"tum", "kitti"}) {
     auto source = FrameSource::Open((root / layout).string());

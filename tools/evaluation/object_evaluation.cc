@@ -9,7 +9,6 @@
 #include <memory>
 #include <sstream>
 
-#include <opencv2/calib3d.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -20,6 +19,7 @@
 #include "core/object/formats/roboearth.h"
 #include "core/vocabulary/vocabulary_io.h"
 #include "tools/common/cli_support.h"
+#include "tools/evaluation/camera_calibration.h"
 #include "tools/evaluation/plot.h"
 
 namespace recog::cli {
@@ -169,17 +169,6 @@ bool IsRotationMatrix(const cv::Matx33d& R) {
   return cv::norm(R.t() * R - cv::Matx33d::eye()) <= 1e-3 && cv::determinant(R) > 0;
 }
 
-StatusOr<CameraIntrinsics> ParseCamera(const std::string& text) {
-  RECOG_ASSIGN_OR_RETURN(const std::vector<double> values, ParseNumbers("--camera", text));
-  if (values.size() != 4 && values.size() != 8 && values.size() != 9) {
-    return Status::InvalidArgument("--camera needs fx,fy,cx,cy[,k1,k2,p1,p2[,k3]]");
-  }
-  CameraIntrinsics camera{values[0], values[1], values[2], values[3],
-                          std::vector<double>(values.begin() + 4, values.end())};
-  RECOG_RETURN_IF_ERROR(camera.Validate());
-  return camera;
-}
-
 StatusOr<std::shared_ptr<const Vocabulary>> LoadObjectVocabulary(const std::string& path) {
   RECOG_ASSIGN_OR_RETURN(Vocabulary vocabulary,
                          LoadAnyVocabulary(path.empty() ? DefaultObjectVocabularyPath() : path));
@@ -218,15 +207,16 @@ void DrawDetection(const Detection& detection, const CameraIntrinsics& camera,
   // Axes of the object frame, a tenth of the object's distance long.
   const RigidTransform& pose = detection.camera_from_object;
   const double length = 0.1 * cv::norm(pose.t);
-  std::vector<cv::Point3f> axes = {
-      {0, 0, 0}, {float(length), 0, 0}, {0, float(length), 0}, {0, 0, float(length)}};
-  std::vector<cv::Point2f> pixels;
-  cv::Vec3d rvec;
-  cv::Rodrigues(pose.R, rvec);
-  cv::projectPoints(axes, rvec, pose.t, camera.K(), camera.distortion, pixels);
+  const cv::Vec3d axes[] = {{0, 0, 0}, {length, 0, 0}, {0, length, 0}, {0, 0, length}};
+  cv::Point2d pixels[4];
+  bool seen[4];
+  for (int k = 0; k < 4; ++k) {
+    seen[k] = ProjectDirection(camera, pose.R * axes[k] + pose.t, &pixels[k]);  // its lens
+  }
   const cv::Scalar axis_colour[] = {{0, 0, 255}, {0, 255, 0}, {255, 0, 0}};
   for (int k = 0; k < 3; ++k) {
-    cv::arrowedLine(*canvas, pixels[0], pixels[size_t(k) + 1], axis_colour[k], 2, cv::LINE_AA);
+    if (!seen[0] || !seen[k + 1]) continue;
+    cv::arrowedLine(*canvas, pixels[0], pixels[k + 1], axis_colour[k], 2, cv::LINE_AA);
   }
   cv::putText(*canvas, detection.name + " (" + std::to_string(detection.inliers) + ")",
               outline[0].empty() ? cv::Point(10, 20) : outline[0][0], cv::FONT_HERSHEY_SIMPLEX, 0.6,

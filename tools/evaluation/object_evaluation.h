@@ -98,9 +98,6 @@ struct ObjectEvaluation {
 
 StatusOr<ObjectEvaluation> EvaluateObjects(const ObjectEvaluationOptions& options);
 
-// "fx,fy,cx,cy[,k1,k2,p1,p2[,k3]]" (the --camera option). INVALID_ARGUMENT naming the problem.
-StatusOr<CameraIntrinsics> ParseCamera(const std::string& text);
-
 // The vocabulary at `path`, or the bundled object vocabulary when `path` is empty.
 StatusOr<std::shared_ptr<const Vocabulary>> LoadObjectVocabulary(const std::string& path);
 

@@ -1,5 +1,6 @@
 #include "tools/evaluation/place_evaluation.h"
 
+#include <algorithm>
 #include <charconv>
 #include <chrono>
 #include <filesystem>
@@ -158,18 +159,24 @@ namespace {
 Status FramePoints(const FrameSource& source, const cv::Mat& image, const FeatureSet& features,
                    const SequenceGeometryOptions& options, FeatureExtractor& extractor,
                    FrameGeometry* geometry) {
-  geometry->K = options.K;
+  geometry->K = options.camera.K();
   geometry->points.clear();
   RECOG_ASSIGN_OR_RETURN(const cv::Mat depth, source.depth());
-  if (!depth.empty()) {
-    return PointsFromDepth(features.keypoints, image.size(), options.K, depth, options.depth_scale,
-                           &geometry->points);
-  }
   RECOG_ASSIGN_OR_RETURN(const cv::Mat right, source.right());
+  if (!depth.empty()) {
+    return PointsFromDepth(features.keypoints, image.size(), options.camera, depth,
+                           options.depth_scale, &geometry->points);
+  }
+  if (!right.empty() && !options.camera.IsPinhole()) {
+    return Status::InvalidArgument(
+        "a right image needs a rectified pair, without lens "
+        "distortion; the camera is " +
+        options.camera.Describe());
+  }
   if (!right.empty()) {
     FeatureSet right_features;
     RECOG_RETURN_IF_ERROR(extractor.Extract(right, &right_features));
-    return PointsFromStereo(features, image, right_features, right, options.K, options.baseline_m,
+    return PointsFromStereo(features, image, right_features, right, geometry->K, options.baseline_m,
                             options.stereo, &geometry->points);
   }
   return Status::Ok();
@@ -199,6 +206,7 @@ StatusOr<SequenceFeatures> ExtractSequence(FrameSource& source, const FeatureOpt
       RECOG_RETURN_IF_ERROR(
           FramePoints(source, image, features, *geometry, *extractor, &frame_geometry)
               .WithContext("frame '" + name + "'"));
+      ToPinhole(geometry->camera, features.keypoints);  // where loops are checked
       sequence.points_ms.push_back(MillisecondsSince(points_start));
       sequence.geometry.push_back(std::move(frame_geometry));
     }
@@ -222,6 +230,69 @@ const FrameGeometry* GeometryOf(const SequenceFeatures& sequence, size_t i) {
 }
 
 }  // namespace
+
+bool RevisitsMap(const GroundTruth& truth, int query, MapFrames map) {
+  const std::vector<int>& matches = truth.matches[size_t(query)];
+  return std::any_of(matches.begin(), matches.end(),
+                     [&](int j) { return map.first <= j && j < map.end; });
+}
+
+MissedRevisit ExplainMiss(const LoopResult& result, int query, MapFrames map,
+                          const GroundTruth& truth) {
+  const auto frame_of = [&](EntryId entry) { return map.first + int(entry); };
+  MissedRevisit miss;
+  miss.query = query;
+  miss.status = std::string(LoopStatusName(result.status));
+  if (result.match != kInvalidEntryId) miss.candidate = frame_of(result.match);
+  for (size_t rank = 0; rank < result.candidates.size(); ++rank) {
+    const int frame = frame_of(result.candidates[rank].entry);
+    if (truth.Matches(query, frame)) {
+      miss.true_candidate = frame;
+      miss.true_rank = int(rank) + 1;
+      break;
+    }
+  }
+  const auto verified = [&] {
+    miss.inliers = uint32_t(result.inliers.size());
+    miss.correspondences = result.correspondences;
+  };
+  switch (result.status) {
+    case LoopStatus::kTooFewFeatures:
+    case LoopStatus::kLowScoreWithPrevious:
+      miss.reason = MissReason::kNotQueried;
+      return miss;
+    case LoopStatus::kLoopDetected:
+      miss.reason = MissReason::kWrongLoop;
+      verified();
+      return miss;
+    case LoopStatus::kNoCandidates:
+    case LoopStatus::kLowScore:
+    case LoopStatus::kNoConsistentIsland:
+      miss.reason = miss.true_rank ? MissReason::kLowScore : MissReason::kNoCandidate;
+      return miss;
+    case LoopStatus::kFailedGeometry:
+    case LoopStatus::kCandidate:
+      verified();
+      break;
+    case LoopStatus::kFailedTemporalConsistency:
+      break;
+  }
+  // A best candidate was chosen (and, but for failed_temporal_consistency, verified).
+  if (!miss.true_rank) {
+    miss.reason = MissReason::kNoCandidate;
+  } else if (!miss.candidate || !truth.Matches(query, *miss.candidate)) {
+    miss.reason = MissReason::kWrongTopCandidate;
+  } else if (result.status == LoopStatus::kFailedGeometry) {
+    miss.reason = MissReason::kFailedGeometry;
+    miss.failed_metric = result.metric.checked && !result.metric.verified;
+  } else {
+    miss.reason = MissReason::kNotConsistent;
+    if (result.status == LoopStatus::kFailedTemporalConsistency) {
+      miss.consistent_queries = result.consistent_queries;
+    }
+  }
+  return miss;
+}
 
 StatusOr<std::vector<LoopResult>> DetectLoops(const SequenceFeatures& sequence,
                                               std::shared_ptr<const Vocabulary> vocabulary,
@@ -264,36 +335,44 @@ void AddTimings(const LoopTimings& t, double features_ms, const double* points_m
                               t.islands + t.insertion + t.verification + t.metric_verification);
 }
 
-// Counts frame `query`'s result: its status, and its match (frame `match` of the sequence, when it
-// has one) scored against the ground truth and, with a trajectory, against the true geometry of
-// its inliers, into `loops`.
-void CountResult(const LoopResult& r, int query, int match, const GroundTruth& truth,
+// Counts frame `query`'s result in `map`: its status, its match (when it has one) scored against
+// the ground truth and, with a trajectory, against the true geometry of its inliers, into
+// `loops`, and, when the frame revisits the map without a loop counted correct, why.
+void CountResult(const LoopResult& r, int query, MapFrames map, const GroundTruth& truth,
                  const SequenceFeatures& sequence, const CameraTrajectory* trajectory,
                  LoopTally* tally, std::vector<DetectedLoop>* loops) {
   tally->CountStatus(LoopStatusName(r.status));
-  if (r.match == kInvalidEntryId) return;
-  DetectedLoop loop;
-  loop.query = query;
-  loop.match = match;
-  loop.status = r.status;
-  loop.correct = truth.Matches(query, match);
-  loop.ambiguous = truth.IsAmbiguous(query, match);
-  if (trajectory != nullptr && !r.inliers.empty()) {
-    loop.geometry = ScoreLoopGeometry(
-        trajectory->poses[size_t(query)], trajectory->poses[size_t(match)], trajectory->K,
-        sequence.features[size_t(query)], sequence.features[size_t(match)], r.inliers);
-    loop.correct = loop.correct && loop.geometry->agrees;
-    // A pair listed as ambiguous is still false when the loop's own inliers miss the true
-    // geometry: they matched something else (a look-alike façade).
-    loop.ambiguous = loop.ambiguous && loop.geometry->agrees;
+  bool counted_correct = false;
+  if (r.match != kInvalidEntryId) {
+    const int match = map.first + int(r.match);
+    DetectedLoop loop;
+    loop.query = query;
+    loop.match = match;
+    loop.status = r.status;
+    loop.correct = truth.Matches(query, match);
+    loop.ambiguous = truth.IsAmbiguous(query, match);
+    if (trajectory != nullptr && !r.inliers.empty()) {
+      loop.geometry = ScoreLoopGeometry(
+          trajectory->poses[size_t(query)], trajectory->poses[size_t(match)], trajectory->K,
+          sequence.features[size_t(query)], sequence.features[size_t(match)], r.inliers);
+      loop.correct = loop.correct && loop.geometry->agrees;
+      // A pair listed as ambiguous is still false when the loop's own inliers miss the true
+      // geometry: they matched something else (a look-alike façade).
+      loop.ambiguous = loop.ambiguous && loop.geometry->agrees;
+    }
+    loop.normalized_score = r.normalized_score;
+    loop.acceptance = r.acceptance;
+    loop.inliers = uint32_t(r.inliers.size());
+    loop.metric = r.metric;
+    loop.evidence = r.evidence;
+    if (r.status == LoopStatus::kLoopDetected) {
+      counted_correct = tally->CountDetection(loop.correct, loop.ambiguous);
+    }
+    loops->push_back(loop);
   }
-  loop.normalized_score = r.normalized_score;
-  loop.acceptance = r.acceptance;
-  loop.inliers = uint32_t(r.inliers.size());
-  loop.metric = r.metric;
-  loop.evidence = r.evidence;
-  if (r.status == LoopStatus::kLoopDetected) tally->CountDetection(loop.correct, loop.ambiguous);
-  loops->push_back(loop);
+  if (!counted_correct && RevisitsMap(truth, query, map)) {
+    tally->CountMiss(ExplainMiss(r, query, map, truth));
+  }
 }
 
 const double* PointsMsOf(const SequenceFeatures& sequence, size_t i) {
@@ -323,7 +402,7 @@ StatusOr<PlaceEvaluation> EvaluatePlace(const SequenceFeatures& sequence, const 
   for (int i = 0; i < eval.frames; ++i) {
     const LoopResult& r = detected[size_t(i)];
     AddTimings(r.timings, sequence.feature_ms[size_t(i)], PointsMsOf(sequence, size_t(i)), &tally);
-    CountResult(r, i, int(r.match), truth, sequence, trajectory, &tally, &eval.loops);
+    CountResult(r, i, {0, eval.frames}, truth, sequence, trajectory, &tally, &eval.loops);
   }
   tally.Finish();
   if (results != nullptr) *results = std::move(detected);
@@ -377,24 +456,21 @@ StatusOr<AcrossMapsEvaluation> EvaluateAcrossMaps(const SequenceFeatures& sequen
   AcrossMapsEvaluation eval;
   eval.inter_map.frames = eval.own_map.frames = frames - split;
   LoopTally inter_map(&eval.inter_map), own_map(&eval.own_map);
+  const MapFrames map_of_a{0, split}, map_of_b{split, frames};
   for (int i = split; i < frames; ++i) {
     const size_t f = size_t(i);
-    bool in_a = false, in_b = false;
-    for (int j : truth.matches[f]) (j < split ? in_a : in_b) = true;
-    eval.inter_map.query_frames_with_truth += in_a;
-    eval.own_map.query_frames_with_truth += in_b;
+    eval.inter_map.query_frames_with_truth += RevisitsMap(truth, i, map_of_a);
+    eval.own_map.query_frames_with_truth += RevisitsMap(truth, i, map_of_b);
     RECOG_ASSIGN_OR_RETURN(
         LoopResult own,
         map_b.Process(sequence.features[f], TimestampOf(sequence, f), {}, GeometryOf(sequence, f)));
     AddTimings(own.timings, sequence.feature_ms[f], PointsMsOf(sequence, f), &own_map);
-    CountResult(own, i, split + int(own.match), truth, sequence, nullptr, &own_map,
-                &eval.own_map.loops);
+    CountResult(own, i, map_of_b, truth, sequence, nullptr, &own_map, &eval.own_map.loops);
     RECOG_ASSIGN_OR_RETURN(
         LoopResult across,
         map_a.Query(sequence.features[f], TimestampOf(sequence, f), GeometryOf(sequence, f)));
     AddTimings(across.timings, 0.0, nullptr, &inter_map);
-    CountResult(across, i, int(across.match), truth, sequence, nullptr, &inter_map,
-                &eval.inter_map.loops);
+    CountResult(across, i, map_of_a, truth, sequence, nullptr, &inter_map, &eval.inter_map.loops);
   }
   inter_map.Finish();
   own_map.Finish();

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "core/features/feature_extractor.h"
+#include "core/geometry/camera_model.h"
 #include "core/geometry/frame_points.h"
 #include "core/place/loop_detector.h"
 #include "tools/evaluation/camera_trajectory.h"
@@ -77,9 +78,12 @@ class FrameSource {
 
 // 3D points for the frames of a dataset that has depth images (TUM) or right images (EuRoC,
 // KITTI): the loop detector then checks loops in 3D and gives their metric relative pose
-// (LoopResult::metric, thesis §3.3.3). The images must be distortion-free (stereo: rectified).
+// (LoopResult::metric, thesis §3.3.3). A camera with a lens distortion has its frames' keypoints
+// moved into the pinhole image of its K (ToPinhole) once their points are known, and loops are
+// checked there; its depth is aligned with the distorted image; right images need a rectified,
+// distortion-free pair.
 struct SequenceGeometryOptions {
-  cv::Matx33d K = cv::Matx33d::zeros();  // the camera matrix of the (left) images
+  CameraIntrinsics camera;  // of the (left) images
   // Metres per unit of a 16-bit depth image (TUM: 1/5000; millimetres: 0.001). Float depth
   // images are metres.
   double depth_scale = 1.0 / 5000.0;
@@ -128,10 +132,36 @@ struct DetectedLoop {
 
 // The figures over the sequence (statuses by LoopStatus name; timing_ms of features, points,
 // conversion, query, islands, insertion, verification, metric_verification and total), with the
-// loops.
+// loops and the misses (ExplainMiss).
 struct PlaceEvaluation : LoopFigures {
   std::vector<DetectedLoop> loops;  // every frame that had a candidate match
 };
+
+// The frames of one map as the sequence numbers them: the map holds frames [first, end), and its
+// entry e is frame first + e (a map built from those frames in order).
+struct MapFrames {
+  int first = 0, end = 0;
+};
+
+// True when the truth matches frame `query` to a frame of `map`: the frame revisits that map.
+bool RevisitsMap(const GroundTruth& truth, int query, MapFrames map);
+
+// Why frame `query`, a revisit of `map` whose loop there is not counted correct, was missed, from
+// its LoopResult in that map. A candidate is a true place when the truth matches the query to its
+// frame (GroundTruth::Matches, as a loop is judged). By the result's status, then its candidates:
+//  - too_few_features, low_score_with_previous: kNotQueried;
+//  - loop_detected: kWrongLoop (the caller judged the loop not correct);
+//  - otherwise no true place among `candidates` (none at all for no_candidates): kNoCandidate;
+//  - low_score, no_consistent_island (no best candidate was chosen): kLowScore;
+//  - the best candidate (`match`) not a true place: kWrongTopCandidate;
+//  - else, a true best candidate: failed_geometry is kFailedGeometry (with failed_metric when the
+//    2D check passed and the 3D one refused it); failed_temporal_consistency, and candidate
+//    (verified, awaiting keyframe confirmations), are kNotConsistent.
+// The rank of the first true candidate is set whenever one is among the candidates; the
+// verification's inliers and correspondences whenever the status says one ran (failed_geometry,
+// candidate, loop_detected), the consistent queries for failed_temporal_consistency.
+MissedRevisit ExplainMiss(const LoopResult& result, int query, MapFrames map,
+                          const GroundTruth& truth);
 
 struct PlaceEvaluationOptions {
   LoopDetectorParams detector;

@@ -2,6 +2,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <map>
 
 #include <gtest/gtest.h>
 #include <opencv2/imgcodecs.hpp>
@@ -62,7 +63,7 @@ TEST(PlaceEvaluationTest, TheCourtyardsLookAlikeFacadesAreJudgedByTheTrueGeometr
   auto source = FrameSource::Open(scene + "images");
   ASSERT_TRUE(source.ok());
   SequenceGeometryOptions camera;
-  camera.K = cv::Matx33d(919.8267, 0, 506.8967, 0, 921.3867, 335.6033, 0, 0, 1);
+  camera.camera = {919.8267, 921.3867, 506.8967, 335.6033, {}};
   auto sequence = ExtractSequence(*source, PlaceFeatureOptions(), false, nullptr, camera);
   ASSERT_TRUE(sequence.ok()) << sequence.status().ToString();
   auto truth = ReadGroundTruth(scene + "ground_truth.txt");
@@ -70,7 +71,7 @@ TEST(PlaceEvaluationTest, TheCourtyardsLookAlikeFacadesAreJudgedByTheTrueGeometr
   ASSERT_TRUE(ReadAmbiguousPairs(scene + "ambiguous.txt", &*truth).ok());
   auto poses = ReadCameraPoses(scene + "poses.txt");
   ASSERT_TRUE(poses.ok()) << poses.status().ToString();
-  const CameraTrajectory trajectory{*poses, camera.K};
+  const CameraTrajectory trajectory{*poses, camera.camera.K()};
 
   PlaceEvaluationOptions keyframes;
   keyframes.detector = LoopDetectorParams::Keyframes();
@@ -229,6 +230,20 @@ TEST(PlaceEvaluationTest, ASecondRobotFindsTheFirstRobotsPlacesAsInterMapLoops) 
   EXPECT_EQ(e->own_map.detections, 0) << "robot B has not been anywhere twice";
   EXPECT_EQ(e->inter_map.timing_ms.count("features"), 0u);
   EXPECT_EQ(e->own_map.timing_ms.count("features"), 1u);
+  // 60 -> 20 is the one miss, and why: 20 was the best candidate, and failed RANSAC.
+  ASSERT_EQ(e->inter_map.misses.size(), 1u);
+  const MissedRevisit& miss = e->inter_map.misses[0];
+  EXPECT_EQ(miss.query, 3);
+  EXPECT_EQ(miss.reason, MissReason::kFailedGeometry);
+  EXPECT_EQ(miss.status, "failed_geometry");
+  EXPECT_EQ(miss.candidate, 1);
+  EXPECT_EQ(miss.true_candidate, 1);
+  EXPECT_EQ(miss.true_rank, 1);
+  ASSERT_TRUE(miss.inliers.has_value() && miss.correspondences.has_value());
+  EXPECT_LT(*miss.inliers, LoopDetectorParams{}.relocalisation_min_inliers);
+  EXPECT_GT(*miss.correspondences, *miss.inliers);
+  EXPECT_EQ(e->inter_map.miss_reasons, (std::map<std::string, int>{{"failed_geometry", 1}}));
+  EXPECT_TRUE(e->own_map.misses.empty());
 }
 
 TEST(PlaceEvaluationTest, RobotBsSequenceFollowsRobotAsWithItsOwnClock) {
@@ -275,6 +290,147 @@ TEST(PlaceEvaluationTest, TheCorridorSplitBetweenTwoRobotsKeepsTheSingleMapRecal
   EXPECT_EQ(e->inter_map.precision, 1.0);
   EXPECT_GE(e->inter_map.recall, 36.0 / 44) << "the single-map recall (README)";
   EXPECT_EQ(e->own_map.precision, 1.0);
+}
+
+// ---- ExplainMiss: why a revisit was missed ----
+
+// Ten frames; frame 9 revisits frames 2 and 3.
+GroundTruth NineRevisitsTwoAndThree() {
+  GroundTruth truth;
+  truth.frames = 10;
+  truth.matches.resize(10);
+  truth.matches[9] = {2, 3};
+  return truth;
+}
+
+// Frame 9's result with `status`, the query's candidates `entries` (best first) and the best
+// candidate `match`.
+LoopResult ResultOfNine(LoopStatus status, std::vector<EntryId> entries,
+                        EntryId match = kInvalidEntryId) {
+  LoopResult r;
+  r.status = status;
+  r.match = match;
+  for (const EntryId entry : entries) r.candidates.push_back({entry, 0.1, 0.5});
+  return r;
+}
+
+TEST(ExplainMissTest, AFrameThatWasNotQueriedOrGotNoTruePlaceHasNoCandidateToBlame) {
+  const GroundTruth truth = NineRevisitsTwoAndThree();
+  const MapFrames map{0, 10};
+  for (const LoopStatus status : {LoopStatus::kTooFewFeatures, LoopStatus::kLowScoreWithPrevious}) {
+    const MissedRevisit miss = ExplainMiss(ResultOfNine(status, {}), 9, map, truth);
+    EXPECT_EQ(miss.reason, MissReason::kNotQueried) << LoopStatusName(status);
+    EXPECT_EQ(miss.status, LoopStatusName(status));
+    EXPECT_EQ(miss.query, 9);
+    EXPECT_FALSE(miss.candidate || miss.true_rank || miss.inliers);
+  }
+  const MissedRevisit nothing =
+      ExplainMiss(ResultOfNine(LoopStatus::kNoCandidates, {}), 9, map, truth);
+  EXPECT_EQ(nothing.reason, MissReason::kNoCandidate);
+  EXPECT_EQ(nothing.status, "no_candidates");
+  // Candidates, a wrong one verified, but no true place among them: the query lost it, not the
+  // ranking.
+  LoopResult wrong_only = ResultOfNine(LoopStatus::kFailedGeometry, {5, 7, 8}, 5);
+  wrong_only.correspondences = 20;
+  const MissedRevisit no_true = ExplainMiss(wrong_only, 9, map, truth);
+  EXPECT_EQ(no_true.reason, MissReason::kNoCandidate);
+  EXPECT_EQ(no_true.candidate, 5);
+  EXPECT_FALSE(no_true.true_rank.has_value());
+  EXPECT_EQ(no_true.correspondences, 20u);
+}
+
+TEST(ExplainMissTest, ATruePlaceAmongTheCandidatesIsGivenWithItsRank) {
+  const GroundTruth truth = NineRevisitsTwoAndThree();
+  const MapFrames map{0, 10};
+  // No candidate reached alpha: no best one; frame 3 ranked second.
+  for (const LoopStatus status : {LoopStatus::kLowScore, LoopStatus::kNoConsistentIsland}) {
+    const MissedRevisit miss = ExplainMiss(ResultOfNine(status, {6, 3, 2}), 9, map, truth);
+    EXPECT_EQ(miss.reason, MissReason::kLowScore) << LoopStatusName(status);
+    EXPECT_FALSE(miss.candidate.has_value());
+    EXPECT_EQ(miss.true_candidate, 3);
+    EXPECT_EQ(miss.true_rank, 2);
+  }
+  // The best island's best entry is 5, verified and refused; the first true place is 4th.
+  LoopResult wrong_top = ResultOfNine(LoopStatus::kFailedGeometry, {5, 7, 8, 2, 3}, 5);
+  wrong_top.inliers.resize(4);
+  wrong_top.correspondences = 20;
+  MissedRevisit miss = ExplainMiss(wrong_top, 9, map, truth);
+  EXPECT_EQ(miss.reason, MissReason::kWrongTopCandidate);
+  EXPECT_EQ(miss.candidate, 5);
+  EXPECT_EQ(miss.true_candidate, 2);
+  EXPECT_EQ(miss.true_rank, 4);
+  EXPECT_EQ(miss.inliers, 4u);
+  EXPECT_EQ(miss.correspondences, 20u);
+  // The database's best is true, but the best island's best entry (7) is not.
+  miss =
+      ExplainMiss(ResultOfNine(LoopStatus::kFailedTemporalConsistency, {3, 7}, 7), 9, map, truth);
+  EXPECT_EQ(miss.reason, MissReason::kWrongTopCandidate);
+  EXPECT_EQ(miss.candidate, 7);
+  EXPECT_EQ(miss.true_rank, 1);
+  EXPECT_FALSE(miss.inliers.has_value()) << "the status says no verification is kept";
+}
+
+TEST(ExplainMissTest, ATrueBestCandidateIsLostByConsistencyOrGeometry) {
+  const GroundTruth truth = NineRevisitsTwoAndThree();
+  const MapFrames map{0, 10};
+  LoopResult waiting = ResultOfNine(LoopStatus::kFailedTemporalConsistency, {3, 2}, 3);
+  waiting.consistent_queries = 1;
+  MissedRevisit miss = ExplainMiss(waiting, 9, map, truth);
+  EXPECT_EQ(miss.reason, MissReason::kNotConsistent);
+  EXPECT_EQ(miss.candidate, 3);
+  EXPECT_EQ(miss.consistent_queries, 1u);
+  EXPECT_FALSE(miss.inliers.has_value());
+  // Verified, but waiting for the next keyframes' confirmation.
+  LoopResult unconfirmed = ResultOfNine(LoopStatus::kCandidate, {3}, 3);
+  unconfirmed.inliers.resize(40);
+  unconfirmed.correspondences = 70;
+  miss = ExplainMiss(unconfirmed, 9, map, truth);
+  EXPECT_EQ(miss.reason, MissReason::kNotConsistent);
+  EXPECT_EQ(miss.inliers, 40u);
+  EXPECT_FALSE(miss.consistent_queries.has_value());
+
+  LoopResult failed = ResultOfNine(LoopStatus::kFailedGeometry, {2, 3}, 2);
+  failed.inliers.resize(9);
+  failed.correspondences = 34;
+  miss = ExplainMiss(failed, 9, map, truth);
+  EXPECT_EQ(miss.reason, MissReason::kFailedGeometry);
+  EXPECT_EQ(miss.candidate, 2);
+  EXPECT_EQ(miss.true_rank, 1);
+  EXPECT_EQ(miss.inliers, 9u);
+  EXPECT_EQ(miss.correspondences, 34u);
+  EXPECT_FALSE(miss.failed_metric);
+  failed.metric.checked = true;  // the 2D check passed, the 3D one did not
+  EXPECT_TRUE(ExplainMiss(failed, 9, map, truth).failed_metric);
+}
+
+TEST(ExplainMissTest, ALoopDetectedForARevisitButNotCountedCorrectIsAWrongLoop) {
+  const GroundTruth truth = NineRevisitsTwoAndThree();
+  LoopResult loop = ResultOfNine(LoopStatus::kLoopDetected, {6, 2}, 6);
+  loop.inliers.resize(30);
+  loop.correspondences = 50;
+  const MissedRevisit miss = ExplainMiss(loop, 9, {0, 10}, truth);
+  EXPECT_EQ(miss.reason, MissReason::kWrongLoop);
+  EXPECT_EQ(miss.candidate, 6);
+  EXPECT_EQ(miss.true_rank, 2);
+  EXPECT_EQ(miss.inliers, 30u);
+  EXPECT_EQ(miss.correspondences, 50u);
+}
+
+// Robot B's own map holds frames 4..9: its entry e is frame 4 + e.
+TEST(ExplainMissTest, AnotherMapsEntriesAreItsOwnFrames) {
+  GroundTruth truth = NineRevisitsTwoAndThree();
+  truth.matches[9] = {3, 5};
+  const MapFrames robot_b{4, 10};
+  EXPECT_TRUE(RevisitsMap(truth, 9, robot_b));
+  EXPECT_TRUE(RevisitsMap(truth, 9, {0, 4}));
+  EXPECT_FALSE(RevisitsMap(truth, 9, {6, 10}));
+  EXPECT_FALSE(RevisitsMap(truth, 8, {0, 10}));
+  LoopResult r = ResultOfNine(LoopStatus::kFailedGeometry, {0, 1}, 1);
+  const MissedRevisit miss = ExplainMiss(r, 9, robot_b, truth);
+  EXPECT_EQ(miss.reason, MissReason::kFailedGeometry);
+  EXPECT_EQ(miss.candidate, 5);
+  EXPECT_EQ(miss.true_candidate, 5);
+  EXPECT_EQ(miss.true_rank, 2);
 }
 
 TEST(PlaceEvaluationTest, AGroundTruthOfAnotherLengthIsRefused) {

@@ -6,7 +6,6 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
-#include <iterator>
 #include <map>
 #include <sstream>
 #include <utility>
@@ -16,6 +15,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "tools/common/cli_support.h"
+#include "tools/evaluation/camera_calibration.h"
 #include "tools/evaluation/dataset_layouts.h"
 #include "tools/evaluation/rig_file.h"
 
@@ -121,44 +121,28 @@ cv::Matx33d NearestRotation(const cv::Matx33d& R) {
   return cv::norm(R - nearest) <= kRoundedRotationTolerance ? nearest : R;
 }
 
-// A EuRoC camera's sensor.yaml, as the rig camera `name`.
+// A EuRoC camera's sensor.yaml, as the rig camera `name`: its camera and resolution as a
+// calibration file (camera_calibration.h), and T_BS.
 StatusOr<RigCamera> ReadEurocSensor(const fs::path& file, const std::string& name) {
-  std::ifstream in(file);
-  if (!in) return Status::NotFound("cannot open " + QuotedPath(file));
-  std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  // EuRoC's files come from OpenCV's FileStorage and start with "%YAML:1.0", a directive
-  // yaml-cpp refuses; the document itself is plain YAML.
-  if (text.rfind("%YAML", 0) == 0) {
-    const size_t end = text.find('\n');
-    text.erase(0, end == std::string::npos ? text.size() : end + 1);
+  RECOG_ASSIGN_OR_RETURN(const CameraCalibration calibration, ReadCalibrationFile(file.string()));
+  if (calibration.size.empty()) {
+    return Status::InvalidArgument(QuotedPath(file) +
+                                   ": resolution must be a list [width, height]");
   }
+  RECOG_ASSIGN_OR_RETURN(const YAML::Node root, LoadYamlFile(file.string()));
   RigCamera camera;
   camera.name = name;
+  camera.size = calibration.size;
+  camera.K = calibration.camera.K();
+  camera.distortion = calibration.camera.distortion;
+  camera.lens = calibration.camera.lens;
   try {
-    const YAML::Node root = YAML::Load(text);
-    for (const auto& [key, value] : {std::pair<const char*, const char*>{"camera_model", "pinhole"},
-                                     {"distortion_model", "radial-tangential"}}) {
-      if (root[key] && root[key].as<std::string>() != value) {
-        return Status::InvalidArgument(QuotedPath(file) + ": " + key + " '" +
-                                       root[key].as<std::string>() + "' is not supported (" +
-                                       value + ")");
-      }
-    }
     const YAML::Node pose = root["T_BS"];
     if (!pose || !pose.IsMap()) {
       return Status::InvalidArgument(QuotedPath(file) +
                                      ": needs T_BS, a 4x4 matrix with its 'data'");
     }
     const std::vector<double> T = Numbers(pose, "data", 16, "T_BS data");
-    const YAML::Node resolution = root["resolution"];
-    if (!resolution || !resolution.IsSequence() || resolution.size() != 2) {
-      return Status::InvalidArgument(QuotedPath(file) +
-                                     ": resolution must be a list [width, height]");
-    }
-    camera.size = {resolution[0].as<int>(), resolution[1].as<int>()};
-    const std::vector<double> k = Numbers(root, "intrinsics", 4, "intrinsics [fu, fv, cu, cv]");
-    camera.K = {k[0], 0, k[2], 0, k[1], k[3], 0, 0, 1};
-    camera.distortion = Numbers(root, "distortion_coefficients", 4, "distortion_coefficients");
     if (T[12] != 0 || T[13] != 0 || T[14] != 0 || T[15] != 1) {
       return Status::InvalidArgument(QuotedPath(file) +
                                      ": the last row of T_BS must be [0, 0, 0, 1]");

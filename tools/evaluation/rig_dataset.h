@@ -7,9 +7,10 @@
 //    What `recog seqgen rig` writes.
 //  - EuRoC MAV: PATH/mav0/camN or PATH/camN (N = 0, 1, ... while camN/sensor.yaml exists), each
 //    with its sensor.yaml (T_BS: the camera's pose in the body frame, a 4x4 row-major `data`;
-//    resolution [w, h]; intrinsics [fu, fv, cu, cv]; distortion_coefficients [k1, k2, p1, p2],
-//    radial-tangential) and data.csv ("timestamp [ns],filename", images in camN/data/). A rig
-//    frame is a timestamp every camera has an image at; others are skipped.
+//    resolution [w, h]; intrinsics [fu, fv, cu, cv]; distortion_model radial-tangential
+//    [k1, k2, p1, p2] or equidistant [k1, k2, k3, k4] in distortion_coefficients: read as a
+//    calibration file, camera_calibration.h) and data.csv ("timestamp [ns],filename", images in
+//    camN/data/). A rig frame is a timestamp every camera has an image at; others are skipped.
 //  - KITTI odometry: PATH/calib.txt (lines "PN: 12 numbers", the rectified 3x4 projection matrix
 //    of camera N), PATH/times.txt (seconds per frame) and PATH/image_N/%06d.png. Every camera
 //    with a PN line and an image_N folder is used; its K is the left 3x3 of PN, no distortion

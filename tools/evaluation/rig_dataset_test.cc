@@ -119,16 +119,16 @@ TEST(RigDatasetTest, PlainMissingCameraFolderIsNotFound) {
 
 // EuRoC MAV sensor.yaml as the dataset has it (OpenCV's "%YAML:1.0" first), with T_BS's data.
 std::string EurocSensor(const std::string& t_bs_data, const std::string& intrinsics,
-                        const std::string& distortion) {
+                        const std::string& distortion,
+                        const std::string& model = "radial-tangential") {
   return "%YAML:1.0\n---\n# General sensor definitions.\nsensor_type: camera\n"
          "comment: VI-Sensor cam (MT9M034)\n\n# Sensor extrinsics wrt. the body-frame.\n"
          "T_BS:\n  cols: 4\n  rows: 4\n  data: [" +
          t_bs_data +
          "]\n\n# Camera specific definitions.\nrate_hz: 20\nresolution: [752, 480]\n"
          "camera_model: pinhole\nintrinsics: [" +
-         intrinsics +
-         "] #fu, fv, cu, cv\ndistortion_model: radial-tangential\ndistortion_coefficients: [" +
-         distortion + "]\n";
+         intrinsics + "] #fu, fv, cu, cv\ndistortion_model: " + model +
+         "\ndistortion_coefficients: [" + distortion + "]\n";
 }
 
 // cam0: EuRoC's own (camera x along body -y...). cam1: nearly the body's axes, its rotation
@@ -227,6 +227,34 @@ TEST_F(RigDatasetEurocTest, MalformedSensorYamlIsRefusedNamingTheFile) {
   rig = ReadRigDataset(dir_.path());
   ExpectError(rig, StatusCode::kInvalidArgument, file);
   ExpectError(rig, StatusCode::kInvalidArgument, "rig camera 'cam1'");
+}
+
+// TUM-VI's cameras are fisheyes: sensor.yaml's equidistant model gives the rig camera its lens;
+// a model that is not read is refused naming the file and the model.
+TEST_F(RigDatasetEurocTest, AnEquidistantCameraKeepsItsLens) {
+  const std::string tum_vi_k =
+      "0.0034823894022493434, 0.0007150348452162257, "
+      "-0.0020532361418706202, 0.00020293673591811182";
+  dir_.Text("mav0/cam1/sensor.yaml",
+            EurocSensor(kCam1Pose,
+                        "190.97847715128717, 190.9733070521226, 254.93170605935475, "
+                        "256.8974428996504",
+                        tum_vi_k, "equidistant"));
+  auto rig = ReadRigDataset(dir_.path());
+  ASSERT_TRUE(rig.ok()) << rig.status().ToString();
+  EXPECT_EQ(rig->cameras[0].lens, LensModel::kRadialTangential);
+  const RigCamera& cam1 = rig->cameras[1];
+  EXPECT_EQ(cam1.lens, LensModel::kEquidistant);
+  EXPECT_EQ(cam1.distortion, (std::vector<double>{0.0034823894022493434, 0.0007150348452162257,
+                                                  -0.0020532361418706202, 0.00020293673591811182}));
+  EXPECT_EQ(cam1.K(0, 0), 190.97847715128717);
+  EXPECT_EQ(cam1.K(1, 2), 256.8974428996504);
+
+  dir_.Text("mav0/cam1/sensor.yaml",
+            EurocSensor(kCam1Pose, "190.9, 190.9, 254.9, 256.8", "0.1, 0.2", "fov"));
+  rig = ReadRigDataset(dir_.path());
+  ExpectError(rig, StatusCode::kInvalidArgument, dir_ / "mav0/cam1/sensor.yaml");
+  ExpectError(rig, StatusCode::kInvalidArgument, "distortion_model 'fov' is not supported");
 }
 
 // KITTI odometry sequence 00's calibration, P1 with a 0.54 m baseline; P2 has no image_2 folder.

@@ -29,6 +29,11 @@ RigCamera ParseCamera(const YAML::Node& node) {
          0,
          1};
   if (node["distortion"]) c.distortion = YamlNumbers(node["distortion"], 0, "distortion");
+  if (node["lens"]) {
+    const StatusOr<LensModel> lens = ParseLensModel(node["lens"].as<std::string>());
+    if (!lens.ok()) throw YAML::Exception(node["lens"].Mark(), lens.status().message());
+    c.lens = *lens;
+  }
   const YAML::Node pose = Required(node, "body_from_camera");
   const std::vector<double> r = YamlNumbers(Required(pose, "rotation"), 9, "rotation");
   const std::vector<double> t = YamlNumbers(Required(pose, "translation"), 3, "translation");
@@ -84,6 +89,9 @@ Status WriteRigFile(const std::vector<RigCamera>& cameras, const std::string& pa
     node["distortion"] = YAML::Node(YAML::NodeType::Sequence);
     for (double v : camera.distortion) node["distortion"].push_back(v);
     node["distortion"].SetStyle(YAML::EmitterStyle::Flow);
+    if (camera.lens != LensModel::kRadialTangential) {
+      node["lens"] = std::string(LensModelName(camera.lens));
+    }
     YAML::Node pose;
     for (double v : camera.body_R_camera.val) pose["rotation"].push_back(v);
     for (int i = 0; i < 3; ++i) pose["translation"].push_back(camera.body_t_camera[i]);

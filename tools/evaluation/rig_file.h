@@ -5,7 +5,9 @@
 //   name: front                  # 1..128 characters of [A-Za-z0-9._-], unique in the rig
 //   width: 640, height: 480      # pixels
 //   fx, fy, cx, cy               # the pinhole intrinsics, pixels; fx, fy > 0
-//   distortion: [k1, k2, p1, p2[, k3[, k4, k5, k6]]]   # OpenCV's order; [] for none
+//   distortion: [k1, k2, p1, p2[, k3[, k4, k5, k6]]]   # the lens's coefficients; [] for none
+//   lens: equidistant            # optional: radtan (the default: OpenCV's order above),
+//                                # equidistant [k1, k2, k3, k4] or double_sphere [xi, alpha]
 //   body_from_camera:            # the camera's pose on the body, X_body = R X_camera + t
 //     rotation: [9 numbers, row-major]    # a rotation: R Rᵀ = I (within 1e-6) and det R = +1
 //     translation: [tx, ty, tz]           # metres
@@ -29,8 +31,8 @@ class Node;
 namespace recog::cli {
 
 // Reads and validates a rig file. NOT_FOUND when it does not exist; INVALID_ARGUMENT naming the
-// file (and the camera) for YAML that does not parse, a missing or mistyped key, or a rig that
-// does not validate (ValidateRig).
+// file (and the camera) for YAML that does not parse, a missing or mistyped key (an unknown lens
+// name too), or a rig that does not validate (ValidateRig).
 StatusOr<std::vector<RigCamera>> ReadRigFile(const std::string& path);
 
 // Writes a rig that validates (INVALID_ARGUMENT otherwise); INTERNAL when the file cannot be

@@ -3,6 +3,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 
 #include <gtest/gtest.h>
 
@@ -56,12 +57,54 @@ TEST(RigFileTest, WrittenRigsReadBackExactly) {
     EXPECT_EQ(a.size, b.size);
     EXPECT_EQ(a.K, b.K);
     EXPECT_EQ(a.distortion, b.distortion);
+    EXPECT_EQ(a.lens, b.lens);
     EXPECT_EQ(a.body_R_camera, b.body_R_camera);
     EXPECT_EQ(a.body_t_camera, b.body_t_camera);
   }
   auto handwritten = ReadRigFile(Write("handwritten.yaml", kRig));
   ASSERT_TRUE(handwritten.ok()) << handwritten.status().ToString();
   EXPECT_EQ(handwritten->front().body_t_camera, cv::Vec3d(0, 0, 0.4));
+}
+
+// A fisheye camera's lens is written (only when it is not radtan, the default) and read back.
+TEST(RigFileTest, ALensIsWrittenAndReadBack) {
+  std::vector<RigCamera> rig = FrontAndSide();
+  rig[1].lens = LensModel::kEquidistant;
+  rig[1].distortion = {0.0034823894022493434, 0.0007150348452162257, -0.0020532361418706202,
+                       0.00020293673591811182};
+  const std::string path = (fs::path(::testing::TempDir()) / "fisheye_rig.yaml").string();
+  ASSERT_TRUE(WriteRigFile(rig, path).ok());
+  std::ifstream in(path);
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_EQ(text.find("lens:"), text.rfind("lens:")) << "one camera has a lens key:\n" << text;
+  EXPECT_NE(text.find("lens: equidistant"), std::string::npos) << text;
+  auto read = ReadRigFile(path);
+  ASSERT_TRUE(read.ok()) << read.status().ToString();
+  EXPECT_EQ((*read)[0].lens, LensModel::kRadialTangential);
+  EXPECT_EQ((*read)[1].lens, LensModel::kEquidistant);
+  EXPECT_EQ((*read)[1].distortion, rig[1].distortion);
+
+  // Written by hand: a double sphere lens by its Kalibr name; a lens of no model, or with the
+  // coefficients of another, is refused naming the file and the camera.
+  std::string ds = kRig;
+  ds.replace(ds.find("    distortion: []"), 18, "    lens: ds\n    distortion: [-0.2, 0.6]");
+  auto handwritten = ReadRigFile(Write("rig_ds.yaml", ds));
+  ASSERT_TRUE(handwritten.ok()) << handwritten.status().ToString();
+  EXPECT_EQ(handwritten->front().lens, LensModel::kDoubleSphere);
+  EXPECT_EQ(handwritten->front().distortion, (std::vector<double>{-0.2, 0.6}));
+  std::string unknown = ds;
+  unknown.replace(unknown.find("lens: ds"), 8, "lens: omni");
+  auto refused = ReadRigFile(Write("rig_omni.yaml", unknown));
+  EXPECT_EQ(refused.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(refused.status().message().find("rig_omni.yaml"), std::string::npos);
+  EXPECT_NE(refused.status().message().find("'omni'"), std::string::npos)
+      << refused.status().message();
+  std::string three = ds;
+  three.replace(three.find("[-0.2, 0.6]"), 11, "[-0.2, 0.6, 0.1]");
+  refused = ReadRigFile(Write("rig_ds_three.yaml", three));
+  EXPECT_EQ(refused.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(refused.status().message().find("rig camera 'front'"), std::string::npos)
+      << refused.status().message();
 }
 
 // A rig that does not validate (ValidateRig, core/geometry/camera_rig_test.cc) is not written.

@@ -108,8 +108,17 @@ size_t RigPhotosNeeded(const RigSequenceOptions& o) {
 std::vector<RigCamera> DefaultRig(const RigSequenceOptions& o) {
   const cv::Matx33d K(o.focal_px, 0, 0.5 * (o.image_size.width - 1), 0, o.focal_px,
                       0.5 * (o.image_size.height - 1), 0, 0, 1);
-  return {{"front", o.image_size, K, {}, cv::Matx33d::eye(), {0, 0, o.camera_offset_m}},
-          {"rear", o.image_size, K, {}, Yaw(180), {0, 0, -o.camera_offset_m}}};
+  return {{.name = "front",
+           .size = o.image_size,
+           .K = K,
+           .distortion = {},
+           .body_t_camera = {0, 0, o.camera_offset_m}},
+          {.name = "rear",
+           .size = o.image_size,
+           .K = K,
+           .distortion = {},
+           .body_R_camera = Yaw(180),
+           .body_t_camera = {0, 0, -o.camera_offset_m}}};
 }
 
 StatusOr<RigSequence> GenerateRigSequence(

@@ -11,6 +11,7 @@
 #include "core/common/option_checks.h"
 #include "tools/bag/ros_images.h"
 #include "tools/bag/ros_messages.h"
+#include "tools/evaluation/camera_calibration.h"
 
 namespace recog::cli {
 namespace {
@@ -219,32 +220,22 @@ struct RosBagReader::Impl {
       i.topic = topic;
       i.size = cv::Size(int(c.width), int(c.height));
       i.distortion_model = c.distortion_model;
-      i.camera = {c.k[0], c.k[4], c.k[2], c.k[5], {}};
-      if (std::any_of(c.d.begin(), c.d.end(), [](double d) { return d != 0; })) {
-        i.camera.distortion = c.d;
-      }
+      i.camera = {c.k[0], c.k[4], c.k[2], c.k[5], c.d};  // D: its lens below
       i.rectified = {c.p[0], c.p[5], c.p[2], c.p[6], {}};
       i.projection_tx = c.p[3];
       return Status::Ok();
     });
-    if (!read.ok()) return read.WithContext("topic " + topic + " of bag " + Quoted(path));
-    if (!info.has_value()) {
-      return Status::InvalidArgument("topic " + topic + " of bag " + Quoted(path) +
-                                     " has no message");
-    }
-    if (!info->camera.Validate().ok()) {
-      return Status::InvalidArgument("topic " + topic + " of bag " + Quoted(path) +
+    const std::string where = "topic " + topic + " of bag " + Quoted(path);
+    if (!read.ok()) return read.WithContext(where);
+    if (!info.has_value()) return Status::InvalidArgument(where + " has no message");
+    if (!(info->camera.fx > 0) || !(info->camera.fy > 0)) {
+      return Status::InvalidArgument(where +
                                      ": the camera is not calibrated (K has no positive focal "
                                      "lengths)");
     }
-    const bool known_model = info->distortion_model.empty() ||
-                             info->distortion_model == "plumb_bob" ||
-                             info->distortion_model == "rational_polynomial";
-    if (!info->camera.distortion.empty() && !known_model) {
-      return Status::InvalidArgument("topic " + topic + " of bag " + Quoted(path) +
-                                     ": distortion model " + Quoted(info->distortion_model) +
-                                     " is not supported (plumb_bob, rational_polynomial)");
-    }
+    StatusOr<CameraIntrinsics> camera = RosCameraIntrinsics(info->camera, info->distortion_model);
+    if (!camera.ok()) return camera.status().WithContext(where);
+    info->camera = *std::move(camera);
     return info;
   }
 

@@ -81,8 +81,10 @@ struct BagReadOptions {
 struct BagCameraInfo {
   std::string topic;
   cv::Size size;  // width, height of the calibration (0 x 0 when the message has none)
-  // K (fx, fy, cx, cy) with D as the distortion (OpenCV's order k1 k2 p1 p2 [k3 ...], which
-  // plumb_bob and rational_polynomial share); no distortion when D is empty or all zeros.
+  // K (fx, fy, cx, cy) with D as the coefficients of the lens distortion_model names
+  // (RosCameraIntrinsics, camera_calibration.h): plumb_bob and rational_polynomial are
+  // radial-tangential (OpenCV's order k1 k2 p1 p2 [k3 ...]), equidistant is equidistant; no
+  // distortion when a radial-tangential D is empty or all zeros.
   CameraIntrinsics camera;
   // P's fx, fy, cx, cy: the camera of the rectified images, without distortion.
   CameraIntrinsics rectified;

@@ -232,6 +232,46 @@ TEST_F(BagTest, CameraInfoGivesTheIntrinsicsAndTheRightCameraTheBaseline) {
               "is not a rectified right camera");
 }
 
+// CameraInfo's distortion_model names the lens of D: a fisheye's equidistant D is kept (even all
+// 0: r = θ is no pinhole), zeros of plumb_bob or of a model no lens knows are a pinhole, and a
+// model that is not read, with coefficients, is refused naming it and the models read.
+TEST_F(BagTest, CameraInfoDistortionModelsGiveTheLens) {
+  const std::string info = " --camera-info-topic /camera/camera_info --camera 50,51,31.5,23.5";
+  struct Case {
+    std::string options;
+    CameraIntrinsics camera;
+  };
+  const std::vector<Case> cases = {
+      {",0.01,-0.002,0.0003,-0.00004 --distortion-model equidistant",
+       {50, 51, 31.5, 23.5, {0.01, -0.002, 0.0003, -0.00004}, LensModel::kEquidistant}},
+      {",0,0,0,0 --distortion-model equidistant",
+       {50, 51, 31.5, 23.5, {0, 0, 0, 0}, LensModel::kEquidistant}},
+      {",0.1,-0.2,0,0,0.01,0.001,0.002,0.003 --distortion-model rational_polynomial",
+       {50, 51, 31.5, 23.5, {0.1, -0.2, 0, 0, 0.01, 0.001, 0.002, 0.003}}},
+      {"", {50, 51, 31.5, 23.5, {}}},  // plumb_bob's five zeros
+      {",0 --distortion-model fov", {50, 51, 31.5, 23.5, {}}},
+  };
+  for (size_t i = 0; i < cases.size(); ++i) {
+    SCOPED_TRACE(cases[i].options);
+    const std::string bag = WriteBag("lens" + std::to_string(i) + ".bag", info + cases[i].options);
+    auto reader = RosBagReader::Open(bag, Topics(kTopic, "", "/camera/camera_info"));
+    ASSERT_TRUE(reader.ok()) << reader.status().ToString();
+    EXPECT_EQ(reader->camera()->camera, cases[i].camera);
+    EXPECT_EQ(reader->FrameCamera(), cases[i].camera);
+  }
+  const std::string fov = WriteBag("fov.bag", info + ",0.9 --distortion-model fov");
+  const auto refused = RosBagReader::Open(fov, Topics(kTopic, "", "/camera/camera_info"));
+  ExpectError(refused, StatusCode::kInvalidArgument, "topic /camera/camera_info of bag");
+  ExpectError(refused, StatusCode::kInvalidArgument,
+              "distortion model 'fov' is not supported (read: plumb_bob, rational_polynomial, "
+              "equidistant");
+  // Coefficients the lens does not take.
+  const std::string three =
+      WriteBag("equidistant3.bag", info + ",0.1,0.01,0.001 --distortion-model equidistant");
+  ExpectError(RosBagReader::Open(three, Topics(kTopic, "", "/camera/camera_info")),
+              StatusCode::kInvalidArgument, "equidistant camera distortion needs 4 coefficients");
+}
+
 TEST_F(BagTest, DepthInEveryEncodingIsMatchedByNearestStamp) {
   for (const char* encoding : {"16UC1", "32FC1", "png", "compressedDepth"}) {
     SCOPED_TRACE(encoding);

@@ -127,7 +127,7 @@ StatusOr<SequenceFeatures> OfflineFeatures(const std::string& folder,
   std::optional<SequenceGeometryOptions> geometry;
   if (const std::optional<CameraIntrinsics> camera = source.bag()->FrameCamera()) {
     geometry.emplace();
-    geometry->K = camera->K();
+    geometry->camera = *camera;
     geometry->depth_scale = 1.0 / 1000;  // 16UC1: millimetres
     RECOG_ASSIGN_OR_RETURN(const std::optional<double> baseline, source.bag()->StereoBaseline());
     geometry->baseline_m = baseline.value_or(0);

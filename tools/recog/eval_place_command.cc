@@ -1,9 +1,13 @@
 // recog eval place: runs the loop detector over a sequence (a folder, a TUM RGB-D / EuRoC / KITTI
 // dataset folder with timestamps, a list, a video or a ROS bag (1 or 2); or with --rig a
 // multi-camera rig sequence) and reports the detections and per-stage timings, with a ground truth
-// also precision and recall; --sweep alpha draws the PR curve.
+// also precision, recall and why each missed revisit was missed (eval_place_misses.h); --sweep
+// alpha draws the PR curve.
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
+#include <functional>
+#include <map>
 #include <memory>
 #include <optional>
 #include <set>
@@ -18,12 +22,13 @@
 #include "core/place/detector_settings.h"
 #include "core/vocabulary/vocabulary_io.h"
 #include "tools/common/cli_support.h"
-#include "tools/evaluation/object_evaluation.h"  // ParseCamera
+#include "tools/evaluation/camera_calibration.h"
 #include "tools/evaluation/place_evaluation.h"
 #include "tools/evaluation/plot.h"
 #include "tools/evaluation/rig_evaluation.h"
 #include "tools/recog/bag_flags.h"
 #include "tools/recog/commands.h"
+#include "tools/recog/eval_place_misses.h"
 
 namespace recog::cli {
 namespace {
@@ -162,11 +167,14 @@ nlohmann::json ToJson(const PlaceEvaluation& e, const SequenceFeatures& seq) {
     }
     loops.push_back(std::move(loop));
   }
-  return {{"frames", e.frames},         {"query_frames_with_truth", e.query_frames_with_truth},
-          {"detections", e.detections}, {"correct", e.correct},
-          {"ambiguous", e.ambiguous},   {"precision", e.precision},
-          {"recall", e.recall},         {"statuses", e.statuses},
-          {"timing_ms", timing},        {"loops", loops}};
+  nlohmann::json out = {
+      {"frames", e.frames},         {"query_frames_with_truth", e.query_frames_with_truth},
+      {"detections", e.detections}, {"correct", e.correct},
+      {"ambiguous", e.ambiguous},   {"precision", e.precision},
+      {"recall", e.recall},         {"statuses", e.statuses},
+      {"timing_ms", timing},        {"loops", loops}};
+  AddMissesJson(e, &seq.names, &out);
+  return out;
 }
 
 // Side-by-side images of each detection with its inlier correspondences.
@@ -215,26 +223,31 @@ int ReportAcrossMaps(const EvalPlaceArgs& args, int split, const SequenceFeature
       "robot A: frames 1-%d (its map); robot B: frames %d-%d (its own map, A's in its "
       "search set)\n",
       split, split + 1, frames);
-  const auto report = [&](const char* what, const PlaceEvaluation& e) {
+  const auto report = [&](const char* what, const char* label, const PlaceEvaluation& e) {
     std::printf(
         "%s: B's frames with a true match there %d, detections %d, correct %d: precision "
         "%.1f %%, recall %.1f %%\n",
         what, e.query_frames_with_truth, e.detections, e.correct, 100 * e.precision,
         100 * e.recall);
+    PrintMissSummary(label, e);
   };
-  report("inter-map loops (in A's map)", evaluation->inter_map);
-  report("own loops (in B's map)", evaluation->own_map);
+  report("inter-map loops (in A's map)", "inter-map", evaluation->inter_map);
+  report("own loops (in B's map)", "own", evaluation->own_map);
   const StageStats& lookup = evaluation->inter_map.timing_ms.at("total");
   std::printf("lookup in A's map: %.3f ms median, %.3f ms max per frame (features excluded)\n",
               lookup.median, lookup.max);
-  for (const auto& [label, e] :
-       {std::pair{"inter-map", &evaluation->inter_map}, std::pair{"own", &evaluation->own_map}}) {
+  const std::pair<const char*, const PlaceEvaluation*> maps[] = {
+      {"inter-map", &evaluation->inter_map}, {"own", &evaluation->own_map}};
+  for (const auto& [label, e] : maps) {
     for (const DetectedLoop& l : e->loops) {
       if (l.status != LoopStatus::kLoopDetected) continue;
       std::printf("%s loop %s -> %s (%s, %u inliers)\n", label,
                   sequence.names[size_t(l.query)].c_str(), sequence.names[size_t(l.match)].c_str(),
                   l.correct ? "correct" : "WRONG", l.inliers);
     }
+  }
+  for (const auto& [label, e] : maps) {
+    PrintMisses(label, *e, [&](int frame) { return sequence.names[size_t(frame)]; });
   }
   return 0;
 }
@@ -318,6 +331,7 @@ nlohmann::json RigEvaluationJson(const EvalPlaceArgs& args, const RigPlaceEvalua
     out["correct"] = e.correct;
     out["precision"] = e.precision;
     out["recall"] = e.recall;
+    AddMissesJson(e, nullptr, &out);
   }
   if (posed) {
     out["pose_error"] = {{"posed_correct", e.posed_correct},
@@ -339,6 +353,7 @@ void PrintRigEvaluation(const EvalPlaceArgs& args, const RigPlaceEvaluation& e, 
     std::printf("query frames with a true match %d\n", e.query_frames_with_truth);
     std::printf("detections %d, correct %d: precision %.1f %%, recall %.1f %%\n", e.detections,
                 e.correct, 100 * e.precision, 100 * e.recall);
+    PrintMissSummary("", e);
   } else {
     std::printf("detections %d (no ground truth)\n", e.detections);
   }
@@ -371,6 +386,52 @@ void PrintRigEvaluation(const EvalPlaceArgs& args, const RigPlaceEvaluation& e, 
                 args.has_truth() ? (l.correct ? "correct, " : "WRONG, ") : "", l.inliers,
                 pairs.c_str());
   }
+  PrintMisses("", e, [](int frame) { return std::to_string(frame + 1); });
+}
+
+// Why each revisit of the rig sequence missed, into e->misses. EvaluateRigPlace keeps the result
+// of the rig frames that had a candidate verified (its loops) and, of the others, only the status
+// (frame_statuses): too_few_features (kNotQueried) or no_candidates (kNoCandidate). A
+// RigLoopResult holds no list of candidates — the rig pools its cameras' answers by rig frame and
+// keeps only the frame whose verification gave the status — so a rig miss has no true candidate
+// and no rank. That frame is, for failed_geometry, the best pooled one (no camera pair of it
+// passed, and the failed pairs' inliers are not kept: no inliers), and for inconsistent_cameras
+// the last one refused so (the best pooled one, unless that one failed geometry first; its
+// verified pairs' inliers are kept); as neither can say whether a true place was among the
+// others, a wrong one there is a kWrongTopCandidate.
+void CountRigMisses(const GroundTruth& truth, RigPlaceEvaluation* e) {
+  std::map<int, const RigDetectedLoop*> loop_of_frame;
+  for (const RigDetectedLoop& l : e->loops) loop_of_frame[l.query] = &l;
+  LoopTally tally(e);
+  for (int i = 0; i < e->frames; ++i) {
+    if (!RevisitsMap(truth, i, {0, e->frames})) continue;
+    MissedRevisit miss;
+    miss.query = i;
+    miss.status = e->frame_statuses[size_t(i)];
+    const auto found = loop_of_frame.find(i);
+    if (found == loop_of_frame.end()) {
+      miss.reason = miss.status == RigLoopStatusName(RigLoopStatus::kTooFewFeatures)
+                        ? MissReason::kNotQueried
+                        : MissReason::kNoCandidate;
+      tally.CountMiss(std::move(miss));
+      continue;
+    }
+    const RigDetectedLoop& l = *found->second;
+    if (l.status == RigLoopStatus::kLoopDetected && l.correct) continue;
+    miss.candidate = l.match;
+    if (l.status != RigLoopStatus::kFailedGeometry) {  // the verified pairs' evidence
+      uint32_t correspondences = 0;
+      for (const RigCameraMatch& pair : l.result.pairs) {
+        correspondences += pair.verification.correspondences;
+      }
+      miss.inliers = l.inliers;
+      miss.correspondences = correspondences;
+    }
+    miss.reason = l.status == RigLoopStatus::kLoopDetected ? MissReason::kWrongLoop
+                  : l.correct                              ? MissReason::kFailedGeometry
+                                                           : MissReason::kWrongTopCandidate;
+    tally.CountMiss(std::move(miss));
+  }
 }
 
 // --rig: the rig detector over a rig sequence (every camera image searched against every camera
@@ -399,6 +460,7 @@ int RunEvalRig(const EvalPlaceArgs& args, const PlaceEvaluationOptions& options,
   auto e = EvaluateRigPlace(*sequence, *truth, std::move(vocabulary), rig_options,
                             poses ? &*poses : nullptr);
   if (!e.ok()) return Fail("eval place", e.status());
+  CountRigMisses(*truth, &*e);
   std::vector<std::string> cameras;
   for (const RigCamera& c : sequence->cameras) cameras.push_back(c.name);
   if (args.json) {
@@ -447,7 +509,7 @@ StatusOr<GroundTruth> ReadTruth(const EvalPlaceArgs& args) {
 StatusOr<std::optional<CameraIntrinsics>> FramesCamera(const EvalPlaceArgs& args,
                                                        const FrameSource& source) {
   if (!args.camera.empty()) {
-    RECOG_ASSIGN_OR_RETURN(const CameraIntrinsics camera, ParseCamera(args.camera));
+    RECOG_ASSIGN_OR_RETURN(const CameraIntrinsics camera, ParseCameraFlag("--camera", args.camera));
     return std::optional<CameraIntrinsics>(camera);
   }
   if (source.bag() != nullptr) return source.bag()->FrameCamera();
@@ -486,7 +548,7 @@ StatusOr<std::optional<SequenceGeometryOptions>> ReadGeometryFlags(
     return std::optional<SequenceGeometryOptions>();
   }
   SequenceGeometryOptions geometry;
-  geometry.K = camera->K();
+  geometry.camera = *camera;
   // --depth-scale is in units per metre, as in recog query and the model builder's views.
   const double units_per_metre = args.depth_scale > 0
                                      ? args.depth_scale
@@ -572,7 +634,8 @@ nlohmann::json EvaluationJson(const EvalPlaceArgs& args, const PlaceEvaluation& 
   out["ground_truth"] =
       args.has_truth() ? nlohmann::json(args.ground_truth) : nlohmann::json(nullptr);
   if (!args.has_truth()) {
-    for (const char* key : {"query_frames_with_truth", "correct", "precision", "recall"}) {
+    for (const char* key :
+         {"query_frames_with_truth", "correct", "precision", "recall", "misses", "miss_reasons"}) {
       out.erase(key);
     }
     for (nlohmann::json& loop : out["loops"]) loop.erase("correct");
@@ -692,6 +755,7 @@ void PrintPlaceEvaluation(const EvalPlaceArgs& args, const PlaceEvaluation& e,
                 e.correct,
                 e.ambiguous > 0 ? (", ambiguous " + std::to_string(e.ambiguous)).c_str() : "",
                 100 * e.precision, 100 * e.recall);
+    PrintMissSummary("", e);
   } else {
     std::printf("frames %d (layout %s), detections %d (no ground truth)\n", e.frames,
                 LayoutName(sequence).c_str(), e.detections);
@@ -708,6 +772,7 @@ void PrintPlaceEvaluation(const EvalPlaceArgs& args, const PlaceEvaluation& e,
   for (const DetectedLoop& l : e.loops) {
     if (l.status == LoopStatus::kLoopDetected) PrintLoop(l, sequence.features, args.has_truth());
   }
+  PrintMisses("", e, [&](int frame) { return sequence.features.names[size_t(frame)]; });
   if (!args.sweep.empty()) std::printf("precision-recall plot: %s\n", args.plot.c_str());
 }
 
@@ -870,10 +935,12 @@ void AddEvalPlaceCommand(CLI::App& eval, int* exit_code) {
                     "the sparse format of recog seqgen; without it, only detections are reported");
   place
       ->add_option("--camera", args->camera,
-                   "fx,fy,cx,cy of the (rectified) images: loops are checked with the essential "
-                   "matrix; frames with a depth image (TUM) or a right image (EuRoC, KITTI) get "
-                   "3D points, loops a 3D check and a metric pose")
-      ->check(Accepts(ParseCamera));
+                   std::string("The frames' camera: ") + kCameraFlagSyntax +
+                       ". Loops are checked with the essential matrix (a lens's keypoints moved "
+                       "into the pinhole image of its K); frames with a depth image (TUM) or a "
+                       "right image (EuRoC, KITTI) of a camera without distortion get 3D points, "
+                       "loops a 3D check and a metric pose")
+      ->check(Accepts([](const std::string& text) { return ParseCameraFlag("--camera", text); }));
   place
       ->add_option("--poses", args->poses,
                    "With --camera: every frame's pose (a line per frame: r11..r33 camera to world, "

@@ -21,6 +21,7 @@
 #include "core/object/tracking/object_tracker.h"
 #include "tools/common/cli_support.h"
 #include "tools/common/remote_support.h"
+#include "tools/evaluation/camera_calibration.h"
 #include "tools/evaluation/frame_poses.h"
 #include "tools/evaluation/object_evaluation.h"
 #include "tools/recog/bag_flags.h"
@@ -64,7 +65,7 @@ std::string BagFrameName(int number) {
 class SequenceFrames {
  public:
   // INVALID_ARGUMENT without --images or --bag, for --images without --camera, and for --bag
-  // with both or neither of --camera and --camera-info-topic; ParseCamera's, ListImages' and
+  // with both or neither of --camera and --camera-info-topic; ParseCameraFlag's, ListImages' and
   // BagFlags::Open's errors (a bag is checked whole before the first frame).
   Status Open(const EvalSequenceArgs& args) {
     if (args.images.empty() != args.bag.given()) {
@@ -72,7 +73,7 @@ class SequenceFrames {
     }
     if (!args.bag.given()) {
       if (args.camera.empty()) return Status::InvalidArgument("--images needs --camera");
-      RECOG_ASSIGN_OR_RETURN(camera_, ParseCamera(args.camera));
+      RECOG_ASSIGN_OR_RETURN(camera_, ParseCameraFlag("--camera", args.camera));
       RECOG_ASSIGN_OR_RETURN(names_, ListImages(args.images));
       label_ = args.images;
       return Status::Ok();
@@ -82,7 +83,7 @@ class SequenceFrames {
           "--bag needs the frames' camera: give --camera or --camera-info-topic (one of them)");
     }
     if (!args.camera.empty()) {
-      RECOG_ASSIGN_OR_RETURN(camera_, ParseCamera(args.camera));
+      RECOG_ASSIGN_OR_RETURN(camera_, ParseCameraFlag("--camera", args.camera));
     }
     RECOG_ASSIGN_OR_RETURN(FrameSource source, args.bag.Open());
     bag_.emplace(std::move(source));
@@ -450,8 +451,9 @@ void AddEvalSequenceCommand(CLI::App& eval, int* exit_code) {
   CLI::Option* images =
       sequence->add_option("--images", sequence_args->images, "Folder of frames (or --bag)");
   sequence->add_option("--camera", sequence_args->camera,
-                       "fx,fy,cx,cy[,k1,k2,p1,p2[,k3]]: required with --images; with --bag, this "
-                       "or --camera-info-topic");
+                       std::string("The frames' camera, required with --images (with --bag, this "
+                                   "or --camera-info-topic): ") +
+                           kCameraFlagSyntax);
   CLI::Option* bag =
       sequence_args->bag.AddImageTo(sequence, images,
                                     "A ROS 1 or ROS 2 bag instead of --images: the frames of "

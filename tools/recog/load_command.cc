@@ -14,6 +14,7 @@
 
 #include "tools/common/cli_support.h"
 #include "tools/common/server_flags.h"
+#include "tools/evaluation/camera_calibration.h"
 #include "tools/evaluation/object_evaluation.h"
 #include "tools/load/load_generator.h"
 #include "tools/recog/bag_flags.h"
@@ -115,7 +116,7 @@ void PrintReport(const LoadArgs& args, const LoadReport& report) {
 
 int RunLoadCommand(LoadArgs& args) {
   if (!args.camera.empty()) {
-    StatusOr<CameraIntrinsics> camera = ParseCamera(args.camera);
+    StatusOr<CameraIntrinsics> camera = ParseCameraFlag("--camera", args.camera);
     if (!camera.ok()) return Fail("load", camera.status());
     args.options.camera = *camera;
   }
@@ -233,8 +234,9 @@ void AddLoadCommand(CLI::App& app, int* exit_code) {
                    "Also call RecognizeObjects on frames 0, K, 2K, ... of each robot (0 = never)")
       ->capture_default_str();
   load->add_option("--camera", args->camera,
-                   "Intrinsics fx,fy,cx,cy[,k1,k2,p1,p2[,k3]] of the RecognizeObjects frames "
-                   "(default with --bag: its --camera-info-topic)");
+                   std::string("The camera of the RecognizeObjects frames (default with --bag: "
+                               "its --camera-info-topic): ") +
+                       kCameraFlagSyntax);
   load->add_option("--object-image", o.object_image,
                    "Recognise objects on this image instead of the robot's current frame");
   load->add_flag("--verify", o.verify,

@@ -19,6 +19,7 @@
 #include "core/object/tracking/recording_learner.h"
 #include "tools/common/cli_support.h"
 #include "tools/common/remote_support.h"
+#include "tools/evaluation/camera_calibration.h"
 #include "tools/evaluation/frame_poses.h"
 #include "tools/evaluation/object_evaluation.h"
 #include "tools/evaluation/rgbd_recording.h"
@@ -57,10 +58,15 @@ StatusOr<ObjectBox> ParseBox(const std::string& text) {
   return box;
 }
 
-// --depth-camera fx,fy,cx,cy[,k1,k2,p1,p2[,k3]].
+// --depth-camera: a camera whose lens depth registration models
+// (core/geometry/depth_registration.h: radial-tangential, or none).
 StatusOr<CameraIntrinsics> ParseDepthCamera(const std::string& text) {
-  auto camera = ParseCamera(text);
-  if (!camera.ok()) return Status::InvalidArgument("--depth-camera: " + camera.status().message());
+  RECOG_ASSIGN_OR_RETURN(CameraIntrinsics camera, ParseCameraFlag("--depth-camera", text));
+  if (camera.lens != LensModel::kRadialTangential && !camera.distortion.empty()) {
+    const std::string lens(LensModelName(camera.lens));
+    return Status::InvalidArgument("--depth-camera: radtan lenses only (depth registration), not " +
+                                   lens);
+  }
   return camera;
 }
 
@@ -133,7 +139,7 @@ StatusOr<ObjectModel> BuildFromCad(const ModelBuildArgs& args, ModelBuilder* bui
   PosedImage first;
   first.name = fs::path(args.image).stem().string();
   RECOG_ASSIGN_OR_RETURN(first.image, ReadGrayImage(args.image));
-  RECOG_ASSIGN_OR_RETURN(first.camera, ParseCamera(args.camera));
+  RECOG_ASSIGN_OR_RETURN(first.camera, ParseCameraFlag("--camera", args.camera));
   RECOG_ASSIGN_OR_RETURN(first.camera_from_object, ReadVispPose(args.pose));
   const std::string name = args.name.empty() ? fs::path(args.cad).stem().string() : args.name;
   const ModelFromViews build = [&](const std::vector<PosedImage>& views) {
@@ -182,7 +188,7 @@ StatusOr<ObjectModel> BuildFromRgbdRecording(const ModelBuildArgs& args, ModelBu
   fs::path folder = fs::path(args.rgbd_recording).lexically_normal();
   if (!folder.has_filename()) folder = folder.parent_path();
   options.name = args.name.empty() ? folder.filename().string() : args.name;
-  RECOG_ASSIGN_OR_RETURN(options.camera, ParseCamera(args.camera));
+  RECOG_ASSIGN_OR_RETURN(options.camera, ParseCameraFlag("--camera", args.camera));
   if (!args.views.empty()) {
     // Chosen frames whose poses are all known: a model of those views, nothing learned.
     RECOG_ASSIGN_OR_RETURN(std::vector<double> numbers, ParseNumbers("--views", args.views));
@@ -396,8 +402,9 @@ void AddModelCommands(CLI::App& app, int* exit_code) {
       ->needs(rgbd_recording);
   build
       ->add_option("--depth-camera", build_args->depth_camera,
-                   "With --rgbd: the depth images come from their own camera "
-                   "fx,fy,cx,cy[,k1,k2,p1,p2[,k3]] (else they are registered to colour)")
+                   std::string("With --rgbd: the depth images come from their own camera (else "
+                               "they are registered to colour), radtan or pinhole: ") +
+                       kCameraFlagSyntax)
       ->check(Accepts(ParseDepthCamera));
   build
       ->add_option("--depth-from-color", build_args->depth_from_color,
@@ -413,7 +420,9 @@ void AddModelCommands(CLI::App& app, int* exit_code) {
                     "frame's number is used)");
   build->add_option("--image", build_args->image, "Registered image for --cad");
   build->add_option("--camera", build_args->camera,
-                    "fx,fy,cx,cy of --image (--cad) or of the recording (--rgbd-recording)");
+                    std::string("The camera of --image (--cad) or of the recording "
+                                "(--rgbd-recording): ") +
+                        kCameraFlagSyntax);
   build->add_option("--recording", build_args->recording,
                     "With --cad: folder of the recording --image belongs to; the object is "
                     "followed through the frames after --image and views from new directions "

@@ -30,6 +30,7 @@
 #include "tools/common/cli_support.h"
 #include "tools/common/remote_support.h"
 #include "tools/common/server_flags.h"
+#include "tools/evaluation/camera_calibration.h"
 #include "tools/evaluation/object_evaluation.h"
 #include "tools/evaluation/place_evaluation.h"
 #include "tools/evaluation/rig_dataset.h"
@@ -117,7 +118,7 @@ int RunQuery(const QueryArgs& args, RecognitionClient& client) {
   options.set_top_k(args.top_k);
   options.set_include_correspondences(args.correspondences);
   if (!args.camera.empty()) {
-    auto camera = ParseCamera(args.camera);
+    auto camera = ParseCameraFlag("--camera", args.camera);
     if (!camera.ok()) return Fail("query", camera.status());
     SetIntrinsics(*camera, &*frame);
     options.set_include_relative_pose(true);
@@ -230,7 +231,7 @@ int RunRelocalize(const RelocalizeArgs& args, RecognitionClient& client) {
   std::optional<CameraIntrinsics> camera;
   pb::ResultOptions options;
   if (!args.camera.empty()) {
-    auto parsed = ParseCamera(args.camera);
+    auto parsed = ParseCameraFlag("--camera", args.camera);
     if (!parsed.ok()) return Fail("relocalize", parsed.status());
     camera = *parsed;
     options.set_include_relative_pose(true);
@@ -303,7 +304,9 @@ void AddQueryCommands(CLI::App& app, int* exit_code) {
   query->add_flag("--add", query_args->add,
                   "Run the map's loop detector and keep the frame, as a streamed frame");
   query->add_option("--camera", query_args->camera,
-                    "fx,fy,cx,cy[,k1,k2,p1,p2[,k3]]: also report the relative pose of a loop");
+                    std::string("The image's camera, to also report the relative pose of a "
+                                "loop: ") +
+                        kCameraFlagSyntax);
   query->add_option("--client-frame-id", query_args->client_frame_id,
                     "Your own id of the frame (at most 128 bytes); with --add the map keeps it "
                     "and returns it whenever the frame is a match");
@@ -352,7 +355,9 @@ void AddQueryCommands(CLI::App& app, int* exit_code) {
       ->capture_default_str();
   CLI::Option* relocalize_camera =
       relocalize->add_option("--camera", relocalize_args->camera,
-                             "fx,fy,cx,cy[,k1,k2,p1,p2[,k3]]: also report the relative pose");
+                             std::string("The images' camera, to also report the relative "
+                                         "pose: ") +
+                                 kCameraFlagSyntax);
   relocalize
       ->add_option("--depth", relocalize_args->depths,
                    "Depth images aligned with the images, one per image (A,B or repeated; "

@@ -78,6 +78,15 @@ expect_ok "seqgen a tiny sequence" "$recog" seqgen --images "$images" -o "$tmp/s
 [ "$(grep -c 1 "$tmp/seq/ground_truth.txt")" -eq 4 ] && pass || fail "seqgen ground truth has 4 query frames with matches"
 expect_error "seqgen into a non-empty folder" "not empty" "$recog" seqgen --images "$images" -o "$tmp/seq" \
   --places 4 --allow-duplicate-places --frames-per-place 2 -q
+# seqgen lens: the corridor frames (512x384) through a fisheye, as PNG of the same names and size.
+expect_ok "seqgen lens through an equidistant fisheye" "$recog" seqgen lens --images "$images" \
+  -o "$tmp/fisheye" --source-camera 400,400,255.5,191.5 --camera equidistant:300,300,255.5,191.5,0,0,0,0 -q
+[ "$(ls "$tmp/fisheye" | wc -l)" -eq "$(ls "$images" | wc -l)" ] && [ -f "$tmp/fisheye/1.png" ] \
+  && [ "$(od -An -tx1 -j12 -N12 "$tmp/fisheye/1.png" | tr -d ' \n')" = "494844520000020000000180" ] \
+  && pass || fail "seqgen lens writes every frame as PNG (IHDR) of the input's size, 512 x 384"
+expect_error "seqgen lens with a lens of the wrong coefficient count" "equidistant takes fx,fy,cx,cy" \
+  "$recog" seqgen lens --images "$images" -o "$tmp/fisheye2" --source-camera 400,400,255.5,191.5 \
+  --camera equidistant:300,300,255.5,191.5,0.1 -q
 [ -f "$tmp/seq/ground_truth.txt" ] && [ ! -e "$tmp/seq/images/000013.png" ] && pass || fail "seqgen rerun leaves the folder alone"
 expect_ok "seqgen jpg, sparse truth, json" "$recog" seqgen --images "$images" -o "$tmp/seq2" --places 4 \
   --allow-duplicate-places --frames-per-place 2 --revisit-fraction 0.5 --width 160 --height 120 --format jpg --sparse-truth --json
@@ -145,7 +154,25 @@ expect_ok "eval place --rig" "$recog" eval place --rig "$tmp/rig" --ground-truth
   "$tmp/rig/ground_truth.txt" --body-poses "$tmp/rig/body_poses.txt" --json -q
 json_check "eval place --rig reads both cameras and scores rig frames" \
   "assert d['frames']==4 and d['cameras']==['front','rear'] and d['layout']=='plain' \
-   and d['query_frames_with_truth']==2 and 'pose_error' in d and d['detections']==d['correct'], d"
+   and d['query_frames_with_truth']==2 and 'pose_error' in d and d['detections']==d['correct'] \
+   and d['misses']==[] and sum(d['miss_reasons'].values())==0, d"
+# The rig's misses: a truth that makes rig frame 4 revisit 1 instead of 2 (its loop is wrong), and
+# 1000 inliers that no camera pair reaches (no candidate list, no rank, and no inliers kept).
+printf '0 0 0 0\n0 0 0 0\n1 1 0 0\n1 0 0 0\n' >"$tmp/rig_gt_wrong.txt"
+expect_ok "eval place --rig with a wrong loop" "$recog" eval place --rig "$tmp/rig" \
+  --ground-truth "$tmp/rig_gt_wrong.txt" --json -q
+json_check "eval place --rig says rig frame 4's loop to 2 is a wrong loop" "
+assert [(m['query'], m['reason'], m['candidate'], m['true_rank']) for m in d['misses']] \
+    == [(4, 'wrong_loop', 2, None)] and d['misses'][0]['inliers'] > 0, d['misses']"
+printf 'min_inliers: 1000\nstrong_min_inliers: 1000\n' >"$tmp/rig_params.yaml"
+expect_ok "eval place --rig with 1000 inliers" "$recog" eval place --rig "$tmp/rig" \
+  --ground-truth "$tmp/rig/ground_truth.txt" --params "$tmp/rig_params.yaml" -q
+if grep -q "^missed 2 of 2: failed geometry 2$" "$tmp/out" \
+  && grep -q "^missed 3: failed geometry with [12]$" "$tmp/out"; then
+  pass
+else
+  fail "eval place --rig sums up and lists the failed geometry: $(cat "$tmp/out")"
+fi
 expect_ok "eval place --rig --cameras front" "$recog" eval place --rig "$tmp/rig/rig.yaml" \
   --cameras front --json -q
 json_check "eval place --rig --cameras front keeps the front camera" \
@@ -335,6 +362,24 @@ i = d['inter_map']; assert i['query_frames_with_truth'] == 2 and i['detections']
 found = [l for l in i['loops'] if l['status'] == 'loop_detected']
 assert [(l['query'], l['match'], l['acceptance']) for l in found] == [(3, 1, 'relocalisation')], i['loops']
 assert d['own_map']['query_frames_with_truth'] == 0 and d['own_map']['detections'] == 0, d['own_map']"
+json_check "eval place --split says why B's 60 missed A's 20: RANSAC, under the 16 inliers needed" "
+i = d['inter_map']; assert d['own_map']['misses'] == [] and len(i['misses']) == 1, d
+assert i['miss_reasons']['failed_geometry'] == 1 and sum(i['miss_reasons'].values()) == 1, i
+m = i['misses'][0]
+assert (m['query'], m['reason'], m['status'], m['candidate'], m['true_candidate'], m['true_rank']) \
+    == (4, 'failed_geometry', 'failed_geometry', 2, 2, 1), m
+assert m['query_file'].endswith('/60.jpg') and m['candidate_file'].endswith('/20.jpg'), m
+assert 0 < m['inliers'] < 16 and m['correspondences'] > m['inliers'], m"
+expect_ok "eval place --split as text" "$recog" eval place --images "$images" \
+  --ground-truth "$tmp/gt4.txt" --split 2 -q
+if grep -q "^inter-map missed 1 of 2: failed geometry 1 (median [0-9]* inliers of [0-9]* matches)$" \
+  "$tmp/out" && grep -Eq \
+  "^inter-map missed .*/60.jpg: failed geometry, [0-9]+ inliers of [0-9]+ matches with .*/20.jpg$" \
+  "$tmp/out" && ! grep -q "^own missed" "$tmp/out"; then
+  pass
+else
+  fail "eval place --split sums up and lists the inter-map miss: $(cat "$tmp/out")"
+fi
 # The same two robots as two sequences: robot A's frames 1.jpg and 20.jpg, robot B's 41.jpg and
 # 60.jpg, the ground truth across both (B's frames numbered after A's).
 printf '%s\n' "$images/1.jpg" "$images/20.jpg" >"$tmp/robot_a.txt"
@@ -344,6 +389,55 @@ expect_ok "eval place --robot-b (two sequences)" "$recog" eval place --images "$
 json_check "eval place --robot-b scores B's revisits of A's places" "
 assert d['robot_a_frames'] == [1, 2] and d['robot_b_frames'] == [3, 4], d
 i = d['inter_map']; assert i['query_frames_with_truth'] == 2 and i['detections'] == i['correct'] == 1, i"
+# Why each revisit was missed, one reason a frame (`misses`, `miss_reasons`): the 4 frames in one
+# map, each case with its settings and truth, and the reasons expected for 41 and 60 (frames 3
+# and 4; none for a frame whose loop is correct).
+printf '0 0 0 0\n0 0 0 0\n1 0 0 0\n1 0 0 0\n' >"$tmp/gt_both_at_1.txt"
+printf '0 0 0 0\n0 0 0 0\n0 1 0 0\n0 1 0 0\n' >"$tmp/gt_both_at_20.txt"
+expect_misses() {  # DESCRIPTION TRUTH PARAMS EXPECTED (a Python dict frame -> reason)
+  printf '%b' "$3" >"$tmp/miss_params.yaml"
+  expect_ok "eval place: $1" "$recog" eval place --images "$images" --ground-truth "$2" \
+    --params "$tmp/miss_params.yaml" --json -q
+  json_check "eval place: $1 ($4)" "
+got = {m['query']: m['reason'] for m in d['misses']}; assert got == $4, d['misses']
+counts = {r: list(got.values()).count(r) for r in d['miss_reasons']}
+assert d['miss_reasons'] == counts and len(counts) == 7, d['miss_reasons']
+assert len(d['misses']) == d['query_frames_with_truth'] - d['correct'], d"
+}
+expect_misses "tau_c's 20 frames leave nothing to query" "$tmp/gt4.txt" 'alpha: 0.3\n' \
+  "{3: 'no_candidate', 4: 'no_candidate'}"
+expect_misses "frames with too few features are not queried" "$tmp/gt4.txt" \
+  'min_features: 100000\n' "{3: 'not_queried', 4: 'not_queried'}"
+expect_misses "no candidate reaches alpha" "$tmp/gt4.txt" 'recent_frames: 0\nalpha: 100\n' \
+  "{3: 'low_score', 4: 'low_score'}"
+expect_misses "60 waits for a third consistent query" "$tmp/gt4.txt" 'recent_frames: 0\n' \
+  "{4: 'not_consistent'}"
+json_check "eval place: 60's true place is its best candidate" "
+m = d['misses'][0]; assert (m['candidate'], m['true_rank'], m['inliers']) == (2, 1, None), m
+assert m['status'] == 'failed_temporal_consistency' and m['consistent_queries'] >= 0, m"
+no_tau_c='recent_frames: 0\ntemporal_matches: 0\n'
+expect_misses "1000 inliers fail 41 -> 1; 60's best, 20, is no true place" "$tmp/gt_both_at_1.txt" \
+  "${no_tau_c}min_inliers: 1000\nstrong_min_inliers: 1000\n" \
+  "{3: 'failed_geometry', 4: 'wrong_top_candidate'}"
+json_check "eval place: 60's first true place, 1, is ranked third" "
+m = {m['query']: m for m in d['misses']}
+assert (m[3]['candidate'], m[3]['true_rank']) == (1, 1) and m[3]['correspondences'] > 0, m[3]
+assert (m[4]['candidate'], m[4]['true_candidate'], m[4]['true_rank']) == (2, 1, 3), m[4]
+assert m[4]['candidate_file'].endswith('/20.jpg') and m[4]['true_candidate_file'].endswith('/1.jpg'), m[4]"
+expect_misses "a loop 41 -> 1 where the truth says 20 is a wrong loop" "$tmp/gt_both_at_20.txt" \
+  "$no_tau_c" "{3: 'wrong_loop'}"
+json_check "eval place: the wrong loop's true place ranked second" "
+m = d['misses'][0]; assert (m['candidate'], m['true_candidate'], m['true_rank']) == (1, 2, 2), m
+assert m['inliers'] > 0 and m['status'] == 'loop_detected', m"
+printf '%b' "$no_tau_c" >"$tmp/miss_params.yaml"
+expect_ok "eval place lists a wrong loop as a miss" "$recog" eval place --images "$images" \
+  --ground-truth "$tmp/gt_both_at_20.txt" --params "$tmp/miss_params.yaml" -q
+if grep -q "^missed 1 of 2: wrong loop 1$" "$tmp/out" && grep -Eq "^missed .*/41.jpg: wrong loop \
+to .*/1.jpg, [0-9]+ inliers of [0-9]+ matches, a true place at rank 2 \(.*/20.jpg\)$" "$tmp/out"; then
+  pass
+else
+  fail "eval place sums up and lists the misses: $(cat "$tmp/out")"
+fi
 expect_error "eval place --robot-b with a ground truth of A's frames only" "INVALID_ARGUMENT" \
   "$recog" eval place --images "$tmp/robot_a.txt" --robot-b "$tmp/robot_b.txt" \
   --ground-truth "$tmp/gt_robot_a.txt" -q
@@ -391,7 +485,7 @@ expect_ok "eval place on a TUM folder without ground truth" "$recog" eval place 
 /usr/bin/python3 -c "
 import json; d=json.load(open('$tmp/out'))
 assert d['layout'] == 'tum' and d['frames'] == 4 and d['ground_truth'] is None, d
-assert 'precision' not in d and 'recall' not in d, d" \
+assert 'precision' not in d and 'recall' not in d and 'misses' not in d, d" \
   && pass || fail "eval place --json names the layout and leaves precision out without ground truth"
 expect_ok "eval place on a TUM folder without depth, with --camera" "$recog" eval place \
   --images "$tmp/tum" --camera 525,525,319.5,239.5 --json -q
@@ -480,6 +574,8 @@ expect_usage_error "model build with a bad --box" "--box" "$recog" model build \
   --rgbd "$tmp/rgbd.txt" --box 0.1,-0.1,0.1 -o "$tmp/m.robj"
 expect_usage_error "model build with a bad --depth-camera" "--depth-camera" "$recog" model build \
   --rgbd "$tmp/rgbd.txt" --depth-camera 500,x,256,192 -o "$tmp/m.robj"
+expect_usage_error "model build with a fisheye --depth-camera" "radtan lenses only.*not equidistant" "$recog" model build \
+  --rgbd "$tmp/rgbd.txt" --depth-camera equidistant:500,500,256,192,0.1,0,0,0 -o "$tmp/m.robj"
 expect_usage_error "model build with a --depth-from-color that is no rotation" "rotation" \
   "$recog" model build --rgbd "$tmp/rgbd.txt" --depth-camera 500,500,256,192 \
   --depth-from-color 2,0,0,0,1,0,0,0,1,0,0,0 -o "$tmp/m.robj"
@@ -499,6 +595,20 @@ expect_error "recognize with a malformed camera" "--camera" "$recog" recognize -
   --image "$images/1.jpg" --camera 1,2,3
 expect_error "recognize with a missing model" "NOT_FOUND" "$recog" recognize --models "$tmp/none.robj" \
   --image "$images/1.jpg" --camera 500,500,256,192
+# --camera takes calibration files (docs/cli.md, "Cameras"): a Kalibr camchain's pinhole camera as
+# the numbers above; its omni camera refused by name, and a file that does not exist.
+printf '%s\n' 'cam0:' '  camera_model: pinhole' '  distortion_model: none' \
+  '  intrinsics: [500, 500, 256, 192]' '  resolution: [512, 384]' 'cam1:' '  camera_model: omni' \
+  '  distortion_model: radtan' '  distortion_coeffs: [-0.1, 0.01, 0, 0]' \
+  '  intrinsics: [0.8, 500, 500, 256, 192]' '  resolution: [512, 384]' >"$tmp/camchain.yaml"
+expect_ok "recognize with a Kalibr camchain's camera" "$recog" recognize \
+  --models "$tmp/poster.robj" --image "$images/1.jpg" --camera "$tmp/camchain.yaml" --json
+/usr/bin/python3 -c "import json; d=json.load(open('$tmp/out')); assert [x['name'] for x in d['detections']]==['poster'], d" \
+  && pass || fail "recognize --camera CAMCHAIN reports the poster"
+expect_error "recognize with a Kalibr omni camera" "cam1: camera_model 'omni' with distortion_model 'radtan' is not supported" \
+  "$recog" recognize --models "$tmp/poster.robj" --image "$images/1.jpg" --camera "$tmp/camchain.yaml#cam1"
+expect_error "recognize with a missing calibration file" "NOT_FOUND.*none.yaml' does not exist" \
+  "$recog" recognize --models "$tmp/poster.robj" --image "$images/1.jpg" --camera "$tmp/none.yaml"
 expect_error "eval objects on a missing folder" "NOT_FOUND" "$recog" eval objects --roboearth /nonexistent -q
 expect_error "eval objects with an unknown method" "INVALID_ARGUMENT.*independent-views" "$recog" eval objects \
   --roboearth /nonexistent --method views -q

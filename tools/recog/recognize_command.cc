@@ -12,6 +12,7 @@
 #include "core/object/recognition/object_recognizer.h"
 #include "tools/common/remote_support.h"
 #include "tools/common/server_flags.h"
+#include "tools/evaluation/camera_calibration.h"
 #include "tools/evaluation/object_evaluation.h"
 #include "tools/recog/commands.h"
 #include "tools/recog/model_database.h"
@@ -151,7 +152,7 @@ int RunRecognize(const RecognizeArgs& args) {
     return Fail("recognize",
                 Status::InvalidArgument("give --models (recognise here) or --server (on recogd)"));
   }
-  auto camera = ParseCamera(args.camera);
+  auto camera = ParseCameraFlag("--camera", args.camera);
   if (!camera.ok()) return Fail("recognize", camera.status());
   auto image = ReadGrayImage(args.image);
   if (!image.ok()) return Fail("recognize", image.status());
@@ -244,7 +245,9 @@ void AddRecognizeCommand(CLI::App& app, int* exit_code) {
   CLI::Option* models = recognize->add_option("--models", recognize_args->models,
                                               "Model files, folders of them, or RoboEarth folders");
   recognize->add_option("--image", recognize_args->image, "Image")->required();
-  recognize->add_option("--camera", recognize_args->camera, "fx,fy,cx,cy[,k1,k2,p1,p2[,k3]]")
+  recognize
+      ->add_option("--camera", recognize_args->camera,
+                   std::string("The image's camera: ") + kCameraFlagSyntax)
       ->required();
   recognize->add_option("--draw", recognize_args->draw, "PNG with outlines and axes");
   recognize->add_flag("--inliers", recognize_args->extras.include_inliers,

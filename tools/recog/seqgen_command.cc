@@ -1,17 +1,23 @@
 // recog seqgen: a long synthetic image sequence with exact loop ground truth, from real photos;
 // recog seqgen objects: an RGB-D sequence of one object with exact pose ground truth;
-// recog seqgen rig: a front + rear camera rig driven out and back the other way.
+// recog seqgen rig: a front + rear camera rig driven out and back the other way;
+// recog seqgen lens: a folder of pinhole images as a given lens would have taken them.
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
+#include <filesystem>
 #include <memory>
+#include <optional>
 #include <random>
 #include <string>
 
 #include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "tools/common/cli_support.h"
+#include "tools/evaluation/camera_calibration.h"
+#include "tools/evaluation/lens_warp.h"
 #include "tools/evaluation/object_sequence_generator.h"
 #include "tools/evaluation/rig_file.h"
 #include "tools/evaluation/rig_sequence.h"
@@ -368,6 +374,83 @@ void AddRigSeqgenCommand(CLI::App& seqgen, int* exit_code) {
   cmd->callback([args, exit_code] { *exit_code = RunRigSeqgen(*args); });
 }
 
+struct LensSeqgenArgs {
+  std::string images, output, source_camera, camera, size;
+  bool quiet = false;
+};
+
+int RunLensSeqgen(const LensSeqgenArgs& args) {
+  const auto fail = [](const Status& status) {
+    std::fprintf(stderr, "recog seqgen lens: %s\n", status.ToString().c_str());
+    return 1;
+  };
+  auto source = ParseNumbers("--source-camera", args.source_camera);
+  if (!source.ok()) return fail(source.status());
+  if (source->size() != 4) {
+    return fail(Status::InvalidArgument("--source-camera takes fx,fy,cx,cy of the pinhole images"));
+  }
+  const cv::Matx33d source_K((*source)[0], 0, (*source)[2], 0, (*source)[1], (*source)[3], 0, 0, 1);
+  auto lens = ParseCameraFlag("--camera", args.camera);
+  if (!lens.ok()) return fail(lens.status());
+  auto paths = ListImages(args.images);
+  if (!paths.ok()) return fail(paths.status().WithContext("--images"));
+  if (Status s = PrepareOutputFolder(args.output); !s.ok()) return fail(s);
+  ProgressBar progress(!args.quiet);
+  std::optional<LensWarp> warp;  // made for the first image's size (or --size)
+  cv::Size size;
+  for (size_t i = 0; i < paths->size(); ++i) {
+    const std::string& path = (*paths)[i];
+    const cv::Mat image = cv::imread(path, cv::IMREAD_UNCHANGED);
+    if (image.empty()) return fail(Status::InvalidArgument("cannot read image '" + path + "'"));
+    if (!warp.has_value()) {
+      size = image.size();
+      if (!args.size.empty()) {
+        auto wh = ParseNumbers("--size", args.size);
+        if (!wh.ok() || wh->size() != 2) {
+          return fail(Status::InvalidArgument("--size takes width,height"));
+        }
+        size = cv::Size(int((*wh)[0]), int((*wh)[1]));
+      }
+      auto made = LensWarp::Create(source_K, *lens, size);
+      if (!made.ok()) return fail(made.status());
+      warp.emplace(std::move(made).value());
+    }
+    // PNG: a second JPEG compression would change the features more than the lens does.
+    std::filesystem::path out =
+        std::filesystem::path(args.output) / std::filesystem::relative(path, args.images);
+    out.replace_extension(".png");
+    std::filesystem::create_directories(out.parent_path());
+    if (!cv::imwrite(out.string(), warp->Apply(image))) {
+      return fail(Status::Internal("cannot write '" + out.string() + "'"));
+    }
+    progress.Update("images", i + 1, paths->size());
+  }
+  progress.Finish();
+  std::printf("wrote %zu images of %dx%d through %s to %s\n", paths->size(), size.width,
+              size.height, lens->Describe().c_str(), args.output.c_str());
+  return 0;
+}
+
+void AddLensSeqgenCommand(CLI::App& seqgen, int* exit_code) {
+  auto args = std::make_shared<LensSeqgenArgs>();
+  CLI::App* cmd = seqgen.add_subcommand(
+      "lens",
+      "Write a folder of pinhole images as a given lens would have taken them (same file names, "
+      "as PNG): a real sequence through a known distortion, to compare the loops and poses found "
+      "through --camera LENS:... with the original's");
+  cmd->add_option("--images", args->images, "Folder of pinhole images (recursive)")->required();
+  cmd->add_option("-o,--output", args->output, "Output folder (must not exist or be empty)")
+      ->required();
+  cmd->add_option("--source-camera", args->source_camera, "fx,fy,cx,cy of the images")->required();
+  cmd->add_option("--camera", args->camera,
+                  "The lens to simulate, in --camera syntax (docs/cli.md, \"Cameras\"), e.g. "
+                  "equidistant:fx,fy,cx,cy,k1,k2,k3,k4")
+      ->required();
+  cmd->add_option("--size", args->size, "width,height of the output (default: the input's)");
+  cmd->add_flag("-q,--quiet", args->quiet, "No progress output");
+  cmd->callback([args, exit_code] { *exit_code = RunLensSeqgen(*args); });
+}
+
 }  // namespace
 
 void AddSeqgenCommand(CLI::App& app, int* exit_code) {
@@ -409,9 +492,10 @@ void AddSeqgenCommand(CLI::App& app, int* exit_code) {
   cmd->add_flag("-q,--quiet", args->quiet, "No progress output");
   AddObjectSeqgenCommand(*cmd, exit_code);
   AddRigSeqgenCommand(*cmd, exit_code);
+  AddLensSeqgenCommand(*cmd, exit_code);
   cmd->require_subcommand(0, 1);
   cmd->callback([cmd, args, exit_code] {
-    if (cmd->got_subcommand("objects") || cmd->got_subcommand("rig")) return;  // ran its own
+    if (!cmd->get_subcommands().empty()) return;  // a mode ran its own
     *exit_code = RunSeqgen(*args);
   });
 }

@@ -118,8 +118,10 @@ class StreamSequence {
   void AddRig(pb::MapSettings* settings) const {
     if (!rig_) return;
     for (const RigCamera& c : rig_->cameras) {
-      *settings->add_rig() = client::MakeRigCamera(c.name, c.size, c.K, c.distortion,
-                                                   c.body_R_camera, c.body_t_camera);
+      pb::RigCameraSettings* camera = settings->add_rig();
+      *camera = client::MakeRigCamera(c.name, c.size, c.K, c.distortion, c.body_R_camera,
+                                      c.body_t_camera);
+      camera->mutable_intrinsics()->set_lens(pb::LensModel(c.lens));  // the same numbers
     }
   }
 

@@ -20,13 +20,9 @@ std::vector<uint8_t> EncodePng(const cv::Mat& image) {
 }
 
 cv::Vec3d PixelRay(const CameraIntrinsics& camera, const cv::Point2f& pixel) {
-  if (camera.distortion.empty()) {
-    return {(pixel.x - camera.cx) / camera.fx, (pixel.y - camera.cy) / camera.fy, 1.0};
-  }
-  std::vector<cv::Point2f> undistorted;
-  cv::undistortPoints(std::vector<cv::Point2f>{pixel}, undistorted, cv::Mat(camera.K()),
-                      cv::Mat(camera.distortion));
-  return {undistorted[0].x, undistorted[0].y, 1.0};
+  cv::Point2f pinhole = pixel;
+  ToPinhole(camera, std::span<cv::Point2f>(&pinhole, 1));
+  return {(pinhole.x - camera.cx) / camera.fx, (pinhole.y - camera.cy) / camera.fy, 1.0};
 }
 
 bool FillProjectedHull(const std::vector<cv::Point3d>& corners, const CameraIntrinsics& camera,

@@ -25,23 +25,6 @@ StatusOr<ObjectType> ParseObjectType(std::string_view name) {
                                  "' (expected planar or 3D)");
 }
 
-Status CameraIntrinsics::Validate() const {
-  const bool finite =
-      std::isfinite(fx) && std::isfinite(fy) && std::isfinite(cx) && std::isfinite(cy);
-  if (!finite || fx <= 0 || fy <= 0) {
-    return Status::InvalidArgument("camera intrinsics need finite fx, fy > 0 and finite cx, cy");
-  }
-  for (double d : distortion) {
-    if (!std::isfinite(d)) return Status::InvalidArgument("camera distortion is not finite");
-  }
-  if (!distortion.empty() && distortion.size() != 4 && distortion.size() != 5 &&
-      distortion.size() != 8) {
-    return Status::InvalidArgument("camera distortion needs 4, 5 or 8 coefficients, got " +
-                                   std::to_string(distortion.size()));
-  }
-  return Status::Ok();
-}
-
 cv::Point3d RigidTransform::Apply(const cv::Point3d& x) const {
   const cv::Vec3d y = R * cv::Vec3d(x.x, x.y, x.z) + t;
   return {y[0], y[1], y[2]};

@@ -24,22 +24,13 @@
 
 #include "core/common/descriptor.h"
 #include "core/common/status.h"
+#include "core/geometry/camera_model.h"
 
 namespace recog {
 
 enum class ObjectType : uint8_t { kPlanar = 0, k3D = 1 };
 std::string_view ObjectTypeName(ObjectType type);  // "planar", "3D"
 StatusOr<ObjectType> ParseObjectType(std::string_view name);
-
-// Pinhole camera with optional OpenCV distortion coefficients (k1 k2 p1 p2 [k3 ...]).
-struct CameraIntrinsics {
-  double fx = 0, fy = 0, cx = 0, cy = 0;
-  std::vector<double> distortion;  // empty = none
-  cv::Matx33d K() const { return {fx, 0, cx, 0, fy, cy, 0, 0, 1}; }
-  // OK when fx, fy > 0 and every value is finite.
-  Status Validate() const;
-  friend bool operator==(const CameraIntrinsics&, const CameraIntrinsics&) = default;
-};
 
 // A rigid transform T_a<-b: X_a = R * X_b + t.
 struct RigidTransform {

@@ -88,9 +88,7 @@ bool GuidedMatcher::Match(const IndexedObject& object, const RigidTransform& pos
   if (m < options_.min_inliers) return false;
   pinhole_.resize(m);
   for (size_t k = 0; k < m; ++k) pinhole_[k] = frame_features_->keypoints[k].pt;
-  if (!camera.distortion.empty()) {
-    cv::undistortPoints(pinhole_, pinhole_, K, camera.distortion, cv::noArray(), K);
-  }
+  ToPinhole(camera, pinhole_);
 
   std::vector<std::pair<uint32_t, uint32_t>>& pairs = pairs_;
   MatchInWindows(object, box, &pairs);

@@ -177,15 +177,13 @@ void CompleteDetection(const IndexedObject& object, const CameraIntrinsics& came
   } else {
     outline3d = object.outline_points;
   }
-  std::vector<cv::Point3f> in_front;  // camera frame
+  std::vector<cv::Point2f> projected;  // the outline's points the camera sees
   for (const cv::Point3f& x : outline3d) {
     const cv::Point3d c = pose.Apply(cv::Point3d(x));
-    if (c.z > 1e-9) in_front.emplace_back(c);
-  }
-  std::vector<cv::Point2f> projected;
-  if (!in_front.empty()) {
-    cv::projectPoints(in_front, cv::Vec3d(0, 0, 0), cv::Vec3d(0, 0, 0), K, camera.distortion,
-                      projected);
+    cv::Point2d pixel;
+    if (c.z > 1e-9 && ProjectDirection(camera, cv::Vec3d(c.x, c.y, c.z), &pixel)) {
+      projected.emplace_back(pixel);
+    }
   }
   detection->outline.clear();
   if (projected.size() >= 3) cv::convexHull(projected, detection->outline);

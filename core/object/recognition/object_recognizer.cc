@@ -260,10 +260,7 @@ Status ObjectRecognizer::Prepare(const CameraIntrinsics& camera, QueryFeatures* 
   query->positions.resize(features.size());
   for (size_t i = 0; i < features.size(); ++i) query->positions[i] = features.keypoints[i].pt;
   query->pinhole = query->positions;
-  if (!camera.distortion.empty() && !query->pinhole.empty()) {
-    cv::undistortPoints(query->positions, query->pinhole, camera.K(), camera.distortion,
-                        cv::noArray(), camera.K());
-  }
+  ToPinhole(camera, query->pinhole);
   return database_->vocabulary().TransformEach(features.descriptors, &query->words, &query->nodes,
                                                database_->direct_levels_up());
 }
