@@ -6,7 +6,6 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
-#include <regex>
 
 #include <yaml-cpp/yaml.h>
 
@@ -147,9 +146,10 @@ StatusOr<CameraCalibration> ReadKalibrCamera(const YAML::Node& node, const Sourc
                   "' is not supported (" + kKalibrModels + ")");
 }
 
+// "cam" and a number: cam0, cam1, ...
 bool IsCamchainCamera(const std::string& key) {
-  static const std::regex name("cam[0-9]+");
-  return std::regex_match(key, name);
+  return key.size() > 3 && key.starts_with("cam") &&
+         std::all_of(key.begin() + 3, key.end(), [](char c) { return c >= '0' && c <= '9'; });
 }
 
 bool IsCamchain(const YAML::Node& root) {

@@ -72,21 +72,31 @@ def raw_depth(array) -> common_pb2.RawDepth:
                                format=formats[str(array.dtype)], data=data)
 
 
-def make_intrinsics(intrinsics: common_pb2.CameraIntrinsics | Sequence[float]
-                    ) -> common_pb2.CameraIntrinsics:
+LENSES = {"radtan": common_pb2.LENS_MODEL_RADTAN,
+          "equidistant": common_pb2.LENS_MODEL_EQUIDISTANT,
+          "double_sphere": common_pb2.LENS_MODEL_DOUBLE_SPHERE}
+
+
+def make_intrinsics(intrinsics: common_pb2.CameraIntrinsics | Sequence[float],
+                    lens: str = "radtan") -> common_pb2.CameraIntrinsics:
     """Returns camera intrinsics as a message.
 
     ``intrinsics`` is a ``CameraIntrinsics`` (returned as it is) or the sequence
-    ``(fx, fy, cx, cy, *distortion)`` in pixels, with 0, 4, 5, 8, 12 or 14 OpenCV distortion
-    coefficients.
+    ``(fx, fy, cx, cy, *distortion)`` in pixels; ``lens`` names the model of the distortion
+    coefficients: ``"radtan"`` (OpenCV's order, 0, 4, 5, 8, 12 or 14 of them), ``"equidistant"``
+    (the Kannala-Brandt fisheye of cv::fisheye: k1 k2 k3 k4) or ``"double_sphere"`` (xi, alpha).
+    The server checks the count.
     """
     if isinstance(intrinsics, common_pb2.CameraIntrinsics):
         return intrinsics
+    if lens not in LENSES:
+        raise InvalidArgument(f"lens {lens!r} is not one of {', '.join(LENSES)}")
     values = [float(v) for v in intrinsics]
     if len(values) < 4:
         raise InvalidArgument("intrinsics are (fx, fy, cx, cy, *distortion)")
     fx, fy, cx, cy, *distortion = values
-    return common_pb2.CameraIntrinsics(fx=fx, fy=fy, cx=cx, cy=cy, distortion=distortion)
+    return common_pb2.CameraIntrinsics(fx=fx, fy=fy, cx=cx, cy=cy, distortion=distortion,
+                                       lens=LENSES[lens])
 
 
 def make_features(keypoints: Iterable, descriptors, image_size: tuple[int, int] | None = None

@@ -8,6 +8,7 @@ are missing.
 """
 
 import hashlib
+import math
 import os
 import struct
 import subprocess
@@ -26,8 +27,8 @@ try:
     from recog_client import (AlreadyExists, Cancelled, InvalidArgument, NotFound,
                               PermissionDenied, RecognitionClient, ResultOptions,
                               Unauthenticated, Unavailable, make_features, make_frame,
-                              make_rig_frame, object_pb2, place_pb2, repository_pb2, rig_camera,
-                              rig_view)
+                              make_intrinsics, make_rig_frame, object_pb2, place_pb2,
+                              repository_pb2, rig_camera, rig_view)
 except ModuleNotFoundError as missing:
     if missing.name.split(".")[0] not in ("grpc", "google"):
         raise  # the package is not on PYTHONPATH: an error, not a skip
@@ -233,6 +234,37 @@ class RecognitionClientTest(unittest.TestCase):
         self.assertEqual(len(full.fundamental), 9)
         self.assertEqual(len(full.relative_pose.rotation), 9)
         self.assertAlmostEqual(sum(v * v for v in full.relative_pose.translation), 1.0, places=6)
+
+    def test_a_fisheye_camera_s_loops_come_back_in_the_pinhole_image_of_its_matrix(self):
+        # The same frames through a pinhole and through an ideal fisheye (r = f theta) of the same
+        # matrix: the server extracts the same keypoints, and moves the fisheye's to the pinhole
+        # image, where a keypoint r pixels off the principal point lies at f tan(r / f).
+        options = ResultOptions(include_correspondences=True)
+        found = {}
+        for name, lens in (("pinhole", "radtan"), ("fisheye", "equidistant")):
+            camera = make_intrinsics((500, 500, 256, 192) + ((0, 0, 0, 0) if lens != "radtan"
+                                                             else ()), lens=lens)
+            self.client.create_map(name)
+            for n in (1, 20):
+                self.client.add_frame(name, make_frame(corridor(n), intrinsics=camera))
+            result = self.client.query_place(name, make_frame(corridor(41), intrinsics=camera),
+                                             result_options=options).result
+            self.assertEqual(result.status, place_pb2.LOOP_STATUS_LOOP_DETECTED)
+            found[name] = {c.query_index: (c.query_x, c.query_y)
+                           for c in result.inlier_correspondences}
+        common = set(found["pinhole"]) & set(found["fisheye"])
+        self.assertGreater(len(common), 10)
+        for index in common:
+            (x, y), (moved_x, moved_y) = found["pinhole"][index], found["fisheye"][index]
+            r = math.hypot(x - 256, y - 192)
+            scale = 500 * math.tan(r / 500) / r if r > 0 else 1
+            self.assertAlmostEqual(moved_x, 256 + (x - 256) * scale, delta=0.01)
+            self.assertAlmostEqual(moved_y, 192 + (y - 192) * scale, delta=0.01)
+        with self.assertRaises(InvalidArgument):
+            make_intrinsics((500, 500, 256, 192), lens="omni")
+        wrong_count = make_intrinsics((500, 500, 256, 192, 0.1), lens="double_sphere")
+        self.assert_raises(InvalidArgument, self.client.query_place, "fisheye",
+                           make_frame(corridor(41), intrinsics=wrong_count))
 
     def test_a_low_resolution_camera_s_frames_are_enlarged_by_the_server_and_find_the_place(self):
         self.client.create_map("small-frames")
