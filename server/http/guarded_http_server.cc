@@ -5,6 +5,7 @@
 #include <netinet/in.h>
 #include <poll.h>
 #include <strings.h>
+#include <sys/ioctl.h>
 #include <sys/socket.h>
 #include <unistd.h>
 
@@ -136,12 +137,16 @@ class ConnectionTable {
   }
 
  private:
-  // Under mutex_: marks the candidate evicted and wakes its thread (its socket reads end).
+  // Under mutex_: marks the candidate evicted and wakes its thread (its socket reads end). A
+  // connection with bytes in its socket that its thread has not read yet (on a busy machine, a
+  // request that came right after its connection may wait there) waits for the server, not for
+  // its client: it is no candidate.
   bool EvictLongestWaiting(const std::string* client) {
     Entry* oldest = nullptr;
     for (Entry& entry : entries_) {
       if (entry.evicted || !entry.awaiting_head) continue;
       if (client != nullptr && entry.client != *client) continue;
+      if (int unread = 0; ioctl(entry.fd, FIONREAD, &unread) == 0 && unread > 0) continue;
       if (oldest == nullptr || entry.waiting_since < oldest->waiting_since) oldest = &entry;
     }
     if (oldest == nullptr) return false;

@@ -24,7 +24,8 @@
 //    closed. When every place is busy with a request, it is answered 503 and closed at once (over
 //    TLS, closed) instead of waiting in a queue. So slow clients cannot hold every place, even
 //    from the address of the proxy that all clients share; a client whose request follows its
-//    connection at once (as browsers' and scrapers' do) is not evicted before it is read.
+//    connection at once (as browsers' and scrapers' do) is not evicted before it is read (a
+//    connection whose socket holds bytes not yet read is no candidate).
 //  - A handler may close its connection after its response (CloseConnectionAfterResponse), as it
 //    must when it refused a request without reading the body the client sent.
 // The guard's own answers (503, 431, 408, 400) are {"code", "message"} JSON carrying the
