@@ -1,14 +1,17 @@
 #!/usr/bin/env bash
-# Enforces the dependency rules of ARCHITECTURE: core/ never includes gRPC or RocksDB headers
-# (nor generated protobuf code), only storage/ includes RocksDB, and in server/ only the api/
-# converters, the services (the RPC handlers) and the web console (an adapter of the same
-# services) see generated protobuf types; the server's
-# infrastructure (config, auth, http, metrics, runtime) does not; the client library (client/) sees the
-# generated API only, never core/, storage/ or server/ (its tests may, to start a server); core's
-# modules include only the layers below them (no cycles). The RPC handlers and converters stay
-# thin, and so does the console: they never reach into a place map's lock, deleted flag or loop
-# detector (PlaceMap's
-# Add/Detect/Query own that).
+# Enforces the dependency rules that docs/index.md ("Layout") states: core/ never includes gRPC or
+# RocksDB headers (nor generated protobuf code), only storage/ includes RocksDB, and in server/
+# only the api/ converters, the services (the RPC handlers) and the web console (an adapter of the
+# same services) see generated protobuf types; the server's infrastructure (config, auth, http,
+# metrics, runtime) does not; the client library (client/) sees the generated API only, never
+# core/, storage/ or server/ (its tests may, to start a server); core's modules include only the
+# layers below them (no cycles); wire/ (what both ends of the API implement) sees only the
+# generated API; tools/ never sees the server, its folders are layers too (bag, common <
+# evaluation < load < recog) and only `recog` opens a store offline; nothing but bench/ includes
+# bench/; and the web console's pages import only its leaf modules, never each other
+# (docs/console.md, the paragraph on server/console/web/). The RPC handlers and converters stay thin, and so
+# does the console: they never reach into a place map's lock, deleted flag or loop detector
+# (PlaceMap's Add/Detect/Query own that).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 status=0
@@ -82,6 +85,56 @@ if [ -n "$(git ls-files 'core/object/*.h' 'core/object/*.cc' | grep -v '^core/ob
   echo "check_boundaries: core/object/ keeps its files in its concern folders" >&2
   status=1
 fi
+# check_roots DIR ALLOWED: the product files of DIR (not its tests nor test helpers) include, of
+# the repository's top folders and the generated API (recognition/, grpc/), only those ALLOWED.
+check_roots() {
+  local dir=$1 allowed=$2 file line include used
+  while IFS=: read -r file line include; do
+    used=$(sed -E 's#.*"([a-z_0-9]+)/.*#\1#' <<<"$include")
+    if ! grep -qw -- "$used" <<<"$allowed"; then
+      echo "$file:$line: $dir/ may not include $used/ (allowed: $allowed)" >&2
+      status=1
+    fi
+  done < <(git grep -n -E '#include\s*"(core|storage|server|tools|client|wire|tests|bench|recognition|grpc)/' \
+    -- "$dir/" ':!*_test.cc' ':!*test*.h')
+}
+check_roots wire "wire recognition"
+check_roots tools/bag "tools core"
+check_roots tools/common "tools core client wire"
+check_roots tools/evaluation "tools core"
+check_roots tools/load "tools core client wire recognition"
+check_roots tools/recog "tools core client wire recognition storage"
+for dir in core storage server client tools wire; do
+  if git grep -n -E '#include\s*"bench/' -- "$dir/"; then
+    echo "check_boundaries: only bench/ includes bench/ headers" >&2
+    status=1
+  fi
+done
+# tools' folders are layers: bag and common at the bottom, then evaluation, load, recog.
+declare -A tools_layer_deps=(
+  [bag]=""
+  [common]=""
+  [evaluation]="common bag"
+  [load]="common evaluation"
+  [recog]="common evaluation load bag"
+)
+check_layers tools tools_layer_deps
+# The web console's modules (server/console/web): the pages import only the leaves (the API
+# client, the DOM and format helpers, the line charts and the inlier pairs) and three.js, and a
+# leaf imports only other leaves. main.js loads the pages by dynamic import() (not checked here).
+console_leaves="api dom format linechart pairs"
+for module in server/console/web/*.js; do
+  while IFS= read -r imported; do
+    case "$imported" in
+      three | three/*) continue ;;
+    esac
+    imported=$(basename "$imported" .js)
+    if ! grep -qw -- "$imported" <<<"$console_leaves"; then
+      echo "$module: imports $imported, which is not a leaf module (leaves: $console_leaves)" >&2
+      status=1
+    fi
+  done < <(sed -n -E "s#^import .* from '([^']+)';#\1#p" "$module")
+done
 if git grep -n -E '(\.|->)(mutex|deleted|detector)\b' -- 'server/services/' 'server/api/' 'server/console/'; then
   echo "check_boundaries: server/services and server/api must not take a map's lock, read its" \
     "deleted flag or drive its detector: call PlaceMap instead" >&2
