@@ -16,7 +16,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include "server/api/converters.h"
+#include "server/api/frame_decoding.h"
 #include "tests/testing/data_paths.h"
 
 namespace recog::server {

@@ -339,7 +339,7 @@ void BM_Relocalize_Group10x2600_vs_One26K(benchmark::State& state) {
   int group_found = 0, one_found = 0;
   const auto timed = [](std::span<const std::shared_ptr<PlaceMap>> maps, const FeatureSet& frame,
                         std::vector<double>* ms) {
-    const RelocalizationFrame query{&frame, std::nullopt, nullptr};
+    const RelocalizationFrame query{&frame, nullptr};
     const auto start = std::chrono::steady_clock::now();
     auto found = Relocalize(maps, std::span(&query, 1));
     ms->push_back(MillisecondsSince(start));

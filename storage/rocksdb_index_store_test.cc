@@ -31,6 +31,7 @@
 #include "storage/record_codec.h"
 #include "storage/snapshot_file.h"
 #include "storage/store_test_util.h"
+#include "tests/testing/wait.h"
 
 namespace recog {
 namespace {
@@ -40,6 +41,7 @@ using testing::EntryDifference;
 using testing::MakeTestEntry;
 using testing::TempDir;
 using testing::TestMapConfig;
+using testing::WaitUntil;
 
 // Exit codes of forked children: kChildStatusBase + StatusCode of what they observed.
 constexpr int kChildStatusBase = 10;
@@ -381,13 +383,13 @@ TEST_F(RocksDbStoreTest, CheckpointWhileWritingHoldsEveryEarlierCommit) {
         acknowledged = id + 1;
       }
     });
-    while (acknowledged < 50) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    EXPECT_TRUE(WaitUntil([&] { return acknowledged >= 50 || failures > 0; }))
+        << "the writer did not commit 50 entries";
     committed_before = acknowledged.load();
     const Status s = store->Checkpoint(checkpoint);
     const EntryId target = acknowledged + 50;
-    while (acknowledged < target && failures == 0) {
-      std::this_thread::sleep_for(std::chrono::milliseconds(1));
-    }
+    EXPECT_TRUE(WaitUntil([&] { return acknowledged >= target || failures > 0; }))
+        << "the writer did not commit 50 more entries after the checkpoint";
     stop = true;
     writer.join();
     ASSERT_TRUE(s.ok()) << s.ToString();
@@ -746,13 +748,13 @@ TEST_F(RocksDbStoreTest, AFullDiskRefusesWritesLosesNothingAcknowledgedAndResume
     disk.FreeSpace();
     // RocksDB looks for free space every 5 s and then recovers by itself.
     Status resumed = Status::ResourceExhausted("not tried yet");
-    for (int attempt = 0; attempt < 300 && !resumed.ok(); ++attempt) {
-      std::this_thread::sleep_for(std::chrono::milliseconds(100));
-      resumed = store->CommitEntry(map->id, entry(next));
-      if (!resumed.ok()) {
-        ASSERT_EQ(resumed.code(), StatusCode::kResourceExhausted) << resumed.ToString();
-      }
-    }
+    ASSERT_TRUE(WaitUntil(
+        [&] {
+          resumed = store->CommitEntry(map->id, entry(next));
+          return resumed.code() != StatusCode::kResourceExhausted;
+        },
+        testing::kEventTimeout, std::chrono::milliseconds(100)))
+        << "the store took no write again after the disk was freed";
     ASSERT_TRUE(resumed.ok()) << resumed.ToString();
     acknowledged.push_back(next);
     EXPECT_TRUE(store->CommitEntry(map->id, entry(next + 1)).ok());

@@ -30,9 +30,22 @@ std::string EnumText(const gp::EnumValueDescriptor& value) {
   return text;
 }
 
+// The field `name` if it is one that text stands for: a singular number, string or enum.
 const gp::FieldDescriptor* Field(std::string_view name) {
-  return MapSettings::descriptor()->FindFieldByName(std::string(name));
+  const gp::FieldDescriptor* field = MapSettings::descriptor()->FindFieldByName(std::string(name));
+  if (field == nullptr || field->is_repeated()) return nullptr;
+  switch (field->cpp_type()) {
+    case gp::FieldDescriptor::CPPTYPE_DOUBLE:
+    case gp::FieldDescriptor::CPPTYPE_UINT32:
+    case gp::FieldDescriptor::CPPTYPE_STRING:
+    case gp::FieldDescriptor::CPPTYPE_ENUM:
+      return field;
+    default:
+      return nullptr;
+  }
 }
+
+std::string Unknown(std::string_view name) { return "unknown setting '" + std::string(name) + "'"; }
 
 std::string FieldText(const MapSettings& settings, const gp::FieldDescriptor& field) {
   const gp::Reflection& reflection = *settings.GetReflection();
@@ -52,35 +65,37 @@ std::string FieldText(const MapSettings& settings, const gp::FieldDescriptor& fi
       const gp::EnumValueDescriptor* value = field.enum_type()->FindValueByNumber(number);
       return value == nullptr ? std::to_string(number) : EnumText(*value);
     }
-    default:
+    default:  // Field() admits no other type
       return {};
   }
 }
 
 }  // namespace
 
-std::vector<std::pair<std::string, std::string>> MapSettingsAsText(
-    const MapSettings& settings, std::span<const std::string_view> names) {
-  std::vector<std::pair<std::string, std::string>> out;
+std::string MapSettingsAsText(const MapSettings& settings, std::span<const std::string_view> names,
+                              std::vector<std::pair<std::string, std::string>>* values) {
+  values->clear();
   const gp::Reflection& reflection = *settings.GetReflection();
   for (const std::string_view name : names) {
     const gp::FieldDescriptor* field = Field(name);
-    if (field == nullptr || field->is_repeated() || !reflection.HasField(settings, field)) continue;
+    if (field == nullptr) {
+      values->clear();
+      return Unknown(name);
+    }
+    if (!reflection.HasField(settings, field)) continue;
     if (field->cpp_type() == gp::FieldDescriptor::CPPTYPE_ENUM &&
         reflection.GetEnumValue(settings, field) == 0) {
       continue;  // *_UNSPECIFIED: not given
     }
-    out.emplace_back(std::string(name), FieldText(settings, *field));
+    values->emplace_back(std::string(name), FieldText(settings, *field));
   }
-  return out;
+  return {};
 }
 
 std::string SetMapSettingFromText(MapSettings* settings, std::string_view name,
                                   std::string_view text) {
   const gp::FieldDescriptor* field = Field(name);
-  if (field == nullptr || field->is_repeated()) {
-    return "unknown setting '" + std::string(name) + "'";
-  }
+  if (field == nullptr) return Unknown(name);
   const std::string value(text);
   const std::string bad = std::string(name) + ": '" + value + "' is not ";
   const gp::Reflection& reflection = *settings->GetReflection();
@@ -117,8 +132,8 @@ std::string SetMapSettingFromText(MapSettings* settings, std::string_view name,
       }
       return bad + "one of " + names;
     }
-    default:
-      return "setting '" + std::string(name) + "' cannot be given as text";
+    default:  // Field() admits no other type
+      return Unknown(name);
   }
 }
 

@@ -20,10 +20,13 @@
 
 namespace recog {
 
-// The fields named `names` that `settings` gives (has_*), as (name, text) in the order of `names`.
-// A name that is not a field of MapSettings is left out.
-std::vector<std::pair<std::string, std::string>> MapSettingsAsText(
-    const ::recognition::v1::MapSettings& settings, std::span<const std::string_view> names);
+// The fields named `names` that `settings` gives (has_*), as (name, text) in the order of `names`,
+// into *values. Returns an empty string, or what is wrong in one line for a name that is not a
+// field of MapSettings this text stands for ("unknown setting 'alpah'"; *values is then empty):
+// with the settings table's names, a programming error, which its callers report as such.
+[[nodiscard]] std::string MapSettingsAsText(
+    const ::recognition::v1::MapSettings& settings, std::span<const std::string_view> names,
+    std::vector<std::pair<std::string, std::string>>* values);
 
 // Sets the field `name` of *settings from `text`. Returns an empty string, or what is wrong in one
 // line ("alpha: 'abc' is not a number", "unknown setting 'alpah'").

@@ -5,7 +5,6 @@
 #include <filesystem>
 #include <fstream>
 #include <mutex>
-#include <thread>
 
 #include <opencv2/imgcodecs.hpp>
 
@@ -14,6 +13,7 @@
 #include "client/cpp/sha256.h"
 #include "tests/testing/model_files.h"
 #include "tests/testing/tcp_proxy.h"
+#include "tests/testing/wait.h"
 #include "wire/sha256.h"
 
 namespace recog::client::testing {
@@ -21,6 +21,7 @@ namespace {
 
 using recog::testing::ModelFile;
 using recog::testing::PosterModelFile;
+using recog::testing::WaitUntil;
 
 // A model file of several 256 KiB chunks.
 std::string BoxModelFile() { return ModelFile("crate", {1, 20, 41, 60}, "box"); }
@@ -192,15 +193,16 @@ TEST_F(ModelRepositoryTest, AWatcherReceivesTheUploadsOfItsModels) {
   };
   // The server registers the watcher shortly after the call starts: upload until it reports.
   const std::string file = PosterModelFile("x", 1, "");
-  for (int i = 0; i < 50 && seen() == 0; ++i) {
-    ASSERT_TRUE(client_->UploadModel(file, "watched-1").ok());
-    ASSERT_TRUE(client_->UploadModel(file, "other").ok());  // filtered out by the prefix
-    std::this_thread::sleep_for(std::chrono::milliseconds(100));
-  }
+  ASSERT_TRUE(WaitUntil(
+      [&] {
+        EXPECT_TRUE(client_->UploadModel(file, "watched-1").ok());
+        EXPECT_TRUE(client_->UploadModel(file, "other").ok());  // filtered out by the prefix
+        return seen() > 0;
+      },
+      recog::testing::kEventTimeout, std::chrono::milliseconds(100)))
+      << "no upload reached the watch";
   ASSERT_TRUE(client_->DeleteModel("watched-1").ok());
-  for (int i = 0; i < 50 && !deletion_seen(); ++i) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(100));
-  }
+  EXPECT_TRUE(WaitUntil(deletion_seen)) << "the watch did not see the deletion";
   watch->Cancel();
   EXPECT_EQ(watch->Wait().error_code(), grpc::StatusCode::CANCELLED);
   ASSERT_GE(events.size(), 2u);

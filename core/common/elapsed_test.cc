@@ -16,6 +16,7 @@ TEST(ElapsedTest, MillisecondsWithTheirFractions) {
 
 TEST(ElapsedTest, GrowsWithTheTimeWaited) {
   const auto start = std::chrono::steady_clock::now();
+  // The time waited is what is measured.
   std::this_thread::sleep_for(std::chrono::milliseconds(20));
   const double first = MillisecondsSince(start);
   EXPECT_GE(first, 20.0);

@@ -2,7 +2,6 @@
 
 #include <cmath>
 #include <cstdio>
-#include <fstream>
 #include <limits>
 #include <set>
 #include <sstream>
@@ -136,10 +135,106 @@ TEST(DetectorSettingsTest, EachRangeIsWhatValidateTakes) {
 }
 
 TEST(DetectorSettingsTest, CrossFieldConditionsAreStillChecked) {
-  // Each value is in its own range, but together they break LoopDetectorParams::Validate.
+  // Each value is in its own range, but together they break LoopDetectorParams::Validate; the
+  // same values the other way round pass.
+  const std::vector<std::pair<NamedSetting, NamedSetting>> pairs = {
+      {{"min_inliers", "40"}, {"strong_min_inliers", "30"}},
+      {{"temporal_matches", "2"}, {"strong_temporal_matches", "3"}},
+  };
+  for (const auto& [first, second] : pairs) {
+    for (const NamedSetting& value : {first, second}) {
+      EXPECT_TRUE(FindDetectorSetting(value.first)->range.Contains(std::stod(value.second)))
+          << value.first;
+    }
+    LoopDetectorParams p;
+    const Status refused = Apply({first, second}, &p);
+    EXPECT_EQ(refused.code(), StatusCode::kInvalidArgument) << first.first;
+    EXPECT_NE(refused.message().find(second.first + " = " + second.second + ": must be "),
+              std::string::npos)
+        << refused.ToString();
+    EXPECT_EQ(FormatDetectorSetting(*FindDetectorSetting(first.first), p),
+              FormatDetectorSetting(*FindDetectorSetting(first.first), LoopDetectorParams{}))
+        << "nothing applied";
+    EXPECT_TRUE(Apply({{first.first, second.second}, {second.first, first.second}}, &p).ok())
+        << first.first;
+  }
+}
+
+// Validate takes each setting's range from the table and names the setting: ends that no check
+// of Validate's own stated before the table did (min_inliers' upper end, max_distance's).
+TEST(DetectorSettingsTest, ValidateChecksEverySettingsRangeUnderItsName) {
   LoopDetectorParams p;
-  EXPECT_EQ(Apply({{"ransac_confidence", "1"}}, &p).code(), StatusCode::kInvalidArgument);
-  EXPECT_EQ(p.epipolar.confidence, LoopDetectorParams{}.epipolar.confidence);
+  p.epipolar.min_inliers = 100001;
+  p.strong_min_inliers = 200000;
+  EXPECT_EQ(p.Validate().message(),
+            "LoopDetectorParams.min_inliers = 100001: must be in "
+            "[8, 100000]");
+  LoopDetectorParams distance;
+  distance.matching.max_distance = 257;
+  EXPECT_EQ(distance.Validate("RigLoopParams.detector").message(),
+            "RigLoopParams.detector.max_distance = 257: must be in [0, 256]");
+  for (const LoopDetectorParams& preset :
+       {LoopDetectorParams{}, LoopDetectorParams::Thesis(), LoopDetectorParams::Keyframes()}) {
+    EXPECT_TRUE(preset.Validate().ok()) << DetectorPresetName(preset.preset);
+  }
+}
+
+// The markdown row of `name`, from its values in the presets and its range: "| `name` | ...".
+std::string MarkdownRow(std::string_view name, const std::string& range, bool kept) {
+  const DetectorSetting& s = *FindDetectorSetting(name);
+  const std::string in_default = FormatDetectorSetting(s, LoopDetectorParams{});
+  std::string row = "| `" + std::string(name) + "` | " + in_default + " ";
+  for (const LoopDetectorParams& other :
+       {LoopDetectorParams::Thesis(), LoopDetectorParams::Keyframes()}) {
+    const std::string value = FormatDetectorSetting(s, other);
+    row += "| " + (value == in_default ? "" : value) + " ";
+  }
+  return row + "| " + range + " | " + (kept ? "kept" : "") + " | " + std::string(s.doc) + " |\n";
+}
+
+TEST(DetectorSettingsTest, TheTableGivesEachPresetsValueWhereItDiffersRangeAndDoc) {
+  const std::string markdown = DetectorSettingsTable(SettingsTableFormat::kMarkdown);
+  EXPECT_EQ(markdown.rfind("| preset | for |\n|---|---|\n| `default` | ", 0), 0u) << markdown;
+  EXPECT_NE(markdown.find("| setting | default | thesis | keyframes | range | map | doc |\n"),
+            std::string::npos);
+  EXPECT_NE(markdown.find(MarkdownRow("recent_frames", ">= 0", true)), std::string::npos)
+      << markdown;
+  EXPECT_NE(markdown.find(MarkdownRow("min_inliers", "[8, 100000]", true)), std::string::npos);
+  EXPECT_NE(markdown.find(MarkdownRow("strong_acceptance", "true, false", false)),
+            std::string::npos);
+  EXPECT_NE(markdown.find(MarkdownRow("geometry", "direct_index, exhaustive, none", true)),
+            std::string::npos);
+  // Reals as a reader writes them, and each setting on one row.
+  EXPECT_NE(markdown.find("| `ratio` | 0.6 |  | 0.85 | (0, 1] |  | "), std::string::npos);
+  for (const DetectorSetting& s : DetectorSettings()) {
+    if (s.kind == SettingKind::kPreset) continue;
+    const std::string cell = "| `" + std::string(s.name) + "` |";
+    const size_t at = markdown.find(cell);
+    EXPECT_NE(at, std::string::npos) << s.name;
+    EXPECT_EQ(markdown.find(cell, at + 1), std::string::npos) << s.name;
+  }
+  // The text form: the same cells in columns, the names without backticks.
+  const std::string text = DetectorSettingsTable(SettingsTableFormat::kText);
+  EXPECT_EQ(text.find('|'), std::string::npos);
+  EXPECT_EQ(text.find('`'), std::string::npos);
+  EXPECT_NE(text.find("\nrecent_frames "), std::string::npos) << text;
+}
+
+TEST(DetectorSettingsTest, PresetHelpGivesWhereEachPresetDiffersFromDefault) {
+  std::vector<std::string> lines;
+  std::istringstream help(PresetHelp());
+  for (std::string line; std::getline(help, line);) lines.push_back(line);
+  ASSERT_EQ(lines.size(), DetectorPresets().size());
+  EXPECT_EQ(lines[0].rfind("default: ", 0), 0u);
+  EXPECT_EQ(lines[0].find('('), std::string::npos) << "default differs from nothing";
+  EXPECT_EQ(lines[1].rfind("thesis: ", 0), 0u);
+  EXPECT_EQ(lines[1].substr(lines[1].find('(')), "(strong_acceptance false)");
+  EXPECT_EQ(lines[2].rfind("keyframes: ", 0), 0u);
+  const std::string recent =
+      "recent_frames " + std::to_string(LoopDetectorParams::Keyframes().recent_frames);
+  EXPECT_NE(lines[2].find(recent), std::string::npos) << lines[2];
+  EXPECT_NE(lines[2].find("ratio 0.85"), std::string::npos) << lines[2];
+  EXPECT_EQ(lines[2].find("alpha"), std::string::npos) << "the same in both";
 }
 
 TEST(DetectorSettingsTest, AMapKeepsItsEightSettingsPresetFirst) {
@@ -150,19 +245,6 @@ TEST(DetectorSettingsTest, AMapKeepsItsEightSettingsPresetFirst) {
                                              "geometry", "recent_seconds", "recent_frames",
                                              "keyframe_confirmations"}));
   EXPECT_EQ(kept.front().second, "thesis");
-}
-
-TEST(DetectorSettingsTest, TheUserGuideNamesEverySetting) {
-  std::ifstream in(std::string(RECOG_SOURCE_DIR) + "/docs/places.md");
-  ASSERT_TRUE(in.good());
-  std::stringstream guide;
-  guide << in.rdbuf();
-  for (const DetectorSetting& s : DetectorSettings()) {
-    std::string quoted(1, '`');  // (not "`" + name + "`": GCC 12's -Wrestrict misfires on it)
-    quoted.append(s.name).push_back('`');
-    EXPECT_NE(guide.str().find(quoted), std::string::npos)
-        << "docs/places.md does not name the setting " << s.name;
-  }
 }
 
 }  // namespace

@@ -10,6 +10,7 @@
 #include "core/common/elapsed.h"
 #include "core/common/option_checks.h"
 #include "core/common/rotation_angle.h"
+#include "core/place/detector_settings.h"
 
 namespace recog {
 namespace {
@@ -227,19 +228,9 @@ StatusOr<LoopDetectorParams> ParseDetectorPreset(std::string_view name) {
 
 Status LoopDetectorParams::Validate(std::string_view name) const {
   OptionChecks check(name);
-  check.InRange("alpha", alpha, RealRange::AtLeast(0));
-  check.InRange("min_score_with_previous", min_score_with_previous, RealRange::AtLeast(0));
-  check.InRange("recent_seconds", recent_seconds, RealRange::AtLeast(0));
-  check.AtLeast("max_query_results", max_query_results, 1);
-  check.AtLeast("query_rescored_candidates", query_rescored_candidates, 1);
-  check.AtLeast("island_min_size", island_min_size, 1);
-  check.AtLeast("verified_candidates", verified_candidates, 1);
-  check.Member("matching", matching);
-  // RANSAC of F needs 8 correspondences; PnP of the metric check 6.
-  check.InRange("epipolar.threshold_px", epipolar.threshold_px, RealRange::Above(0));
-  check.InRange("epipolar.confidence", epipolar.confidence, RealRange::Open(0, 1));
-  check.AtLeast("epipolar.max_iterations", epipolar.max_iterations, 1);
-  check.AtLeast("epipolar.min_inliers", epipolar.min_inliers, 8);
+  // The range of every setting is the settings table's, named as the setting.
+  CheckDetectorSettingRanges(*this, &check);
+  // The fields that are not settings. PnP of the metric check needs 6 correspondences.
   check.InRange("metric.threshold_px", metric.threshold_px, RealRange::Above(0));
   check.InRange("metric.confidence", metric.confidence, RealRange::Open(0, 1));
   check.AtLeast("metric.max_iterations", metric.max_iterations, 1);
@@ -251,30 +242,20 @@ Status LoopDetectorParams::Validate(std::string_view name) const {
   check.InRange("calibrated.essential.confidence", calibrated.essential.confidence,
                 RealRange::Open(0, 1));
   check.AtLeast("calibrated.essential.max_iterations", calibrated.essential.max_iterations, 1);
-  check.InRange("calibrated.min_in_front", calibrated.min_in_front, RealRange::Closed(0, 1));
-  check.InRange("calibrated.max_rotation_deg", calibrated.max_rotation_deg,
-                RealRange::Closed(0, 180));
   check.InRange("calibrated.min_parallax_deg", calibrated.min_parallax_deg, RealRange::AtLeast(0));
   check.InRange("calibrated.min_rotation_only", calibrated.min_rotation_only,
-                RealRange::Closed(0, 1));
-  check.InRange("calibrated.min_spread", calibrated.min_spread, RealRange::Closed(0, 1));
-  check.InRange("keyframe_confirmations", keyframe_confirmations, 0, kMaxKeyframeConfirmations);
-  check.InRange("max_motion_disagreement_deg", max_motion_disagreement_deg,
-                RealRange::Closed(0, 180));
-  check.Require(strong_temporal_matches <= temporal_matches, "strong_temporal_matches",
-                strong_temporal_matches,
-                "<= temporal_matches (" + std::to_string(temporal_matches) + ")");
-  check.Require(strong_min_inliers >= epipolar.min_inliers, "strong_min_inliers",
-                strong_min_inliers,
-                ">= epipolar.min_inliers (" + std::to_string(epipolar.min_inliers) + ")");
-  check.InRange("min_spread", min_spread, RealRange::Closed(0, 1));
-  check.InRange("strong_min_spread", strong_min_spread, RealRange::Closed(0, 1));
-  check.InRange("strong_max_homography_ratio", strong_max_homography_ratio,
                 RealRange::Closed(0, 1));
   check.InRange("model_selection.sigma_px", model_selection.sigma_px, RealRange::Above(0));
   check.InRange("model_selection.threshold_px", model_selection.threshold_px, RealRange::Above(0));
   check.InRange("model_selection.confidence", model_selection.confidence, RealRange::Open(0, 1));
   check.AtLeast("model_selection.max_iterations", model_selection.max_iterations, 1);
+  // The rules between settings, which no range can say.
+  check.Require(strong_temporal_matches <= temporal_matches, "strong_temporal_matches",
+                strong_temporal_matches,
+                "<= temporal_matches (" + std::to_string(temporal_matches) + ")");
+  check.Require(strong_min_inliers >= epipolar.min_inliers, "strong_min_inliers",
+                strong_min_inliers,
+                ">= min_inliers (" + std::to_string(epipolar.min_inliers) + ")");
   return check.status();
 }
 
@@ -498,9 +479,7 @@ StatusOr<EntryId> LoopDetector::Add(const FeatureSet& features, std::optional<do
   return Insert(features, bow, direct, timestamp, client_id, geometry);
 }
 
-StatusOr<LoopResult> LoopDetector::Query(const FeatureSet& features,
-                                         std::optional<double> /*timestamp*/,
-                                         const FrameGeometry* geometry,
+StatusOr<LoopResult> LoopDetector::Query(const FeatureSet& features, const FrameGeometry* geometry,
                                          std::span<const EntryId> excluded) const {
   RECOG_RETURN_IF_ERROR(CheckGeometry(features, geometry));
   ConvertedFrame frame;

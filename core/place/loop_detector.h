@@ -58,8 +58,11 @@
 // Defaults are thesis Table 4.4 where it gives one (k = 3, alpha = 0.3, direct index level 2,
 // 12 RANSAC inliers, minimum score 0.005 with the previous frame, tau_c = 20 s); the others are
 // documented on each field. LoopDetectorParams::Thesis() is the thesis's detector exactly (no
-// acceptance on strong evidence); ParseDetectorPreset names the two presets. One detector per
-// map; independent detectors may run at once.
+// acceptance on strong evidence) and Keyframes() the one for a SLAM's keyframes:
+// ParseDetectorPreset names the three presets (default, thesis, keyframes), and
+// core/place/detector_settings.h is the table of the settings by name, with their ranges
+// (`recog settings` lists each preset's values). One detector per map; independent detectors may
+// run at once.
 //
 // Thread safety: Process and Add change the detector and must be called from one thread at a
 // time (per detector, i.e. per map). Query reads nothing they change — only the parameters and
@@ -280,7 +283,10 @@ struct LoopDetectorParams {
   static LoopDetectorParams Keyframes();
   // OK, or INVALID_ARGUMENT naming the first field out of its range with its value
   // ("LoopDetectorParams.alpha = inf: must be finite and >= 0"); `name` names the struct in the
-  // message (a holder passes the member's path, "RigLoopParams.detector").
+  // message (a holder passes the member's path, "RigLoopParams.detector"). A setting's range is
+  // the settings table's (detector_settings.h) and its message names the setting
+  // ("LoopDetectorParams.min_inliers = 7"); the other fields are named by their path
+  // ("LoopDetectorParams.metric.min_inliers = 5").
   Status Validate(std::string_view name = "LoopDetectorParams") const;
 };
 
@@ -404,24 +410,22 @@ class LoopDetector {
 
   // Looks for the place of a single frame in the map, without adding the frame or changing the
   // detector (relocalisation). Every entry the map holds when the query runs is a candidate:
-  // tau_c, which keeps a sequence from matching its own recent past, does not apply, so
-  // `timestamp` (accepted for symmetry with Process) changes nothing. As there is no previous
-  // frame, each candidate's score is normalised by the best candidate's, eta = s / s_best, so
-  // alpha still keeps the candidates within a fraction of a reference score; candidates are
-  // grouped into islands as by Process, and the best entry of the best island is verified with
-  // the geometry check of the parameters. The status is kLoopDetected when the place is
-  // recognised, else kTooFewFeatures, kNoCandidates, kLowScore (only when alpha > 1 or every
-  // score is 0, as the best candidate's eta is 1), kNoConsistentIsland or kFailedGeometry. `entry`
-  // stays kInvalidEntryId, `previous_score` and `consistent_queries` 0, and the insertion time 0;
-  // a recognised place has acceptance kRelocalisation.
+  // tau_c, which keeps a sequence from matching its own recent past, does not apply (so a query
+  // takes no timestamp). As there is no previous frame, each candidate's score is normalised by
+  // the best candidate's, eta = s / s_best, so alpha still keeps the candidates within a fraction
+  // of a reference score; candidates are grouped into islands as by Process, and the best entry
+  // of the best island is verified with the geometry check of the parameters. The status is
+  // kLoopDetected when the place is recognised, else kTooFewFeatures, kNoCandidates, kLowScore
+  // (only when alpha > 1 or every score is 0, as the best candidate's eta is 1),
+  // kNoConsistentIsland or kFailedGeometry. `entry` stays kInvalidEntryId, `previous_score` and
+  // `consistent_queries` 0, and the insertion time 0; a recognised place has acceptance
+  // kRelocalisation.
   // Errors are only for bad input or a failing store. Safe to call from any number of threads,
   // concurrently with Process and Add.
   // With `geometry` (may be null), a recognised place is checked in 3D and gets the metric pose
   // when its entry has 3D points, or the query has them and the entry a camera matrix. `excluded`
   // as for Process.
-  StatusOr<LoopResult> Query(const FeatureSet& features,
-                             std::optional<double> timestamp = std::nullopt,
-                             const FrameGeometry* geometry = nullptr,
+  StatusOr<LoopResult> Query(const FeatureSet& features, const FrameGeometry* geometry = nullptr,
                              std::span<const EntryId> excluded = {}) const;
 
   // Query in three steps, for a frame looked up in several maps of one vocabulary at once

@@ -406,7 +406,7 @@ TEST_F(LoopDetectorTest, ExcludedFramesAreNeverCandidatesOfProcessOrQuery) {
   const std::vector<EntryId> covisible = {3, 1, 2, 0, 999};  // any order; 999 is not in the map
   for (size_t i = 16; i < 20; ++i) {
     auto all = detector->Query(tour[i]);
-    auto without = detector->Query(tour[i], std::nullopt, nullptr, covisible);
+    auto without = detector->Query(tour[i], nullptr, covisible);
     ASSERT_TRUE(all.ok() && without.ok());
     EXPECT_LT(all->match, 4u) << "without an exclusion the first visit is found, frame " << i;
     for (const LoopCandidate& c : without->candidates) {
@@ -623,7 +623,7 @@ TEST_F(LoopDetectorTest, ACandidateThatFailsVerificationGivesWayToTheNextOnes) {
   EXPECT_EQ(three.match, 0u);
   EXPECT_GE(three.evidence.inliers, params_.strong_min_inliers);
   EXPECT_LE(three.island_first, 0u);
-  EXPECT_GE(three.island_last, 0u);
+  EXPECT_LT(three.island_last, three.entry) << "the match's island lies among the earlier entries";
   const auto frame_1 = std::find_if(best_only.candidates.begin(), best_only.candidates.end(),
                                     [](const LoopCandidate& c) { return c.entry == 0; });
   ASSERT_NE(frame_1, best_only.candidates.end());
@@ -842,8 +842,7 @@ TEST_F(LoopDetectorTest, BadFrameGeometryAndMetricParametersAreInvalidArgument) 
   s = detector->Add(features, std::nullopt, {}, &too_few).status();
   EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
   EXPECT_NE(s.message().find("3 3D points"), std::string::npos) << s.ToString();
-  EXPECT_EQ(detector->Query(features, 0.0, &no_camera).status().code(),
-            StatusCode::kInvalidArgument);
+  EXPECT_EQ(detector->Query(features, &no_camera).status().code(), StatusCode::kInvalidArgument);
   EXPECT_EQ(db_->size(), 0u) << "a refused frame is not added";
 }
 
@@ -968,7 +967,8 @@ TEST(LoopDetectorParamsTest, ThePresetsAreValid) {
 }
 
 // One field out of its range at a time, NaN and infinity among the values: the message names the
-// field by its path in LoopDetectorParams, its value and its range.
+// field (a setting by its name in the settings table, another field by its path in
+// LoopDetectorParams), its value and its range.
 TEST(LoopDetectorParamsTest, EachFieldOutOfRangeIsRefusedWithItsNameAndValue) {
   const double nan = std::numeric_limits<double>::quiet_NaN();
   const double inf = std::numeric_limits<double>::infinity();
@@ -983,12 +983,12 @@ TEST(LoopDetectorParamsTest, EachFieldOutOfRangeIsRefusedWithItsNameAndValue) {
       {"query_rescored_candidates = 0", [](P& p) { p.query_rescored_candidates = 0; }},
       {"island_min_size = 0", [](P& p) { p.island_min_size = 0; }},
       {"verified_candidates = 0", [](P& p) { p.verified_candidates = 0; }},
-      {"matching.ratio = nan", [&](P& p) { p.matching.ratio = nan; }},
-      {"matching.ratio = 0", [](P& p) { p.matching.ratio = 0; }},
-      {"epipolar.threshold_px = inf", [&](P& p) { p.epipolar.threshold_px = inf; }},
-      {"epipolar.confidence = 1", [](P& p) { p.epipolar.confidence = 1; }},
-      {"epipolar.max_iterations = 0", [](P& p) { p.epipolar.max_iterations = 0; }},
-      {"epipolar.min_inliers = 7", [](P& p) { p.epipolar.min_inliers = 7; }},
+      {"ratio = nan", [&](P& p) { p.matching.ratio = nan; }},
+      {"ratio = 0", [](P& p) { p.matching.ratio = 0; }},
+      {"ransac_threshold_px = inf", [&](P& p) { p.epipolar.threshold_px = inf; }},
+      {"ransac_confidence = 1", [](P& p) { p.epipolar.confidence = 1; }},
+      {"ransac_max_iterations = 0", [](P& p) { p.epipolar.max_iterations = 0; }},
+      {"min_inliers = 7", [](P& p) { p.epipolar.min_inliers = 7; }},
       {"metric.threshold_px = nan", [&](P& p) { p.metric.threshold_px = nan; }},
       {"metric.confidence = 0", [](P& p) { p.metric.confidence = 0; }},
       {"metric.max_iterations = -3", [](P& p) { p.metric.max_iterations = -3; }},
@@ -1001,11 +1001,11 @@ TEST(LoopDetectorParamsTest, EachFieldOutOfRangeIsRefusedWithItsNameAndValue) {
        [&](P& p) { p.calibrated.essential.confidence = nan; }},
       {"calibrated.essential.max_iterations = 0",
        [](P& p) { p.calibrated.essential.max_iterations = 0; }},
-      {"calibrated.min_in_front = nan", [&](P& p) { p.calibrated.min_in_front = nan; }},
-      {"calibrated.max_rotation_deg = 181", [](P& p) { p.calibrated.max_rotation_deg = 181; }},
+      {"calibrated_min_in_front = nan", [&](P& p) { p.calibrated.min_in_front = nan; }},
+      {"calibrated_max_rotation_deg = 181", [](P& p) { p.calibrated.max_rotation_deg = 181; }},
       {"calibrated.min_parallax_deg = inf", [&](P& p) { p.calibrated.min_parallax_deg = inf; }},
       {"calibrated.min_rotation_only = -0.5", [](P& p) { p.calibrated.min_rotation_only = -0.5; }},
-      {"calibrated.min_spread = nan", [&](P& p) { p.calibrated.min_spread = nan; }},
+      {"calibrated_min_spread = nan", [&](P& p) { p.calibrated.min_spread = nan; }},
       {"keyframe_confirmations = 101", [](P& p) { p.keyframe_confirmations = 101; }},
       {"max_motion_disagreement_deg = nan", [&](P& p) { p.max_motion_disagreement_deg = nan; }},
       {"strong_temporal_matches = 4", [](P& p) { p.strong_temporal_matches = 4; }},

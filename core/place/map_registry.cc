@@ -1,6 +1,7 @@
 #include "core/place/map_registry.h"
 
 #include <algorithm>
+#include <charconv>
 #include <cstdio>
 #include <cstdlib>
 #include <sstream>
@@ -79,15 +80,22 @@ StatusOr<RigCamera> DecodeRigCamera(const std::string& name, std::istream& in) {
 
 namespace {
 
-// Every version stores each kept setting with its value, the preset's own included. When a later
-// version changes a preset's value, a map of that preset still holding the value of then follows
-// the value of now, as a map that never changed it should (a value it changed stays):
+// Version 4 stores the map's preset and only the kept settings whose value differs from that
+// preset's: a map that never changed a setting follows its preset's value of the day, so a
+// preset retuned needs neither a new version nor a migration.
+constexpr int kPlaceSettingsVersion = 4;
+
+// Versions 1 to 3 stored each kept setting with its value, the preset's own included. When a
+// later version changed a preset's value, a map of that preset still holding the value of then
+// follows the value of now, as a map that never changed it should (a value it changed stays;
+// a map that set a value equal to the preset's of then cannot be told apart, and follows too):
 // - version 2: the keyframes preset's correspondences for views metres apart (exhaustive with a
 //   cross check, 45 inliers; docs/places.md, "Repeated architecture and wide baselines"). Its
 //   looser correspondences with the old floor of 12 inliers would accept false loops.
 // - version 3: the keyframes preset leaves out the last 3 keyframes instead of 4, so that a
 //   keyframe can close a loop with the one 4 back (docs/places.md, "Keyframe streams").
-constexpr int kPlaceSettingsVersion = 3;
+// This applies to maps written before version 4 only.
+constexpr int kFirstPresetRelativeVersion = 4;
 
 struct FormerPresetValue {
   int changed_in;  // the first version whose preset has another value
@@ -113,12 +121,36 @@ void DropFormerPresetValues(int version, std::vector<NamedSetting>* settings) {
   });
 }
 
+// The version line's number: DATA_LOSS unless a positive number, FAILED_PRECONDITION above
+// kPlaceSettingsVersion (written by a newer build).
+StatusOr<int> ParseVersion(const std::string& text) {
+  uint64_t version = 0;
+  const char* const end = text.data() + text.size();
+  const auto [stop, error] = std::from_chars(text.data(), end, version);
+  const bool too_large = error == std::errc::result_out_of_range;
+  if (stop != end || (error != std::errc() && !too_large) || (!too_large && version == 0)) {
+    return Status::DataLoss("place settings: a malformed version '" + text + "'");
+  }
+  if (too_large || version > uint64_t(kPlaceSettingsVersion)) {
+    return Status::FailedPrecondition("place settings of an unknown version " + text);
+  }
+  return int(version);
+}
+
 }  // namespace
 
 std::string EncodePlaceSettings(const LoopDetectorParams& p, const std::string& group,
                                 const std::vector<RigCamera>& rig) {
   std::string text = "version " + std::to_string(kPlaceSettingsVersion) + "\n";
-  for (const auto& [name, value] : MapDetectorSettings(p)) text += name + " " + value + "\n";
+  const std::vector<NamedSetting> own = MapDetectorSettings(p);
+  const std::vector<NamedSetting> preset =
+      MapDetectorSettings(ParseDetectorPreset(DetectorPresetName(p.preset)).value());
+  for (size_t i = 0; i < own.size(); ++i) {
+    // `preset` first (MapDetectorSettings), always written; the others where they differ.
+    if (i == 0 || own[i].second != preset[i].second) {
+      text += own[i].first + " " + own[i].second + "\n";
+    }
+  }
   if (!group.empty()) text += "group " + group + "\n";
   for (const RigCamera& camera : rig) text += EncodeRigCamera(camera);
   return text;
@@ -126,8 +158,12 @@ std::string EncodePlaceSettings(const LoopDetectorParams& p, const std::string& 
 
 StatusOr<LoopDetectorParams> DecodePlaceSettings(std::string_view text, std::string* group,
                                                  std::vector<RigCamera>* rig) {
-  // The detector's settings apply over the preset's values (DetectorSettings); settings written
-  // before presets were stored have none and start from the default.
+  return DecodePlaceSettings(text, ParseDetectorPreset, group, rig);
+}
+
+StatusOr<LoopDetectorParams> DecodePlaceSettings(std::string_view text,
+                                                 const PresetValues& preset_values,
+                                                 std::string* group, std::vector<RigCamera>* rig) {
   std::istringstream in{std::string(text)};
   std::string key, value;
   int version = 0;
@@ -136,10 +172,7 @@ StatusOr<LoopDetectorParams> DecodePlaceSettings(std::string_view text, std::str
   std::vector<NamedSetting> settings;
   while (in >> key >> value) {
     if (key == "version") {
-      if (value.size() != 1 || value[0] < '1' || value[0] > '0' + kPlaceSettingsVersion) {
-        return Status::FailedPrecondition("place settings of an unknown version " + value);
-      }
-      version = value[0] - '0';
+      RECOG_ASSIGN_OR_RETURN(version, ParseVersion(value));
     } else if (key == "group") {
       if (!ValidateName("group", value).ok()) {
         return Status::DataLoss("place settings: a malformed group name");
@@ -153,9 +186,19 @@ StatusOr<LoopDetectorParams> DecodePlaceSettings(std::string_view text, std::str
     }  // unknown keys: written by a newer minor version, ignored
   }
   if (version == 0) return Status::DataLoss("place settings without a version line");
-  DropFormerPresetValues(version, &settings);
-  LoopDetectorParams p;
-  const Status valid = ApplyDetectorSettings(settings, &p);
+  if (version < kFirstPresetRelativeVersion) DropFormerPresetValues(version, &settings);
+  // The settings apply over their preset's values (settings written before presets were stored
+  // have none and start from the default).
+  const auto is_preset = [](const NamedSetting& s) { return s.first == "preset"; };
+  const auto preset = std::find_if(settings.begin(), settings.end(), is_preset);
+  if (preset != settings.end() && std::count_if(settings.begin(), settings.end(), is_preset) > 1) {
+    return Status::DataLoss("place settings: the preset is given twice");
+  }
+  StatusOr<LoopDetectorParams> p =
+      preset_values(preset == settings.end() ? "default" : std::string_view(preset->second));
+  if (!p.ok()) return p.status().WithContext("place settings", StatusCode::kDataLoss);
+  if (preset != settings.end()) settings.erase(preset);
+  const Status valid = ApplyDetectorSettings(settings, &*p);
   if (!valid.ok()) return valid.WithContext("place settings", StatusCode::kDataLoss);
   if (!cameras.empty()) {
     const Status rig_valid = ValidateRig(cameras);

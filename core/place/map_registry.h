@@ -69,16 +69,25 @@ class MapRegistry {
 };
 
 // The parameters a map's settings blob holds, as text ("key value" lines), and back: the preset
-// the map started from (DetectorPreset), then alpha, k, the RANSAC inliers, tau_c and the
-// geometry check, applied over that preset's values; the map's group (no line for none, as in
-// settings written before groups); and a rig map's cameras, one "rig_camera" line each (name,
-// width, height, fx, fy, cx, cy, body_R_camera row-major, body_t_camera, the number of
-// distortion coefficients, then them), in rig order. The text starts with its version (2; a
-// version-1 keyframes map's preset values of then give way to the preset's of now, see
-// map_registry.cc); an unknown version is FAILED_PRECONDITION.
+// the map started from (DetectorPreset), then only the settings a map keeps (detector_settings.h)
+// whose value differs from that preset's, applied over the preset's values when read (so a
+// preset retuned reaches every map that did not change that setting); the map's group (no line
+// for none, as in settings written before groups); and a rig map's cameras, one "rig_camera" line
+// each (name, width, height, fx, fy, cx, cy, body_R_camera row-major, body_t_camera, the number
+// of distortion coefficients, then them), in rig order. The text starts with its version (4;
+// versions 1 to 3 stored every kept value, and a keyframes map's preset values of then give way
+// to the preset's of now, see map_registry.cc); a version above 4 is FAILED_PRECONDITION, a
+// malformed one DATA_LOSS.
 std::string EncodePlaceSettings(const LoopDetectorParams& params, const std::string& group = {},
                                 const std::vector<RigCamera>& rig = {});
 StatusOr<LoopDetectorParams> DecodePlaceSettings(std::string_view text,
+                                                 std::string* group = nullptr,
+                                                 std::vector<RigCamera>* rig = nullptr);
+// The values of the preset named `name` (ParseDetectorPreset's, or a test's retuned presets).
+using PresetValues = std::function<StatusOr<LoopDetectorParams>(std::string_view name)>;
+// The same, with the presets' values from `preset_values` instead of this build's.
+StatusOr<LoopDetectorParams> DecodePlaceSettings(std::string_view text,
+                                                 const PresetValues& preset_values,
                                                  std::string* group = nullptr,
                                                  std::vector<RigCamera>* rig = nullptr);
 

@@ -134,11 +134,10 @@ TEST(MapRegistryTest, SettingsRoundTripThroughTheirText) {
   EXPECT_EQ(group, "") << "no group line: no group";
   ASSERT_TRUE(DecodePlaceSettings(EncodePlaceSettings(p, "fleet-7"), &group).ok());
   EXPECT_EQ(group, "fleet-7");
-  // Every setting a map keeps is written (an older build ignores the ones it does not know).
-  for (const auto& [name, value] : MapDetectorSettings(p)) {
-    EXPECT_NE(EncodePlaceSettings(p).find("\n" + name + " " + value + "\n"), std::string::npos)
-        << name;
-  }
+  // The preset, then only what differs from it.
+  EXPECT_EQ(EncodePlaceSettings(p),
+            "version 4\npreset default\nalpha 0.30000000000000004\n"
+            "geometry none\n");
   p.keyframe_confirmations = 2;
   decoded = DecodePlaceSettings(EncodePlaceSettings(p));
   ASSERT_TRUE(decoded.ok());
@@ -242,25 +241,148 @@ TEST(MapRegistryTest, AnOlderKeyframesMapFollowsThePresetsNewValuesUnlessItChang
   EXPECT_EQ(video->geometry, GeometryCheck::kDirectIndex);
   EXPECT_EQ(video->epipolar.min_inliers, 12u);
   EXPECT_EQ(video->recent_frames, 4u);
-  // Written now: version 3, read back exactly, the old values included when a map sets them.
+  // Written now: version 4, read back exactly, the old values included when a map sets them.
   LoopDetectorParams own = now;
   own.geometry = GeometryCheck::kDirectIndex;
   own.epipolar.min_inliers = 12;
   own.strong_min_inliers = 12;
   own.recent_frames = 4;
   const std::string text = EncodePlaceSettings(own);
-  EXPECT_EQ(text.rfind("version 3\n", 0), 0u) << text;
+  EXPECT_EQ(text.rfind("version 4\n", 0), 0u) << text;
   auto kept = DecodePlaceSettings(text);
   ASSERT_TRUE(kept.ok());
   EXPECT_EQ(kept->geometry, GeometryCheck::kDirectIndex);
   EXPECT_EQ(kept->epipolar.min_inliers, 12u);
   EXPECT_EQ(kept->recent_frames, 4u);
-  // A newer version than this build knows is refused, nothing guessed.
-  for (const char* version : {"version 4\n", "version 10\n", "version x\n"}) {
-    EXPECT_EQ(DecodePlaceSettings(std::string(version) + "preset keyframes\n").status().code(),
-              StatusCode::kFailedPrecondition)
-        << version;
+}
+
+// Every setting's value in `params`, as text: equal texts, equal parameters.
+std::vector<std::string> AllSettings(const LoopDetectorParams& params) {
+  std::vector<std::string> out;
+  for (const DetectorSetting& s : DetectorSettings()) {
+    out.push_back(std::string(s.name) + " " + FormatDetectorSetting(s, params));
   }
+  return out;
+}
+
+// Settings as versions 1 to 3 wrote them (every kept value, the preset's own included) load to
+// the parameters they always did.
+TEST(MapRegistryTest, StoredSettingsOfEveryEarlierVersionLoadAsBefore) {
+  const std::string common = "alpha 0.29999999999999999\ntemporal_matches 3\n";
+  const std::string video =
+      "min_inliers 12\ngeometry direct_index\nrecent_seconds 20\nrecent_frames 20\n"
+      "keyframe_confirmations 0\n";
+  LoopDetectorParams keyframes = LoopDetectorParams::Keyframes();
+  LoopDetectorParams own_keyframes = keyframes;
+  own_keyframes.recent_frames = 7;
+  own_keyframes.keyframe_confirmations = 2;
+  const std::vector<std::pair<std::string, LoopDetectorParams>> stored = {
+      {"version 3\npreset default\n" + common + video, LoopDetectorParams{}},
+      {"version 3\npreset thesis\n" + common + video, LoopDetectorParams::Thesis()},
+      {"version 3\npreset keyframes\n" + common +
+           "min_inliers 45\ngeometry exhaustive\nrecent_seconds 20\nrecent_frames 3\n"
+           "keyframe_confirmations 0\n",
+       keyframes},
+      {"version 3\npreset keyframes\n" + common +
+           "min_inliers 45\ngeometry exhaustive\nrecent_seconds 20\nrecent_frames 7\n"
+           "keyframe_confirmations 2\n",
+       own_keyframes},
+      // Version 2's keyframes preset left out 4 frames; version 1's had the direct index's
+      // correspondences with 12 inliers: a map holding them follows the preset of now.
+      {"version 2\npreset keyframes\n" + common +
+           "min_inliers 45\ngeometry exhaustive\nrecent_seconds 20\nrecent_frames 4\n"
+           "keyframe_confirmations 0\n",
+       keyframes},
+      {"version 1\npreset keyframes\n" + common +
+           "min_inliers 12\ngeometry direct_index\nrecent_seconds 20\nrecent_frames 4\n",
+       keyframes},
+      {"version 2\npreset default\n" + common + video, LoopDetectorParams{}},
+      {"version 1\n" + common + video, LoopDetectorParams{}},
+  };
+  for (const auto& [text, expected] : stored) {
+    auto decoded = DecodePlaceSettings(text);
+    ASSERT_TRUE(decoded.ok()) << text << decoded.status().ToString();
+    EXPECT_EQ(AllSettings(*decoded), AllSettings(expected)) << text;
+  }
+}
+
+// The version line takes any positive number: one above this build's is a newer writer's
+// (refused, nothing guessed), and anything else is damage.
+TEST(MapRegistryTest, ANewerVersionIsRefusedAndAMalformedOneIsDataLoss) {
+  for (const std::string version : {"5", "10", "99999999999999999999999"}) {
+    const Status refused =
+        DecodePlaceSettings("version " + version + "\npreset keyframes\n").status();
+    EXPECT_EQ(refused.code(), StatusCode::kFailedPrecondition) << version;
+    EXPECT_EQ(refused.message(), "place settings of an unknown version " + version);
+  }
+  for (const char* version : {"0", "x", "-1", "4x", "+4"}) {
+    const Status malformed =
+        DecodePlaceSettings("version " + std::string(version) + "\npreset keyframes\n").status();
+    EXPECT_EQ(malformed.code(), StatusCode::kDataLoss) << version;
+    EXPECT_NE(malformed.message().find("malformed version"), std::string::npos)
+        << malformed.ToString();
+  }
+  EXPECT_TRUE(DecodePlaceSettings("version 4\npreset keyframes\n").ok());
+  EXPECT_EQ(DecodePlaceSettings("version 4\npreset keyframes\npreset thesis\n").status().code(),
+            StatusCode::kDataLoss);
+}
+
+TEST(MapRegistryTest, EveryPresetRoundTripsWithAndWithoutChangesStoringOnlyTheChanges) {
+  for (const DetectorPresetInfo& info : DetectorPresets()) {
+    const std::string name(DetectorPresetName(info.preset));
+    const LoopDetectorParams preset = ParseDetectorPreset(name).value();
+    const std::string text = EncodePlaceSettings(preset);
+    EXPECT_EQ(text, "version 4\npreset " + name + "\n");
+    auto decoded = DecodePlaceSettings(text);
+    ASSERT_TRUE(decoded.ok()) << decoded.status().ToString();
+    EXPECT_EQ(AllSettings(*decoded), AllSettings(preset)) << name;
+
+    LoopDetectorParams changed = preset;
+    changed.alpha = 0.1 + 0.2;
+    changed.temporal_matches = 5;
+    changed.epipolar.min_inliers = 20;
+    changed.strong_min_inliers = 50;  // not kept by a map: back to the preset's when read
+    changed.geometry = GeometryCheck::kNone;
+    changed.recent_seconds = 2.5;
+    changed.recent_frames = preset.recent_frames + 1;
+    changed.keyframe_confirmations = 1;
+    decoded = DecodePlaceSettings(EncodePlaceSettings(changed, "fleet"));
+    ASSERT_TRUE(decoded.ok()) << decoded.status().ToString();
+    changed.strong_min_inliers = preset.strong_min_inliers;
+    EXPECT_EQ(AllSettings(*decoded), AllSettings(changed)) << name;
+  }
+}
+
+// A preset retuned in a later build reaches every stored map that did not change that setting;
+// a map that set it keeps its own value, and the maps of other presets do not move.
+TEST(MapRegistryTest, ARetunedPresetReachesTheMapsThatDidNotChangeThatSetting) {
+  LoopDetectorParams own = LoopDetectorParams::Keyframes();
+  own.recent_frames = 9;
+  const std::string follows = EncodePlaceSettings(LoopDetectorParams::Keyframes());
+  const std::string sets_it = EncodePlaceSettings(own);
+  const std::string video = EncodePlaceSettings(LoopDetectorParams{});
+  const PresetValues retuned = [](std::string_view name) -> StatusOr<LoopDetectorParams> {
+    RECOG_ASSIGN_OR_RETURN(LoopDetectorParams values, ParseDetectorPreset(name));
+    if (values.preset == DetectorPreset::kKeyframes) values.recent_frames = 5;
+    return values;
+  };
+  auto followed = DecodePlaceSettings(follows, retuned);
+  ASSERT_TRUE(followed.ok()) << followed.status().ToString();
+  EXPECT_EQ(followed->recent_frames, 5u) << "the retuned preset's value";
+  EXPECT_EQ(followed->preset, DetectorPreset::kKeyframes);
+  auto kept = DecodePlaceSettings(sets_it, retuned);
+  ASSERT_TRUE(kept.ok());
+  EXPECT_EQ(kept->recent_frames, 9u) << "the map's own value";
+  auto other = DecodePlaceSettings(video, retuned);
+  ASSERT_TRUE(other.ok());
+  EXPECT_EQ(other->recent_frames, LoopDetectorParams{}.recent_frames);
+  // An unknown preset from the lookup is damage, named.
+  const PresetValues none = [](std::string_view name) -> StatusOr<LoopDetectorParams> {
+    return Status::InvalidArgument("no preset " + std::string(name));
+  };
+  const Status refused = DecodePlaceSettings(follows, none).status();
+  EXPECT_EQ(refused.code(), StatusCode::kDataLoss);
+  EXPECT_NE(refused.message().find("no preset keyframes"), std::string::npos) << refused.ToString();
 }
 
 TEST(MapRegistryTest, SettingsWrittenBeforePresetsOpenWithTheDefaultAndAnUnknownPresetIsDataLoss) {

@@ -15,7 +15,6 @@ std::tuple<size_t, double> Strength(const PlaceFrameResult& found) {
 
 StatusOr<std::vector<MapMatch>> SearchMaps(std::span<const std::shared_ptr<PlaceMap>> maps,
                                            const FeatureSet& features,
-                                           std::optional<double> /*timestamp: no tau_c*/,
                                            const PlaceResultOptions& options,
                                            const FrameGeometry* geometry) {
   RECOG_RETURN_IF_ERROR(options.Validate().WithContext(
@@ -68,9 +67,8 @@ StatusOr<std::vector<Relocalization>> Relocalize(std::span<const std::shared_ptr
                                                  const PlaceResultOptions& options) {
   std::vector<Relocalization> found;  // one per map, in the order maps first recognise a frame
   for (size_t i = 0; i < frames.size(); ++i) {
-    RECOG_ASSIGN_OR_RETURN(
-        std::vector<MapMatch> matches,
-        SearchMaps(maps, *frames[i].features, frames[i].timestamp, options, frames[i].geometry));
+    RECOG_ASSIGN_OR_RETURN(std::vector<MapMatch> matches,
+                           SearchMaps(maps, *frames[i].features, options, frames[i].geometry));
     for (MapMatch& match : matches) {
       auto same_map = std::find_if(found.begin(), found.end(),
                                    [&](const Relocalization& r) { return r.map == match.map; });

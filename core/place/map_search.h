@@ -18,7 +18,6 @@
 #pragma once
 
 #include <memory>
-#include <optional>
 #include <span>
 #include <string>
 #include <vector>
@@ -39,15 +38,13 @@ struct MapMatch {
 // failing store), naming the map.
 StatusOr<std::vector<MapMatch>> SearchMaps(std::span<const std::shared_ptr<PlaceMap>> maps,
                                            const FeatureSet& features,
-                                           std::optional<double> timestamp,
                                            const PlaceResultOptions& options = {},
                                            const FrameGeometry* geometry = nullptr);
 
-// One frame of a relocalisation (Relocalize): its features, and its timestamp and 3D points or
-// intrinsics when it has them (metric checks, as in PlaceMap::Query).
+// One frame of a relocalisation (Relocalize): its features, and its 3D points or intrinsics when
+// it has them (metric checks, as in PlaceMap::Query).
 struct RelocalizationFrame {
   const FeatureSet* features = nullptr;
-  std::optional<double> timestamp;
   const FrameGeometry* geometry = nullptr;
 };
 

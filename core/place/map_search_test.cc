@@ -53,7 +53,7 @@ std::shared_ptr<const Vocabulary>* MapSearchTest::vocabulary_ = nullptr;
 TEST_F(MapSearchTest, APlaceIsFoundInTheMapThatHasBeenThere) {
   const std::vector<std::shared_ptr<PlaceMap>> fleet = {robot_b_, robot_a_};
   for (int place = 0; place < 4; ++place) {
-    auto found = SearchMaps(fleet, Revisit(place), std::nullopt);
+    auto found = SearchMaps(fleet, Revisit(place));
     ASSERT_TRUE(found.ok()) << found.status().ToString();
     ASSERT_EQ(found->size(), 1u) << "place " << place << " is in one map only";
     const MapMatch& m = found->front();
@@ -69,10 +69,10 @@ TEST_F(MapSearchTest, APlaceIsFoundInTheMapThatHasBeenThere) {
 
 TEST_F(MapSearchTest, MapsThatHaveNotBeenThereAreLeftOut) {
   const std::vector<std::shared_ptr<PlaceMap>> only_a = {robot_a_};
-  auto found = SearchMaps(only_a, Revisit(3), std::nullopt);
+  auto found = SearchMaps(only_a, Revisit(3));
   ASSERT_TRUE(found.ok());
   EXPECT_TRUE(found->empty());
-  EXPECT_TRUE(SearchMaps({}, Revisit(0), std::nullopt).value().empty());
+  EXPECT_TRUE(SearchMaps({}, Revisit(0)).value().empty());
 }
 
 TEST_F(MapSearchTest, MatchesComeBestFirst) {
@@ -83,7 +83,7 @@ TEST_F(MapSearchTest, MatchesComeBestFirst) {
                   ->Add(testing::Extract(testing::Visit(places_[0], 1, 12)).front(), std::nullopt)
                   .ok());
   const std::vector<std::shared_ptr<PlaceMap>> fleet = {*glimpse, robot_b_, robot_a_};
-  auto found = SearchMaps(fleet, Revisit(0), std::nullopt);
+  auto found = SearchMaps(fleet, Revisit(0));
   ASSERT_TRUE(found.ok());
   ASSERT_EQ(found->size(), 2u) << "robot A and robot C have been there";
   EXPECT_GT((*found)[0].result.loop.inliers.size(), (*found)[1].result.loop.inliers.size());
@@ -95,7 +95,7 @@ TEST_F(MapSearchTest, BadOptionsAreRefusedNamingTheMap) {
   PlaceResultOptions options;
   options.top_k = PlaceResultOptions::kMaxTopK + 1;
   const std::vector<std::shared_ptr<PlaceMap>> fleet = {robot_a_};
-  const Status refused = SearchMaps(fleet, Revisit(0), std::nullopt, options).status();
+  const Status refused = SearchMaps(fleet, Revisit(0), options).status();
   EXPECT_EQ(refused.code(), StatusCode::kInvalidArgument);
   EXPECT_NE(refused.message().find("robot-a"), std::string::npos) << refused.ToString();
 }
@@ -124,7 +124,7 @@ TEST_F(MapSearchTest, AMapFarBelowTheBestMapsScoreIsNotVerified) {
 TEST_F(MapSearchTest, RelocalizationRanksTheMapThatRecognisesMostFramesFirst) {
   const std::vector<FeatureSet> seen = {Revisit(3), Revisit(0), Revisit(1), FeatureSet()};
   std::vector<RelocalizationFrame> frames;
-  for (const FeatureSet& f : seen) frames.push_back({&f, std::nullopt, nullptr});
+  for (const FeatureSet& f : seen) frames.push_back({&f, nullptr});
   const std::vector<std::shared_ptr<PlaceMap>> fleet = {robot_b_, robot_a_};
   auto found = Relocalize(fleet, frames);
   ASSERT_TRUE(found.ok()) << found.status().ToString();
@@ -135,8 +135,7 @@ TEST_F(MapSearchTest, RelocalizationRanksTheMapThatRecognisesMostFramesFirst) {
   ASSERT_TRUE(a.frame_index == 1 || a.frame_index == 2) << a.frame_index;
   // The answer is the frame with more inliers of the two robot A recognised.
   const size_t other = a.frame_index == 1 ? 2 : 1;
-  auto alone =
-      SearchMaps(std::vector<std::shared_ptr<PlaceMap>>{robot_a_}, seen[other], std::nullopt);
+  auto alone = SearchMaps(std::vector<std::shared_ptr<PlaceMap>>{robot_a_}, seen[other]);
   ASSERT_TRUE(alone.ok());
   ASSERT_EQ(alone->size(), 1u);
   EXPECT_GE(a.result.loop.inliers.size(), alone->front().result.loop.inliers.size());

@@ -172,19 +172,18 @@ StatusOr<PlaceFrameResult> PlaceMap::Detect(
 }
 
 StatusOr<PlaceFrameResult> PlaceMap::Query(const FeatureSet& features,
-                                           std::optional<double> timestamp,
                                            const PlaceResultOptions& options,
                                            const FrameGeometry* geometry,
                                            std::span<const EntryId> excluded) const {
   RECOG_RETURN_IF_ERROR(RequireRig(false));
   RECOG_RETURN_IF_ERROR(options.Validate());
   PlaceFrameResult result;
-  StatusOr<LoopResult> loop = detector_.Query(features, timestamp, geometry, excluded);
+  StatusOr<LoopResult> loop = detector_.Query(features, geometry, excluded);
   if (loop.status().code() == StatusCode::kNotFound && !deleted()) {
     // A frame removed (RemoveFrame) between the detector's query and its geometric check.
     // deleted() took the map's lock, which RemoveFrame holds until the frame has left the index
     // too, so the query runs again without it.
-    loop = detector_.Query(features, timestamp, geometry, excluded);
+    loop = detector_.Query(features, geometry, excluded);
   }
   if (!loop.ok()) return loop.status();
   result.loop = std::move(loop).value();

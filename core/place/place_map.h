@@ -148,8 +148,8 @@ class PlaceMap {
                                     const FrameGeometry* geometry = nullptr,
                                     std::span<const EntryId> excluded = {});
   // Looks for the frame's place, leaving out the `excluded` frames; adds nothing and changes
-  // nothing.
-  StatusOr<PlaceFrameResult> Query(const FeatureSet& features, std::optional<double> timestamp,
+  // nothing (LoopDetector::Query: no tau_c, so no timestamp).
+  StatusOr<PlaceFrameResult> Query(const FeatureSet& features,
                                    const PlaceResultOptions& options = {},
                                    const FrameGeometry* geometry = nullptr,
                                    std::span<const EntryId> excluded = {}) const;

@@ -8,8 +8,6 @@
 #include "core/index/memory_index_store.h"
 #include "core/place/map_registry.h"
 #include "core/place/place_test_frames.h"
-#include "core/vocabulary/vocabulary_io.h"
-#include "tests/testing/test_data.h"
 
 namespace recog {
 namespace {
@@ -67,7 +65,7 @@ TEST_F(PlaceMapTest, QueryFindsTheAddedPlaceAndChangesNothing) {
   AddFirstVisits(*map);
   const std::vector<FeatureSet>& tour = *tour_;
   for (size_t i = 16; i < tour.size(); ++i) {
-    auto r = map->Query(tour[i], 100.0);
+    auto r = map->Query(tour[i]);
     ASSERT_TRUE(r.ok()) << r.status().ToString();
     const EntryId first_visit = i < 20 ? 0 : 4;
     EXPECT_EQ(r->loop.status, LoopStatus::kLoopDetected) << i;
@@ -115,7 +113,7 @@ TEST_F(PlaceMapTest, ExtrasComeOnlyWhenAskedAndVerifiedAndThePoseNeedsTheCamera)
 
   PlaceResultOptions fundamental_only;
   fundamental_only.include_fundamental = true;
-  auto r = map->Query(revisit, 0, fundamental_only);
+  auto r = map->Query(revisit, fundamental_only);
   ASSERT_TRUE(r.ok());
   ASSERT_EQ(r->loop.status, LoopStatus::kLoopDetected);
   ASSERT_FALSE(r->loop.inliers.empty());
@@ -126,7 +124,7 @@ TEST_F(PlaceMapTest, ExtrasComeOnlyWhenAskedAndVerifiedAndThePoseNeedsTheCamera)
 
   PlaceResultOptions pose;
   pose.include_relative_pose = true;
-  r = map->Query(revisit, 0, pose);  // no camera matrix: no pose
+  r = map->Query(revisit, pose);  // no camera matrix: no pose
   ASSERT_TRUE(r.ok());
   EXPECT_FALSE(r->relative_pose.has_value());
   EXPECT_FALSE(r->fundamental.has_value());
@@ -140,42 +138,12 @@ TEST_F(PlaceMapTest, ExtrasComeOnlyWhenAskedAndVerifiedAndThePoseNeedsTheCamera)
   PlaceResultOptions everything = pose;
   everything.include_fundamental = true;
   everything.camera_matrix = cv::Matx33d(400, 0, 128, 0, 400, 192, 0, 0, 1);
-  r = plain->Query(revisit, 0, everything);
+  r = plain->Query(revisit, everything);
   ASSERT_TRUE(r.ok());
   EXPECT_EQ(r->loop.status, LoopStatus::kLoopDetected);
   EXPECT_TRUE(r->match_timestamp.has_value());
   EXPECT_FALSE(r->fundamental.has_value());
   EXPECT_FALSE(r->relative_pose.has_value());
-}
-
-TEST_F(PlaceMapTest, AQueryWithTheCameraGetsTheRelativePoseOfTheNeighbouringFrame) {
-  RECOG_SKIP_WITHOUT_SHARED_DATA("places/corridor/images/11.jpg");
-  auto vocabulary = LoadVocabulary(DefaultPlaceVocabularyPath());
-  ASSERT_TRUE(vocabulary.ok()) << vocabulary.status().ToString();
-  MemoryIndexStore store;
-  auto registry =
-      MapRegistry::Open(&store, std::make_shared<const Vocabulary>(std::move(vocabulary).value()));
-  ASSERT_TRUE(registry.ok());
-  auto map = (*registry)->Create("walk", LoopDetectorParams{});
-  ASSERT_TRUE(map.ok());
-  const auto corridor = [](int n) {
-    auto image =
-        ReadGrayImage(testing::SharedData("places/corridor/images/" + std::to_string(n) + ".jpg"));
-    EXPECT_TRUE(image.ok());
-    return testing::Extract({image.value()})[0];
-  };
-  for (int n = 2; n <= 20; n += 2) ASSERT_TRUE((*map)->Add(corridor(n), 0).ok());
-  PlaceResultOptions options;
-  options.include_relative_pose = true;
-  options.camera_matrix = cv::Matx33d(400, 0, 256, 0, 400, 192, 0, 0, 1);
-  auto r = (*map)->Query(corridor(11), 0, options);
-  ASSERT_TRUE(r.ok()) << r.status().ToString();
-  ASSERT_EQ(r->loop.status, LoopStatus::kLoopDetected);
-  EXPECT_TRUE(r->loop.match == 4u || r->loop.match == 5u) << r->loop.match;  // frame 10 or 12
-  ASSERT_TRUE(r->relative_pose.has_value());
-  EXPECT_NEAR(cv::norm(r->relative_pose->t), 1.0, 1e-6);  // up to scale: unit length
-  EXPECT_NEAR(cv::determinant(r->relative_pose->R), 1.0, 1e-6);
-  EXPECT_FALSE(r->fundamental.has_value());  // not asked for
 }
 
 // The client's id of frame i of the tour in these tests.
@@ -187,7 +155,7 @@ TEST_F(PlaceMapTest, TheMatchAndTheTopCandidatesComeWithTheirClientIdsAndTheInli
   for (size_t i = 0; i < 16; ++i) ASSERT_TRUE(map->Add((*tour_)[i], double(i), ClientId(i)).ok());
   const FeatureSet& revisit = (*tour_)[17];
 
-  auto plain = map->Query(revisit, 0);
+  auto plain = map->Query(revisit);
   ASSERT_TRUE(plain.ok());
   ASSERT_EQ(plain->loop.status, LoopStatus::kLoopDetected);
   EXPECT_EQ(plain->match_client_id, ClientId(plain->loop.match));  // always, asked or not
@@ -198,7 +166,7 @@ TEST_F(PlaceMapTest, TheMatchAndTheTopCandidatesComeWithTheirClientIdsAndTheInli
   PlaceResultOptions options;
   options.top_k = 3;
   options.include_correspondences = true;
-  auto r = map->Query(revisit, 0, options);
+  auto r = map->Query(revisit, options);
   ASSERT_TRUE(r.ok()) << r.status().ToString();
   ASSERT_EQ(r->loop.status, LoopStatus::kLoopDetected);
   ASSERT_EQ(r->candidates.size(), 3u);
@@ -222,7 +190,7 @@ TEST_F(PlaceMapTest, TheMatchAndTheTopCandidatesComeWithTheirClientIdsAndTheInli
   }
   EXPECT_TRUE(match_listed);
   options.top_k = PlaceResultOptions::kMaxTopK;  // more than the query returned: all of them
-  auto all = map->Query(revisit, 0, options);
+  auto all = map->Query(revisit, options);
   ASSERT_TRUE(all.ok());
   EXPECT_EQ(all->candidates.size(), all->loop.candidates.size());
 
@@ -247,7 +215,7 @@ TEST_F(PlaceMapTest, DetectReturnsTheClientIdsOfItsMatchesAndBadOptionsAddNothin
   too_many.top_k = PlaceResultOptions::kMaxTopK + 1;
   auto refused = map->Detect((*tour_)[0], 0, too_many, ClientId(0));
   EXPECT_EQ(refused.status().code(), StatusCode::kInvalidArgument);
-  EXPECT_EQ(map->Query((*tour_)[0], 0, too_many).status().code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(map->Query((*tour_)[0], too_many).status().code(), StatusCode::kInvalidArgument);
   auto too_long = map->Detect((*tour_)[0], 0, {}, std::string(kMaxClientIdBytes + 1, 'x'));
   EXPECT_EQ(too_long.status().code(), StatusCode::kInvalidArgument);
   EXPECT_EQ(map->Add((*tour_)[0], 0, std::string(kMaxClientIdBytes + 1, 'x')).status().code(),
@@ -285,7 +253,7 @@ TEST_F(PlaceMapTest, ARemovedFrameIsNeverACandidateAgain) {
   PlaceResultOptions options;
   options.top_k = PlaceResultOptions::kMaxTopK;
   const FeatureSet& revisit = (*tour_)[17];  // place 0 again
-  auto before = map->Query(revisit, 0, options);
+  auto before = map->Query(revisit, options);
   ASSERT_TRUE(before.ok());
   ASSERT_EQ(before->loop.status, LoopStatus::kLoopDetected);
   ASSERT_LT(before->loop.match, 4u);
@@ -298,7 +266,7 @@ TEST_F(PlaceMapTest, ARemovedFrameIsNeverACandidateAgain) {
   EXPECT_EQ(map->frames(), 12u);
   EXPECT_EQ(map->next_frame_id(), 16u);
 
-  auto after = map->Query(revisit, 0, options);
+  auto after = map->Query(revisit, options);
   ASSERT_TRUE(after.ok());
   EXPECT_TRUE(after->loop.match == kInvalidEntryId || after->loop.match >= 4u) << after->loop.match;
   for (const PlaceCandidate& c : after->candidates) EXPECT_GE(c.frame, 4u);

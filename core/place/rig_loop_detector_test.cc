@@ -382,7 +382,7 @@ TEST(RigLoopParamsTest, EachFieldOutOfRangeIsRefusedWithItsNameAndValue) {
       {"min_consistent_ratio = nan", [&](RigLoopParams& p) { p.min_consistent_ratio = nan; }},
       {"min_consistent_ratio = 1.5", [](RigLoopParams& p) { p.min_consistent_ratio = 1.5; }},
       {"detector.alpha = inf", [&](RigLoopParams& p) { p.detector.alpha = inf; }},
-      {"detector.matching.ratio = nan", [&](RigLoopParams& p) { p.detector.matching.ratio = nan; }},
+      {"detector.ratio = nan", [&](RigLoopParams& p) { p.detector.matching.ratio = nan; }},
   };
   testing::ExpectEachRefused("RigLoopParams", cases);
 }

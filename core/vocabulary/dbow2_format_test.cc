@@ -65,13 +65,13 @@ std::string Binary(const Descriptor& d) {
 
 double RelativeTolerance(double expected) { return 1e-6 * std::max(1.0, std::fabs(expected)); }
 
-void WriteText(const std::string& path, const std::string& content) {
+void WriteFileText(const std::string& path, const std::string& content) {
   std::ofstream out(path, std::ios::binary | std::ios::trunc);
   out << content;
   ASSERT_TRUE(out.good()) << path;
 }
 
-std::string ReadText(const std::string& path) {
+std::string ReadFileText(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   std::stringstream ss;
   ss << in.rdbuf();
@@ -94,7 +94,7 @@ class Dbow2FormatTest : public ::testing::Test {
   std::string Path(const std::string& name) const { return (dir_ / name).string(); }
   std::string Write(const std::string& name, const std::string& content) {
     const std::string path = Path(name);
-    WriteText(path, content);
+    WriteFileText(path, content);
     return path;
   }
 
@@ -480,7 +480,7 @@ TEST_F(Dbow2RealVocabularyFileTest, GzipIsRecognisedByContentNotByName) {
 
 TEST_F(Dbow2RealVocabularyFileTest, TruncatedGzipYamlIsDataLoss) {
   RECOG_SKIP_WITHOUT_SHARED_DATA(kOrbYaml);
-  const std::string whole = ReadText(testing::SharedData(kOrbYaml));
+  const std::string whole = ReadFileText(testing::SharedData(kOrbYaml));
   ASSERT_GT(whole.size(), 1000u);
   std::mt19937 rng(11);
   for (int trial = 0; trial < 8; ++trial) {
@@ -712,7 +712,7 @@ TEST_F(Dbow2TextCorruptTest, RandomCutsOfALargerFileGiveAnErrorOrAVocabularyButN
   ASSERT_TRUE(original.ok()) << original.status().ToString();
   const std::string path = Path("random.txt");
   ASSERT_TRUE(ExportDbow2Text(*original, path).ok());
-  const std::string whole = ReadText(path);
+  const std::string whole = ReadFileText(path);
   std::mt19937 rng(5);
   size_t loaded = 0;
   for (int trial = 0; trial < 100; ++trial) {
@@ -797,7 +797,7 @@ TEST_F(Dbow2TextExportTest, ReproducesTheImportedFileLineForLine) {
   ASSERT_TRUE(v.ok()) << v.status().ToString();
   const std::string out = Path("out.txt");
   ASSERT_TRUE(ExportDbow2Text(*v, out).ok());
-  EXPECT_EQ(ReadText(out), TinyText("2 2 4 1"));
+  EXPECT_EQ(ReadFileText(out), TinyText("2 2 4 1"));
 }
 
 TEST_F(Dbow2TextExportTest, YamlToTextKeepsTieBreakingAndRenumbersWordsInLeafOrder) {
@@ -898,7 +898,7 @@ TEST_F(Dbow2TextExportTest, ReplacesAnExistingFileAndLeavesNoTemporaryBehind) {
   ASSERT_TRUE(v.ok());
   const std::string out = Write("out.txt", "old content\n");
   ASSERT_TRUE(ExportDbow2Text(*v, out).ok());
-  EXPECT_EQ(ReadText(out), TinyText());
+  EXPECT_EQ(ReadFileText(out), TinyText());
   size_t files = 0;
   for ([[maybe_unused]] const auto& entry : std::filesystem::directory_iterator(dir_)) ++files;
   EXPECT_EQ(files, 2u);  // tiny.txt and out.txt

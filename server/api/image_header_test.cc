@@ -11,7 +11,7 @@
 #include <gtest/gtest.h>
 #include <opencv2/imgcodecs.hpp>
 
-#include "server/api/converters.h"
+#include "server/api/frame_decoding.h"
 
 namespace recog::server {
 namespace {

@@ -1,5 +1,5 @@
 // PreparedFrame and PreparedRigFrame: a request's frame made ready for a place map. A frame is
-// decoded and validated (DecodeFrame, converters.h), given its features (the client's, or those
+// decoded and validated (DecodeFrame, frame_decoding.h), given its features (the client's, or those
 // extracted from its image) and its 3D structure (points from its depth or right image, or only
 // the camera matrix). A frame whose camera has a lens distortion has its keypoints moved into the
 // pinhole image of the camera's K (ToPinhole, core/geometry/camera_model.h), where the geometry
@@ -18,7 +18,8 @@
 
 #include "core/common/status.h"
 #include "core/place/place_map.h"
-#include "server/api/converters.h"
+#include "server/api/frame_decoding.h"
+#include "server/api/place_converters.h"
 
 namespace recog::server {
 

@@ -3,7 +3,8 @@
 // Every code of core's Status maps to the canonical gRPC code of the same name. The two that say
 // the server itself failed are sanitised: DATA_LOSS (corrupt stored data) and INTERNAL (a bug)
 // reach the client with their code and a message naming the request id only; the details go to
-// the server log with the request id.
+// the server log with the request id. An RPC's core status reaches this through ToCallStatus
+// (server/services/call.h), once, where the call ends.
 #pragma once
 
 #include <string_view>
@@ -22,12 +23,3 @@ grpc::StatusCode ToGrpcCode(StatusCode code);
 grpc::Status ToGrpcStatus(const Status& status, std::string_view request_id = {});
 
 }  // namespace recog::server
-
-// In a handler returning grpc::Status: returns the gRPC form of `expr` when it is not OK.
-#define RECOG_RETURN_IF_ERROR_AS_GRPC(expr, request_id)                  \
-  do {                                                                   \
-    const ::recog::Status recog_status_ = (expr);                        \
-    if (!recog_status_.ok()) {                                           \
-      return ::recog::server::ToGrpcStatus(recog_status_, (request_id)); \
-    }                                                                    \
-  } while (false)

@@ -259,13 +259,11 @@ struct ServerConfig {
   // Default "info": spdlog level: trace, debug, info, warn (or warning), err (or error),
   // critical or off.
   std::string log_level = "info";
-  // Loop detector parameters of new place maps, defaults as in LoopDetectorParams (alpha 0.3,
-  // temporal_matches 3, epipolar.min_inliers 12, geometry direct_index, recent_seconds 20,
-  // recent_frames 20, acceptance on strong evidence). YAML section "place" with the settings a
-  // map keeps (core/place/detector_settings.h): preset (default, thesis or keyframes: the one the
-  // other keys start from), alpha, temporal_matches, min_inliers, geometry, recent_seconds,
-  // recent_frames and keyframe_confirmations; the other parameters keep the preset's values.
-  // "mode" is the deprecated name of "preset".
+  // Loop detector parameters of new place maps: the `default` preset unless the YAML says
+  // otherwise (defaults: `recog settings`, docs/places.md). YAML section "place" with the
+  // settings a map keeps (core/place/detector_settings.h, kept_by_map), by their names there:
+  // `preset` (the one the other keys start from) and the others; the parameters a map does not
+  // keep take the preset's values. "mode" is the deprecated name of "preset".
   LoopDetectorParams place;
 
   // Defaults overridden by the YAML file at `path`. NOT_FOUND when the file is missing;

@@ -470,7 +470,7 @@ TEST_F(ServerConfigTest, ValidateNamesTheBadField) {
       {[](ServerConfig& c) { c.repository.tls_ca = "ca.pem"; }, "need repository.primary"},
       {[](ServerConfig& c) { c.repository.primary = c.listen; }, "repository.primary is this"},
       {[](ServerConfig& c) { c.place.alpha = -1; }, "place.alpha = -1: must be"},
-      {[](ServerConfig& c) { c.place.epipolar.min_inliers = 3; }, "place.epipolar.min_inliers = 3"},
+      {[](ServerConfig& c) { c.place.epipolar.min_inliers = 3; }, "place.min_inliers = 3"},
       {[](ServerConfig& c) { c.console.listen = c.listen; }, "console.listen"},
       {[](ServerConfig& c) { c.console.listen = c.metrics_listen; }, "console.listen"},
       {[](ServerConfig& c) { c.console.loops_per_map = 0; }, "console.loops_per_map"},

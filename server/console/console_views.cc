@@ -10,7 +10,8 @@
 #include <nlohmann/json.hpp>
 
 #include "core/object/formats/model_file.h"
-#include "server/api/converters.h"
+#include "server/api/object_converters.h"
+#include "server/api/pose_converter.h"
 #include "server/api/status_mapping.h"
 
 namespace recog::server {

@@ -8,7 +8,7 @@
 #include <spdlog/spdlog.h>
 
 #include "core/common/file_io.h"
-#include "server/api/converters.h"
+#include "server/api/object_converters.h"
 #include "wire/grpc_code_names.h"
 
 namespace recog::server {

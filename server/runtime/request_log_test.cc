@@ -8,6 +8,8 @@
 
 #include <gtest/gtest.h>
 
+#include "tests/testing/wait.h"
+
 namespace recog::server {
 namespace {
 
@@ -15,8 +17,15 @@ using std::chrono::milliseconds;
 using std::chrono::minutes;
 using Kind = RequestLog::Claim::Kind;
 using Clock = RequestLog::Clock;
+using recog::testing::WaitUntil;
 
 const Clock::time_point kLogStart{};
+
+// Called once a thread is about to call Begin for a running key: gives it a moment to block in
+// Begin's wait, so that End's wake-up is what usually returns it. Pacing, not synchronisation: a
+// Begin that comes after End finds the outcome at once and gives the same claim, so no assertion
+// depends on it (that Begin waits at all is checked by the kTimedOut case).
+void GiveTimeToBlock() { std::this_thread::sleep_for(milliseconds(50)); }
 const std::string kDigest = "digest of the request";
 
 TEST(RequestLogTest, ASuccessfulAnswerIsRepeatedForTheSameKeyOnly) {
@@ -97,12 +106,15 @@ TEST(RequestLogTest, AConcurrentDuplicateWaitsForTheFirstCallAndGetsItsAnswer) {
   RequestLog log(10);
   ASSERT_EQ(log.Begin("a", kDigest, Clock::now(), Clock::now()).kind, Kind::kRun);
   std::atomic<bool> ended{false};
+  std::atomic<bool> calling{false};
   RequestLog::Claim duplicate;
   std::thread waiter([&] {
+    calling = true;
     duplicate = log.Begin("a", kDigest, Clock::now(), Clock::now() + std::chrono::seconds(30));
     EXPECT_TRUE(ended.load());  // it returned only after End
   });
-  std::this_thread::sleep_for(milliseconds(50));
+  EXPECT_TRUE(WaitUntil([&] { return calling.load(); })) << "the duplicate's thread did not run";
+  GiveTimeToBlock();
   ended = true;
   log.End("a", "first", Clock::now());
   waiter.join();
@@ -115,11 +127,14 @@ TEST(RequestLogTest, ADuplicateOfAFailedCallRunsItselfAndOneStillRunningTimesOut
   ASSERT_EQ(log.Begin("a", kDigest, Clock::now(), Clock::now()).kind, Kind::kRun);
   EXPECT_EQ(log.Begin("a", kDigest, Clock::now(), Clock::now() + milliseconds(20)).kind,
             Kind::kTimedOut);
+  std::atomic<bool> calling{false};
   RequestLog::Claim duplicate;
   std::thread waiter([&] {
+    calling = true;
     duplicate = log.Begin("a", kDigest, Clock::now(), Clock::now() + std::chrono::seconds(30));
   });
-  std::this_thread::sleep_for(milliseconds(50));
+  EXPECT_TRUE(WaitUntil([&] { return calling.load(); })) << "the duplicate's thread did not run";
+  GiveTimeToBlock();
   log.End("a", std::nullopt, Clock::now());
   waiter.join();
   EXPECT_EQ(duplicate.kind, Kind::kRun);  // the first failed: the duplicate is the call now

@@ -3,17 +3,18 @@
 #include <atomic>
 #include <chrono>
 #include <mutex>
-#include <thread>
 #include <vector>
 
 #include <gtest/gtest.h>
 
 #include "core/index/memory_index_store.h"
+#include "tests/testing/wait.h"
 
 namespace recog::server {
 namespace {
 
 using namespace std::chrono_literals;
+using recog::testing::WaitUntil;
 
 // A store whose Verify reports `bytes` read, or DATA_LOSS once `damaged` is set.
 class CheckedStore : public MemoryIndexStore {
@@ -51,11 +52,11 @@ TEST(StoreVerifierTest, ChecksEveryPeriodAtTheConfiguredRateAndReportsDamage) {
   {
     StoreVerifier verifier(&store, 1s, 4096, outcomes.Recorder());
     EXPECT_EQ(store.checks, 0);  // the first check waits one period
-    for (int i = 0; i < 300 && outcomes.size() < 1; ++i) std::this_thread::sleep_for(10ms);
+    ASSERT_TRUE(WaitUntil([&] { return outcomes.size() >= 1; })) << "no check was reported";
     ASSERT_EQ(outcomes.size(), 1u);
     EXPECT_EQ(store.last_rate, 4096u);
     store.damaged = true;
-    for (int i = 0; i < 300 && outcomes.size() < 2; ++i) std::this_thread::sleep_for(10ms);
+    ASSERT_TRUE(WaitUntil([&] { return outcomes.size() >= 2; })) << "no second check was reported";
     ASSERT_EQ(outcomes.size(), 2u);
   }
   EXPECT_EQ(outcomes.codes[0], StatusCode::kOk);

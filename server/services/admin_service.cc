@@ -8,7 +8,6 @@
 
 #include <spdlog/spdlog.h>
 
-#include "server/api/status_mapping.h"
 #include "server/services/call.h"
 
 namespace recog::server {
@@ -31,9 +30,9 @@ class CheckpointDownload final : public grpc::ServerWriteReactor<pb::CheckpointR
                        : std::min<size_t>(request.chunk_bytes(), kMaxBackupChunkBytes);
     grpc::Status status = BeginCall(state_, context_, kMethod, Right::kWrite, &call_);
     if (status.ok()) {
-      status =
-          ToGrpcStatus(TokenAuthenticator::CheckEveryMap(call_.caller, Right::kWrite, "Checkpoint"),
-                       call_.request_id);
+      status = ToCallStatus(
+          context_, call_,
+          TokenAuthenticator::CheckEveryMap(call_.caller, Right::kWrite, "Checkpoint"));
     }
     if (status.ok()) {
       if (state_.pool->TrySubmit([this](WorkerContext&) { Prepare(); })) return;
@@ -49,8 +48,7 @@ class CheckpointDownload final : public grpc::ServerWriteReactor<pb::CheckpointR
     std::error_code ec;
     fs::create_directories(parent, ec);
     if (ec) {
-      End({grpc::StatusCode::FAILED_PRECONDITION,
-           "cannot create '" + parent.string() + "': " + ec.message()});
+      End(Status::FailedPrecondition("cannot create '" + parent.string() + "': " + ec.message()));
       return;
     }
     directory_ =
@@ -58,7 +56,7 @@ class CheckpointDownload final : public grpc::ServerWriteReactor<pb::CheckpointR
     fs::remove_all(directory_, ec);
     const Status made = state_.store->Checkpoint(directory_.string());
     if (!made.ok()) {
-      End(ToGrpcStatus(made, call_.request_id));
+      End(made);
       return;
     }
     pb::CheckpointManifest* manifest = response_.mutable_manifest();
@@ -124,6 +122,9 @@ class CheckpointDownload final : public grpc::ServerWriteReactor<pb::CheckpointR
     StartWrite(&response_);
   }
 
+  void End(const Status& status) { End(ToCallStatus(context_, call_, status)); }
+  // Made in gRPC's terms: the client going away, and the failures to read the checkpoint's files,
+  // which name the file (a core INTERNAL reaches the client sanitised, without it).
   void End(const grpc::Status& status) {
     EndCall(state_, call_, status);
     Finish(status);
@@ -187,19 +188,18 @@ grpc::ServerUnaryReactor* AdminService::Verify(grpc::CallbackServerContext* cont
   return RunUnary(
       state_, context, "/recognition.v1.Admin/Verify", Right::kWrite, *request,
       [=, this](CallInfo& call, WorkerContext&) {
-        RECOG_RETURN_IF_ERROR_AS_GRPC(
-            TokenAuthenticator::CheckEveryMap(call.caller, Right::kWrite, "Verify"),
-            call.request_id);
+        RECOG_RETURN_IF_ERROR(
+            TokenAuthenticator::CheckEveryMap(call.caller, Right::kWrite, "Verify"));
         const uint64_t mib = request->mib_per_second() != 0 ? request->mib_per_second()
                                                             : state_.config.store.verify_mb_per_s;
         const auto start = std::chrono::steady_clock::now();
         StoreVerifier::Result report = state_.verifier->RunNow(mib << 20);
-        RECOG_RETURN_IF_ERROR_AS_GRPC(report.status(), call.request_id);
+        RECOG_RETURN_IF_ERROR(report.status());
         response->set_files(report->files);
         response->set_bytes(report->bytes);
         response->set_seconds(
             std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
-        return grpc::Status::OK;
+        return Status::Ok();
       });
 }
 
@@ -208,16 +208,15 @@ grpc::ServerUnaryReactor* AdminService::StoreStatus(grpc::CallbackServerContext*
                                                     pb::StoreStatusResponse* response) {
   return RunUnary(state_, context, "/recognition.v1.Admin/StoreStatus", Right::kRead, *request,
                   [=, this](CallInfo& call, WorkerContext&) {
-                    RECOG_RETURN_IF_ERROR_AS_GRPC(
-                        TokenAuthenticator::CheckEveryMap(call.caller, Right::kRead, "StoreStatus"),
-                        call.request_id);
+                    RECOG_RETURN_IF_ERROR(TokenAuthenticator::CheckEveryMap(
+                        call.caller, Right::kRead, "StoreStatus"));
                     if (state_.recovery.recovered()) {
                       FillRecoveryReport(state_.recovery, response->mutable_recovery());
                     }
                     if (auto check = state_.last_store_check()) {
                       FillStoreCheck(*check, response->mutable_last_check());
                     }
-                    return grpc::Status::OK;
+                    return Status::Ok();
                   });
 }
 

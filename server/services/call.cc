@@ -100,10 +100,10 @@ grpc::Status BeginCall(ServerState& state, grpc::CallbackServerContext* context,
   }
   context->AddTrailingMetadata("x-request-id", call->request_id);
   StatusOr<Caller> caller = state.auth.Authenticate(Metadata(context, "authorization"));
-  if (!caller.ok()) return ToGrpcStatus(caller.status(), call->request_id);
+  if (!caller.ok()) return ToCallStatus(context, *call, caller.status());
   call->caller = std::move(caller).value();
   const Status allowed = TokenAuthenticator::Check(call->caller, right);
-  if (!allowed.ok()) return ToGrpcStatus(allowed, call->request_id);
+  if (!allowed.ok()) return ToCallStatus(context, *call, allowed);
   // Refusals that nothing was applied for carry the retry hint, so that clients may retry even
   // calls that change the server.
   if (state.draining.load()) {
@@ -161,26 +161,29 @@ grpc::Status Busy(ServerState& state, grpc::CallbackServerContext* context) {
               " ms"};
 }
 
-grpc::Status Final(grpc::CallbackServerContext* context, grpc::Status status) {
-  if (status.error_code() == grpc::StatusCode::RESOURCE_EXHAUSTED) {
+grpc::Status ToCallStatus(grpc::CallbackServerContext* context, const CallInfo& call,
+                          const Status& status) {
+  if (status.code() == StatusCode::kResourceExhausted) {
     context->AddTrailingMetadata(kPushback, "-1");
   }
-  return status;
+  return ToGrpcStatus(status, call.request_id);
 }
 
-grpc::Status CheckRequestId(const std::string& request_id) {
-  if (request_id.empty() || RequestLog::ValidRequestId(request_id)) return grpc::Status::OK;
-  return {grpc::StatusCode::INVALID_ARGUMENT, "request_id must have 1 to " +
-                                                  std::to_string(RequestLog::kMaxRequestIdBytes) +
-                                                  " printable ASCII characters"};
+Status CheckRequestId(const std::string& request_id) {
+  if (request_id.empty() || RequestLog::ValidRequestId(request_id)) return Status::Ok();
+  return Status::InvalidArgument("request_id must have 1 to " +
+                                 std::to_string(RequestLog::kMaxRequestIdBytes) +
+                                 " printable ASCII characters");
 }
 
 grpc::Status RunOnce(ServerState& state, grpc::CallbackServerContext* context, CallInfo& call,
                      const Replay& replay, google::protobuf::Message* response,
-                     const std::function<grpc::Status()>& work) {
+                     const std::function<Status()>& work) {
   const std::string& request_id = replay.request_id;
-  if (grpc::Status checked = CheckRequestId(request_id); !checked.ok()) return checked;
-  if (request_id.empty()) return work();
+  if (Status checked = CheckRequestId(request_id); !checked.ok()) {
+    return ToCallStatus(context, call, checked);
+  }
+  if (request_id.empty()) return ToCallStatus(context, call, work());
   // The caller's token is part of the key: one client cannot read another's answers by guessing
   // ids, nor can another token of the same rights or name.
   const std::string key = call.method + '\n' + call.caller.identity + '\n' + request_id;
@@ -194,7 +197,7 @@ grpc::Status RunOnce(ServerState& state, grpc::CallbackServerContext* context, C
     const Status allowed = replay.authorize(call);
     const bool gone =
         claim.kind == RequestLog::Claim::Kind::kRepeat && allowed.code() == StatusCode::kNotFound;
-    if (!allowed.ok() && !gone) return ToGrpcStatus(allowed, call.request_id);
+    if (!allowed.ok() && !gone) return ToCallStatus(context, call, allowed);
   }
   switch (claim.kind) {
     case RequestLog::Claim::Kind::kRepeat:
@@ -218,28 +221,23 @@ grpc::Status RunOnce(ServerState& state, grpc::CallbackServerContext* context, C
     case RequestLog::Claim::Kind::kRun:
       break;
   }
-  const grpc::Status status = work();
+  const Status status = work();
   state.requests.End(
       key, status.ok() ? std::optional<std::string>(response->SerializeAsString()) : std::nullopt,
       RequestLog::Clock::now());
-  return status;
+  return ToCallStatus(context, call, status);
 }
 
-grpc::ServerUnaryReactor* RunUnary(ServerState& state, grpc::CallbackServerContext* context,
-                                   std::string_view method, Right right, Replay replay,
-                                   google::protobuf::Message* response, UnaryWork work) {
-  const google::protobuf::Message& request = *replay.request;
-  return RunUnary(state, context, method, right, request,
-                  [&state, context, replay = std::move(replay), response, work = std::move(work)](
-                      CallInfo& call, WorkerContext& worker) {
-                    return RunOnce(state, context, call, replay, response,
-                                   [&] { return work(call, worker); });
-                  });
-}
+namespace {
 
-grpc::ServerUnaryReactor* RunUnary(ServerState& state, grpc::CallbackServerContext* context,
-                                   std::string_view method, Right right,
-                                   const google::protobuf::Message& request, UnaryWork work) {
+// A unary call's work that answers in gRPC's terms already (its status converted by ToCallStatus
+// or made by RunOnce).
+using GrpcWork = std::function<grpc::Status(CallInfo&, WorkerContext&)>;
+
+// Both RunUnary: the checks, the request's bytes, the hand-over to the pool, `work`, the end.
+grpc::ServerUnaryReactor* StartUnary(ServerState& state, grpc::CallbackServerContext* context,
+                                     std::string_view method, Right right,
+                                     const google::protobuf::Message& request, GrpcWork work) {
   grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
   auto call = std::make_shared<CallInfo>();
   grpc::Status status = BeginCall(state, context, method, right, call.get());
@@ -263,7 +261,7 @@ grpc::ServerUnaryReactor* RunUnary(ServerState& state, grpc::CallbackServerConte
         [&state, context, reactor, call, work, bytes](WorkerContext& worker) mutable {
           call->queue_ms = MillisecondsSince(call->start);
           grpc::Status result = CheckStillWanted(context);
-          if (result.ok()) result = Final(context, work(*call, worker));
+          if (result.ok()) result = work(*call, worker);
           bytes.reset();
           EndCall(state, *call, result);
           reactor->Finish(result);
@@ -276,34 +274,57 @@ grpc::ServerUnaryReactor* RunUnary(ServerState& state, grpc::CallbackServerConte
   return reactor;
 }
 
+}  // namespace
+
+grpc::ServerUnaryReactor* RunUnary(ServerState& state, grpc::CallbackServerContext* context,
+                                   std::string_view method, Right right, Replay replay,
+                                   google::protobuf::Message* response, UnaryWork work) {
+  const google::protobuf::Message& request = *replay.request;
+  return StartUnary(state, context, method, right, request,
+                    [&state, context, replay = std::move(replay), response, work = std::move(work)](
+                        CallInfo& call, WorkerContext& worker) {
+                      return RunOnce(state, context, call, replay, response,
+                                     [&] { return work(call, worker); });
+                    });
+}
+
+grpc::ServerUnaryReactor* RunUnary(ServerState& state, grpc::CallbackServerContext* context,
+                                   std::string_view method, Right right,
+                                   const google::protobuf::Message& request, UnaryWork work) {
+  return StartUnary(state, context, method, right, request,
+                    [context, work = std::move(work)](CallInfo& call, WorkerContext& worker) {
+                      return ToCallStatus(context, call, work(call, worker));
+                    });
+}
+
 namespace {
 
 // CheckMapOwner and CheckGroupOwner: `owner` is what the placement table says of the map or group
 // `what` ("map 'x'", "group 'y'"), `entry` how to list it.
-grpc::Status CheckOwner(const ServerState& state, const std::optional<std::string>& owner,
-                        const std::string& what, const std::string& entry) {
+Status CheckOwner(const ServerState& state, const std::optional<std::string>& owner,
+                  const std::string& what, const std::string& entry) {
   const std::string& self = state.config.shard.name;
-  if (owner == self) return grpc::Status::OK;
+  if (owner == self) return Status::Ok();
   if (!owner.has_value()) {
-    return {grpc::StatusCode::FAILED_PRECONDITION,
-            what + " is not in the placement table (" + state.config.shard.placement_file +
-                "): add `" + entry + " <shard>;`, then reload nginx and the servers"};
+    return Status::FailedPrecondition(what + " is not in the placement table (" +
+                                      state.config.shard.placement_file + "): add `" + entry +
+                                      " <shard>;`, then reload nginx and the servers");
   }
-  return {grpc::StatusCode::FAILED_PRECONDITION,
-          what + " belongs to shard '" + *owner + "', not to this server (shard '" + self + "')"};
+  return Status::FailedPrecondition(what + " belongs to shard '" + *owner +
+                                    "', not to this server (shard '" + self + "')");
 }
 
 }  // namespace
 
-grpc::Status CheckMapOwner(const ServerState& state, const std::string& map) {
+Status CheckMapOwner(const ServerState& state, const std::string& map) {
   const std::shared_ptr<const PlacementTable> placement = state.placement();
-  if (placement == nullptr) return grpc::Status::OK;
+  if (placement == nullptr) return Status::Ok();
   return CheckOwner(state, placement->OwnerOf(map), "map '" + map + "'", map);
 }
 
-grpc::Status CheckGroupOwner(const ServerState& state, const std::string& group) {
+Status CheckGroupOwner(const ServerState& state, const std::string& group) {
   const std::shared_ptr<const PlacementTable> placement = state.placement();
-  if (placement == nullptr) return grpc::Status::OK;
+  if (placement == nullptr) return Status::Ok();
   return CheckOwner(state, placement->OwnerOfGroup(group), "group '" + group + "'",
                     PlacementTable::kGroupPrefix + group);
 }

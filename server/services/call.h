@@ -9,6 +9,11 @@
 // gRPC's retries. Mutating calls pass their request's `request_id` and response: RunOnce answers
 // a repeat from the server's RequestLog (server/runtime/request_log.h).
 // Streaming reactors use BeginCall/EndCall and the pool themselves.
+//
+// Handlers speak core's Status; it becomes the call's gRPC status in one place, ToCallStatus,
+// where the call ends (RunUnary, RunOnce, a stream reactor's end). Only what is gRPC's own stays
+// grpc::Status here: the refusals that carry a retry hint (Busy, a server starting or draining),
+// a client gone or out of time, and the request log's ABORTED.
 #pragma once
 
 #include <chrono>
@@ -19,7 +24,7 @@
 #include <google/protobuf/message.h>
 #include <grpcpp/grpcpp.h>
 
-#include "server/api/converters.h"
+#include "server/api/frame_decoding.h"
 #include "server/auth/token_auth.h"
 #include "server/services/server_state.h"
 
@@ -62,12 +67,15 @@ grpc::Status CheckStillWanted(grpc::CallbackServerContext* context);
 // metadata.
 grpc::Status Busy(ServerState& state, grpc::CallbackServerContext* context);
 
-// `status` unchanged; when it is RESOURCE_EXHAUSTED, a pushback of -1 is added to the call's
-// trailing metadata so that gRPC does not retry it (for refusals that a retry cannot cure).
-grpc::Status Final(grpc::CallbackServerContext* context, grpc::Status status);
+// The gRPC status that `call` ends with for a handler's core `status` (ToGrpcStatus with the
+// call's request id). A core RESOURCE_EXHAUSTED is a refusal that a retry cannot cure (the ones a
+// retry can, like Busy, are made in gRPC's terms): a pushback of -1 is added to the call's
+// trailing metadata so that gRPC does not retry it.
+grpc::Status ToCallStatus(grpc::CallbackServerContext* context, const CallInfo& call,
+                          const Status& status);
 
 // OK for an empty or valid request_id (RequestLog::ValidRequestId), INVALID_ARGUMENT otherwise.
-grpc::Status CheckRequestId(const std::string& request_id);
+Status CheckRequestId(const std::string& request_id);
 
 // What the request log (RunOnce) needs of a mutating call besides its work.
 struct Replay {
@@ -88,21 +96,22 @@ struct Replay {
 // the call's deadline passes first). A different request with a request_id in use is
 // INVALID_ARGUMENT, and changes nothing. Only successful answers are remembered; a repeat of a
 // failed call runs again. An empty request_id just runs `work`; an invalid one is
-// INVALID_ARGUMENT.
+// INVALID_ARGUMENT. The answer is the call's gRPC status (`work`'s through ToCallStatus).
 grpc::Status RunOnce(ServerState& state, grpc::CallbackServerContext* context, CallInfo& call,
                      const Replay& replay, google::protobuf::Message* response,
-                     const std::function<grpc::Status()>& work);
+                     const std::function<Status()>& work);
 
 // OK when this server serves place map `map`: always without a shard configuration; with one,
 // when the placement table gives the map to this shard. FAILED_PRECONDITION naming the owner (or
 // saying that the table does not list the map) otherwise.
-grpc::Status CheckMapOwner(const ServerState& state, const std::string& map);
+Status CheckMapOwner(const ServerState& state, const std::string& map);
 // The same for every map of `group`: the placement table must place the group (`group:NAME`) on
 // this shard, so that its maps are created and searched here only.
-grpc::Status CheckGroupOwner(const ServerState& state, const std::string& group);
+Status CheckGroupOwner(const ServerState& state, const std::string& group);
 
-// The work of a unary call, on a worker, with that worker's context.
-using UnaryWork = std::function<grpc::Status(CallInfo&, WorkerContext&)>;
+// The work of a unary call, on a worker, with that worker's context; RunUnary turns its status
+// into the call's (ToCallStatus).
+using UnaryWork = std::function<Status(CallInfo&, WorkerContext&)>;
 // `request` (which lives as long as the call) is charged to the server's pending request bytes
 // from the hand-over to the pool until the work ends: RESOURCE_EXHAUSTED with the retry hint when
 // they would pass grpc.pending_requests_mb.

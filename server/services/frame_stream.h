@@ -18,7 +18,7 @@
 
 #include <grpcpp/grpcpp.h>
 
-#include "server/api/converters.h"
+#include "server/api/frame_decoding.h"
 #include "server/api/status_mapping.h"
 #include "server/services/call.h"
 
@@ -50,7 +50,7 @@ class FrameStream : public grpc::ServerBidiReactor<Request, Response> {
 
  protected:
   // Checks the first request (on a worker). Not OK ends the stream with that status.
-  virtual grpc::Status Configure(const Request& first) = 0;
+  virtual Status Configure(const Request& first) = 0;
   // Answers one frame (on a worker, with its context) into `response`, which has its sequence
   // number and client frame id already. A failure becomes the answer's FrameError.
   virtual Status Answer(const pb::Frame& frame, WorkerContext& worker, Response* response) = 0;
@@ -68,9 +68,9 @@ class FrameStream : public grpc::ServerBidiReactor<Request, Response> {
     const auto submitted_at = std::chrono::steady_clock::now();
     const bool submitted = state_.pool->Submit([this, submitted_at](WorkerContext& worker) {
       if (!configured_) {
-        const grpc::Status status = Configure(request_);
+        const Status status = Configure(request_);
         if (!status.ok()) {
-          End(status);
+          End(ToCallStatus(context_, call_, status));
           return;
         }
         configured_ = true;
@@ -86,7 +86,7 @@ class FrameStream : public grpc::ServerBidiReactor<Request, Response> {
             request_.frame().client_frame_id().substr(0, kMaxFrameIdBytes));
         status = Answer(request_.frame(), worker, &response_);
       }
-      if (!status.ok()) {
+      if (!status.ok()) {  // the frame's answer, not the stream's end: no trailing metadata
         const grpc::Status error = ToGrpcStatus(status, call_.request_id);
         response_.mutable_error()->set_code(int(error.error_code()));
         response_.mutable_error()->set_message(error.error_message());

@@ -4,8 +4,8 @@
 #include <memory>
 
 #include "core/object/tracking/object_tracker.h"
-#include "server/api/converters.h"
-#include "server/api/status_mapping.h"
+#include "server/api/frame_decoding.h"
+#include "server/api/object_converters.h"
 #include "server/services/call.h"
 #include "server/services/frame_stream.h"
 
@@ -72,10 +72,10 @@ class ObjectFrameStream final
                     "StreamRecognizeObjects") {}
 
  private:
-  grpc::Status Configure(const pb::StreamRecognizeObjectsRequest& first) override {
+  Status Configure(const pb::StreamRecognizeObjectsRequest& first) override {
     if (!first.has_config()) {
-      return {grpc::StatusCode::FAILED_PRECONDITION,
-              "the first message of StreamRecognizeObjects must be a RecognitionConfig"};
+      return Status::FailedPrecondition(
+          "the first message of StreamRecognizeObjects must be a RecognitionConfig");
     }
     filter_ = FromProto(first.config().filter());
     extras_ = FromProto(first.config().detection_options());
@@ -83,7 +83,7 @@ class ObjectFrameStream final
     if (!first.config().disable_tracking()) {
       tracker_ = std::make_unique<ObjectTracker>(state_.objects);
     }
-    return grpc::Status::OK;
+    return Status::Ok();
   }
 
   Status Answer(const pb::Frame& frame, WorkerContext& worker,
@@ -103,19 +103,17 @@ class ObjectFrameStream final
 grpc::ServerUnaryReactor* ObjectService::RecognizeObjects(
     grpc::CallbackServerContext* context, const pb::RecognizeObjectsRequest* request,
     pb::RecognizeObjectsResponse* response) {
-  return RunUnary(
-      state_, context, ObjectMethod("RecognizeObjects"), Right::kRead, *request,
-      [=, this](CallInfo& call, WorkerContext& worker) {
-        RECOG_RETURN_IF_ERROR_AS_GRPC(
-            RunRecognition(state_, worker, request->frame(), FromProto(request->filter()),
-                           FromProto(request->detection_options()), nullptr,
-                           response->mutable_objects(), response->mutable_timing(),
-                           request->explain() ? response->mutable_explanations() : nullptr),
-            call.request_id);
-        response->set_client_frame_id(request->frame().client_frame_id());
-        response->mutable_timing()->set_queue_ms(call.queue_ms);
-        return grpc::Status::OK;
-      });
+  return RunUnary(state_, context, ObjectMethod("RecognizeObjects"), Right::kRead, *request,
+                  [=, this](CallInfo& call, WorkerContext& worker) {
+                    RECOG_RETURN_IF_ERROR(RunRecognition(
+                        state_, worker, request->frame(), FromProto(request->filter()),
+                        FromProto(request->detection_options()), nullptr,
+                        response->mutable_objects(), response->mutable_timing(),
+                        request->explain() ? response->mutable_explanations() : nullptr));
+                    response->set_client_frame_id(request->frame().client_frame_id());
+                    response->mutable_timing()->set_queue_ms(call.queue_ms);
+                    return Status::Ok();
+                  });
 }
 
 grpc::ServerBidiReactor<pb::StreamRecognizeObjectsRequest, pb::StreamRecognizeObjectsResponse>*

@@ -8,9 +8,9 @@
 
 #include "core/common/elapsed.h"
 #include "core/place/map_search.h"
-#include "server/api/converters.h"
+#include "server/api/frame_decoding.h"
+#include "server/api/place_converters.h"
 #include "server/api/prepared_frame.h"
-#include "server/api/status_mapping.h"
 #include "server/services/call.h"
 #include "server/services/frame_stream.h"
 
@@ -50,17 +50,11 @@ void FillMapInfo(const ServerState& state, const PlaceMap& map, pb::MapInfo* out
   out->set_vocabulary_checksum(checksum);
 }
 
-// On a shard, a map or group that this server does not hold (CheckMapOwner, CheckGroupOwner) as
-// a core Status (FAILED_PRECONDITION naming where it is).
-Status Owned(const grpc::Status& owned) {
-  return owned.ok() ? Status::Ok() : Status::FailedPrecondition(owned.error_message());
-}
-
 // Where every map-scoped call starts: names the map in the call's log line and checks that this
 // server owns it (FAILED_PRECONDITION otherwise, see CheckMapOwner).
 Status ScopeCall(const ServerState& state, CallInfo& call, const std::string& name) {
   call.map = name;
-  return Owned(CheckMapOwner(state, name));
+  return CheckMapOwner(state, name);
 }
 
 // A new map's keep_thumbnails setting (a failure to store it is logged: the map is created, and
@@ -78,7 +72,7 @@ void ApplyThumbnailSetting(ServerState& state, const PlaceMap& map,
 Status CheckCreation(const ServerState& state, CallInfo& call, const std::string& name,
                      const std::string& group) {
   RECOG_RETURN_IF_ERROR(ScopeCall(state, call, name));
-  if (!group.empty()) RECOG_RETURN_IF_ERROR(Owned(CheckGroupOwner(state, group)));
+  if (!group.empty()) RECOG_RETURN_IF_ERROR(CheckGroupOwner(state, group));
   return TokenAuthenticator::CheckMap(call.caller, Right::kWrite, name, group);
 }
 
@@ -124,12 +118,12 @@ StatusOr<SearchSet> ResolveSearchSet(const ServerState& state, const Caller& cal
     return Status::Ok();
   };
   for (const std::string& name : names) {
-    RECOG_RETURN_IF_ERROR(Owned(CheckMapOwner(state, name)));
+    RECOG_RETURN_IF_ERROR(CheckMapOwner(state, name));
     RECOG_ASSIGN_OR_RETURN(std::shared_ptr<PlaceMap> map, state.maps->Get(name));
     RECOG_RETURN_IF_ERROR(add(std::move(map)));
   }
   if (!group.empty()) {
-    RECOG_RETURN_IF_ERROR(Owned(CheckGroupOwner(state, group)));
+    RECOG_RETURN_IF_ERROR(CheckGroupOwner(state, group));
     RECOG_ASSIGN_OR_RETURN(SearchSet members, state.maps->Group(group));
     for (std::shared_ptr<PlaceMap>& map : members) RECOG_RETURN_IF_ERROR(add(std::move(map)));
   }
@@ -144,6 +138,26 @@ StatusOr<SearchSet> ResolveSearchSet(const ServerState& state, const Caller& cal
 // The group a map is created in (settings.group, when set).
 std::string GroupOf(const pb::MapSettings& settings) {
   return settings.has_group() ? settings.group() : std::string();
+}
+
+// Creates place map `name` for `call`, the one way both CreateMap and a stream's
+// create_if_missing do: CheckCreation, `settings` over the server's defaults (ApplyMapSettings),
+// the rig, MapRegistry::Create, the keep_thumbnails setting and the map's entries gauge (at 0).
+// ALREADY_EXISTS when the map is there, also when another call created it since this one looked:
+// CreateMap answers that, a stream takes the map that is there (PlaceFrameStream::Configure).
+StatusOr<std::shared_ptr<PlaceMap>> CreatePlaceMap(ServerState& state, CallInfo& call,
+                                                   const std::string& name,
+                                                   const pb::MapSettings& settings) {
+  const std::string group = GroupOf(settings);
+  RECOG_RETURN_IF_ERROR(CheckCreation(state, call, name, group));
+  LoopDetectorParams params = state.config.place;
+  RECOG_RETURN_IF_ERROR(ApplyMapSettings(settings, &params));
+  RECOG_ASSIGN_OR_RETURN(std::vector<RigCamera> rig, RigFromProto(settings));
+  RECOG_ASSIGN_OR_RETURN(std::shared_ptr<PlaceMap> map,
+                         state.maps->Create(name, params, group, rig));
+  ApplyThumbnailSetting(state, *map, settings);
+  state.metrics.SetMapEntries(name, 0);
+  return map;
 }
 
 // The worker's place feature extractor, for PreparedFrame.
@@ -166,7 +180,7 @@ StatusOr<PlaceFrameResult> RunMode(PlaceMap& map, FrameMode mode, const FeatureS
     case FrameMode::kQuery:
       break;
   }
-  return map.Query(features, timestamp, extras, geometry, frame.excluded_frames);
+  return map.Query(features, extras, geometry, frame.excluded_frames);
 }
 
 // What a rig map refuses of a request (INVALID_ARGUMENT): the options of single-camera loops,
@@ -294,7 +308,7 @@ Status RunPlaceFrame(ServerState& state, WorkerContext& worker, PlaceMap& map, F
   ToProto(result.value(), out);
   if (!search.empty()) {
     StatusOr<std::vector<MapMatch>> matches =
-        SearchMaps(search, features, prepared.frame().timestamp, extras, prepared.geometry());
+        SearchMaps(search, features, extras, prepared.geometry());
     if (!matches.ok()) return matches.status();
     for (const MapMatch& match : matches.value()) {
       pb::InterMapMatch* found = inter_map->Add();
@@ -314,45 +328,31 @@ class PlaceFrameStream final
       : FrameStream(state, context, PlaceMethod("StreamFrames"), "StreamFrames") {}
 
  private:
-  grpc::Status Configure(const pb::StreamFramesRequest& first) override {
+  Status Configure(const pb::StreamFramesRequest& first) override {
     if (!first.has_config()) {
-      return {grpc::StatusCode::FAILED_PRECONDITION,
-              "the first message of StreamFrames must be a StreamConfig"};
+      return Status::FailedPrecondition("the first message of StreamFrames must be a StreamConfig");
     }
     const pb::StreamConfig& config = first.config();
     const Right right = config.query_only() ? Right::kRead : Right::kWrite;
     StatusOr<std::shared_ptr<PlaceMap>> map = CallMap(state_, call_, config.map(), right);
-    if (!map.ok() && map.status().code() != StatusCode::kNotFound) {  // not this shard's map
-      return ToGrpcStatus(map.status(), call_.request_id);
-    }
+    // A missing map may be created below; any other refusal (not this shard's map) ends here.
+    if (!map.ok() && map.status().code() != StatusCode::kNotFound) return map.status();
     mode_ = config.query_only() ? FrameMode::kQuery : FrameMode::kDetect;
     options_ = config.options();
-    const Status options = FromProto(options_, std::nullopt).Validate();
-    if (!options.ok()) return ToGrpcStatus(options, call_.request_id);
-    StatusOr<SearchSet> search = ResolveSearchSet(state_, call_.caller, config.map(),
-                                                  config.search_maps(), config.search_group());
-    if (!search.ok()) return ToGrpcStatus(search.status(), call_.request_id);
-    search_ = std::move(search).value();
-    if (!map.ok() && map.status().code() == StatusCode::kNotFound && config.create_if_missing() &&
-        !config.query_only()) {
-      const Status allowed = CheckCreation(state_, call_, config.map(), GroupOf(config.settings()));
-      if (!allowed.ok()) return ToGrpcStatus(allowed, call_.request_id);
-      LoopDetectorParams params = state_.config.place;
-      const Status settings = ApplyMapSettings(config.settings(), &params);
-      if (!settings.ok()) return ToGrpcStatus(settings, call_.request_id);
-      StatusOr<std::vector<RigCamera>> rig = RigFromProto(config.settings());
-      if (!rig.ok()) return ToGrpcStatus(rig.status(), call_.request_id);
-      map = state_.maps->Create(config.map(), params, GroupOf(config.settings()), rig.value());
-      if (map.ok()) ApplyThumbnailSetting(state_, *map.value(), config.settings());
+    RECOG_RETURN_IF_ERROR(FromProto(options_, std::nullopt).Validate());
+    RECOG_ASSIGN_OR_RETURN(search_, ResolveSearchSet(state_, call_.caller, config.map(),
+                                                     config.search_maps(), config.search_group()));
+    if (!map.ok() && config.create_if_missing() && !config.query_only()) {
+      map = CreatePlaceMap(state_, call_, config.map(), config.settings());
       if (map.status().code() == StatusCode::kAlreadyExists) {
-        map = CallMap(state_, call_, config.map(), right);  // created by another stream meanwhile
+        // Created by another call since CallMap looked: the stream writes to it like to any map
+        // that was there (its settings are that map's, not the config's).
+        map = CallMap(state_, call_, config.map(), right);
       }
     }
-    if (!map.ok()) return ToGrpcStatus(map.status(), call_.request_id);
+    if (!map.ok()) return map.status();
     map_ = std::move(map).value();
-    const Status rig = CheckRigRequest(*map_, options_, search_);
-    if (!rig.ok()) return ToGrpcStatus(rig, call_.request_id);
-    return grpc::Status::OK;
+    return CheckRigRequest(*map_, options_, search_);
   }
 
   Status Answer(const pb::Frame& frame, WorkerContext& worker,
@@ -393,7 +393,7 @@ Status RunRelocalize(ServerState& state, WorkerContext& worker, const Caller& ca
   std::vector<RelocalizationFrame> frames;
   frames.reserve(prepared.size());
   for (const PreparedFrame& p : prepared) {
-    frames.push_back({&p.features(), p.frame().timestamp, p.geometry()});
+    frames.push_back({&p.features(), p.geometry()});
   }
   const auto start = std::chrono::steady_clock::now();
   // Frames of one request share their options; the intrinsics for relative poses are the first's.
@@ -424,21 +424,11 @@ grpc::ServerUnaryReactor* PlaceService::CreateMap(grpc::CallbackServerContext* c
                       }};
   return RunUnary(state_, context, PlaceMethod("CreateMap"), Right::kWrite, replay, response,
                   [=, this](CallInfo& call, WorkerContext&) {
-                    RECOG_RETURN_IF_ERROR_AS_GRPC(
-                        CheckCreation(state_, call, request->name(), GroupOf(request->settings())),
-                        call.request_id);
-                    LoopDetectorParams params = state_.config.place;
-                    RECOG_RETURN_IF_ERROR_AS_GRPC(ApplyMapSettings(request->settings(), &params),
-                                                  call.request_id);
-                    StatusOr<std::vector<RigCamera>> rig = RigFromProto(request->settings());
-                    if (!rig.ok()) return ToGrpcStatus(rig.status(), call.request_id);
-                    StatusOr<std::shared_ptr<PlaceMap>> map = state_.maps->Create(
-                        request->name(), params, GroupOf(request->settings()), rig.value());
-                    if (!map.ok()) return ToGrpcStatus(map.status(), call.request_id);
-                    ApplyThumbnailSetting(state_, *map.value(), request->settings());
-                    FillMapInfo(state_, *map.value(), response->mutable_map());
-                    state_.metrics.SetMapEntries(request->name(), 0);
-                    return grpc::Status::OK;
+                    RECOG_ASSIGN_OR_RETURN(
+                        std::shared_ptr<PlaceMap> map,
+                        CreatePlaceMap(state_, call, request->name(), request->settings()));
+                    FillMapInfo(state_, *map, response->mutable_map());
+                    return Status::Ok();
                   });
 }
 
@@ -447,11 +437,10 @@ grpc::ServerUnaryReactor* PlaceService::GetMap(grpc::CallbackServerContext* cont
                                                pb::GetMapResponse* response) {
   return RunUnary(state_, context, PlaceMethod("GetMap"), Right::kRead, *request,
                   [=, this](CallInfo& call, WorkerContext&) {
-                    StatusOr<std::shared_ptr<PlaceMap>> map =
-                        CallMap(state_, call, request->name(), Right::kRead);
-                    if (!map.ok()) return ToGrpcStatus(map.status(), call.request_id);
-                    FillMapInfo(state_, *map.value(), response->mutable_map());
-                    return grpc::Status::OK;
+                    RECOG_ASSIGN_OR_RETURN(std::shared_ptr<PlaceMap> map,
+                                           CallMap(state_, call, request->name(), Right::kRead));
+                    FillMapInfo(state_, *map, response->mutable_map());
+                    return Status::Ok();
                   });
 }
 
@@ -475,7 +464,7 @@ grpc::ServerUnaryReactor* PlaceService::ListMaps(grpc::CallbackServerContext* co
                       FillMapInfo(state_, *map, response->add_maps());
                       ++added;
                     }
-                    return grpc::Status::OK;
+                    return Status::Ok();
                   });
 }
 
@@ -486,16 +475,14 @@ grpc::ServerUnaryReactor* PlaceService::DeleteMap(grpc::CallbackServerContext* c
       state_, context, PlaceMethod("DeleteMap"), Right::kWrite,
       MapReplay(state_, request->request_id(), *request, request->name(), Right::kWrite), response,
       [=, this](CallInfo& call, WorkerContext&) {
-        StatusOr<std::shared_ptr<PlaceMap>> map =
-            CallMap(state_, call, request->name(), Right::kWrite);
-        if (!map.ok()) return ToGrpcStatus(map.status(), call.request_id);
-        const uint32_t map_id = map.value()->info().id;
-        StatusOr<size_t> frames = state_.maps->Delete(request->name());
-        if (!frames.ok()) return ToGrpcStatus(frames.status(), call.request_id);
+        RECOG_ASSIGN_OR_RETURN(std::shared_ptr<PlaceMap> map,
+                               CallMap(state_, call, request->name(), Right::kWrite));
+        const uint32_t map_id = map->info().id;
+        RECOG_ASSIGN_OR_RETURN(const size_t frames, state_.maps->Delete(request->name()));
         ForgetConsoleRecords(state_, request->name(), map_id);
-        response->set_frames_deleted(frames.value());
+        response->set_frames_deleted(frames);
         state_.metrics.RemoveMap(request->name());
-        return grpc::Status::OK;
+        return Status::Ok();
       });
 }
 
@@ -506,20 +493,17 @@ grpc::ServerUnaryReactor* PlaceService::AddFrame(grpc::CallbackServerContext* co
       state_, context, PlaceMethod("AddFrame"), Right::kWrite,
       MapReplay(state_, request->request_id(), *request, request->map(), Right::kWrite), response,
       [=, this](CallInfo& call, WorkerContext& worker) {
-        StatusOr<std::shared_ptr<PlaceMap>> map =
-            CallMap(state_, call, request->map(), Right::kWrite);
-        if (!map.ok()) return ToGrpcStatus(map.status(), call.request_id);
+        RECOG_ASSIGN_OR_RETURN(std::shared_ptr<PlaceMap> map,
+                               CallMap(state_, call, request->map(), Right::kWrite));
         pb::LoopResult added;
         uint32_t num_features = 0;
-        RECOG_RETURN_IF_ERROR_AS_GRPC(
-            RunPlaceFrame(state_, worker, *map.value(), FrameMode::kAdd, request->frame(), {},
-                          &added, response->mutable_timing(), &num_features),
-            call.request_id);
+        RECOG_RETURN_IF_ERROR(RunPlaceFrame(state_, worker, *map, FrameMode::kAdd, request->frame(),
+                                            {}, &added, response->mutable_timing(), &num_features));
         response->mutable_timing()->set_queue_ms(call.queue_ms);
         response->set_frame_id(added.frame_id());
         response->set_num_features(num_features);
         response->set_client_frame_id(request->frame().client_frame_id());
-        return grpc::Status::OK;
+        return Status::Ok();
       });
 }
 
@@ -533,20 +517,19 @@ grpc::ServerUnaryReactor* PlaceService::QueryPlace(grpc::CallbackServerContext* 
       MapReplay(state_, request->add_frame() ? request->request_id() : std::string(), *request,
                 request->map(), right),
       response, [=, this](CallInfo& call, WorkerContext& worker) {
-        StatusOr<std::shared_ptr<PlaceMap>> map = CallMap(state_, call, request->map(), right);
-        if (!map.ok()) return ToGrpcStatus(map.status(), call.request_id);
+        RECOG_ASSIGN_OR_RETURN(std::shared_ptr<PlaceMap> map,
+                               CallMap(state_, call, request->map(), right));
         const FrameMode mode = request->add_frame() ? FrameMode::kDetect : FrameMode::kQuery;
-        StatusOr<SearchSet> search = ResolveSearchSet(
-            state_, call.caller, request->map(), request->search_maps(), request->search_group());
-        if (!search.ok()) return ToGrpcStatus(search.status(), call.request_id);
-        RECOG_RETURN_IF_ERROR_AS_GRPC(
-            RunPlaceFrame(state_, worker, *map.value(), mode, request->frame(), request->options(),
-                          response->mutable_result(), response->mutable_timing(), nullptr,
-                          search.value(), response->mutable_inter_map()),
-            call.request_id);
+        RECOG_ASSIGN_OR_RETURN(SearchSet search,
+                               ResolveSearchSet(state_, call.caller, request->map(),
+                                                request->search_maps(), request->search_group()));
+        RECOG_RETURN_IF_ERROR(RunPlaceFrame(state_, worker, *map, mode, request->frame(),
+                                            request->options(), response->mutable_result(),
+                                            response->mutable_timing(), nullptr, search,
+                                            response->mutable_inter_map()));
         response->set_client_frame_id(request->frame().client_frame_id());
         response->mutable_timing()->set_queue_ms(call.queue_ms);
-        return grpc::Status::OK;
+        return Status::Ok();
       });
 }
 
@@ -557,54 +540,46 @@ grpc::ServerUnaryReactor* PlaceService::RemoveFrame(grpc::CallbackServerContext*
       state_, context, PlaceMethod("RemoveFrame"), Right::kWrite,
       MapReplay(state_, request->request_id(), *request, request->map(), Right::kWrite), response,
       [=, this](CallInfo& call, WorkerContext&) {
-        StatusOr<std::shared_ptr<PlaceMap>> map =
-            CallMap(state_, call, request->map(), Right::kWrite);
-        if (!map.ok()) return ToGrpcStatus(map.status(), call.request_id);
-        PlaceMap& place_map = *map.value();
+        RECOG_ASSIGN_OR_RETURN(std::shared_ptr<PlaceMap> map,
+                               CallMap(state_, call, request->map(), Right::kWrite));
         switch (request->frame_case()) {
           case pb::RemoveFrameRequest::kFrameId: {
             if (request->frame_id() >= kInvalidEntryId) {
-              return ToGrpcStatus(Status::NotFound("map '" + request->map() + "' has no frame " +
-                                                   std::to_string(request->frame_id())),
-                                  call.request_id);
+              return Status::NotFound("map '" + request->map() + "' has no frame " +
+                                      std::to_string(request->frame_id()));
             }
-            RECOG_RETURN_IF_ERROR_AS_GRPC(place_map.RemoveFrame(EntryId(request->frame_id())),
-                                          call.request_id);
+            RECOG_RETURN_IF_ERROR(map->RemoveFrame(EntryId(request->frame_id())));
             response->add_removed_frame_ids(request->frame_id());
-            ForgetThumbnail(state_, place_map, request->frame_id());
+            ForgetThumbnail(state_, *map, request->frame_id());
             break;
           }
           case pb::RemoveFrameRequest::kClientFrameId: {
-            StatusOr<std::vector<EntryId>> removed =
-                place_map.RemoveFramesByClientId(request->client_frame_id());
-            if (!removed.ok()) return ToGrpcStatus(removed.status(), call.request_id);
-            for (EntryId id : removed.value()) {
+            RECOG_ASSIGN_OR_RETURN(std::vector<EntryId> removed,
+                                   map->RemoveFramesByClientId(request->client_frame_id()));
+            for (EntryId id : removed) {
               response->add_removed_frame_ids(id);
-              ForgetThumbnail(state_, place_map, id);
+              ForgetThumbnail(state_, *map, id);
             }
             break;
           }
           case pb::RemoveFrameRequest::FRAME_NOT_SET:
-            return ToGrpcStatus(
-                Status::InvalidArgument("RemoveFrame needs a frame_id or a client_frame_id"),
-                call.request_id);
+            return Status::InvalidArgument("RemoveFrame needs a frame_id or a client_frame_id");
         }
-        state_.metrics.SetMapEntries(place_map.name(), place_map.frames());
-        return grpc::Status::OK;
+        state_.metrics.SetMapEntries(map->name(), map->frames());
+        return Status::Ok();
       });
 }
 
 grpc::ServerUnaryReactor* PlaceService::Relocalize(grpc::CallbackServerContext* context,
                                                    const pb::RelocalizeRequest* request,
                                                    pb::RelocalizeResponse* response) {
-  return RunUnary(state_, context, PlaceMethod("Relocalize"), Right::kRead, *request,
-                  [=, this](CallInfo& call, WorkerContext& worker) {
-                    RECOG_RETURN_IF_ERROR_AS_GRPC(
-                        RunRelocalize(state_, worker, call.caller, *request, response),
-                        call.request_id);
-                    response->mutable_timing()->set_queue_ms(call.queue_ms);
-                    return grpc::Status::OK;
-                  });
+  return RunUnary(
+      state_, context, PlaceMethod("Relocalize"), Right::kRead, *request,
+      [=, this](CallInfo& call, WorkerContext& worker) {
+        RECOG_RETURN_IF_ERROR(RunRelocalize(state_, worker, call.caller, *request, response));
+        response->mutable_timing()->set_queue_ms(call.queue_ms);
+        return Status::Ok();
+      });
 }
 
 grpc::ServerBidiReactor<pb::StreamFramesRequest, pb::StreamFramesResponse>*

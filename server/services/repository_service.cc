@@ -3,8 +3,7 @@
 #include <algorithm>
 #include <deque>
 
-#include "server/api/converters.h"
-#include "server/api/status_mapping.h"
+#include "server/api/object_converters.h"
 #include "server/services/call.h"
 #include "wire/sha256.h"
 
@@ -16,13 +15,13 @@ constexpr size_t kDefaultChunkBytes = 1u << 20, kMaxChunkBytes = 2u << 20;
 std::string RepositoryMethod(const char* name) { return std::string(kRepositoryService) + name; }
 
 // A replica's repository follows its primary (RepositoryFollower) and takes no writes of its own.
-grpc::Status RefuseOnReplica(const ServerState& state) {
+Status RefuseOnReplica(const ServerState& state) {
   const std::string& primary = state.config.repository.primary;
-  if (primary.empty()) return grpc::Status::OK;
-  return {grpc::StatusCode::FAILED_PRECONDITION,
-          "this server holds a read-only replica of the model repository; send uploads and "
-          "deletions to its primary, " +
-              primary};
+  if (primary.empty()) return Status::Ok();
+  return Status::FailedPrecondition(
+      "this server holds a read-only replica of the model repository; send uploads and "
+      "deletions to its primary, " +
+      primary);
 }
 
 bool IsSha256Hex(const std::string& s) {
@@ -39,7 +38,7 @@ class ModelUpload final : public grpc::ServerReadReactor<pb::PutModelRequest> {
       : state_(state), partial_uploads_(partial_uploads), context_(context), response_(response) {
     grpc::Status status =
         BeginCall(state_, context_, RepositoryMethod("PutModel"), Right::kWrite, &call_);
-    if (status.ok()) status = RefuseOnReplica(state_);
+    if (status.ok()) status = ToCallStatus(context_, call_, RefuseOnReplica(state_));
     if (!status.ok()) {
       End(status);
       return;
@@ -58,7 +57,7 @@ class ModelUpload final : public grpc::ServerReadReactor<pb::PutModelRequest> {
     }
     if (!ok) {  // the client sent everything
       if (!has_header_) {
-        End({grpc::StatusCode::FAILED_PRECONDITION, "PutModel needs a PutModelHeader first"});
+        End(Status::FailedPrecondition("PutModel needs a PutModelHeader first"));
       } else if (!state_.pool->TrySubmit([this](WorkerContext&) {
                    End(RunOnce(state_, context_, call_,
                                Replay{header_.request_id(), &header_, nullptr}, response_,
@@ -68,7 +67,7 @@ class ModelUpload final : public grpc::ServerReadReactor<pb::PutModelRequest> {
       }
       return;
     }
-    const grpc::Status status = has_header_ ? TakeChunk() : TakeHeader();
+    const Status status = has_header_ ? TakeChunk() : TakeHeader();
     if (!status.ok()) {
       End(status);
       return;
@@ -76,89 +75,80 @@ class ModelUpload final : public grpc::ServerReadReactor<pb::PutModelRequest> {
     StartRead(&request_);
   }
 
-  grpc::Status TakeHeader() {
+  Status TakeHeader() {
     if (!request_.has_header()) {
-      return {grpc::StatusCode::FAILED_PRECONDITION,
-              "the first message of PutModel must be a PutModelHeader"};
+      return Status::FailedPrecondition("the first message of PutModel must be a PutModelHeader");
     }
     header_ = request_.header();
     call_.map = header_.name();
-    if (header_.size_bytes() == 0) {
-      return {grpc::StatusCode::INVALID_ARGUMENT, "header.size_bytes is required"};
-    }
+    if (header_.size_bytes() == 0) return Status::InvalidArgument("header.size_bytes is required");
     if (header_.size_bytes() > RepositoryService::kMaxModelBytes) {
-      return Final(context_, {grpc::StatusCode::RESOURCE_EXHAUSTED,
-                              "the model file has " + std::to_string(header_.size_bytes()) +
-                                  " bytes; the server takes at most " +
-                                  std::to_string(RepositoryService::kMaxModelBytes)});
+      return Status::ResourceExhausted(
+          "the model file has " + std::to_string(header_.size_bytes()) +
+          " bytes; the server takes at most " + std::to_string(RepositoryService::kMaxModelBytes));
     }
-    // Before the file is sent, not after.
-    if (grpc::Status checked = CheckRequestId(header_.request_id()); !checked.ok()) {
-      return checked;
-    }
+    RECOG_RETURN_IF_ERROR(CheckRequestId(header_.request_id()));  // before the file is sent
     if (!IsSha256Hex(header_.sha256())) {
-      return {grpc::StatusCode::INVALID_ARGUMENT,
-              "header.sha256 must be 64 lowercase hex digits (SHA-256 of the file)"};
+      return Status::InvalidArgument(
+          "header.sha256 must be 64 lowercase hex digits (SHA-256 of the file)");
     }
     if (header_.offset() >= header_.size_bytes()) {
-      return {grpc::StatusCode::INVALID_ARGUMENT,
-              "header.offset must be below header.size_bytes (" +
-                  std::to_string(header_.size_bytes()) + ")"};
+      return Status::InvalidArgument("header.offset must be below header.size_bytes (" +
+                                     std::to_string(header_.size_bytes()) + ")");
     }
     if (header_.offset() > 0) {
       std::optional<std::string> kept = partial_uploads_.TakeInterrupted(Key());
       const uint64_t held = kept.has_value() ? kept->size() : 0;
       if (held < header_.offset()) {
         if (kept.has_value()) partial_uploads_.KeepInterrupted(Key(), std::move(*kept));
-        return {grpc::StatusCode::FAILED_PRECONDITION,
-                "cannot resume at byte " + std::to_string(header_.offset()) +
-                    ": the server holds " + std::to_string(held) +
-                    " bytes of this upload (GetUploadStatus)"};
+        return Status::FailedPrecondition(
+            "cannot resume at byte " + std::to_string(header_.offset()) + ": the server holds " +
+            std::to_string(held) + " bytes of this upload (GetUploadStatus)");
       }
       bytes_ = std::move(*kept);
       bytes_.resize(size_t(header_.offset()));
     }
     bytes_.reserve(size_t(header_.size_bytes()));
     has_header_ = true;
-    return grpc::Status::OK;
+    return Status::Ok();
   }
 
   PartialUploads::Key Key() const { return {header_.sha256(), header_.size_bytes()}; }
 
-  grpc::Status TakeChunk() {
+  Status TakeChunk() {
     if (!request_.has_chunk()) {
-      return {grpc::StatusCode::INVALID_ARGUMENT, "only the first message of PutModel is a header"};
+      return Status::InvalidArgument("only the first message of PutModel is a header");
     }
     if (bytes_.size() + request_.chunk().size() > header_.size_bytes()) {
-      return {grpc::StatusCode::INVALID_ARGUMENT, "the upload is longer than header.size_bytes (" +
-                                                      std::to_string(header_.size_bytes()) + ")"};
+      return Status::InvalidArgument("the upload is longer than header.size_bytes (" +
+                                     std::to_string(header_.size_bytes()) + ")");
     }
     bytes_ += request_.chunk();
-    return grpc::Status::OK;
+    return Status::Ok();
   }
 
-  grpc::Status Store() {
+  Status Store() {
     if (bytes_.size() != header_.size_bytes()) {
-      return {grpc::StatusCode::INVALID_ARGUMENT,
-              "the upload has " + std::to_string(bytes_.size()) + " bytes; the header said " +
-                  std::to_string(header_.size_bytes())};
+      return Status::InvalidArgument("the upload has " + std::to_string(bytes_.size()) +
+                                     " bytes; the header said " +
+                                     std::to_string(header_.size_bytes()));
     }
     if (Sha256Hex(bytes_) != header_.sha256()) {
-      return {grpc::StatusCode::INVALID_ARGUMENT,
-              "the upload's SHA-256 differs from header.sha256 (damaged in transit?)"};
+      return Status::InvalidArgument(
+          "the upload's SHA-256 differs from header.sha256 (damaged in transit?)");
     }
     std::vector<std::string> tags(header_.tags().begin(), header_.tags().end());
-    StatusOr<ModelVersionInfo> stored =
-        state_.repository->Put(bytes_, header_.name(), std::move(tags));
-    if (!stored.ok()) return Final(context_, ToGrpcStatus(stored.status(), call_.request_id));
-    call_.map = stored.value().metadata.name;
-    partial_uploads_.RecordStored(Key(),
-                                  {stored.value().metadata.name, stored.value().metadata.version});
-    ToProto(stored.value(), response_->mutable_model());
+    RECOG_ASSIGN_OR_RETURN(const ModelVersionInfo stored,
+                           state_.repository->Put(bytes_, header_.name(), std::move(tags)));
+    call_.map = stored.metadata.name;
+    partial_uploads_.RecordStored(Key(), {stored.metadata.name, stored.metadata.version});
+    ToProto(stored, response_->mutable_model());
     state_.metrics.SetObjects(state_.objects->size());
-    return grpc::Status::OK;
+    return Status::Ok();
   }
 
+  void End(const Status& status) { End(ToCallStatus(context_, call_, status)); }
+  // Made in gRPC's terms: the upload broken off, Busy, RunOnce's answer.
   void End(const grpc::Status& status) {
     EndCall(state_, call_, status);
     Finish(status);
@@ -203,7 +193,7 @@ class ModelDownload final : public grpc::ServerWriteReactor<pb::GetModelResponse
     StatusOr<std::pair<ModelVersionInfo, std::string>> model =
         state_.repository->Get(name, version);
     if (!model.ok()) {
-      End(ToGrpcStatus(model.status(), call_.request_id));
+      End(ToCallStatus(context_, call_, model.status()));
       return;
     }
     bytes_ = std::move(model.value().second);
@@ -395,10 +385,10 @@ grpc::ServerUnaryReactor* RepositoryService::GetUploadStatus(
   return RunUnary(
       state_, context, RepositoryMethod("GetUploadStatus"), Right::kWrite, *request,
       [=, this](CallInfo&, WorkerContext&) {
-        if (grpc::Status refused = RefuseOnReplica(state_); !refused.ok()) return refused;
+        RECOG_RETURN_IF_ERROR(RefuseOnReplica(state_));
         if (!IsSha256Hex(request->sha256())) {
-          return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
-                              "sha256 must be 64 lowercase hex digits (SHA-256 of the file)");
+          return Status::InvalidArgument(
+              "sha256 must be 64 lowercase hex digits (SHA-256 of the file)");
         }
         const PartialUploads::Progress progress =
             partial_uploads_.ProgressOf({request->sha256(), request->size_bytes()});
@@ -410,7 +400,7 @@ grpc::ServerUnaryReactor* RepositoryService::GetUploadStatus(
             }
           }
         }
-        return grpc::Status::OK;
+        return Status::Ok();
       });
 }
 
@@ -424,15 +414,13 @@ grpc::ServerUnaryReactor* RepositoryService::ListModels(grpc::CallbackServerCont
                                                         pb::ListModelsResponse* response) {
   return RunUnary(
       state_, context, RepositoryMethod("ListModels"), Right::kRead, *request,
-      [=, this](CallInfo& call, WorkerContext&) {
+      [=, this](CallInfo&, WorkerContext&) {
         const ModelFilter filter{request->name_prefix(), request->object_class(), request->tag()};
-        StatusOr<ModelPage> page =
-            state_.repository->List(filter, request->page_size(), request->page_token());
-        if (!page.ok()) return ToGrpcStatus(page.status(), call.request_id);
-        for (const ModelVersionInfo& info : page.value().models)
-          ToProto(info, response->add_models());
-        response->set_next_page_token(page.value().next_page_token);
-        return grpc::Status::OK;
+        RECOG_ASSIGN_OR_RETURN(ModelPage page, state_.repository->List(filter, request->page_size(),
+                                                                       request->page_token()));
+        for (const ModelVersionInfo& info : page.models) ToProto(info, response->add_models());
+        response->set_next_page_token(page.next_page_token);
+        return Status::Ok();
       });
 }
 
@@ -443,14 +431,12 @@ grpc::ServerUnaryReactor* RepositoryService::DeleteModel(grpc::CallbackServerCon
                   Replay{request->request_id(), request, nullptr}, response,
                   [=, this](CallInfo& call, WorkerContext&) {
                     call.map = request->name();
-                    if (grpc::Status refused = RefuseOnReplica(state_); !refused.ok())
-                      return refused;
+                    RECOG_RETURN_IF_ERROR(RefuseOnReplica(state_));
                     const size_t versions = state_.repository->Versions(request->name()).size();
-                    RECOG_RETURN_IF_ERROR_AS_GRPC(state_.repository->Remove(request->name()),
-                                                  call.request_id);
+                    RECOG_RETURN_IF_ERROR(state_.repository->Remove(request->name()));
                     response->set_versions_deleted(uint32_t(versions));
                     state_.metrics.SetObjects(state_.objects->size());
-                    return grpc::Status::OK;
+                    return Status::Ok();
                   });
 }
 

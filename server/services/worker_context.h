@@ -16,7 +16,6 @@
 #include "core/features/feature_extractor.h"
 #include "core/object/recognition/object_recognizer.h"
 #include "core/place/loop_detector.h"
-#include "server/api/converters.h"
 
 namespace recog::server {
 

@@ -466,7 +466,7 @@ TEST_F(ConsoleHardeningTest, SlowClientsCannotStarveTheConsole) {
   std::thread trickle([&] {
     while (trickling) {
       for (int fd : slow) send(fd, "X", 1, MSG_NOSIGNAL | MSG_DONTWAIT);
-      std::this_thread::sleep_for(std::chrono::milliseconds(200));
+      std::this_thread::sleep_for(std::chrono::milliseconds(200));  // slow is what they must be
     }
   });
   // Meanwhile another client is answered at once, again and again.
@@ -474,7 +474,7 @@ TEST_F(ConsoleHardeningTest, SlowClientsCannotStarveTheConsole) {
     const auto start = Clock::now();
     EXPECT_EQ(StatusOf(RawGet("/api/whoami")), 200);
     EXPECT_LT(Clock::now() - start, std::chrono::milliseconds(2000));
-    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));  // spread over the attack
   }
   // The slow ones were evicted (beyond the per-client cap, the oldest made room for the newer)
   // or cut at the minimum rate (408): the server has closed every one of them.
@@ -713,7 +713,7 @@ TEST_F(ConsoleHardeningTest, SlowClientsFromAFewAddressesCannotStarveEitherPort)
           s.due = Clock::now() + std::chrono::seconds(2);
         }
       }
-      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));  // the attack's pace
     }
     for (Slow& s : slow) close(s.fd);
   });
@@ -721,13 +721,14 @@ TEST_F(ConsoleHardeningTest, SlowClientsFromAFewAddressesCannotStarveEitherPort)
   // answered on both ports, again and again, each well within 2 s.
   for (int i = 0; i < 8; ++i) {
     const auto start = Clock::now();
-    EXPECT_EQ(StatusOf(Raw(
-                  "GET /api/whoami HTTP/1.1\r\nHost: " + Host() + "\r\nConnection: close\r\n\r\n",
-                  i % 2 == 0 ? "127.0.0.1" : "127.0.0.2")),
-              200);
-    EXPECT_EQ(StatusOf(Scrape()), 200);
+    const std::string whoami =
+        Raw("GET /api/whoami HTTP/1.1\r\nHost: " + Host() + "\r\nConnection: close\r\n\r\n",
+            i % 2 == 0 ? "127.0.0.1" : "127.0.0.2");
+    EXPECT_EQ(StatusOf(whoami), 200) << "request " << i << " got '" << whoami << "'";
+    const std::string scrape = Scrape();
+    EXPECT_EQ(StatusOf(scrape), 200) << "scrape " << i << " got '" << scrape.substr(0, 200) << "'";
     EXPECT_LT(Clock::now() - start, std::chrono::milliseconds(2000));
-    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));  // spread over the attack
   }
   attacking = false;
   attacker.join();

@@ -7,17 +7,18 @@
 #include <filesystem>
 #include <fstream>
 #include <opencv2/imgcodecs.hpp>
-#include <thread>
 
 #include "server/console/live_sampler.h"
 #include "server/console/rpc_gateway.h"
 #include "tests/server/server_fixture.h"
 #include "tests/testing/model_files.h"
+#include "tests/testing/wait.h"
 
 namespace recog::server::testing {
 namespace {
 
 using nlohmann::json;
+using recog::testing::WaitUntil;
 
 constexpr char kReader[] = "reader-token-0123456789", kWriter[] = "writer-token-0123456789";
 
@@ -46,14 +47,15 @@ class ConsoleTest : public ServerFixture {
     auto [status, body] = Get(path, token);
     return {status, json::parse(body, nullptr, false)};
   }
-  // GET /api/maps once the map's thumbnails are written (in the background, within 10 s).
+  // GET /api/maps once the map's thumbnails are written (in the background), or when they never
+  // were, as it was at the deadline.
   json MapsOnceWritten(const std::string& thumbnails) {
     json maps;
-    for (int attempt = 0; attempt < 100; ++attempt) {
+    EXPECT_TRUE(WaitUntil([&] {
       maps = GetJson("/api/maps").second;
-      if (maps["maps"][0]["thumbnails"] == thumbnails) break;
-      std::this_thread::sleep_for(std::chrono::milliseconds(100));
-    }
+      return maps["maps"][0]["thumbnails"] == thumbnails;
+    })) << "the map's thumbnails were never "
+        << thumbnails;
     return maps;
   }
   std::pair<int, json> Rpc(const std::string& method, const std::string& body,
@@ -263,15 +265,17 @@ TEST_F(ConsoleTest, TheLiveViewCountsTheCallsOfTheLastSeconds) {
   for (int i = 0; i < 5; ++i)
     ASSERT_EQ(GetMap("nowhere").error_code(), grpc::StatusCode::NOT_FOUND);
   json samples;
-  for (int attempt = 0; attempt < 50; ++attempt) {  // one sample a second
-    auto [status, live] = GetJson("/api/live");
-    ASSERT_EQ(status, 200);
-    samples = live["samples"];
-    double calls = 0;
-    for (const json& s : samples) calls += s["calls_per_s"].get<double>();
-    if (calls > 0) break;
-    std::this_thread::sleep_for(std::chrono::milliseconds(100));
-  }
+  EXPECT_TRUE(WaitUntil(  // one sample a second
+      [&] {
+        auto [status, live] = GetJson("/api/live");
+        EXPECT_EQ(status, 200);
+        samples = live["samples"];
+        double calls = 0;
+        for (const json& s : samples) calls += s["calls_per_s"].get<double>();
+        return calls > 0;
+      },
+      recog::testing::kEventTimeout, std::chrono::milliseconds(100)))
+      << "the live view never counted a call";
   double calls = 0, errors = 0;
   for (const json& s : samples) {
     calls += s["calls_per_s"].get<double>();

@@ -14,6 +14,7 @@
 #include "client/cpp/frames.h"
 #include "core/features/feature_extractor.h"
 #include "tests/server/server_fixture.h"
+#include "tests/testing/metrics_scrape.h"
 #include "tools/evaluation/metric_sequence.h"
 
 namespace recog::server::testing {
@@ -194,6 +195,25 @@ TEST_F(PlaceServiceTest, AStreamAnswersEveryFrameInOrderAndDetectsTheRevisit) {
   ASSERT_TRUE(GetMap("tour", &info).ok());
   EXPECT_EQ(info.frames(), 5u);
   EXPECT_EQ(info.settings().temporal_matches(), 0u);
+}
+
+// A map created by a stream (create_if_missing) is created like one of CreateMap: its gauge of
+// entries is there, at 0, before any frame reaches it.
+TEST_F(PlaceServiceTest, AMapAStreamCreatesHasItsEntriesGaugeLikeOneOfCreateMap) {
+  StopServer();
+  config().metrics_listen = "127.0.0.1:0";
+  StartServer();
+  ASSERT_TRUE(CreateMap("made").ok());
+  pb::StreamConfig config;
+  config.set_map("streamed");
+  config.set_create_if_missing(true);
+  grpc::Status status;
+  EXPECT_TRUE(Stream(*places_, config, {}, &status).empty());
+  ASSERT_TRUE(status.ok()) << status.error_message();
+  ASSERT_TRUE(GetMap("streamed").ok());
+  const std::string metrics = recog::testing::FetchMetrics(server_->metrics_port());
+  EXPECT_NE(metrics.find("recog_map_entries{map=\"made\"} 0"), std::string::npos) << metrics;
+  EXPECT_NE(metrics.find("recog_map_entries{map=\"streamed\"} 0"), std::string::npos) << metrics;
 }
 
 TEST_F(PlaceServiceTest, BadFramesAreAnsweredWithTheirErrorAndTheStreamGoesOn) {

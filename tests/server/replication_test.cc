@@ -5,8 +5,6 @@
 // was never reached), catches up when either side comes back, and reconciles what changed while
 // it was down; settings it cannot use stop it from starting.
 #include <chrono>
-#include <functional>
-#include <thread>
 
 #include <google/protobuf/util/message_differencer.h>
 
@@ -16,22 +14,14 @@
 #include "tests/server/server_fixture.h"
 #include "tests/testing/model_files.h"
 #include "tests/testing/unix_socket.h"
+#include "tests/testing/wait.h"
 
 namespace recog::server::testing {
 namespace {
 
 using recog::testing::ModelFile;
 using recog::testing::PosterModelFile;
-
-// Polls `condition` every 50 ms for up to 20 s.
-bool Eventually(const std::function<bool()>& condition) {
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(20);
-  while (std::chrono::steady_clock::now() < deadline) {
-    if (condition()) return true;
-    std::this_thread::sleep_for(std::chrono::milliseconds(50));
-  }
-  return condition();
-}
+using recog::testing::WaitUntil;
 
 std::unique_ptr<client::RecognitionClient> ClientOf(const std::string& target) {
   client::ClientOptions options;
@@ -155,7 +145,7 @@ TEST_F(ReplicationTest, AReplicaCopiesEveryVersionAsThePrimaryStoresItAndRecogni
   Upload(PosterModelFile("poster", 1, "poster"), "poster", {"lab", "v2"});
   Upload(ModelFile("box", {41, 60}, "box"), "box");
   StartReplica();
-  ASSERT_TRUE(Eventually([&] { return ReplicaHolds("poster", 2) && ReplicaHolds("box", 1); }));
+  ASSERT_TRUE(WaitUntil([&] { return ReplicaHolds("poster", 2) && ReplicaHolds("box", 1); }));
   EXPECT_TRUE(ReplicaHolds("poster", 1));
   EXPECT_EQ(Latest(*replica_), Latest(*primary_));
   EXPECT_EQ(Recognised(*replica_), std::vector<std::string>{"poster"});
@@ -164,14 +154,14 @@ TEST_F(ReplicationTest, AReplicaCopiesEveryVersionAsThePrimaryStoresItAndRecogni
 TEST_F(ReplicationTest, AReplicaFollowsUploadsAndDeletionsAsTheyHappen) {
   StartReplica();
   Upload(ModelFile("box", {41, 60}, "box"), "box");
-  ASSERT_TRUE(Eventually([&] { return ReplicaHolds("box", 1); }));
+  ASSERT_TRUE(WaitUntil([&] { return ReplicaHolds("box", 1); }));
   Upload(PosterModelFile("poster", 20, "poster"), "poster");
   Upload(PosterModelFile("poster", 1, "poster"), "poster", {"newer"});
-  ASSERT_TRUE(Eventually([&] { return ReplicaHolds("poster", 2); }));
+  ASSERT_TRUE(WaitUntil([&] { return ReplicaHolds("poster", 2); }));
   EXPECT_TRUE(ReplicaHolds("poster", 1));
   EXPECT_THAT(Recognised(*replica_), ::testing::Contains("poster"));
   ASSERT_TRUE(primary_->DeleteModel("poster").ok());
-  ASSERT_TRUE(Eventually([&] { return ReplicaLacks("poster"); }));
+  ASSERT_TRUE(WaitUntil([&] { return ReplicaLacks("poster"); }));
   EXPECT_THAT(Recognised(*replica_), ::testing::Not(::testing::Contains("poster")));
   EXPECT_EQ(Latest(*replica_), (std::vector<std::pair<std::string, uint32_t>>{{"box", 1}}));
 }
@@ -179,7 +169,7 @@ TEST_F(ReplicationTest, AReplicaFollowsUploadsAndDeletionsAsTheyHappen) {
 TEST_F(ReplicationTest, AReplicaRefusesWritesNamingItsPrimaryAndKeepsItsModels) {
   Upload(PosterModelFile("poster", 1, "poster"), "poster");
   StartReplica();
-  ASSERT_TRUE(Eventually([&] { return ReplicaHolds("poster", 1); }));
+  ASSERT_TRUE(WaitUntil([&] { return ReplicaHolds("poster", 1); }));
 
   auto upload = replica_->UploadModel(PosterModelFile("poster", 20, "poster"), "poster");
   EXPECT_EQ(upload.status().error_code(), grpc::StatusCode::FAILED_PRECONDITION);
@@ -196,7 +186,7 @@ TEST_F(ReplicationTest, AReplicaRefusesWritesNamingItsPrimaryAndKeepsItsModels) 
 TEST_F(ReplicationTest, AReplicaServesWhileThePrimaryIsAwayAndFollowsItWhenItReturns) {
   Upload(PosterModelFile("poster", 1, "poster"), "poster");
   StartReplica();
-  ASSERT_TRUE(Eventually([&] { return ReplicaHolds("poster", 1); }));
+  ASSERT_TRUE(WaitUntil([&] { return ReplicaHolds("poster", 1); }));
   primary_.reset();
   StopServer();
   EXPECT_EQ(Recognised(*replica_), std::vector<std::string>{"poster"});
@@ -205,7 +195,7 @@ TEST_F(ReplicationTest, AReplicaServesWhileThePrimaryIsAwayAndFollowsItWhenItRet
   StartServer();  // same port, same data
   primary_ = ClientOf(config().listen);
   Upload(ModelFile("box", {41, 60}, "box"), "box");
-  EXPECT_TRUE(Eventually([&] { return ReplicaHolds("box", 1); }));
+  EXPECT_TRUE(WaitUntil([&] { return ReplicaHolds("box", 1); }));
 }
 
 TEST_F(ReplicationTest, AReplicaThatWasDownReconcilesWhatChangedMeanwhile) {
@@ -213,7 +203,7 @@ TEST_F(ReplicationTest, AReplicaThatWasDownReconcilesWhatChangedMeanwhile) {
   Upload(PosterModelFile("poster", 20, "poster"), "poster");
   Upload(ModelFile("box", {41, 60}, "box"), "box");
   StartReplica();
-  ASSERT_TRUE(Eventually([&] { return ReplicaHolds("poster", 2) && ReplicaHolds("box", 1); }));
+  ASSERT_TRUE(WaitUntil([&] { return ReplicaHolds("poster", 2) && ReplicaHolds("box", 1); }));
   StopReplica();
 
   // While the replica is down: the box goes, the poster is deleted and uploaded anew (another
@@ -224,7 +214,7 @@ TEST_F(ReplicationTest, AReplicaThatWasDownReconcilesWhatChangedMeanwhile) {
   Upload(PosterModelFile("cup", 41, "cup"), "cup");
 
   StartReplica();
-  ASSERT_TRUE(Eventually([&] { return ReplicaHolds("cup", 1) && ReplicaHolds("poster", 1); }));
+  ASSERT_TRUE(WaitUntil([&] { return ReplicaHolds("cup", 1) && ReplicaHolds("poster", 1); }));
   EXPECT_TRUE(ReplicaLacks("box"));
   pb::ModelInfo info;
   std::string bytes;

@@ -1,7 +1,10 @@
 // Loopback tests of the ObjectRepository and ObjectRecognition services: versioned uploads and
 // downloads, watching (also with the stored versions first), recognition of what was uploaded,
 // bad uploads and bad frames.
+#include <algorithm>
 #include <chrono>
+#include <iterator>
+#include <mutex>
 #include <string_view>
 #include <thread>
 
@@ -9,12 +12,14 @@
 
 #include "tests/server/server_fixture.h"
 #include "tests/testing/model_files.h"
+#include "tests/testing/wait.h"
 #include "wire/sha256.h"
 
 namespace recog::server::testing {
 namespace {
 
 using recog::testing::PosterModelFile;
+using recog::testing::WaitUntil;
 
 class RepositoryServiceTest : public ServerFixture {
  protected:
@@ -36,7 +41,10 @@ class RepositoryServiceTest : public ServerFixture {
   }
 
   // Starts uploading `bytes`, sends the first `sent` of them, then cancels the call (as a lost
-  // connection would end it) once the server has had time to read them.
+  // connection would end it) once the server has had time to read them. Nothing tells a client
+  // that the server has read a chunk of a call still open (it answers at the end), so the pause
+  // stays: the server keeps what it had read when it saw the cancellation, and the test accepts
+  // any part of the `sent` bytes, only not none.
   void Interrupt(const std::string& bytes, size_t sent) {
     auto context = Context();
     pb::PutModelResponse response;
@@ -53,19 +61,14 @@ class RepositoryServiceTest : public ServerFixture {
     EXPECT_EQ(writer->Finish().error_code(), grpc::StatusCode::CANCELLED);
   }
 
-  // GetUploadStatus of the upload of `bytes`, waiting up to 5 s for received bytes when
-  // `wait_for_bytes` (the server keeps them once it has seen the cancellation).
-  pb::GetUploadStatusResponse UploadStatus(const std::string& bytes, bool wait_for_bytes = false) {
+  // GetUploadStatus of the upload of `bytes`.
+  pb::GetUploadStatusResponse UploadStatus(const std::string& bytes) {
     pb::GetUploadStatusRequest request;
     request.set_sha256(Sha256Hex(bytes));
     request.set_size_bytes(bytes.size());
     pb::GetUploadStatusResponse response;
-    for (int i = 0; i < 50; ++i) {
-      const grpc::Status status = models_->GetUploadStatus(Context().get(), request, &response);
-      EXPECT_TRUE(status.ok()) << status.error_message();
-      if (!wait_for_bytes || response.received_bytes() > 0) break;
-      std::this_thread::sleep_for(std::chrono::milliseconds(100));
-    }
+    const grpc::Status status = models_->GetUploadStatus(Context().get(), request, &response);
+    EXPECT_TRUE(status.ok()) << status.error_message();
     return response;
   }
 
@@ -131,8 +134,10 @@ TEST_F(RepositoryServiceTest, AnInterruptedUploadIsResumedFromTheBytesTheServerK
   ASSERT_GT(file.size(), 20000u);
   EXPECT_EQ(UploadStatus(file).received_bytes(), 0u);
   Interrupt(file, 16384);
-  const uint64_t kept = UploadStatus(file, /*wait_for_bytes=*/true).received_bytes();
-  ASSERT_GT(kept, 0u);
+  // The server keeps the bytes once it has seen the cancellation.
+  uint64_t kept = 0;
+  ASSERT_TRUE(WaitUntil([&] { return (kept = UploadStatus(file).received_bytes()) > 0; }))
+      << "the server kept none of the interrupted upload's bytes";
   EXPECT_LE(kept, 16384u);
 
   // Resuming beyond what the server holds is refused, and what it holds stays.
@@ -325,35 +330,64 @@ TEST_F(RepositoryServiceTest, WatchersSeeEveryChangeInOrder) {
   pb::WatchModelsRequest request;
   request.set_name_prefix("watched");
   auto reader = models_->WatchModels(&context, request);
-  std::vector<pb::WatchModelsResponse> events;
+  std::mutex mutex;
+  std::vector<pb::WatchModelsResponse> events;  // guarded by mutex
   std::thread watcher([&] {
     pb::WatchModelsResponse event;
-    while (events.size() < 3 && reader->Read(&event)) events.push_back(event);
+    while (reader->Read(&event)) {
+      std::lock_guard lock(mutex);
+      events.push_back(event);
+    }
   });
-  // The watch is registered once the server handled the call; give it a moment.
-  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  const auto seen = [&](const std::string& name, pb::ModelChange change) {
+    std::lock_guard lock(mutex);
+    return std::any_of(events.begin(), events.end(), [&](const pb::WatchModelsResponse& event) {
+      return event.model().name() == name && event.change() == change;
+    });
+  };
+  // The watch is registered once the server has handled the call, which the client does not see:
+  // uploads of a probe the watch matches go until one of them arrives. Every change after that
+  // reaches the watch.
   const std::string file = PosterModelFile("x", 1, "");
-  ASSERT_TRUE(Put(file, "watched-1").ok());
-  ASSERT_TRUE(Put(file, "other").ok());  // filtered out by the prefix
-  ASSERT_TRUE(Put(file, "watched-1").ok());
-  pb::DeleteModelRequest remove;
-  remove.set_name("watched-1");
-  pb::DeleteModelResponse removed;
-  ASSERT_TRUE(models_->DeleteModel(Context().get(), remove, &removed).ok());
-  EXPECT_EQ(removed.versions_deleted(), 2u);
-  watcher.join();
+  const bool registered = WaitUntil([&] {
+    EXPECT_TRUE(Put(file, "watched-probe").ok());
+    return WaitUntil([&] { return seen("watched-probe", pb::MODEL_CHANGE_PUT); },
+                     std::chrono::seconds(1));
+  });
+  bool deletion_seen = false;
+  if (registered) {
+    EXPECT_TRUE(Put(file, "watched-1").ok());
+    EXPECT_TRUE(Put(file, "other").ok());  // filtered out by the prefix
+    EXPECT_TRUE(Put(file, "watched-1").ok());
+    pb::DeleteModelRequest remove;
+    remove.set_name("watched-1");
+    pb::DeleteModelResponse removed;
+    EXPECT_TRUE(models_->DeleteModel(Context().get(), remove, &removed).ok());
+    EXPECT_EQ(removed.versions_deleted(), 2u);
+    EXPECT_EQ(models_->DeleteModel(Context().get(), remove, &removed).error_code(),
+              grpc::StatusCode::NOT_FOUND);
+    deletion_seen = WaitUntil([&] { return seen("watched-1", pb::MODEL_CHANGE_DELETED); });
+  }
   context.TryCancel();
+  watcher.join();
   reader->Finish();
-  ASSERT_EQ(events.size(), 3u);
-  EXPECT_EQ(events[0].change(), pb::MODEL_CHANGE_PUT);
-  EXPECT_EQ(events[0].model().version(), 1u);
-  EXPECT_EQ(events[1].change(), pb::MODEL_CHANGE_PUT);
-  EXPECT_EQ(events[1].model().version(), 2u);
-  EXPECT_EQ(events[2].change(), pb::MODEL_CHANGE_DELETED);
-  EXPECT_LT(events[0].sequence(), events[1].sequence());
-  EXPECT_LT(events[1].sequence(), events[2].sequence());
-  EXPECT_EQ(models_->DeleteModel(Context().get(), remove, &removed).error_code(),
-            grpc::StatusCode::NOT_FOUND);
+  ASSERT_TRUE(registered) << "no upload of the probe reached the watch";
+  ASSERT_TRUE(deletion_seen) << "the watch did not see the deletion of watched-1";
+
+  std::vector<pb::WatchModelsResponse> watched;  // the changes of watched-1, in their order
+  std::copy_if(events.begin(), events.end(), std::back_inserter(watched),
+               [](const pb::WatchModelsResponse& event) {
+                 EXPECT_NE(event.model().name(), "other");
+                 return event.model().name() == "watched-1";
+               });
+  ASSERT_EQ(watched.size(), 3u);
+  EXPECT_EQ(watched[0].change(), pb::MODEL_CHANGE_PUT);
+  EXPECT_EQ(watched[0].model().version(), 1u);
+  EXPECT_EQ(watched[1].change(), pb::MODEL_CHANGE_PUT);
+  EXPECT_EQ(watched[1].model().version(), 2u);
+  EXPECT_EQ(watched[2].change(), pb::MODEL_CHANGE_DELETED);
+  EXPECT_LT(watched[0].sequence(), watched[1].sequence());
+  EXPECT_LT(watched[1].sequence(), watched[2].sequence());
 }
 
 TEST_F(RepositoryServiceTest, WatchingWithTheExistingVersionsSendsThemThenSyncedThenChanges) {

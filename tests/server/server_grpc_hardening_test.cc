@@ -19,11 +19,13 @@
 #include "server/services/health_service.h"
 #include "tests/server/server_fixture.h"
 #include "tests/testing/raw_http2_client.h"
+#include "tests/testing/wait.h"
 
 namespace recog::server::testing {
 namespace {
 
 using recog::testing::RawHttp2Client;
+using recog::testing::WaitUntil;
 namespace http2 = recog::testing::http2;
 
 constexpr char kListMaps[] = "/recognition.v1.PlaceRecognition/ListMaps";
@@ -206,18 +208,18 @@ TEST_F(GrpcHardeningTest, RunningOutOfDescriptorsDoesNotDeafenThePort) {
     }
     sockets.push_back(fd);
   }
-  // The listener takes the connections up in its own time: its turn (500 ms), then up to 10 s
-  // more on a busy machine until it has closed one of them for want of a descriptor.
-  std::this_thread::sleep_for(std::chrono::milliseconds(500));
+  // The listener takes the connections up in its own time, until it closes one of them for want
+  // of a descriptor.
   size_t closed_by_server = 0;
-  const auto listened_until = std::chrono::steady_clock::now() + std::chrono::seconds(10);
-  while (closed_by_server == 0 && std::chrono::steady_clock::now() < listened_until) {
-    for (const int fd : sockets) {
-      char byte;
-      if (recv(fd, &byte, 1, MSG_DONTWAIT) == 0) ++closed_by_server;
-    }
-    if (closed_by_server == 0) std::this_thread::sleep_for(std::chrono::milliseconds(50));
-  }
+  WaitUntil(
+      [&] {
+        for (const int fd : sockets) {
+          char byte;
+          if (recv(fd, &byte, 1, MSG_DONTWAIT) == 0) ++closed_by_server;
+        }
+        return closed_by_server > 0;
+      },
+      recog::testing::kEventTimeout, std::chrono::milliseconds(50));
   for (const int fd : sockets) close(fd);
   EXPECT_GT(sockets.size(), 400u);
   EXPECT_GT(closed_by_server, 0u) << "the reserve of descriptors was never reached";

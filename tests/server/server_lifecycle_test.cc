@@ -22,11 +22,12 @@
 
 #include "core/vocabulary/vocabulary_io.h"
 #include "grpc/health/v1/health.grpc.pb.h"
-#include "server/api/converters.h"
+#include "server/api/place_converters.h"
 #include "tests/server/server_fixture.h"
 #include "tests/testing/metrics_scrape.h"
 #include "tests/testing/test_data.h"
 #include "tests/testing/unix_socket.h"
+#include "tests/testing/wait.h"
 #include "tools/evaluation/ground_truth.h"
 #include "tools/evaluation/place_evaluation.h"
 
@@ -36,6 +37,7 @@ namespace recog::server::testing {
 namespace {
 
 using recog::testing::FetchMetrics;
+using recog::testing::WaitUntil;
 
 constexpr char kRobotToken[] = "robot-token-0123456789";
 constexpr char kOperatorToken[] = "operator-token-0123456789";
@@ -252,16 +254,21 @@ TEST_F(ServerLifecycleTest, DrainingAnswersNotServingAndRefusesNewCalls) {
   EXPECT_EQ(watch.Next(), 2);
   EXPECT_EQ(watch.Next(), -1) << "the health watch did not end with the drain's NOT_SERVING";
   // Once the drain is under way a new client is refused (the listener is closed), and so is a new
-  // call on a connection opened before it. (A call that arrives in the very instant gRPC begins
-  // its shutdown may be CANCELLED instead: hence the pause.)
-  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  // call on a connection opened before it. A call that arrives in the very instant gRPC begins its
+  // shutdown may be CANCELLED instead: that one is sent again.
   pb::ListMapsResponse listed;
   auto fresh = pb::PlaceRecognition::NewStub(grpc::CreateChannel(
       "127.0.0.1:" + std::to_string(server_->port()), grpc::InsecureChannelCredentials()));
-  EXPECT_EQ(fresh->ListMaps(Context().get(), {}, &listed).error_code(),
-            grpc::StatusCode::UNAVAILABLE);
-  EXPECT_EQ(places_->ListMaps(Context().get(), {}, &listed).error_code(),
-            grpc::StatusCode::UNAVAILABLE);
+  const auto refusal = [&](pb::PlaceRecognition::Stub& stub) {
+    grpc::StatusCode code = grpc::StatusCode::CANCELLED;
+    EXPECT_TRUE(WaitUntil([&] {
+      code = stub.ListMaps(Context().get(), {}, &listed).error_code();
+      return code != grpc::StatusCode::CANCELLED;
+    })) << "every ListMaps was cancelled";
+    return code;
+  };
+  EXPECT_EQ(refusal(*fresh), grpc::StatusCode::UNAVAILABLE);
+  EXPECT_EQ(refusal(*places_), grpc::StatusCode::UNAVAILABLE);
   EXPECT_EQ(shutdown.wait_for(std::chrono::milliseconds(0)), std::future_status::timeout)
       << "the drain ended before the checks: they did not run during it";
   shutdown.get();
@@ -300,12 +307,7 @@ TEST_F(ServerLifecycleTest, ACallWhoseDeadlinePassesInTheQueueDoesNotRun) {
     const size_t at = metrics.find("\nrecog_worker_queue_depth ");
     return at == std::string::npos ? 0.0 : std::atof(metrics.c_str() + at + 26);
   };
-  const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(60);
-  double queued = 0;
-  while ((queued = waiting()) < 2 && std::chrono::steady_clock::now() < give_up) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(5));
-  }
-  ASSERT_GE(queued, 2) << "the large frames never queued";
+  ASSERT_TRUE(WaitUntil([&] { return waiting() >= 2; })) << "the large frames never queued";
   pb::AddFrameRequest request;
   request.set_map("queued");
   *request.mutable_frame() = JpegFrame(CorridorJpeg(20));
@@ -500,13 +502,12 @@ TEST_F(ServerLifecycleTest, KillNineDuringAStreamLosesNoAcknowledgedFrame) {
   auto channel = grpc::CreateChannel(listen, grpc::InsecureChannelCredentials());
   auto stub = pb::PlaceRecognition::NewStub(channel);
   grpc::Status ready;
-  for (int attempt = 0; attempt < 300; ++attempt) {  // wait until it serves
+  ASSERT_TRUE(WaitUntil([&] {
     pb::ListMapsResponse listed;
     ready = stub->ListMaps(Context().get(), {}, &listed);
-    if (ready.ok()) break;
-    std::this_thread::sleep_for(std::chrono::milliseconds(100));
-  }
-  ASSERT_TRUE(ready.ok()) << ready.error_message();
+    return ready.ok();
+  })) << "recogd did not serve: "
+      << ready.error_message();
   const std::string jpegs[] = {CorridorJpeg(1), CorridorJpeg(20), CorridorJpeg(41),
                                CorridorJpeg(60)};
 
@@ -635,14 +636,13 @@ TEST_F(ServerLifecycleTest, AFullDiskRefusesFramesWithoutRetryLosesNoneAcknowled
   disk.FreeSpace();
   // The store looks for room every 5 s and then takes writes again.
   grpc::Status resumed = refused;
-  for (int attempt = 0; attempt < 300 && !resumed.ok(); ++attempt) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(100));
-    resumed = add_next_frame(&pushback);
-    if (!resumed.ok()) {
-      ASSERT_EQ(resumed.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED)
-          << resumed.error_message();
-    }
-  }
+  ASSERT_TRUE(WaitUntil(
+      [&] {
+        resumed = add_next_frame(&pushback);
+        return resumed.error_code() != grpc::StatusCode::RESOURCE_EXHAUSTED;
+      },
+      recog::testing::kEventTimeout, std::chrono::milliseconds(100)))
+      << "the store took no write again after the disk was freed";
   ASSERT_TRUE(resumed.ok()) << resumed.error_message();
 
   RestartServer();

@@ -21,6 +21,7 @@
 #include "tests/server/server_fixture.h"
 #include "tests/testing/metrics_scrape.h"
 #include "tests/testing/unix_socket.h"
+#include "tests/testing/wait.h"
 
 extern char** environ;
 
@@ -68,15 +69,11 @@ class ServerReloadTest : public ServerFixture {
     return pb::PlaceRecognition::NewStub(channel)->ListMaps(Context(token).get(), {}, &listed);
   }
 
-  // Polls a new connection trusting `ca_pem` until it succeeds, for up to 10 s (the certificate
+  // Whether a new connection trusting `ca_pem` succeeds before the deadline (the certificate
   // provider re-reads the files every second).
   bool NewConnectionsSucceedWith(const std::string& ca_pem) const {
-    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
-    while (std::chrono::steady_clock::now() < deadline) {
-      if (ListMaps(TlsChannel(ca_pem)).ok()) return true;
-      std::this_thread::sleep_for(std::chrono::milliseconds(100));
-    }
-    return false;
+    return recog::testing::WaitUntil([&] { return ListMaps(TlsChannel(ca_pem)).ok(); },
+                                     recog::testing::kEventTimeout, std::chrono::milliseconds(100));
   }
 
   recog::testing::TempDir files_;  // the server's certificate, key and token files
@@ -103,6 +100,8 @@ TEST_F(ServerReloadTest, ARotatedCertificateServesNewConnectionsAfterAReload) {
   reloaded = server_->Reload();
   EXPECT_EQ(reloaded.code(), StatusCode::kInvalidArgument);
   EXPECT_THAT(reloaded.message(), HasSubstr("is not the key of"));
+  // The behaviour under test takes time: after two refresh periods the certificate provider has
+  // re-read the files, and must still serve the pair it had.
   std::this_thread::sleep_for(std::chrono::seconds(2 * ServerTls::kRefreshSeconds));
   EXPECT_TRUE(ListMaps(TlsChannel(old_ca)).ok());
 

@@ -38,7 +38,7 @@ void SetIntrinsics(const CameraIntrinsics& camera, pb::Frame* frame) {
   out->set_cx(camera.cx);
   out->set_cy(camera.cy);
   out->mutable_distortion()->Assign(camera.distortion.begin(), camera.distortion.end());
-  out->set_lens(pb::LensModel(camera.lens));  // the same numbers (server/api/converters.cc)
+  out->set_lens(pb::LensModel(camera.lens));  // the same numbers (server/api/frame_decoding.cc)
 }
 
 std::string EnumLabel(std::string name, std::string_view prefix) {

@@ -199,7 +199,7 @@ class MetricSequenceTest : public ::testing::Test {
     for (size_t i = kLapFrames; i < features_->size(); ++i) {
       const FrameGeometry geometry = geometry_of(i, sides.query_depth);
       const auto start = Clock::now();
-      auto r = detector->Query((*features_)[i], 0.0, &geometry);
+      auto r = detector->Query((*features_)[i], &geometry);
       run.detector_ms += MillisecondsSince(start) / kLapFrames;
       EXPECT_TRUE(r.ok()) << r.status().ToString();
       EXPECT_EQ(r->status, LoopStatus::kLoopDetected) << i;

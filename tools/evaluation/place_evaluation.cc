@@ -466,9 +466,8 @@ StatusOr<AcrossMapsEvaluation> EvaluateAcrossMaps(const SequenceFeatures& sequen
         map_b.Process(sequence.features[f], TimestampOf(sequence, f), {}, GeometryOf(sequence, f)));
     AddTimings(own.timings, sequence.feature_ms[f], PointsMsOf(sequence, f), &own_map);
     CountResult(own, i, map_of_b, truth, sequence, nullptr, &own_map, &eval.own_map.loops);
-    RECOG_ASSIGN_OR_RETURN(
-        LoopResult across,
-        map_a.Query(sequence.features[f], TimestampOf(sequence, f), GeometryOf(sequence, f)));
+    RECOG_ASSIGN_OR_RETURN(LoopResult across,
+                           map_a.Query(sequence.features[f], GeometryOf(sequence, f)));
     AddTimings(across.timings, 0.0, nullptr, &inter_map);
     CountResult(across, i, map_of_a, truth, sequence, nullptr, &inter_map, &eval.inter_map.loops);
   }

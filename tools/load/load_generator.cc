@@ -745,8 +745,10 @@ StatusOr<LoadReport> LoadGenerator::Run(
 
 StatusOr<PlaceEvaluationOptions> OfflineDetectorOptions(const pb::MapSettings& settings) {
   PlaceEvaluationOptions options;
-  RECOG_RETURN_IF_ERROR(ApplyDetectorSettings(
-      MapSettingsAsText(settings, MapDetectorSettingNames()), &options.detector));
+  std::vector<NamedSetting> values;
+  const std::string unknown = MapSettingsAsText(settings, MapDetectorSettingNames(), &values);
+  if (!unknown.empty()) return Status::Internal("MapSettings and the settings table: " + unknown);
+  RECOG_RETURN_IF_ERROR(ApplyDetectorSettings(values, &options.detector));
   return options;
 }
 

@@ -3,6 +3,7 @@
 // an unreachable or vanishing server, and refused options.
 #include "tools/load/load_generator.h"
 
+#include <algorithm>
 #include <chrono>
 #include <filesystem>
 #include <fstream>
@@ -12,6 +13,7 @@
 
 #include "client/cpp/client_test_fixture.h"
 #include "tests/testing/test_data.h"
+#include "tests/testing/wait.h"
 
 namespace recog::cli {
 namespace {
@@ -235,8 +237,14 @@ TEST_F(LoadGeneratorTest, AServerThatGoesAwayMidRunEndsTheRobotsWithCountedError
   LoadOptions load = CorridorLoad(2, 0);
   load.duration_s = 30;
   load.rate_hz = 20;
+  // The server goes away once the robots' frames are being answered (their maps hold some).
   std::thread stopper([this] {
-    std::this_thread::sleep_for(std::chrono::milliseconds(700));
+    const std::unique_ptr<client::RecognitionClient> client = Connect();
+    EXPECT_TRUE(recog::testing::WaitUntil([&] {
+      const auto maps = client->ListMaps();
+      return maps.ok() && std::any_of(maps->begin(), maps->end(),
+                                      [](const auto& map) { return map.frames() > 0; });
+    })) << "no frame was added to a robot's map";
     StopServer();
   });
   const auto start = Clock::now();

@@ -18,6 +18,8 @@ void AddSeqgenCommand(CLI::App& app, int* exit_code);  // seqgen, seqgen objects
 void AddEvalPlaceCommand(CLI::App& eval, int* exit_code);
 void AddEvalObjectsCommand(CLI::App& eval, int* exit_code);
 void AddEvalSequenceCommand(CLI::App& eval, int* exit_code);
+// settings: the loop detector's settings table (detector_settings.h)
+void AddSettingsCommand(CLI::App& app, int* exit_code);
 void AddModelCommands(CLI::App& app, int* exit_code);  // model build|info|export
 void AddRecognizeCommand(CLI::App& app, int* exit_code);
 // The subcommands that use recogd (remote_support.h, server_flags.h); recognize too, with --server.

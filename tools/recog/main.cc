@@ -34,6 +34,7 @@ int main(int argc, char** argv) {
   recog::cli::AddEvalPlaceCommand(*eval, &exit_code);
   recog::cli::AddEvalObjectsCommand(*eval, &exit_code);
   recog::cli::AddEvalSequenceCommand(*eval, &exit_code);
+  recog::cli::AddSettingsCommand(app, &exit_code);
   recog::cli::AddModelCommands(app, &exit_code);
   recog::cli::AddRecognizeCommand(app, &exit_code);
   recog::cli::AddStreamCommands(app, &exit_code);

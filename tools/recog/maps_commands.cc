@@ -8,6 +8,8 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -37,9 +39,13 @@ void PrintFields(const Json& fields) {
 }
 
 // A map's detector settings (the settings table's names and kinds), then its group and thumbnails.
-Json SettingsJson(const pb::MapSettings& settings) {
+// INTERNAL when the table names a setting MapSettings lacks (a bug).
+StatusOr<Json> SettingsJson(const pb::MapSettings& settings) {
+  std::vector<std::pair<std::string, std::string>> values;
+  const std::string unknown = MapSettingsAsText(settings, MapDetectorSettingNames(), &values);
+  if (!unknown.empty()) return Status::Internal("MapSettings and the settings table: " + unknown);
   Json out = Json::object();
-  for (const auto& [name, text] : MapSettingsAsText(settings, MapDetectorSettingNames())) {
+  for (const auto& [name, text] : values) {
     const SettingKind kind = FindDetectorSetting(name)->kind;
     if (kind == SettingKind::kNumber) {
       out[name] = std::stod(text);
@@ -54,14 +60,15 @@ Json SettingsJson(const pb::MapSettings& settings) {
   return out;
 }
 
-Json MapJson(const pb::MapInfo& map) {
-  return {{"name", map.name()},
-          {"id", map.id()},
-          {"frames", map.frames()},
-          {"next_frame_id", map.next_frame_id()},
-          {"created", UtcTime(map.created_unix_ms())},
-          {"vocabulary_checksum", map.vocabulary_checksum()},
-          {"settings", SettingsJson(map.settings())}};
+StatusOr<Json> MapJson(const pb::MapInfo& map) {
+  RECOG_ASSIGN_OR_RETURN(Json settings, SettingsJson(map.settings()));
+  return Json{{"name", map.name()},
+              {"id", map.id()},
+              {"frames", map.frames()},
+              {"next_frame_id", map.next_frame_id()},
+              {"created", UtcTime(map.created_unix_ms())},
+              {"vocabulary_checksum", map.vocabulary_checksum()},
+              {"settings", std::move(settings)}};
 }
 
 // One flag per setting a map keeps (the settings table: --name-with-dashes, its doc, its choices
@@ -74,7 +81,8 @@ void AddMapSettingFlags(CLI::App* create, pb::MapSettings* settings) {
     std::replace(flag.begin(), flag.end(), '_', '-');
     std::string doc = std::string(setting.doc);
     doc[0] = char(std::toupper(static_cast<unsigned char>(doc[0])));
-    doc += " (default preset: " + FormatDetectorSetting(setting, defaults) + ")";
+    doc += "; default preset: " + DisplayDetectorSetting(setting, defaults);
+    if (setting.kind == SettingKind::kPreset) doc += ":\n" + PresetHelp();
     CLI::Option* option = create->add_option_function<std::string>(
         flag,
         [settings, name, flag](const std::string& text) {
@@ -100,7 +108,11 @@ int RunMapsList(const ServerFlags& flags, RecognitionClient& client) {
   if (!maps.ok()) return Fail("maps list", maps.status());
   if (flags.json) {
     Json out = Json::array();
-    for (const pb::MapInfo& map : *maps) out.push_back(MapJson(map));
+    for (const pb::MapInfo& map : *maps) {
+      StatusOr<Json> json = MapJson(map);
+      if (!json.ok()) return Fail("maps list", json.status());
+      out.push_back(*std::move(json));
+    }
     std::printf("%s\n", out.dump(2).c_str());
     return 0;
   }
@@ -112,13 +124,17 @@ int RunMapsList(const ServerFlags& flags, RecognitionClient& client) {
   return 0;
 }
 
-// Prints a map's description (maps create, maps stats).
-void PrintMap(const ServerFlags& flags, const pb::MapInfo& map) {
+// Prints a map's description (maps create, maps stats, named `command` in a failure): the exit
+// status.
+int PrintMap(const ServerFlags& flags, const pb::MapInfo& map, const char* command) {
+  StatusOr<Json> json = MapJson(map);
+  if (!json.ok()) return Fail(command, json.status());
   if (flags.json) {
-    std::printf("%s\n", MapJson(map).dump(2).c_str());
+    std::printf("%s\n", json->dump(2).c_str());
   } else {
-    PrintFields(MapJson(map));
+    PrintFields(*json);
   }
+  return 0;
 }
 
 }  // namespace
@@ -153,8 +169,7 @@ void AddMapsCommands(CLI::App& app, int* exit_code) {
   ConnectCommand(create, &create_args->server, exit_code, [create_args](RecognitionClient& client) {
     auto map = client.CreateMap(create_args->name, create_args->settings);
     if (!map.ok()) return Fail("maps create", map.status());
-    PrintMap(create_args->server, *map);
-    return 0;
+    return PrintMap(create_args->server, *map, "maps create");
   });
 
   struct NamedArgs {
@@ -223,8 +238,7 @@ void AddMapsCommands(CLI::App& app, int* exit_code) {
   ConnectCommand(stats, &stats_args->server, exit_code, [stats_args](RecognitionClient& client) {
     auto map = client.GetMap(stats_args->name);
     if (!map.ok()) return Fail("maps stats", map.status());
-    PrintMap(stats_args->server, *map);
-    return 0;
+    return PrintMap(stats_args->server, *map, "maps stats");
   });
 }
 

@@ -173,6 +173,45 @@ if grep -q "^missed 2 of 2: failed geometry 2$" "$tmp/out" \
 else
   fail "eval place --rig sums up and lists the failed geometry: $(cat "$tmp/out")"
 fi
+# A report reproduces itself: its "parameters" (every setting, typed, and the rig's own) given
+# back as --params over the default preset give the same report but for the timings.
+same_but_timings() {  # DESCRIPTION A B: the two JSON reports are equal once timing_ms is dropped
+  /usr/bin/python3 - "$2" "$3" <<'PYTHON' && pass || fail "$1"
+import json, sys
+def untimed(d):
+    if isinstance(d, dict): return {k: untimed(v) for k, v in d.items() if k != 'timing_ms'}
+    if isinstance(d, list): return [untimed(v) for v in d]
+    return d
+a, b = (untimed(json.load(open(path))) for path in sys.argv[1:])
+assert a == b, {k: (a.get(k), b.get(k)) for k in set(a) | set(b) if a.get(k) != b.get(k)}
+PYTHON
+}
+printf 'alpha: 0.2\nmax_verified_frames: 3\nmin_consistent_ratio: 0.8\n' >"$tmp/rig_own.yaml"
+expect_ok "eval place --rig with the rig's own settings" "$recog" eval place --rig "$tmp/rig" \
+  --ground-truth "$tmp/rig/ground_truth.txt" --params "$tmp/rig_own.yaml" --json -q
+cp "$tmp/out" "$tmp/rig_report.json"
+json_check "eval place --rig reports every setting and the rig's own" "
+p = d['parameters']
+assert (p['preset'], p['alpha'], p['max_verified_frames'], p['min_consistent_ratio']) \
+    == ('default', 0.2, 3, 0.8), p
+assert p['max_rotation_disagreement_deg'] == 3.0 and p['mutual'] is False and p['ratio'] == 0.6, p
+assert (p['features'], p['scoring'], p['direct_index_levels_up']) == (1000, 'l1', 2), p
+assert p['vocabulary'] == d['vocabulary'] and d['detections'] > 0, d"
+expect_ok "eval place --rig given its report as --params" "$recog" eval place --rig "$tmp/rig" \
+  --ground-truth "$tmp/rig/ground_truth.txt" --params "$tmp/rig_report.json" --json -q
+same_but_timings "eval place --rig reproduces its report from it" "$tmp/rig_report.json" \
+  "$tmp/out"
+expect_ok "eval place --rig as text with its settings" "$recog" eval place --rig "$tmp/rig" \
+  --params "$tmp/rig_own.yaml" -q
+grep -qx "settings: preset default, alpha 0.2" "$tmp/out" && pass \
+  || fail "eval place --rig prints the settings that differ from the preset: $(cat "$tmp/out")"
+expect_error "eval place --images with a rig report's settings" \
+  "rig_report.json': 'max_rotation_disagreement_deg' is a setting of --rig" "$recog" eval place \
+  --images "$images" --params "$tmp/rig_report.json" -q
+printf 'max_verified_frames: 0\n' >"$tmp/rig_bad_own.yaml"
+expect_error "eval place --rig with no frame to verify" \
+  "rig_bad_own.yaml': RigLoopParams.max_verified_frames = 0: must be >= 1" "$recog" eval place \
+  --rig "$tmp/rig" --params "$tmp/rig_bad_own.yaml" -q
 expect_ok "eval place --rig --cameras front" "$recog" eval place --rig "$tmp/rig/rig.yaml" \
   --cameras front --json -q
 json_check "eval place --rig --cameras front keeps the front camera" \
@@ -438,6 +477,47 @@ to .*/1.jpg, [0-9]+ inliers of [0-9]+ matches, a true place at rank 2 \(.*/20.jp
 else
   fail "eval place sums up and lists the misses: $(cat "$tmp/out")"
 fi
+# The report of one map and of two: every setting (typed) with the evaluation's own, and given
+# back as --params (over the default preset) the same report but for the timings; its vocabulary
+# is skipped (--vocab's is used), other keys are settings.
+printf 'preset: thesis\nrecent_frames: 0\ntemporal_matches: 0\nratio: 0.7\nfeatures: 800\nscoring: l2\n' \
+  >"$tmp/replay.yaml"
+expect_ok "eval place with settings over the thesis preset" "$recog" eval place --images "$images" \
+  --ground-truth "$tmp/gt4.txt" --vocab "$tmp/v.rvoc" --params "$tmp/replay.yaml" --json -q
+cp "$tmp/out" "$tmp/report.json"
+json_check "eval place --json lists every setting, typed, and the evaluation's own" "
+p = d['parameters']
+assert (p['preset'], p['recent_frames'], p['temporal_matches'], p['ratio']) == ('thesis', 0, 0, 0.7), p
+assert (p['features'], p['scoring'], p['direct_index_levels_up']) == (800, 'l2', 2), p
+assert p['strong_acceptance'] is False and p['geometry'] == 'direct_index', p
+assert p['min_inliers'] == 12 and p['calibrated_min_spread'] == 0.125 and p['mutual'] is False, p
+assert p['vocabulary'].endswith('/v.rvoc') and 'max_verified_frames' not in p, p
+assert d['detections'] > 0, d"
+expect_ok "eval place given its report as --params" "$recog" eval place --images "$images" \
+  --ground-truth "$tmp/gt4.txt" --vocab "$tmp/v.rvoc" --params "$tmp/report.json" --json -q
+same_but_timings "eval place reproduces its report from it" "$tmp/report.json" "$tmp/out"
+expect_ok "eval place as text with its settings" "$recog" eval place --images "$images" \
+  --ground-truth "$tmp/gt4.txt" --vocab "$tmp/v.rvoc" --params "$tmp/report.json" -q
+grep -qx "settings: preset thesis, temporal_matches 0, recent_frames 0, ratio 0.7" "$tmp/out" \
+  && pass || fail "eval place prints the settings that differ from the preset: $(cat "$tmp/out")"
+expect_ok "eval place --split with settings" "$recog" eval place --images "$images" \
+  --ground-truth "$tmp/gt4.txt" --split 2 --params "$tmp/replay.yaml" --json -q
+cp "$tmp/out" "$tmp/split_report.json"
+json_check "eval place --split reports every setting" "
+p = d['parameters']; assert (p['preset'], p['ratio'], p['features']) == ('thesis', 0.7, 800), p"
+expect_ok "eval place --split given its report as --params" "$recog" eval place \
+  --images "$images" --ground-truth "$tmp/gt4.txt" --split 2 --params "$tmp/split_report.json" \
+  --json -q
+same_but_timings "eval place --split reproduces its report from it" "$tmp/split_report.json" \
+  "$tmp/out"
+printf '{"parameters": [1, 2]}\n' >"$tmp/bad_report.json"
+expect_error "eval place --params with a report whose parameters are no map" \
+  "bad_report.json': 'parameters' is not a map" "$recog" eval place --images "$images" \
+  --params "$tmp/bad_report.json" -q
+printf 'vocabulary: %s\n' "$tmp/v.rvoc" >"$tmp/vocabulary_setting.yaml"
+expect_error "eval place --params naming a vocabulary outside a report" \
+  "unknown setting 'vocabulary'" "$recog" eval place --images "$images" \
+  --params "$tmp/vocabulary_setting.yaml" -q
 expect_error "eval place --robot-b with a ground truth of A's frames only" "INVALID_ARGUMENT" \
   "$recog" eval place --images "$tmp/robot_a.txt" --robot-b "$tmp/robot_b.txt" \
   --ground-truth "$tmp/gt_robot_a.txt" -q

@@ -24,6 +24,7 @@
 #include "client/cpp/frames.h"
 #include "client/cpp/recognition_client.h"
 #include "core/object/model/object_model.h"
+#include "core/place/detector_settings.h"
 #include "tools/common/cli_support.h"
 #include "tools/common/remote_support.h"
 #include "tools/common/server_flags.h"
@@ -620,9 +621,14 @@ void AddStreamCommands(CLI::App& app, int* exit_code) {
                    "Create the map (with the server's default settings) if it does not exist");
   stream
       ->add_option("--preset", stream_args->preset,
-                   "With --create: the new map's detector preset (default, thesis, or keyframes "
-                   "for a SLAM's keyframes)")
-      ->check(CLI::IsMember({"default", "thesis", "keyframes"}))
+                   "With --create: the new map's detector preset:\n" + PresetHelp())
+      ->check(CLI::IsMember([] {
+        std::vector<std::string> names;
+        for (const DetectorPresetInfo& info : DetectorPresets()) {
+          names.emplace_back(DetectorPresetName(info.preset));
+        }
+        return names;
+      }()))
       ->needs("--create");
   stream
       ->add_option("--group", stream_args->group,

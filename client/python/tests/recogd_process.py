@@ -6,10 +6,10 @@ import signal
 import socket
 import subprocess
 import tempfile
-import time
 from typing import Sequence
 
 from recog_client import RecognitionClient, Unavailable
+from waiting import wait_until
 
 STARTUP_SECONDS = 30
 SHUTDOWN_SECONDS = 30
@@ -39,19 +39,20 @@ class Recogd:
         """Polls list_maps until it stops answering UNAVAILABLE (at most STARTUP_SECONDS), each
         time from a new client with ``client_options`` (a channel that failed to connect waits
         out a growing backoff); stops the server and raises when it does not come up."""
-        deadline = time.monotonic() + STARTUP_SECONDS
+
+        def serving() -> bool:
+            if self.process.poll() is not None:
+                raise RuntimeError(f"recogd exited with {self.process.returncode} at start-up")
+            try:
+                with RecognitionClient(self.target, **client_options) as probe:
+                    list(probe.list_maps())
+                return True
+            except Unavailable:
+                return False
+
         try:
-            while True:
-                if self.process.poll() is not None:
-                    raise RuntimeError(f"recogd exited with {self.process.returncode} at start-up")
-                try:
-                    with RecognitionClient(self.target, **client_options) as probe:
-                        list(probe.list_maps())
-                    return
-                except Unavailable:
-                    if time.monotonic() > deadline:
-                        raise
-                time.sleep(0.1)
+            wait_until(serving, f"recogd serving on {self.target}", timeout=STARTUP_SECONDS,
+                       interval=0.1)
         except BaseException:
             self.process.kill()
             self.process.wait()

@@ -24,6 +24,7 @@ from pathlib import Path
 try:
     import grpc
     from recogd_process import Recogd
+    from waiting import wait_until
     from recog_client import (AlreadyExists, Cancelled, InvalidArgument, NotFound,
                               PermissionDenied, RecognitionClient, ResultOptions,
                               Unauthenticated, Unavailable, make_features, make_frame,
@@ -581,25 +582,26 @@ class RecognitionClientTest(unittest.TestCase):
         request = repository_pb2.GetUploadStatusRequest(
             sha256=hashlib.sha256(data).hexdigest(), size_bytes=len(data))
         sent_first_chunk = threading.Event()
+        cancelled = threading.Event()
 
         def first_chunk_then_wait():
             header = repository_pb2.PutModelHeader(sha256=request.sha256, size_bytes=len(data))
             yield repository_pb2.PutModelRequest(header=header)
             yield repository_pb2.PutModelRequest(chunk=data[:1 << 18])
             sent_first_chunk.set()
-            time.sleep(30)  # until the call is cancelled
+            cancelled.wait(timeout=60)  # the call stays open until the test cancels it
 
         stub = self.client._repository
         broken = stub.PutModel.future(first_chunk_then_wait(), timeout=60)
         self.assertTrue(sent_first_chunk.wait(timeout=10))
-        held = 0
-        for _ in range(50):  # the server keeps the bytes once it sees the call end
-            time.sleep(0.1)
-            if held == 0 and not broken.done():
-                broken.cancel()
-            held = stub.GetUploadStatus(request, timeout=10).received_bytes
-            if held > 0:
-                break
+        # Nothing tells a client that the server has read a chunk of a call still open (it answers
+        # at the end): the pause gives it time to, as a connection that breaks off later would.
+        time.sleep(0.1)
+        broken.cancel()
+        cancelled.set()
+        # The server keeps the bytes it had read once it sees the call end.
+        held = wait_until(lambda: stub.GetUploadStatus(request, timeout=10).received_bytes,
+                          "the server keeping the bytes of the cancelled upload")
         self.assertEqual(held, 1 << 18)
         # The client sends the rest only: the server has the whole file (size and SHA-256 pass)
         # and refuses its contents; the kept bytes were used.
@@ -609,22 +611,27 @@ class RecognitionClientTest(unittest.TestCase):
         self.assertEqual(stub.GetUploadStatus(request, timeout=10).received_bytes, 0)
 
     def test_a_watch_ends_when_cancelled(self):
-        watch = self.client.watch_models("noise")
+        # With the existing models (none has the prefix): the SYNCED event says that the watch is
+        # established, and the consumer then waits for the next event.
+        watch = self.client.watch_models("noise", include_existing=True)
         outcome = []
+        synced = threading.Event()
 
         def consume():
             try:
-                outcome.extend(watch)
+                for event in watch:
+                    outcome.append(event.change)
+                    synced.set()
             except Cancelled as error:
                 outcome.append(error.code)
 
         consumer = threading.Thread(target=consume)
         consumer.start()
-        time.sleep(0.5)  # the watch is established and waiting
+        self.assertTrue(synced.wait(timeout=60), "the watch sent no SYNCED event")
         watch.cancel()
         consumer.join(timeout=10)
         self.assertFalse(consumer.is_alive())
-        self.assertEqual(outcome, [grpc.StatusCode.CANCELLED])
+        self.assertEqual(outcome, [repository_pb2.MODEL_CHANGE_SYNCED, grpc.StatusCode.CANCELLED])
 
     def test_a_watch_with_the_existing_models_says_when_it_has_sent_them(self):
         watch = self.client.watch_models("nothing-", include_existing=True)

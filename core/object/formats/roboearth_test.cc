@@ -680,8 +680,6 @@ TEST_F(RoboEarthTest, FolderWithABadCameraReportsTheCameraFile) {
 
 // --- Export. ---
 
-std::shared_ptr<const Vocabulary> ObjectVocabulary() { return testing::BundledObjectVocabulary(); }
-
 cv::Mat PosterImage() { return cv::imread(testing::ProjectTestData("corridor/1.jpg")); }
 
 // A 3D model RoboEarth can hold: a 1 x 0.75 m poster at z = 2 m, seen by one camera at the origin
@@ -693,7 +691,8 @@ const ObjectModel& PosedPoster() {
         "frame", image, {500, 500, image.cols / 2.0, image.rows / 2.0, {}}, RigidTransform()};
     const FacePolygon face{
         {{-0.5, -0.375, 2}, {0.5, -0.375, 2}, {0.5, 0.375, 2}, {-0.5, 0.375, 2}}};
-    auto built = ModelBuilder(ObjectVocabulary()).FromPosedPolygons("poster", {face}, {view});
+    auto built = ModelBuilder(testing::BundledObjectVocabulary())
+                     .FromPosedPolygons("poster", {face}, {view});
     EXPECT_TRUE(built.ok()) << built.status().ToString();
     return std::move(*built);
   }();
@@ -726,7 +725,7 @@ TEST_F(RoboEarthTest, ExportedModelReadsBackAsTheSameObject) {
   ASSERT_TRUE(seen.ok()) << seen.status().ToString();
   EXPECT_EQ(seen->points.size(), model.points.size());
 
-  auto rebuilt = ModelBuilder(ObjectVocabulary()).FromRoboEarth(dir);
+  auto rebuilt = ModelBuilder(testing::BundledObjectVocabulary()).FromRoboEarth(dir);
   ASSERT_TRUE(rebuilt.ok()) << rebuilt.status().ToString();
   EXPECT_EQ(rebuilt->metadata.name, "poster");
   EXPECT_EQ(rebuilt->metadata.type, ObjectType::k3D);
@@ -788,7 +787,7 @@ TEST_F(RoboEarthTest, ExportOfACameraRoboEarthCannotExpressIsInvalidArgumentNami
 
 TEST_F(RoboEarthTest, ExportOfAFaceImagePosterIsInvalidArgument) {
   // Its views are frontal cameras with the principal point at the image corner.
-  auto poster = ModelBuilder(ObjectVocabulary())
+  auto poster = ModelBuilder(testing::BundledObjectVocabulary())
                     .FromFaceImages("poster", {{BoxSide::kFront, PosterImage()}}, 0.64, 0.48);
   ASSERT_TRUE(poster.ok()) << poster.status().ToString();
   const Status status = ExportRoboEarthFolder(*poster, Path("out"));
@@ -816,7 +815,7 @@ TEST_F(RoboEarthTest, ExportedPlanarModelKeepsItsFacesInTheMeta) {
   ASSERT_EQ(meta->faces.size(), 1u);
   EXPECT_EQ(meta->faces[0].object_from_face.t, cv::Vec3d(-0.5, -0.375, 2));
 
-  auto rebuilt = ModelBuilder(ObjectVocabulary()).FromRoboEarth(Path("planar"));
+  auto rebuilt = ModelBuilder(testing::BundledObjectVocabulary()).FromRoboEarth(Path("planar"));
   ASSERT_TRUE(rebuilt.ok()) << rebuilt.status().ToString();
   EXPECT_EQ(rebuilt->metadata.type, ObjectType::kPlanar);
   ASSERT_EQ(rebuilt->faces.size(), 1u);

@@ -33,8 +33,6 @@ namespace {
 
 constexpr double kPosterWidth = 0.64, kPosterHeight = 0.48;  // metres
 
-std::shared_ptr<const Vocabulary> ObjectVocabulary() { return testing::BundledObjectVocabulary(); }
-
 cv::Mat Poster(const std::string& name = "corridor/1.jpg") {
   return cv::imread(testing::ProjectTestData(name), cv::IMREAD_GRAYSCALE);
 }
@@ -66,12 +64,12 @@ cv::Mat RenderPoster(const cv::Mat& poster, const ObjectModel& model,
 class ObjectRecognitionTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    ModelBuilder builder(ObjectVocabulary());
+    ModelBuilder builder(testing::BundledObjectVocabulary());
     auto poster = builder.FromFaceImages("poster", {{BoxSide::kFront, Poster()}}, kPosterWidth,
                                          kPosterHeight);
     ASSERT_TRUE(poster.ok()) << poster.status().ToString();
     poster_ = std::move(*poster);
-    auto database = ObjectDatabase::Open(&store_, ObjectVocabulary());
+    auto database = ObjectDatabase::Open(&store_, testing::BundledObjectVocabulary());
     ASSERT_TRUE(database.ok()) << database.status().ToString();
     database_ = std::move(*database);
     camera_ = {500, 500, 320, 240, {}};
@@ -178,7 +176,7 @@ TEST_F(ObjectRecognitionTest, AFilterDropsCandidatesBeforeVerification) {
 
 TEST_F(ObjectRecognitionTest, AnExplanationSaysWhereEachObjectDroppedOut) {
   ASSERT_TRUE(database_->Put(poster_).ok());
-  ModelBuilder builder(ObjectVocabulary());
+  ModelBuilder builder(testing::BundledObjectVocabulary());
   auto other = builder.FromFaceImages("other", {{BoxSide::kFront, Poster("corridor/60.jpg")}},
                                       kPosterWidth, kPosterHeight);
   ASSERT_TRUE(other.ok()) << other.status().ToString();
@@ -409,7 +407,7 @@ TEST_F(ObjectRecognitionTest, DatabaseAddsReplacesListsAndRemovesModels) {
   EXPECT_EQ(database_->size(), 1u);
   EXPECT_EQ(database_->index().size(), 1u);  // the old entry left the index
 
-  ModelBuilder builder(ObjectVocabulary());
+  ModelBuilder builder(testing::BundledObjectVocabulary());
   auto other =
       builder.FromFaceImages("other", {{BoxSide::kFront, Poster("corridor/41.jpg")}}, 0.3, 0.2);
   ASSERT_TRUE(other.ok());
@@ -435,7 +433,7 @@ TEST_F(ObjectRecognitionTest, DatabaseReloadsItsObjectsFromTheStore) {
   ASSERT_TRUE(database_->Put(poster_).ok());
   ASSERT_TRUE(database_->Put(poster_).ok());  // version 2
   database_.reset();
-  auto reopened = ObjectDatabase::Open(&store_, ObjectVocabulary());
+  auto reopened = ObjectDatabase::Open(&store_, testing::BundledObjectVocabulary());
   ASSERT_TRUE(reopened.ok()) << reopened.status().ToString();
   std::shared_ptr<ObjectDatabase> database = std::move(*reopened);
   ASSERT_EQ(database->size(), 1u);
@@ -462,7 +460,7 @@ TEST_F(ObjectRecognitionTest, DatabaseRejectsBadModels) {
 }
 
 TEST(ModelBuilderTest, BoxFacesLandOnTheirSidesOfTheBox) {
-  ModelBuilder builder(ObjectVocabulary());
+  ModelBuilder builder(testing::BundledObjectVocabulary());
   const double w = 0.3, h = 0.2, d = 0.1;
   auto box = builder.FromFaceImages("box",
                                     {{BoxSide::kFront, Poster()},
@@ -508,7 +506,7 @@ TEST(ModelBuilderTest, RgbdViewsBackProjectFeaturesWithDepth) {
   view.view.camera = {500, 500, size.width / 2.0, size.height / 2.0, {}};
   view.depth = cv::Mat(size, CV_16U, cv::Scalar(1500));
   view.depth.colRange(0, size.width / 2).setTo(0);
-  ModelBuilder builder(ObjectVocabulary());
+  ModelBuilder builder(testing::BundledObjectVocabulary());
   auto model = builder.FromRgbd("wall", {view});
   ASSERT_TRUE(model.ok()) << model.status().ToString();
   ASSERT_GT(model->points.size(), 50u);
@@ -538,7 +536,7 @@ TEST(ModelBuilderTest, TheRgbdReportFlagsAViewWhoseDepthMissesTheBox) {
   misposed.depth = posed.depth.clone();
   misposed.depth.colRange(size.width / 2, size.width).setTo(1600);
   const ObjectBox slab{{2.0, 2.0, 0.02}, {0, 0, 1.5}};
-  ModelBuilder builder(ObjectVocabulary());
+  ModelBuilder builder(testing::BundledObjectVocabulary());
   std::vector<RgbdViewReport> report;
   auto model = builder.FromRgbd("wall", {posed, misposed}, slab, &report);
   ASSERT_TRUE(model.ok()) << model.status().ToString();
@@ -568,7 +566,7 @@ TEST(ModelBuilderTest, PosedPolygonsIntersectKeypointsWithTheVisibleFace) {
   // One 1 x 0.75 m face at z = 2 m in front of the camera; keypoints outside it are dropped.
   PosedImage view{"frame", Poster(), {500, 500, 320, 240, {}}, {}};
   FacePolygon face{{{-0.5, -0.375, 2}, {0.5, -0.375, 2}, {0.5, 0.375, 2}, {-0.5, 0.375, 2}}};
-  ModelBuilder builder(ObjectVocabulary());
+  ModelBuilder builder(testing::BundledObjectVocabulary());
   auto model = builder.FromPosedPolygons("face", {face}, {view});
   ASSERT_TRUE(model.ok()) << model.status().ToString();
   ASSERT_GT(model->points.size(), 50u);
@@ -585,7 +583,7 @@ TEST(ModelBuilderTest, RoboEarthLionHeldOutViewIsRecognisedWithItsPose) {
   ModelBuildOptions options;
   options.keep_images = false;
   options.exclude_views = {13};
-  ModelBuilder builder(ObjectVocabulary(), options);
+  ModelBuilder builder(testing::BundledObjectVocabulary(), options);
   auto model = builder.FromRoboEarth(dir);
   ASSERT_TRUE(model.ok()) << model.status().ToString();
   EXPECT_EQ(model->metadata.name, "lion");
@@ -594,7 +592,7 @@ TEST(ModelBuilderTest, RoboEarthLionHeldOutViewIsRecognisedWithItsPose) {
   EXPECT_GT(model->points.size(), 1000u);
 
   MemoryIndexStore store;
-  auto database = ObjectDatabase::Open(&store, ObjectVocabulary());
+  auto database = ObjectDatabase::Open(&store, testing::BundledObjectVocabulary());
   ASSERT_TRUE(database.ok());
   ASSERT_TRUE((*database)->Put(*model).ok());
   auto camera_file = ReadBundleCamera(dir + "/face_013.txt");
@@ -817,7 +815,7 @@ RecognitionOptions SparseFirstPass() {
 }
 
 TEST_F(ObjectRecognitionTest, TheSecondPassFindsASmallObjectInClutter) {
-  ModelBuilder builder(ObjectVocabulary());
+  ModelBuilder builder(testing::BundledObjectVocabulary());
   auto poster = builder.FromFaceImages("poster", {{BoxSide::kFront, Poster(kSmallPoster)}},
                                        kPosterWidth, kPosterHeight);
   ASSERT_TRUE(poster.ok()) << poster.status().ToString();
@@ -887,7 +885,7 @@ TEST_F(ObjectRecognitionTest, TheSecondPassFindsASmallObjectInClutter) {
 
 // RecognizeFeatures has no image to crop: no second pass.
 TEST_F(ObjectRecognitionTest, RecognizeFeaturesHasNoSecondPass) {
-  ModelBuilder builder(ObjectVocabulary());
+  ModelBuilder builder(testing::BundledObjectVocabulary());
   auto poster = builder.FromFaceImages("poster", {{BoxSide::kFront, Poster(kSmallPoster)}},
                                        kPosterWidth, kPosterHeight);
   ASSERT_TRUE(poster.ok()) << poster.status().ToString();
@@ -920,7 +918,7 @@ namespace {
 TEST_F(ObjectRecognitionTest, ADetectionInsideAStrongerOneOfAnotherObjectIsDropped) {
   ASSERT_TRUE(database_->Put(poster_).ok());
   const cv::Mat poster = Poster();
-  ModelBuilder builder(ObjectVocabulary());
+  ModelBuilder builder(testing::BundledObjectVocabulary());
   auto half = builder.FromFaceImages(
       "half", {{BoxSide::kFront, poster.colRange(poster.cols / 2, poster.cols).clone()}},
       kPosterWidth / 2, kPosterHeight);
@@ -945,7 +943,7 @@ TEST_F(ObjectRecognitionTest, ADetectionInsideAStrongerOneOfAnotherObjectIsDropp
 TEST_F(ObjectRecognitionTest, ARunnerUpIsVerifiedOnlyWhenItsScoreIsCloseToTheBest) {
   ASSERT_TRUE(database_->Put(poster_).ok());
   const cv::Mat poster = Poster();
-  ModelBuilder builder(ObjectVocabulary());
+  ModelBuilder builder(testing::BundledObjectVocabulary());
   auto half = builder.FromFaceImages(
       "half", {{BoxSide::kFront, poster.colRange(0, poster.cols / 2).clone()}}, kPosterWidth / 2,
       kPosterHeight);
