@@ -33,13 +33,26 @@ if git grep -n -E '#include\s*"(core|storage|server|tools|tests)/' -- 'client/' 
   echo "check_boundaries: the client library must not include core/, storage/ or server/ headers" >&2
   status=1
 fi
+# check_includes DIR PREFIX FOLDERS ALLOWED: the product files of DIR (not its tests nor test
+# helpers) include, of the folders PREFIX<f>/ for f in FOLDERS (an extended regex), only those
+# whose f is in ALLOWED.
+check_includes() {
+  local dir=$1 prefix=$2 folders=$3 allowed=$4 file line include used
+  while IFS=: read -r file line include; do
+    used=$(sed -E "s#.*\"$prefix([a-z_0-9]+)/.*#\\1#" <<<"$include")
+    if ! grep -qw -- "$used" <<<"$allowed"; then
+      echo "$file:$line: $dir/ may not include $prefix$used/ (allowed: $allowed)" >&2
+      status=1
+    fi
+  done < <(git grep -n -E "#include\s*\"$prefix($folders)/" -- "$dir/" ':!*_test.cc' ':!*test*.h')
+}
 # check_layers ROOT DEPS: every folder ROOT/<m>/ includes from ROOT/ only <m> itself and the
 # folders DEPS (the name of an associative array: folder -> allowed folders) lists for it; tests
 # may include anything. A folder missing from DEPS is an error too.
 check_layers() {
   local root=$1
   local -n deps=$2
-  local dir module allowed file line include used
+  local dir module
   for dir in "$root"/*/; do
     module=$(basename "$dir")
     if [ -z "${deps[$module]+set}" ]; then
@@ -47,14 +60,7 @@ check_layers() {
       status=1
       continue
     fi
-    allowed="$module ${deps[$module]}"
-    while IFS=: read -r file line include; do
-      used=$(sed -E "s#.*\"$root/([a-z_]+)/.*#\\1#" <<<"$include")
-      if ! grep -qw -- "$used" <<<"$allowed"; then
-        echo "$file:$line: $root/$module/ may not include $root/$used/ (allowed: $allowed)" >&2
-        status=1
-      fi
-    done < <(git grep -n -E "#include\s*\"$root/" -- "$root/$module/" ':!*_test.cc')
+    check_includes "$root/$module" "$root/" "[a-z_]+" "$module ${deps[$module]}"
   done
 }
 # core's modules form layers, each including only the ones below it:
@@ -85,18 +91,10 @@ if [ -n "$(git ls-files 'core/object/*.h' 'core/object/*.cc' | grep -v '^core/ob
   echo "check_boundaries: core/object/ keeps its files in its concern folders" >&2
   status=1
 fi
-# check_roots DIR ALLOWED: the product files of DIR (not its tests nor test helpers) include, of
-# the repository's top folders and the generated API (recognition/, grpc/), only those ALLOWED.
+# check_roots DIR ALLOWED: of the repository's top folders and the generated API (recognition/,
+# grpc/), DIR's product files include only those ALLOWED.
 check_roots() {
-  local dir=$1 allowed=$2 file line include used
-  while IFS=: read -r file line include; do
-    used=$(sed -E 's#.*"([a-z_0-9]+)/.*#\1#' <<<"$include")
-    if ! grep -qw -- "$used" <<<"$allowed"; then
-      echo "$file:$line: $dir/ may not include $used/ (allowed: $allowed)" >&2
-      status=1
-    fi
-  done < <(git grep -n -E '#include\s*"(core|storage|server|tools|client|wire|tests|bench|recognition|grpc)/' \
-    -- "$dir/" ':!*_test.cc' ':!*test*.h')
+  check_includes "$1" "" "core|storage|server|tools|client|wire|tests|bench|recognition|grpc" "$2"
 }
 check_roots wire "wire recognition"
 check_roots tools/bag "tools core"
